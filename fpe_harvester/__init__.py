@@ -1,0 +1,50 @@
+"""fpe-harvester: stationary statistics of noise-driven piezoelectric energy harvesters.
+
+Public API: the model (:class:`Params`, :class:`Potential`, :class:`Harvester`), the one
+entry point :func:`solve` with its result :class:`Stats`, the exact harmonic solver
+(:class:`Exact`, :func:`exact_sweep`) and stability thresholds (:func:`k_di`,
+:func:`threshold`).
+"""
+
+from __future__ import annotations
+
+from .errors import (
+    HarvesterError,
+    MethodNotAvailableError,
+    NotConvergedError,
+    ParameterError,
+    UnstableSystemError,
+)
+from .exact import Exact, exact_sweep
+from .model import Harvester, Params, Potential
+from .result import QUANTITIES, Stats, Status
+from .solve import METHODS, choose_method, get_solver, solve
+from .stability import Threshold, critical_mode, growth_rate, k_di, ring_spectrum, threshold
+
+__version__ = "0.1.0"
+
+__all__ = [
+    "Params",
+    "Potential",
+    "Harvester",
+    "Stats",
+    "Status",
+    "QUANTITIES",
+    "solve",
+    "get_solver",
+    "choose_method",
+    "METHODS",
+    "Exact",
+    "exact_sweep",
+    "Threshold",
+    "threshold",
+    "k_di",
+    "critical_mode",
+    "growth_rate",
+    "ring_spectrum",
+    "HarvesterError",
+    "ParameterError",
+    "UnstableSystemError",
+    "NotConvergedError",
+    "MethodNotAvailableError",
+]

@@ -1,0 +1,166 @@
+"""Command-line interface: ``harvester stats``, ``harvester threshold``.
+
+Every command prints a readable table, or one JSON object with ``--json``. Bad arguments
+give a one-line error naming the argument and exit code 2, without a traceback.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+from collections.abc import Callable, Sequence
+from typing import Any, NoReturn
+
+from .errors import HarvesterError, ParameterError
+from .model import Harvester, Params
+from .solve import METHODS, choose_method, solve
+from .stability import threshold
+
+__all__ = ["main", "build_parser"]
+
+
+class _Parser(argparse.ArgumentParser):
+    def error(self, message: str) -> NoReturn:
+        self.exit(2, f"{self.prog}: error: {message}\n")
+
+
+def _number(text: str) -> float:
+    try:
+        return float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected a number, got {text!r}") from None
+
+
+def _key_value(text: str) -> tuple[str, str]:
+    key, sep, value = text.partition("=")
+    if not sep or not key:
+        raise argparse.ArgumentTypeError(f"expected NAME=VALUE, got {text!r}")
+    return key.strip(), value.strip()
+
+
+def _parse_value(text: str) -> Any:
+    """Solver option values: int, float, bool or string, in that order of preference."""
+    for conv in (int, float):
+        try:
+            return conv(text)
+        except ValueError:
+            pass
+    if text.lower() in ("true", "false"):
+        return text.lower() == "true"
+    return text
+
+
+def _params(pairs: Sequence[tuple[str, str]]) -> Params:
+    changes: dict[str, float] = {}
+    for key, value in pairs:
+        try:
+            changes[key] = float(value)
+        except ValueError:
+            raise ParameterError(f"--param {key}: expected a number, got {value!r}") from None
+    return Params().replace(**changes)
+
+
+def _print_table(rows: Sequence[tuple[str, str, str]], header: tuple[str, str, str]) -> None:
+    widths = [max(len(r[i]) for r in (header, *rows)) for i in range(3)]
+    line = "  ".join("-" * w for w in widths)
+    print("  ".join(h.ljust(w) for h, w in zip(header, widths)))
+    print(line)
+    for r in rows:
+        print("  ".join(c.ljust(w) for c, w in zip(r, widths)))
+
+
+def _fmt(value: float | None, err: float | None = None) -> tuple[str, str]:
+    if value is None:
+        return "-", "-"
+    return f"{value:.10g}", ("-" if err is None else f"{err:.3g}")
+
+
+def cmd_stats(args: argparse.Namespace) -> int:
+    h = Harvester.build(a=args.a, n=args.n, N=args.N, k=args.k)
+    h = h.replace(params=_params(args.param))
+    options = {key: _parse_value(val) for key, val in args.opt}
+    if args.tol is not None:
+        options["tol"] = args.tol
+    if args.seed is not None:
+        options["seed"] = args.seed
+    method = args.method if args.method != "auto" else choose_method(h)
+    result = solve(h, method, **options)
+    if args.json:
+        out = result.to_dict()
+        out["harvester"] = h.to_dict()
+        print(json.dumps(out, indent=2))
+        return 0
+    print(
+        f"Harvester: U(x) = {h.a:g}|x|^{h.n:g}, N = {h.N}, k = {h.k:g}; "
+        f"method = {result.method}; status = {result.status.value}"
+    )
+    if result.message and result.message != "stable":
+        print(result.message)
+    rows = [(name, *_fmt(*result.value(name))) for name in ("eta", "V2", "Vrms", "Pin", "v2", "vV", "x2")]
+    _print_table(rows, ("quantity", "value", "error"))
+    if result.growth_rate is not None:
+        print(f"largest growth rate of the drift: {result.growth_rate:.6g}")
+    return 0
+
+
+def cmd_threshold(args: argparse.Namespace) -> int:
+    th = threshold(args.N, args.a)
+    if args.json:
+        print(json.dumps(th.to_dict(), indent=2))
+        return 0
+    kd = "none (always stable)" if th.k_di is None else f"{th.k_di:.12g}"
+    _print_table(
+        [("k_di", kd, ""), ("critical_mode", ", ".join(map(str, th.critical_mode)), "")],
+        ("quantity", "value", ""),
+    )
+    print(th.explanation)
+    return 0
+
+
+COMMANDS: dict[str, Callable[[argparse.Namespace], int]] = {
+    "stats": cmd_stats,
+    "threshold": cmd_threshold,
+}
+
+
+def build_parser() -> argparse.ArgumentParser:
+    """The argument parser (exposed for documentation and tests)."""
+    parser = _Parser(prog="harvester", description="Power and efficiency of noise-driven harvesters.")
+    sub = parser.add_subparsers(dest="command", required=True, parser_class=_Parser)
+
+    p = sub.add_parser("stats", help="stationary statistics (eta, V2, Vrms, Pin) of one harvester")
+    p.add_argument("--n", type=_number, default=2.0, help="potential exponent n >= 1 (default 2)")
+    p.add_argument("--a", type=_number, default=0.5, help="potential strength a > 0 (default 0.5)")
+    p.add_argument("--N", type=int, default=1, help="number of units in the ring (default 1)")
+    p.add_argument("--k", type=_number, default=0.0, help="coupling k (default 0)")
+    p.add_argument("--param", type=_key_value, action="append", default=[], metavar="NAME=VALUE",
+                   help="physical parameter (m, gamma, Kv, Kc, sigma, tau, D, tau_p, R); repeatable")
+    p.add_argument("--method", choices=("auto", *METHODS), default="auto",
+                   help="solver (default auto: exact for n = 2, fpe for one nonlinear unit, else mc)")
+    p.add_argument("--tol", type=_number, default=None, help="requested relative error on eta")
+    p.add_argument("--seed", type=int, default=None, help="random seed (Monte Carlo)")
+    p.add_argument("--opt", type=_key_value, action="append", default=[], metavar="NAME=VALUE",
+                   help="solver setting passed to the solver; repeatable")
+    p.add_argument("--json", action="store_true", help="print one JSON object")
+
+    p = sub.add_parser("threshold", help="diffusive-instability threshold k_di of a harmonic ring")
+    p.add_argument("--N", type=int, default=3, help="number of units (default 3)")
+    p.add_argument("--a", type=_number, default=0.5, help="potential strength a > 0 (default 0.5)")
+    p.add_argument("--json", action="store_true", help="print one JSON object")
+    return parser
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    """Entry point of the ``harvester`` command; returns the exit code."""
+    parser = build_parser()
+    args = parser.parse_args(argv)
+    try:
+        return COMMANDS[args.command](args)
+    except HarvesterError as exc:
+        print(f"harvester {args.command}: error: {exc}", file=sys.stderr)
+        return 2
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,185 @@
+"""One result type for all three solvers: stationary statistics with errors and a status."""
+
+from __future__ import annotations
+
+import enum
+import math
+from collections.abc import Mapping
+from dataclasses import dataclass, field
+from types import MappingProxyType
+from typing import Any
+
+from .errors import UnstableSystemError
+
+__all__ = ["Status", "Stats", "QUANTITIES"]
+
+#: Names of the stationary observables, the SPEC's spelling.
+QUANTITIES = ("V2", "Vrms", "Pin", "eta", "v2", "vV", "x2")
+
+
+class Status(str, enum.Enum):
+    """Outcome of a solve."""
+
+    STABLE = "stable"
+    """A stationary state exists and the numbers describe it."""
+    MARGINAL = "marginal"
+    """At a stability threshold: x of the critical mode diffuses; V statistics are finite limits."""
+    UNSTABLE = "unstable"
+    """No stationary state; ``growth_rate`` says how fast the critical mode grows."""
+    METASTABLE = "metastable"
+    """Long-lived state that eventually escapes (nonlinear ring with n < 2, k < 0)."""
+    NOT_CONVERGED = "not_converged"
+    """Requested accuracy not reached; numbers are the best estimate with their error."""
+
+
+_FIELDS = ("V2", "Pin", "eta", "Vrms", "v2", "vV", "x2")
+
+
+@dataclass(frozen=True)
+class Stats:
+    """Stationary statistics of a harvester, each paired with its error.
+
+    Attributes
+    ----------
+    V2 : float or None
+        Mean squared load voltage :math:`\\langle V^2\\rangle` (ring: averaged over units).
+    Pin : float or None
+        Injected mechanical power :math:`P_{in} = \\sigma\\langle v\\xi\\rangle`.
+    eta : float or None
+        Efficiency :math:`\\eta = \\langle V^2\\rangle / (R P_{in})`.
+    Vrms : float or None
+        :math:`\\sqrt{\\langle V^2\\rangle}`.
+    v2, vV, x2 : float or None
+        :math:`\\langle v^2\\rangle`, :math:`\\langle vV\\rangle`, :math:`\\langle x^2\\rangle`
+        where the method provides them (``x2`` is ``None`` at a marginal point, where it diverges).
+    *_err : float or None
+        Error estimate of each quantity (one standard error for Monte Carlo, truncation and
+        mesh error for Fokker--Planck, 0 for exact). ``None`` when the value is ``None``.
+    status : Status
+        Stable, marginal, unstable, metastable or not converged.
+    message : str
+        What the status means for this problem and what to do about it.
+    method : str
+        Which solver produced the numbers (``"exact"``, ``"fpe"``, ``"mc"``).
+    growth_rate : float or None
+        Largest real part of the drift spectrum (> 0 when unstable), where known.
+    info : Mapping
+        Solver-specific details (time step, paths, degree M, mesh size, timings, ...).
+
+    Numbers are never NaN or inf: what cannot be computed is ``None`` and the status says why.
+    """
+
+    V2: float | None = None
+    Pin: float | None = None
+    eta: float | None = None
+    Vrms: float | None = None
+    v2: float | None = None
+    vV: float | None = None
+    x2: float | None = None
+    V2_err: float | None = None
+    Pin_err: float | None = None
+    eta_err: float | None = None
+    Vrms_err: float | None = None
+    v2_err: float | None = None
+    vV_err: float | None = None
+    x2_err: float | None = None
+    status: Status = Status.STABLE
+    message: str = ""
+    method: str = ""
+    growth_rate: float | None = None
+    info: Mapping[str, Any] = field(default_factory=dict)
+
+    def __post_init__(self) -> None:
+        object.__setattr__(self, "status", Status(self.status))
+        for name in _FIELDS:
+            for key in (name, name + "_err"):
+                value = getattr(self, key)
+                if value is None:
+                    continue
+                value = float(value)
+                if not math.isfinite(value):
+                    raise ValueError(
+                        f"internal error: {self.method or 'solver'} produced {key} = {value}; "
+                        "non-finite numbers must be reported through the status"
+                    )
+                object.__setattr__(self, key, value)
+        object.__setattr__(self, "info", MappingProxyType(dict(self.info)))
+
+    @classmethod
+    def from_moments(
+        cls,
+        *,
+        V2: float,
+        Pin: float,
+        R: float,
+        V2_err: float = 0.0,
+        Pin_err: float = 0.0,
+        cov_V2_Pin: float = 0.0,
+        **kwargs: Any,
+    ) -> Stats:
+        """Build from :math:`\\langle V^2\\rangle` and :math:`P_{in}`, deriving eta and Vrms.
+
+        Errors are propagated to first order; ``cov_V2_Pin`` is the covariance of the two
+        estimates (Monte Carlo replicas give it; it reduces the error on eta).
+
+        .. math::
+
+            \\left(\\frac{\\delta\\eta}{\\eta}\\right)^2 = \\left(\\frac{\\delta V^2}{V^2}\\right)^2
+            + \\left(\\frac{\\delta P}{P}\\right)^2 - \\frac{2\\,\\mathrm{cov}}{V^2 P}
+        """
+        eta = V2 / (R * Pin)
+        rel2 = (V2_err / V2) ** 2 + (Pin_err / Pin) ** 2 - 2.0 * cov_V2_Pin / (V2 * Pin)
+        eta_err = abs(eta) * math.sqrt(max(rel2, 0.0))
+        Vrms = math.sqrt(V2)
+        Vrms_err = 0.5 * V2_err / Vrms
+        return cls(
+            V2=V2, V2_err=V2_err, Pin=Pin, Pin_err=Pin_err, eta=eta, eta_err=eta_err,
+            Vrms=Vrms, Vrms_err=Vrms_err, **kwargs,
+        )
+
+    @property
+    def ok(self) -> bool:
+        """True when the numbers describe a stationary state (stable or marginal)."""
+        return self.status in (Status.STABLE, Status.MARGINAL)
+
+    def value(self, name: str) -> tuple[float | None, float | None]:
+        """``(value, error)`` of an observable by name (one of :data:`QUANTITIES`)."""
+        if name not in _FIELDS:
+            raise KeyError(f"unknown observable {name!r}; valid: {', '.join(_FIELDS)}")
+        return getattr(self, name), getattr(self, name + "_err")
+
+    def raise_for_status(self) -> Stats:
+        """Return self if stable or marginal, else raise :class:`UnstableSystemError`."""
+        if self.status is Status.UNSTABLE:
+            raise UnstableSystemError(self.message or "the system has no stationary state")
+        return self
+
+    def to_dict(self) -> dict[str, Any]:
+        """JSON-ready dict (``None`` for quantities that do not exist)."""
+        out: dict[str, Any] = {}
+        for name in _FIELDS:
+            out[name] = getattr(self, name)
+            out[name + "_err"] = getattr(self, name + "_err")
+        out.update(
+            status=self.status.value,
+            message=self.message,
+            method=self.method,
+            growth_rate=self.growth_rate,
+            info=_jsonable(dict(self.info)),
+        )
+        return out
+
+
+def _jsonable(obj: Any) -> Any:
+    """Convert numpy scalars/arrays and nested containers to JSON-ready Python objects."""
+    if isinstance(obj, Mapping):
+        return {str(k): _jsonable(v) for k, v in obj.items()}
+    if isinstance(obj, (list, tuple)):
+        return [_jsonable(v) for v in obj]
+    if hasattr(obj, "tolist"):
+        return _jsonable(obj.tolist())
+    if isinstance(obj, float) and not math.isfinite(obj):
+        return None
+    if isinstance(obj, enum.Enum):
+        return obj.value
+    return obj
