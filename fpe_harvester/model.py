@@ -117,7 +117,7 @@ class Potential:
 
     Examples
     --------
-    >>> Potential(0.5, 2).force(1.0)
+    >>> float(Potential(0.5, 2).force(1.0))
     -1.0
     >>> Potential.from_U0_x0(U0=2.0, x0=2.0, n=2).a
     0.5

@@ -1,0 +1,108 @@
+"""Model objects: defaults, validation, conversions."""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+
+import numpy as np
+import pytest
+
+from fpe_harvester import Harvester, ParameterError, Params, Potential
+
+POSITIVE = ["m", "Kv", "Kc", "sigma", "tau", "D", "tau_p", "R"]
+
+
+def test_paper_defaults():
+    p = Params()
+    assert (p.m, p.gamma, p.Kv, p.Kc, p.sigma, p.tau, p.D, p.tau_p, p.R) == (1, 1, 1, 1, 1, 1, 1, 2, 1)
+    assert p.noise_variance == 1.0
+
+
+@pytest.mark.parametrize("name", POSITIVE)
+@pytest.mark.parametrize("bad", [0, -1.5])
+def test_nonpositive_parameters_rejected(name, bad):
+    with pytest.raises(ParameterError, match=rf"{name} must be in \(0, inf\), got {bad!r}"):
+        Params(**{name: bad})
+
+
+def test_gamma_may_be_zero_but_not_negative():
+    assert Params(gamma=0).gamma == 0.0
+    with pytest.raises(ParameterError, match=r"gamma must be in \[0, inf\)"):
+        Params(gamma=-0.1)
+
+
+@pytest.mark.parametrize("bad", [math.nan, math.inf, -math.inf])
+def test_non_finite_rejected(bad):
+    with pytest.raises(ParameterError, match="D must be finite"):
+        Params(D=bad)
+
+
+@pytest.mark.parametrize("bad", ["1", None, True, 1j])
+def test_wrong_type_rejected(bad):
+    with pytest.raises(ParameterError, match=r"tau must be a real number .*type"):
+        Params(tau=bad)
+
+
+def test_params_frozen_and_replace():
+    p = Params()
+    with pytest.raises(dataclasses.FrozenInstanceError):
+        p.m = 2.0  # type: ignore[misc]
+    assert p.replace(tau_p=3).tau_p == 3.0
+    with pytest.raises(ParameterError, match="unknown parameter"):
+        p.replace(foo=1)
+    with pytest.raises(ParameterError, match="R must be in"):
+        p.replace(R=0)
+
+
+def test_potential_validation():
+    with pytest.raises(ParameterError, match=r"n must be in \[1, inf\), got 0.5"):
+        Potential(0.5, 0.5)
+    with pytest.raises(ParameterError, match=r"a must be in \(0, inf\), got 0"):
+        Potential(0, 2)
+    with pytest.raises(ParameterError, match="a must be finite"):
+        Potential(math.nan, 2)
+
+
+def test_potential_force_and_conversion():
+    pot = Potential(0.5, 2)
+    x = np.linspace(-2, 2, 9)
+    np.testing.assert_allclose(pot.force(x), -x)
+    np.testing.assert_allclose(pot.U(x), 0.5 * x**2)
+    kink = Potential(2.0, 1)
+    np.testing.assert_allclose(kink.dU(np.array([-1.0, 0.0, 3.0])), [-2.0, 0.0, 2.0])
+    p = Potential.from_U0_x0(U0=3.0, x0=-2.0, n=3)
+    assert p.a == pytest.approx(3.0 / 8.0)
+    assert p.U0_x0(x0=2.0) == pytest.approx((3.0, 2.0))
+    with pytest.raises(ParameterError, match="x0 must be a nonzero"):
+        Potential.from_U0_x0(U0=1.0, x0=0.0, n=2)
+
+
+def test_harvester_validation():
+    with pytest.raises(ParameterError, match=r"N must be an integer in \[1, inf\], got 0"):
+        Harvester(N=0)
+    with pytest.raises(ParameterError, match="N must be an integer.*2.5"):
+        Harvester(N=2.5)
+    with pytest.raises(ParameterError, match="k must be 0 for a single unit"):
+        Harvester(k=-0.1)
+    with pytest.raises(ParameterError, match="k must be finite"):
+        Harvester(N=3, k=math.inf)
+    with pytest.raises(ParameterError, match="potential must be a Potential"):
+        Harvester(potential=2.0)  # type: ignore[arg-type]
+    assert Harvester(N=np.int64(4)).N == 4
+
+
+def test_harvester_build_replace_confinement():
+    h = Harvester.build(a=0.5, n=1, N=3, k=-0.01, tau_p=3)
+    assert h.params.tau_p == 3.0 and h.confinement == "metastable"
+    assert h.replace(n=3).confinement == "confined"
+    assert h.replace(n=2).confinement == "linear"
+    assert h.replace(k=0.1).confinement == "confined"
+    h2 = h.replace(a=2, D=5, N=4)
+    assert (h2.a, h2.params.D, h2.N, h2.params.tau_p) == (2.0, 5.0, 4, 3.0)
+
+
+def test_mode_stiffness_n2_convention():
+    # N = 2: the antisymmetric mode sees 2a + 4k (force 2k(x_other - x_j) on each unit)
+    h = Harvester.build(a=0.5, N=2, k=-0.1)
+    np.testing.assert_allclose(h.mode_stiffness(), [1.0, 1.0 - 0.4])
