@@ -1,0 +1,327 @@
+"""Pass/fail checks with tolerances built from the reported errors.
+
+A check compares two numbers that carry error estimates. It passes when
+
+.. math::
+
+    |a - b| \\le n_\\sigma \\sqrt{\\delta_a^2 + \\delta_b^2} + f_{abs} + f_{rel}\\,|b|
+
+where :math:`\\delta_a, \\delta_b` are the errors the solvers report (one standard error for
+Monte Carlo, truncation/mesh error for Fokker--Planck, 0 for exact), :math:`n_\\sigma` is the
+number of error bars allowed (4 by default) and the floors cover what the errors do not
+(round-off for exact numbers). The tolerance is stated in every result, so a reader can
+see what was promised and what was delivered. A check whose solver is not installed is
+*skipped*, never passed.
+"""
+
+from __future__ import annotations
+
+import enum
+import math
+import signal
+import time
+import traceback
+from collections.abc import Callable, Iterator
+from contextlib import contextmanager
+from dataclasses import dataclass, fields, replace
+from pathlib import Path
+from typing import Any
+
+from fpe_harvester.errors import MethodNotAvailableError, check_real
+from fpe_harvester.model import Harvester
+from fpe_harvester.result import Stats
+from fpe_harvester.solve import get_solver, solve
+
+__all__ = [
+    "Outcome",
+    "CheckResult",
+    "agree",
+    "expect",
+    "skipped",
+    "failed",
+    "guarded",
+    "SolveCache",
+    "solver_available",
+    "CheckTimeout",
+    "Context",
+]
+
+
+class Outcome(str, enum.Enum):
+    """Result of one check."""
+
+    PASS = "PASS"
+    FAIL = "FAIL"
+    SKIP = "SKIP"
+
+
+@dataclass(frozen=True)
+class CheckResult:
+    """One pass/fail/skip verdict with the numbers behind it.
+
+    Attributes
+    ----------
+    name : str
+        What was checked (e.g. ``"exact vs mc: N = 3, k = -0.2, eta"``).
+    section : str
+        Report section the check belongs to.
+    outcome : Outcome
+        PASS, FAIL or SKIP.
+    detail : str
+        The comparison in words: values, errors, tolerance, or why it was skipped.
+    value, reference : float or None
+        The two numbers compared (``None`` for checks that are not a comparison).
+    diff, tolerance : float or None
+        :math:`|a - b|` and the tolerance it was held to.
+    seconds : float
+        Wall time spent on the check, >= 0.
+    """
+
+    name: str
+    section: str
+    outcome: Outcome
+    detail: str = ""
+    value: float | None = None
+    reference: float | None = None
+    diff: float | None = None
+    tolerance: float | None = None
+    seconds: float = 0.0
+
+    def __post_init__(self) -> None:
+        object.__setattr__(self, "outcome", Outcome(self.outcome))
+        check_real("seconds", self.seconds, low=0.0)
+
+    @property
+    def passed(self) -> bool:
+        return self.outcome is Outcome.PASS
+
+    def to_dict(self) -> dict[str, Any]:
+        return {f.name: (getattr(self, f.name).value if f.name == "outcome" else getattr(self, f.name))
+                for f in fields(self)}
+
+
+def _finite(x: float | None) -> bool:
+    return x is not None and math.isfinite(float(x))
+
+
+def agree(
+    name: str,
+    section: str,
+    a: float | None,
+    err_a: float | None,
+    b: float | None,
+    err_b: float | None,
+    *,
+    n_sigma: float = 4.0,
+    floor: float = 0.0,
+    rel_floor: float = 0.0,
+    note: str = "",
+) -> CheckResult:
+    """Compare ``a +- err_a`` with ``b +- err_b``.
+
+    Parameters
+    ----------
+    name, section : str
+        Label and report section.
+    a, b : float or None
+        The two values; ``None`` or non-finite fails the check (a solver that could not
+        produce a number where one was expected).
+    err_a, err_b : float or None
+        Their error estimates, >= 0 (``None`` counts as 0 and is said so in the detail).
+    n_sigma : float
+        Error bars allowed, > 0 (default 4).
+    floor, rel_floor : float
+        Absolute and relative (to ``|b|``) floors added to the tolerance, >= 0.
+    note : str
+        Extra context appended to the detail.
+
+    Returns
+    -------
+    CheckResult
+        PASS iff :math:`|a-b| \\le n_\\sigma\\sqrt{\\delta_a^2+\\delta_b^2} + f + f_{rel}|b|`.
+
+    Examples
+    --------
+    >>> agree("x", "s", 1.0, 0.1, 1.3, 0.0).outcome.value
+    'PASS'
+    >>> agree("x", "s", 1.0, 0.01, 1.3, 0.0).outcome.value
+    'FAIL'
+    """
+    n_sigma = check_real("n_sigma", n_sigma, low=0.0, low_open=True)
+    floor = check_real("floor", floor, low=0.0)
+    rel_floor = check_real("rel_floor", rel_floor, low=0.0)
+    suffix = f"; {note}" if note else ""
+    if not (_finite(a) and _finite(b)):
+        return CheckResult(name, section, Outcome.FAIL, f"no finite value to compare: a = {a}, b = {b}{suffix}",
+                           value=a, reference=b)
+    missing = [lbl for lbl, e in (("a", err_a), ("b", err_b)) if e is None]
+    ea = 0.0 if err_a is None else abs(float(err_a))
+    eb = 0.0 if err_b is None else abs(float(err_b))
+    if not (math.isfinite(ea) and math.isfinite(eb)):
+        return CheckResult(name, section, Outcome.FAIL, f"non-finite error estimate ({err_a}, {err_b}){suffix}",
+                           value=a, reference=b)
+    diff = abs(float(a) - float(b))
+    tol = n_sigma * math.hypot(ea, eb) + floor + rel_floor * abs(float(b))
+    ok = diff <= tol
+    detail = (
+        f"{a:.8g} +- {ea:.2g} vs {b:.8g} +- {eb:.2g}: |diff| = {diff:.3g} "
+        f"{'<=' if ok else '>'} tol = {n_sigma:g}*sqrt(err_a^2+err_b^2)"
+        f"{f' + {floor:.1g}' if floor else ''}{f' + {rel_floor:.1g}*|b|' if rel_floor else ''} = {tol:.3g}"
+    )
+    if missing:
+        detail += f" (no error reported for {', '.join(missing)}: taken as 0)"
+    return CheckResult(name, section, Outcome.PASS if ok else Outcome.FAIL, detail + suffix,
+                       value=float(a), reference=float(b), diff=diff, tolerance=tol)
+
+
+def expect(name: str, section: str, condition: bool, detail: str) -> CheckResult:
+    """A yes/no check (e.g. "status is unstable and growth rate > 0")."""
+    return CheckResult(name, section, Outcome.PASS if condition else Outcome.FAIL, detail)
+
+
+def skipped(name: str, section: str, why: str) -> CheckResult:
+    """A check that could not run (solver not installed, module missing)."""
+    return CheckResult(name, section, Outcome.SKIP, f"skipped: {why}")
+
+
+def failed(name: str, section: str, why: str) -> CheckResult:
+    """A check that could not produce a verdict because something broke."""
+    return CheckResult(name, section, Outcome.FAIL, why)
+
+
+class CheckTimeout(Exception):
+    """A check exceeded its wall-time budget (counts as a hang)."""
+
+
+@contextmanager
+def _alarm(seconds: float | None) -> Iterator[None]:
+    # SIGALRM interrupts Python-level loops (replica loops, sweeps); a single compiled kernel
+    # cannot be interrupted, so solvers are also given their own time budgets.
+    usable = seconds is not None and hasattr(signal, "SIGALRM")
+    if usable:
+        try:
+            def handler(signum: int, frame: Any) -> None:
+                raise CheckTimeout(f"exceeded the {seconds:g} s budget")
+
+            old = signal.signal(signal.SIGALRM, handler)
+        except ValueError:  # not in the main thread
+            usable = False
+    if usable:
+        signal.setitimer(signal.ITIMER_REAL, float(seconds))
+    try:
+        yield
+    finally:
+        if usable:
+            signal.setitimer(signal.ITIMER_REAL, 0.0)
+            signal.signal(signal.SIGALRM, old)
+
+
+def guarded(
+    name: str,
+    section: str,
+    fn: Callable[[], list[CheckResult] | CheckResult],
+    timeout: float | None = None,
+) -> list[CheckResult]:
+    """Run a check function; turn a missing solver into SKIP and any crash into FAIL.
+
+    The wall time is recorded on every returned result. A crash is a failure with the
+    exception and its location in the detail, so one broken check does not stop the run.
+    """
+    t0 = time.perf_counter()
+    try:
+        with _alarm(timeout):
+            out = fn()
+        results = [out] if isinstance(out, CheckResult) else list(out)
+    except MethodNotAvailableError as exc:
+        results = [skipped(name, section, f"solver not available for this case: {exc}")]
+    except CheckTimeout as exc:
+        results = [failed(name, section, f"hang: {exc}")]
+    except Exception as exc:  # noqa: BLE001 - every crash must be reported, not raised
+        where = traceback.extract_tb(exc.__traceback__)[-1]
+        results = [failed(name, section, f"crashed: {type(exc).__name__}: {exc} "
+                                         f"(at {where.filename.rsplit('/', 1)[-1]}:{where.lineno})")]
+    dt = (time.perf_counter() - t0) / max(len(results), 1)
+    return [replace(r, seconds=r.seconds or dt) for r in results]
+
+
+def solver_available(method: str) -> str | None:
+    """``None`` if solver ``method`` can be built, else the reason it cannot."""
+    try:
+        get_solver(method)
+    except MethodNotAvailableError as exc:
+        return str(exc)
+    return None
+
+
+class SolveCache:
+    """Solve each (harvester, method, options) once per validation run.
+
+    Options the solver class does not define are dropped (and listed in ``dropped``), so the
+    validation code can ask for ``max_time`` or ``tol`` even from a solver that lacks them.
+    """
+
+    def __init__(self) -> None:
+        self._store: dict[tuple[Any, ...], Stats] = {}
+        self.dropped: dict[str, set[str]] = {}
+        self.seconds: dict[str, float] = {}
+
+    def results(self) -> list[tuple[Harvester, str, Stats]]:
+        """Every (harvester, method, result) solved so far, in order."""
+        return [(key[0], key[1], r) for key, r in self._store.items()]
+
+    def solve(self, h: Harvester, method: str, **options: Any) -> Stats:
+        """Stats of ``h`` by ``method`` with the given settings (cached)."""
+        key = (h, method, tuple(sorted(options.items())))
+        if key not in self._store:
+            base = get_solver(method, h)
+            names = {f.name for f in fields(base)} if hasattr(base, "__dataclass_fields__") else set()
+            accepted = {k: v for k, v in options.items() if k in names}
+            extra = set(options) - set(accepted)
+            if extra:
+                self.dropped.setdefault(method, set()).update(extra)
+            solver = replace(base, **accepted) if accepted else base
+            t0 = time.perf_counter()
+            self._store[key] = solve(h, solver)
+            self.seconds[method] = self.seconds.get(method, 0.0) + time.perf_counter() - t0
+        return self._store[key]
+
+
+@dataclass(frozen=True)
+class Context:
+    """Settings shared by every validation step of one run.
+
+    Attributes
+    ----------
+    quick : bool
+        CI mode: small subsets and short solver budgets (whole run < 3 minutes).
+    out : pathlib.Path
+        Output folder (figures, JSON, the report).
+    cache : SolveCache
+        Results solved so far in this run (reused by the identity checks).
+    seed : int
+        Base seed of every Monte Carlo run (>= 0), so a run is reproducible.
+    """
+
+    quick: bool
+    out: Path
+    cache: SolveCache
+    seed: int = 2017
+
+    @property
+    def mc_options(self) -> dict[str, Any]:
+        """Monte Carlo settings: target relative error on eta and a wall-time budget [s] per point."""
+        if self.quick:
+            return {"seed": self.seed, "tol": 0.02, "max_time": 6.0}
+        return {"seed": self.seed, "tol": 0.005, "max_time": 90.0}
+
+    @property
+    def fpe_options(self) -> dict[str, Any]:
+        """Fokker--Planck settings: requested relative error on eta."""
+        return {"tol": 1e-3 if self.quick else 1e-4}
+
+    def options(self, method: str) -> dict[str, Any]:
+        return {"mc": self.mc_options, "fpe": self.fpe_options}.get(method, {})
+
+    def solve(self, h: Harvester, method: str, **overrides: Any) -> Stats:
+        """Solve through the run's cache with this context's settings for ``method``."""
+        return self.cache.solve(h, method, **{**self.options(method), **overrides})

@@ -1,0 +1,178 @@
+"""Cross-checks between the three solvers and against the exact identities.
+
+* exact vs Monte Carlo on harmonic rings (N = 1, 2, 3, 5);
+* Fokker--Planck vs Monte Carlo on single nonlinear units (n x a grid);
+* Fokker--Planck vs exact on the harmonic unit (n = 2);
+* the Fourier-mode exact solution vs a dense 4N x 4N Lyapunov solve (scipy) for small N;
+* the identities of SPEC section 1 for every result computed in this run:
+
+.. math::
+
+    \\langle V^2\\rangle = K_c\\tau_p\\langle vV\\rangle,\\qquad
+    P_{in} = m\\gamma\\langle v^2\\rangle + K_v\\langle vV\\rangle.
+
+Each comparison of a quantity ``q`` passes when
+:math:`|q_1 - q_2| \\le 4\\sqrt{\\delta_1^2 + \\delta_2^2} + \\text{floor}` (see
+:func:`validation.checks.agree`).
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from fpe_harvester.linear import dense_covariance
+from fpe_harvester.model import Harvester
+from fpe_harvester.result import Stats
+
+from .checks import CheckResult, Context, agree, expect, guarded
+from .report import Section, Table
+
+__all__ = ["run", "identity_checks", "HARMONIC_RINGS", "NONLINEAR_GRID", "QUICK_NONLINEAR"]
+
+#: (N, k) of the harmonic rings compared with Monte Carlo (a = 0.5; all inside the stable range).
+HARMONIC_RINGS = ((1, 0.0), (2, -0.15), (3, -0.25), (5, -0.2))
+#: (n, a) grid of single nonlinear units compared between Fokker--Planck and Monte Carlo.
+NONLINEAR_GRID = tuple((n, a) for n in (1.0, 1.5, 3.0, 4.0, 8.0) for a in (0.5, 1.0, 2.0))
+#: The subset used in quick mode: the kink, a non-integer n and a steep potential.
+QUICK_NONLINEAR = ((1.0, 0.5), (1.5, 1.0), (4.0, 2.0))
+
+_SECTION = "Cross-checks"
+_COMPARED = ("eta", "V2", "Pin")
+
+
+def _compare(label: str, r1: Stats, r2: Stats, *, floor: float = 0.0, rel_floor: float = 0.0,
+             names: tuple[str, ...] = _COMPARED) -> list[CheckResult]:
+    note = f"{r1.method}: {r1.status.value}; {r2.method}: {r2.status.value}"
+    return [agree(f"{label}: {q}", _SECTION, *r1.value(q), *r2.value(q), floor=floor,
+                  rel_floor=rel_floor, note=note) for q in names]
+
+
+def identity_checks(label: str, r: Stats, h: Harvester, section: str = _SECTION) -> list[CheckResult]:
+    """The two stationary identities of SPEC section 1 on one result, within its errors.
+
+    A result that lacks ``vV`` or ``v2`` fails: the identities are every solver's self-check.
+    """
+    p = h.params
+    floor = 1e-12 if r.method == "exact" else 0.0
+    if r.vV is None or r.v2 is None or r.V2 is None or r.Pin is None:
+        return [expect(f"identities [{r.method}] {label}", section, False,
+                       f"result lacks V2/Pin/vV/v2 (V2={r.V2}, Pin={r.Pin}, vV={r.vV}, v2={r.v2}); "
+                       f"status {r.status.value}")]
+    e = lambda x: 0.0 if x is None else x  # noqa: E731
+    rhs1 = p.Kc * p.tau_p * r.vV
+    rhs1_err = p.Kc * p.tau_p * e(r.vV_err)
+    rhs2 = p.m * p.gamma * r.v2 + p.Kv * r.vV
+    rhs2_err = math.hypot(p.m * p.gamma * e(r.v2_err), p.Kv * e(r.vV_err))
+    return [
+        agree(f"identities [{r.method}] {label}: V2 = Kc tau_p vV", section, r.V2, r.V2_err, rhs1, rhs1_err,
+              rel_floor=floor),
+        agree(f"identities [{r.method}] {label}: Pin = m gamma v2 + Kv vV", section, r.Pin, r.Pin_err, rhs2,
+              rhs2_err, rel_floor=floor),
+    ]
+
+
+def _exact_vs_mc(ctx: Context, N: int, k: float) -> list[CheckResult]:
+    h = Harvester.build(a=0.5, n=2, N=N, k=k)
+    ex = ctx.solve(h, "exact")
+    mc = ctx.solve(h, "mc")
+    return _compare(f"exact vs mc: N = {N}, k = {k:g}", mc, ex)
+
+
+def _fpe_vs_mc(ctx: Context, n: float, a: float) -> list[CheckResult]:
+    h = Harvester.build(a=a, n=n)
+    fp = ctx.solve(h, "fpe")
+    mc = ctx.solve(h, "mc")
+    return _compare(f"fpe vs mc: n = {n:g}, a = {a:g}", fp, mc)
+
+
+def _fpe_vs_exact(ctx: Context, a: float) -> list[CheckResult]:
+    h = Harvester.build(a=a, n=2)
+    fp = ctx.solve(h, "fpe", tol=1e-8)
+    ex = ctx.solve(h, "exact")
+    return _compare(f"fpe vs exact: n = 2, a = {a:g}", fp, ex, names=("eta", "V2", "Pin", "v2", "vV"),
+                    rel_floor=1e-12)
+
+
+def _fourier_vs_dense(ctx: Context, rng: np.random.Generator, N: int) -> list[CheckResult]:
+    """Exact (Fourier modes) vs the dense 4N x 4N Lyapunov solve, random parameters and k."""
+    out = []
+    for _ in range(2):
+        params = dict(m=rng.uniform(0.3, 3), gamma=rng.uniform(0.2, 3), Kv=rng.uniform(0.3, 3),
+                      Kc=rng.uniform(0.3, 3), sigma=rng.uniform(0.3, 3), tau=rng.uniform(0.2, 5),
+                      D=rng.uniform(0.2, 5), tau_p=rng.uniform(0.2, 5))
+        a = float(rng.uniform(0.1, 2.0))
+        h = Harvester.build(a=a, n=2, N=N, **params)
+        if N > 1:
+            from fpe_harvester.stability import k_di
+
+            h = h.replace(k=float(rng.uniform(0.9 * k_di(N, a), 1.0)))
+        ex = ctx.solve(h, "exact")
+        P = dense_covariance(h)
+        p = h.params
+        dense = {
+            "V2": float(np.mean(np.diag(P)[2::4])),
+            "v2": float(np.mean(np.diag(P)[1::4])),
+            "vV": float(np.mean(np.diag(P[1::4, 2::4]))),
+            "Pin": float(p.sigma * np.mean(np.diag(P[1::4, 3::4]))),
+            "x2": float(np.mean(np.diag(P)[0::4])),
+        }
+        label = f"fourier vs dense Lyapunov: N = {N}, a = {a:.3g}, k = {h.k:.3g}, random params"
+        rel = {q: abs(getattr(ex, q) - dense[q]) / abs(dense[q]) for q in dense}
+        worst = max(rel, key=rel.__getitem__)
+        out.append(agree(f"{label}: worst of V2, Pin, v2, vV, x2 ({worst})", _SECTION, getattr(ex, worst), 0.0,
+                         dense[worst], 0.0, rel_floor=1e-10,
+                         note="dense 4N x 4N scipy.linalg.solve_continuous_lyapunov; relative differences "
+                              + ", ".join(f"{q} {v:.1e}" for q, v in rel.items())))
+    return out
+
+
+def run(ctx: Context) -> Section:
+    """All cross-checks; quick mode runs a subset (listed in the section text)."""
+    sec = Section("crosscheck", _SECTION)
+    rings = HARMONIC_RINGS[::2] if ctx.quick else HARMONIC_RINGS
+    grid = QUICK_NONLINEAR if ctx.quick else NONLINEAR_GRID
+    dense_N = (1, 2, 3) if ctx.quick else (1, 2, 3, 4, 5, 6)
+    fpe_a = (0.5, 2.0) if ctx.quick else (0.5, 1.0, 2.0)
+    sec.text.append(
+        "Each comparison passes when |a - b| <= 4 sqrt(err_a^2 + err_b^2) + floor, with the errors the "
+        "solvers report (Monte Carlo: standard error from replicas, time-step bias folded in; "
+        "Fokker-Planck: truncation and mesh error; exact: 0, with a relative round-off floor of 1e-12, "
+        "1e-10 for the dense Lyapunov solve). "
+        f"Monte Carlo settings: {ctx.mc_options}; Fokker-Planck settings: {ctx.fpe_options}."
+    )
+    sec.text.append(
+        f"Harmonic rings (a = 0.5) compared with Monte Carlo: (N, k) = {list(rings)}. "
+        f"Single nonlinear units (n, a): {list(grid)}. Fokker-Planck vs exact at n = 2, a in {list(fpe_a)}. "
+        f"Dense Lyapunov cross-check for N in {list(dense_N)} with random parameters."
+        + (" Quick mode: subsets; the full run covers N = 1, 2, 3, 5 and the whole 5 x 3 grid." if ctx.quick
+           else "")
+    )
+    rng = np.random.default_rng(ctx.seed)
+    for N in dense_N:
+        sec.checks += guarded(f"fourier vs dense: N = {N}", _SECTION, lambda N=N: _fourier_vs_dense(ctx, rng, N))
+    for a in fpe_a:
+        sec.checks += guarded(f"fpe vs exact: a = {a:g}", _SECTION, lambda a=a: _fpe_vs_exact(ctx, a))
+    for N, k in rings:
+        sec.checks += guarded(f"exact vs mc: N = {N}, k = {k:g}", _SECTION, lambda N=N, k=k: _exact_vs_mc(ctx, N, k))
+    for n, a in grid:
+        sec.checks += guarded(f"fpe vs mc: n = {n:g}, a = {a:g}", _SECTION, lambda n=n, a=a: _fpe_vs_mc(ctx, n, a))
+    sec.tables.append(_results_table(ctx))
+    return sec
+
+
+def _fmt(v: float | None, e: float | None) -> str:
+    if v is None:
+        return "-"
+    return f"{v:.6g}" if not e else f"{v:.6g} +- {e:.2g}"
+
+
+def _results_table(ctx: Context) -> Table:
+    rows = []
+    for h, method, r in ctx.cache.results():
+        rows.append((f"a={h.a:g}, n={h.n:g}, N={h.N}, k={h.k:g}", method, r.status.value,
+                     _fmt(*r.value("eta")), _fmt(*r.value("V2")), _fmt(*r.value("Pin")),
+                     f"{r.info.get('wall_time', r.info.get('seconds', '-'))}"))
+    return Table("Every result computed for the cross-checks", ("system", "method", "status", "eta", "V2", "Pin",
+                                                                "solver time [s]"), rows)
