@@ -1,0 +1,154 @@
+"""Benchmark of the exact harmonic solver: run time against error, with scipy's dense baseline.
+
+Measured in one run:
+
+* a single call of :func:`fpe_harvester.solve` (N = 3);
+* a ring of N = 1,000,000 units (target: under 1 s);
+* a vectorized sweep of 10,000 (k, a) points for N = 3 (target: under 1 s);
+* scipy's dense 4N x 4N Lyapunov solve (``solve_continuous_lyapunov``) for N = 2..128, its
+  wall time and its error against the Fourier closed form, which is itself checked against
+  exact rational arithmetic (``fractions.Fraction``) where the mode stiffnesses are rational.
+
+``python -m validation.bench_exact [--quick] [--out DIR]`` writes ``bench_exact.json`` and
+``bench_exact.png``.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import time
+from collections.abc import Callable
+from fractions import Fraction
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from fpe_harvester import Harvester, Params, exact_sweep, solve
+from fpe_harvester.linear import dense_covariance
+
+__all__ = ["run", "rational_eta"]
+
+
+def _best_time(fn: Callable[[], Any], repeat: int) -> tuple[float, Any]:
+    best, out = np.inf, None
+    for _ in range(repeat):
+        t0 = time.perf_counter()
+        out = fn()
+        best = min(best, time.perf_counter() - t0)
+    return best, out
+
+
+def rational_eta(kappas: list[Fraction], p: Params | None = None) -> tuple[Fraction, Fraction]:
+    """``(V2, eta)`` of a ring in exact rational arithmetic, from rational mode stiffnesses.
+
+    Same closed form as :func:`fpe_harvester.linear.mode_moments`, evaluated with
+    :class:`fractions.Fraction` (the default parameters are integers, so no rounding at all).
+    """
+    p = p or Params()
+    m, g, Kv, Kc, s, tau, D, tp, R = (Fraction(x) for x in (p.m, p.gamma, p.Kv, p.Kc, p.sigma,
+                                                               p.tau, p.D, p.tau_p, p.R))
+    V2 = Pin = Fraction(0)
+    for kap in kappas:
+        d1 = m * tau + m * tp + g * m * tau**2 + g * m * tau * tp + Kc * Kv * tau**2 * tp
+        d1 += kap * tau**2 * (tau + tp)
+        d2 = g * m + g**2 * m * tp + Kc * Kv * tp + Kc * Kv * g * tp**2 + g * kap * tp**2
+        c = g * tau * tp + tau + tp
+        V2 += D * Kc**2 * s**2 * tp**2 * c / (d1 * d2)
+        Pin += D * s**2 * (tau + tp) / d1
+    n = len(kappas)
+    V2, Pin = V2 / n, Pin / n
+    return V2, V2 / (R * Pin)
+
+
+def run(quick: bool = False, out: Path | None = None) -> dict[str, Any]:
+    """Run the benchmark; returns (and writes, when ``out`` is given) the measurements."""
+    repeat = 3 if quick else 7
+    res: dict[str, Any] = {"quick": quick}
+
+    t, r = _best_time(lambda: solve(Harvester.build(a=0.5, N=3, k=-0.33)), repeat)
+    res["single_call_s"] = t
+    res["single_call_eta_error"] = abs(r.eta - 0.6773938564272123)
+
+    h = Harvester.build(a=0.5, N=1_000_000, k=-0.2)
+    t, r = _best_time(lambda: solve(h), repeat)
+    res["ring_1e6_s"] = t
+    res["ring_1e6_target_s"] = 1.0
+
+    a, k = np.meshgrid(np.linspace(0.01, 2.0, 100), np.linspace(-1.0, 0.5, 100))
+    t, sw = _best_time(lambda: exact_sweep(a, k, N=3), repeat)
+    res["sweep_10000_s"] = t
+    res["sweep_10000_target_s"] = 1.0
+    res["sweep_stable_fraction"] = float(sw["stable"].mean())
+
+    # N = 4, a = 1/2, k = -1/16: kappa_q = 1 - sin^2(pi q/4)/4 = 1, 7/8, 3/4, 7/8 (all rational)
+    kq = [Fraction(1), Fraction(7, 8), Fraction(3, 4), Fraction(7, 8)]
+    V2_q, eta_q = rational_eta(kq)
+    r = solve(Harvester.build(a=0.5, N=4, k=-1 / 16))
+    res["rational_check"] = {
+        "N": 4, "k": -1 / 16,
+        "eta_exact": str(eta_q), "eta_rel_error": abs(r.eta / float(eta_q) - 1),
+        "V2_rel_error": abs(r.V2 / float(V2_q) - 1),
+    }
+
+    rows = []
+    for N in ([2, 4, 8, 16, 32] if quick else [2, 4, 8, 16, 32, 64, 128]):
+        ring = Harvester.build(a=0.5, N=N, k=-0.2)
+        t_fourier, rf = _best_time(lambda: solve(ring), repeat)
+        t_dense, C = _best_time(lambda: dense_covariance(ring), 1 if N >= 64 else repeat)
+        V2_dense = float(np.diag(C)[2::4].mean())
+        Pin_dense = float(np.diag(C, 2)[1::4].mean()) * ring.params.sigma
+        rows.append({
+            "N": N, "fourier_s": t_fourier, "dense_lyapunov_s": t_dense,
+            "dense_eta_rel_error": abs(V2_dense / Pin_dense / rf.eta - 1),
+        })
+    res["fourier_vs_dense"] = rows
+
+    if out is not None:
+        out = Path(out)
+        out.mkdir(parents=True, exist_ok=True)
+        (out / "bench_exact.json").write_text(json.dumps(res, indent=2))
+        _plot(res, out / "bench_exact.png")
+    return res
+
+
+def _plot(res: dict[str, Any], path: Path) -> None:
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    rows = res["fourier_vs_dense"]
+    N = [r["N"] for r in rows]
+    fig, (ax1, ax2) = plt.subplots(1, 2, figsize=(9, 3.6))
+    ax1.loglog(N, [r["fourier_s"] for r in rows], "o-", label="Fourier closed form")
+    ax1.loglog(N, [r["dense_lyapunov_s"] for r in rows], "s-", label="scipy dense Lyapunov (4N)")
+    ax1.set_xlabel("ring size N")
+    ax1.set_ylabel("wall time [s]")
+    ax1.legend()
+    ax2.loglog([r["dense_lyapunov_s"] for r in rows],
+               [max(r["dense_eta_rel_error"], 1e-17) for r in rows], "s-", label="dense Lyapunov")
+    ax2.loglog([r["fourier_s"] for r in rows],
+               [max(res["rational_check"]["eta_rel_error"], 1e-17)] * len(rows), "o",
+               label="Fourier (vs rational, N = 4)")
+    ax2.set_xlabel("wall time [s]")
+    ax2.set_ylabel("relative error of eta")
+    ax2.legend()
+    fig.suptitle(f"exact solver: N = 1e6 ring in {res['ring_1e6_s']:.3f} s, "
+                 f"10^4-point sweep in {res['sweep_10000_s']:.4f} s")
+    fig.tight_layout()
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
+
+
+def main() -> None:  # pragma: no cover - thin CLI
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--quick", action="store_true")
+    ap.add_argument("--out", type=Path, default=Path("validation_report"))
+    res = run(quick=ap.parse_args().quick, out=ap.parse_args().out)
+    print(json.dumps({k: v for k, v in res.items() if k != "fourier_vs_dense"}, indent=2))
+
+
+if __name__ == "__main__":  # pragma: no cover
+    main()
