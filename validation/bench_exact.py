@@ -146,7 +146,8 @@ def main() -> None:  # pragma: no cover - thin CLI
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--quick", action="store_true")
     ap.add_argument("--out", type=Path, default=Path("validation_report"))
-    res = run(quick=ap.parse_args().quick, out=ap.parse_args().out)
+    args = ap.parse_args()
+    res = run(quick=args.quick, out=args.out)
     print(json.dumps({k: v for k, v in res.items() if k != "fourier_vs_dense"}, indent=2))
 
 
