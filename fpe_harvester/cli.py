@@ -118,8 +118,16 @@ def cmd_threshold(args: argparse.Namespace) -> int:
     return 0
 
 
+def cmd_validate(args: argparse.Namespace) -> int:
+    """Run the validation suite; its runner prints the summary and writes the report."""
+    from validation.runner import run_cli
+
+    return run_cli(quick=args.quick, out=args.out, seed=args.seed, progress=not args.no_progress)
+
+
 COMMANDS: dict[str, Callable[[argparse.Namespace], int]] = {
     "stats": cmd_stats,
+    "validate": cmd_validate,
     "threshold": cmd_threshold,
 }
 
@@ -148,6 +156,13 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--N", type=int, default=3, help="number of units (default 3)")
     p.add_argument("--a", type=_number, default=0.5, help="potential strength a > 0 (default 0.5)")
     p.add_argument("--json", action="store_true", help="print one JSON object")
+
+    p = sub.add_parser("validate", help="cross-checks, paper comparison, stress tests, benchmarks -> report")
+    p.add_argument("--quick", action="store_true", help="CI subset, under 3 minutes")
+    p.add_argument("--out", default="validation_report", metavar="DIR",
+                   help="output folder for report.md, report.html, figures (default ./validation_report)")
+    p.add_argument("--seed", type=int, default=2017, help="base Monte Carlo seed (default 2017)")
+    p.add_argument("--no-progress", action="store_true", help="no progress bar")
     return parser
 
 

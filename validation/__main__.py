@@ -1,0 +1,9 @@
+"""``python -m validation [--quick] [--out DIR]``: the same as ``harvester validate``."""
+
+from __future__ import annotations
+
+import sys
+
+from .runner import main
+
+sys.exit(main())

@@ -1,0 +1,172 @@
+"""Run the whole validation and write the report: ``harvester validate [--quick] [--out DIR]``.
+
+Steps, in order (each a module with ``run(ctx) -> Section``): the cross-checks, the paper
+comparison, beyond the paper, the stress tests, the paper's figures (scenes), the
+benchmarks, and last the identities of SPEC section 1 on every result computed in the run.
+A step that crashes becomes a failed check; the run always ends with a report.
+"""
+
+from __future__ import annotations
+
+import argparse
+import importlib
+import os
+import platform
+import sys
+import time
+from collections.abc import Callable, Sequence
+from datetime import datetime, timezone
+from pathlib import Path
+
+from fpe_harvester.errors import check_int
+
+from .checks import Context, SolveCache, guarded, skipped
+from .report import Report, Section, summary_text, write_html, write_markdown
+
+__all__ = ["STEPS", "validate", "run_cli", "main", "build_parser"]
+
+#: (module, title) of each step, run in this order.
+STEPS: tuple[tuple[str, str], ...] = (
+    ("validation.crosscheck", "Cross-checks"),
+    ("validation.paper", "Paper comparison"),
+    ("validation.beyond", "Beyond the paper"),
+    ("validation.stress", "Stress tests"),
+    ("validation.figures", "The paper's figures (scenes)"),
+    ("validation.benchmarks", "Benchmarks: error versus wall time"),
+)
+
+
+def _identities(ctx: Context) -> Section:
+    from .crosscheck import identity_checks
+
+    sec = Section("identities", "Identities of SPEC section 1 (every solver, every result of this run)")
+    sec.text.append(
+        "For every stable result computed in this run: V2 = Kc tau_p vV (d<V^2>/dt = 0) and "
+        "Pin = m gamma v2 + Kv vV (power balance), each within 4 combined error bars of the "
+        "result's own errors (exact: relative floor 1e-12)."
+    )
+    for h, method, r in ctx.cache.results():
+        if not r.ok and r.V2 is None:
+            continue
+        label = f"a={h.a:g}, n={h.n:g}, N={h.N}, k={h.k:.6g}" + (f", {r.status.value}" if not r.ok else "")
+        sec.checks += guarded(f"identities [{method}] {label}", sec.title,
+                              lambda h=h, r=r, label=label: identity_checks(label, r, h, sec.title))
+    methods = {m for _, m, _ in ctx.cache.results()}
+    sec.checks += [skipped(f"identities [{m}]", sec.title, f"no {m!r} result was computed in this run "
+                           "(solver not available)") for m in ("exact", "fpe", "mc") if m not in methods]
+    return sec
+
+
+def validate(
+    quick: bool = False,
+    out: Path | str = "validation_report",
+    seed: int = 2017,
+    steps: Sequence[tuple[str, str]] = STEPS,
+    progress: Callable[[str], None] | None = None,
+) -> Report:
+    """Run the validation steps and write ``report.md`` and ``report.html`` into ``out``.
+
+    Parameters
+    ----------
+    quick : bool
+        CI mode (subsets, short budgets; < 3 minutes on 2 cores).
+    out : path
+        Output folder, created if needed.
+    seed : int
+        Base seed of the Monte Carlo runs, >= 0.
+    steps : sequence of (module, title)
+        The steps to run (default :data:`STEPS`); each module has ``run(ctx) -> Section``.
+    progress : callable, optional
+        Called with the title of each step before it starts.
+
+    Returns
+    -------
+    Report
+        All sections and checks; ``report.failed`` says whether any check failed.
+    """
+    seed = check_int("seed", seed, low=0)
+    out = Path(out)
+    out.mkdir(parents=True, exist_ok=True)
+    ctx = Context(quick=quick, out=out.resolve(), cache=SolveCache(), seed=seed)
+    t_start = time.perf_counter()
+    report = Report("fpe-harvester validation report" + (" (quick)" if quick else ""))
+    report.meta.update({
+        "date (UTC)": datetime.now(timezone.utc).strftime("%Y-%m-%d %H:%M:%S"),
+        "mode": "quick (CI subset)" if quick else "full",
+        "machine": f"{platform.machine()}, {os.cpu_count()} cores, Python {platform.python_version()}",
+        "Monte Carlo seed": str(seed),
+    })
+    for module, title in steps:
+        if progress:
+            progress(title)
+        t0 = time.perf_counter()
+        holder: list[Section] = []
+
+        def step(module: str = module) -> list:
+            holder.append(importlib.import_module(module).run(ctx))
+            return []
+
+        crash = guarded(title, title, step)
+        sec = holder[0] if holder else Section(module.rsplit(".", 1)[-1], title)
+        sec.checks += crash
+        sec.seconds = time.perf_counter() - t0
+        report.sections.append(sec)
+    if progress:
+        progress("Identities")
+    t0 = time.perf_counter()
+    sec = _identities(ctx)
+    sec.seconds = time.perf_counter() - t0
+    report.sections.append(sec)
+    if ctx.cache.dropped:
+        report.meta["solver options not supported (dropped)"] = "; ".join(
+            f"{m}: {', '.join(sorted(o))}" for m, o in ctx.cache.dropped.items())
+    report.meta["total wall time"] = f"{time.perf_counter() - t_start:.1f} s"
+    write_markdown(report, out / "report.md")
+    write_html(report, out / "report.html")
+    return report
+
+
+def run_cli(quick: bool = False, out: Path | str = "validation_report", seed: int = 2017,
+            progress: bool = True) -> int:
+    """Run :func:`validate`, print the pass/fail summary; exit code 1 if any check failed."""
+    bar = None
+    if progress:
+        from tqdm import tqdm
+
+        bar = tqdm(total=len(STEPS) + 1, desc="validate", unit="step", file=sys.stderr)
+
+    def tick(title: str) -> None:
+        if bar is not None:
+            if bar.n or title != STEPS[0][1]:
+                bar.update(1)
+            bar.set_postfix_str(title)
+
+    t0 = time.perf_counter()
+    report = validate(quick=quick, out=out, seed=seed, progress=tick)
+    if bar is not None:
+        bar.update(bar.total - bar.n)
+        bar.close()
+    print(summary_text(report))
+    print(f"report: {Path(out) / 'report.md'} and {Path(out) / 'report.html'} "
+          f"({time.perf_counter() - t0:.1f} s)")
+    return 1 if report.failed else 0
+
+
+def build_parser() -> argparse.ArgumentParser:
+    """Arguments of ``python -m validation`` (the same as ``harvester validate``)."""
+    p = argparse.ArgumentParser(prog="python -m validation", description=__doc__.splitlines()[0])
+    p.add_argument("--quick", action="store_true", help="CI subset, under 3 minutes")
+    p.add_argument("--out", default="validation_report", metavar="DIR",
+                   help="output folder (default ./validation_report)")
+    p.add_argument("--seed", type=int, default=2017, help="base Monte Carlo seed (default 2017)")
+    p.add_argument("--no-progress", action="store_true", help="no progress bar")
+    return p
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    """Entry point of ``python -m validation``; returns the exit code."""
+    args = build_parser().parse_args(argv)
+    if args.seed < 0:
+        print(f"python -m validation: error: --seed must be >= 0, got {args.seed}", file=sys.stderr)
+        return 2
+    return run_cli(quick=args.quick, out=args.out, seed=args.seed, progress=not args.no_progress)
