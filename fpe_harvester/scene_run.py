@@ -1,0 +1,453 @@
+"""Running a scene: cheapest adequate solver per point, cache/resume, outputs and figures.
+
+Per point the method is ``scene.method`` or, for ``"auto"``, :func:`.solve.choose_method`
+(harmonic -> exact, single nonlinear unit -> Fokker--Planck with ``tol = rtol``, coupled
+nonlinear ring -> Monte Carlo with ``tol = rtol`` and a seed derived from the scene and the
+point). Harmonic points are computed together with :func:`.exact.exact_sweep` (one
+vectorized call per ring size and parameter set); the rest one by one. Each finished point
+is appended to ``points.jsonl`` in the output folder (see :mod:`.scene_cache`), so reruns
+reuse it and an interrupted run resumes. A point whose solver fails or is not available is
+reported with its status and message; the scene goes on.
+"""
+
+from __future__ import annotations
+
+import csv
+import json
+import time
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass, field, replace
+from pathlib import Path
+from types import MappingProxyType
+from typing import Any
+
+import numpy as np
+from scipy.optimize import minimize_scalar
+
+from .errors import HarvesterError, MethodNotAvailableError, ParameterError
+from .exact import Exact, exact_sweep
+from .model import Harvester
+from .result import Stats, Status
+from .scene import DERIVED, OBSERVABLES, Scene
+from .scene_cache import PointCache, point_key, point_seed
+from .solve import choose_method, solve
+from .stability import MARGINAL_RTOL, k_di
+
+__all__ = ["SceneRow", "SceneResult", "run_scene"]
+
+#: Row statuses besides :class:`Status` values.
+NOT_AVAILABLE = "not_available"
+ERROR = "error"
+
+
+@dataclass(frozen=True)
+class _Failure:
+    status: str
+    message: str
+    method: str
+
+
+@dataclass(frozen=True)
+class SceneRow:
+    """One point of a scene run.
+
+    Attributes
+    ----------
+    index : int
+        Position in the sweep.
+    point : Mapping
+        Values of the varied fields (sweep axes and, with ``optimize``, the optimum found).
+    status : str
+        A :class:`Status` value, or ``"not_available"`` (solver missing or unable) or
+        ``"error"`` (solver failed); ``message`` says what happened.
+    method : str
+        Solver used (``"exact"``, ``"fpe"``, ``"mc"``; ``""`` when no solver was needed).
+    values : Mapping
+        Requested observables and their errors (``name`` and ``name_err``); ``None`` where
+        the point has no value.
+    info : Mapping
+        Bookkeeping: cache key, seed, whether the point was reused, optimization details.
+    """
+
+    index: int
+    point: Mapping[str, float]
+    status: str
+    method: str
+    message: str
+    values: Mapping[str, float | None]
+    info: Mapping[str, Any] = field(default_factory=dict)
+
+    @property
+    def ok(self) -> bool:
+        """True when the values describe a stationary state (stable or marginal)."""
+        return self.status in (Status.STABLE.value, Status.MARGINAL.value)
+
+    def get(self, name: str) -> float | None:
+        """Value of a varied field or an observable."""
+        if name in self.point:
+            return self.point[name]
+        return self.values.get(name)
+
+    def to_dict(self) -> dict[str, Any]:
+        """Flat JSON-ready dict (point, values, status, method, message, info)."""
+        return {"index": self.index, **self.point, **self.values, "status": self.status,
+                "method": self.method, "message": self.message, "info": dict(self.info)}
+
+
+@dataclass(frozen=True)
+class SceneResult:
+    """What :func:`run_scene` produced.
+
+    Attributes
+    ----------
+    scene : Scene
+        The scene actually run (the quick variant in quick mode).
+    rows : tuple of SceneRow
+    out_dir : Path
+    figures : Mapping of figure name to PNG path
+    csv_path, json_path, table_path : Path or None
+        Written outputs (``None`` when not requested).
+    computed, reused : int
+        Solver results computed in this run / taken from the cache.
+    elapsed : float
+        Wall time in seconds.
+    """
+
+    scene: Scene
+    rows: tuple[SceneRow, ...]
+    out_dir: Path
+    figures: Mapping[str, Path]
+    csv_path: Path | None
+    json_path: Path | None
+    table_path: Path | None
+    computed: int
+    reused: int
+    elapsed: float
+
+    @property
+    def columns(self) -> list[str]:
+        varied = list(dict.fromkeys(key for row in self.rows for key in row.point))
+        return varied + list(self.scene.observables)
+
+    def table(self) -> str:
+        """Readable fixed-width table of the points (value ± error, status, method)."""
+        header = [*self.columns, "status", "method"]
+        lines = []
+        for row in self.rows:
+            cells = [_fmt(row.point.get(c)) for c in self.columns if c in row.point]
+            for obs in self.scene.observables:
+                val, err = row.values.get(obs), row.values.get(obs + "_err")
+                cells.append(_fmt(val) + (f" ± {err:.2g}" if val is not None and err else ""))
+            lines.append([*cells, row.status, row.method or "-"])
+        widths = [max(len(r[i]) for r in (header, *lines)) for i in range(len(header))]
+        out = ["  ".join(h.ljust(w) for h, w in zip(header, widths)),
+               "  ".join("-" * w for w in widths)]
+        out += ["  ".join(c.ljust(w) for c, w in zip(r, widths)) for r in lines]
+        notes = [f"[{row.index}] {row.status}: {row.message}" for row in self.rows if not row.ok]
+        return "\n".join(out + (["", "notes:", *notes] if notes else []))
+
+    def to_dict(self) -> dict[str, Any]:
+        """JSON-ready summary with every row."""
+        return {
+            "scene": self.scene.name, "title": self.scene.title,
+            "description": self.scene.description, "rtol": self.scene.rtol,
+            "method": self.scene.method, "observables": list(self.scene.observables),
+            "system": self.scene.system.to_dict(),
+            "computed": self.computed, "reused": self.reused, "elapsed_s": self.elapsed,
+            "figures": {k: str(v) for k, v in self.figures.items()},
+            "rows": [row.to_dict() for row in self.rows],
+        }
+
+
+def _fmt(value: Any) -> str:
+    if value is None:
+        return "-"
+    if isinstance(value, (int, np.integer)):
+        return str(value)
+    return f"{value:.6g}"
+
+
+class _Runner:
+    """Evaluates harvesters for one scene run, through the cache."""
+
+    def __init__(self, scene: Scene, cache: PointCache, bar: Any) -> None:
+        self.scene, self.cache, self.bar = scene, cache, bar
+        self.computed = self.reused = 0
+        self.needs_solver = any(o in OBSERVABLES for o in scene.observables)
+
+    def method_of(self, h: Harvester) -> tuple[str, dict[str, Any]]:
+        method = choose_method(h) if self.scene.method == "auto" else self.scene.method
+        opts: dict[str, Any] = {}
+        if method in ("fpe", "mc"):
+            opts["tol"] = self.scene.rtol
+        if method == "mc":
+            opts["seed"] = point_seed(self.scene.name, h)
+        opts.update(self.scene.options.get(method, {}))
+        return method, opts
+
+    def key(self, h: Harvester) -> tuple[str, str, dict[str, Any]]:
+        method, opts = self.method_of(h)
+        rtol = None if method == "exact" else self.scene.rtol
+        return point_key(h, method, rtol, opts), method, opts
+
+    def _cached(self, key: str) -> Stats | None:
+        stats = self.cache.get(key)
+        if stats is not None and "x2" in self.scene.observables and stats.x2 is None and stats.ok \
+                and stats.status is not Status.MARGINAL:
+            return None
+        return stats
+
+    def evaluate(self, hs: Sequence[Harvester]) -> list[Stats | _Failure | None]:
+        """Results for each harvester (``None`` when no solver is needed)."""
+        out: list[Stats | _Failure | None] = [None] * len(hs)
+        if not self.needs_solver:
+            self.bar.update(len(hs))
+            return out
+        todo: list[tuple[int, str, str, dict[str, Any]]] = []
+        for i, h in enumerate(hs):
+            key, method, opts = self.key(h)
+            hit = self._cached(key)
+            if hit is not None:
+                out[i] = hit
+                self.reused += 1
+                self.bar.update(1)
+            else:
+                todo.append((i, key, method, opts))
+        batch = [t for t in todo if t[2] == "exact" and hs[t[0]].is_linear
+                 and "x2" not in self.scene.observables]
+        if batch:
+            for (i, key, _, opts), stats in zip(batch, _exact_batch([hs[t[0]] for t in batch])):
+                out[i] = self._store(hs[i], key, opts, stats)
+        in_batch = {t[0] for t in batch}
+        for i, key, method, opts in todo:
+            if i not in in_batch:
+                out[i] = self._solve_one(hs[i], key, method, opts)
+        return out
+
+    def _store(self, h: Harvester, key: str, opts: Mapping[str, Any], res: Stats | _Failure) -> Stats | _Failure:
+        extra = {"scene": self.scene.name, "seed": opts.get("seed")}
+        if isinstance(res, Stats):
+            self.cache.put(key, h, res, extra)
+            self.computed += 1
+        else:
+            self.cache.log_failure(key, h, res.status, res.message, {**extra, "method": res.method})
+        self.bar.update(1)
+        return res
+
+    def _solve_one(self, h: Harvester, key: str, method: str, opts: dict[str, Any]) -> Stats | _Failure:
+        res: Stats | _Failure
+        try:
+            res = solve(h, method, **opts)
+        except MethodNotAvailableError as exc:
+            res = _Failure(NOT_AVAILABLE, f"method {method!r}: {exc}", method)
+        except HarvesterError as exc:
+            res = _Failure(ERROR, f"method {method!r} failed: {type(exc).__name__}: {exc}", method)
+        except (ArithmeticError, ValueError, RuntimeError, FloatingPointError, TypeError) as exc:
+            # A solver bug must not sink a long sweep: report it on the point, keep going.
+            res = _Failure(ERROR, f"method {method!r} raised {type(exc).__name__}: {exc}", method)
+        return self._store(h, key, opts, res)
+
+
+def _exact_batch(hs: Sequence[Harvester]) -> list[Stats]:
+    """Exact results of harmonic points, vectorized per (N, params) with exact_sweep.
+
+    Strictly stable points come from :func:`exact_sweep`; marginal and unstable points (few)
+    go through the pointwise :class:`Exact` solver, which reports growth rates and messages.
+    """
+    results: list[Stats | None] = [None] * len(hs)
+    groups: dict[tuple[int, Any], list[int]] = {}
+    for i, h in enumerate(hs):
+        groups.setdefault((h.N, h.params), []).append(i)
+    for (N, params), idx in groups.items():
+        a = np.array([hs[i].a for i in idx])
+        k = np.array([hs[i].k for i in idx])
+        sweep = exact_sweep(a, k, N, params)
+        s2 = np.sin(np.pi * np.arange(N) / N) ** 2
+        kmin = (2.0 * a[:, None] + 4.0 * k[:, None] * s2).min(axis=1)
+        strict = kmin > MARGINAL_RTOL * (2.0 * a + 4.0 * np.abs(k))
+        for j, i in enumerate(idx):
+            if not strict[j]:
+                results[i] = Exact().solve(hs[i])
+                continue
+            results[i] = Stats.from_moments(
+                V2=float(sweep["V2"][j]), Pin=float(sweep["Pin"][j]), R=params.R,
+                v2=float(sweep["v2"][j]), v2_err=0.0, vV=float(sweep["vV"][j]), vV_err=0.0,
+                status=Status.STABLE, message="stable", method="exact",
+                info={"N": N, "kappa_min": float(kmin[j]), "k_di": k_di(N, float(a[j])),
+                      "vectorized": True},
+            )
+    return results  # type: ignore[return-value]
+
+
+def _row(scene: Scene, index: int, point: Mapping[str, float], h: Harvester,
+         res: Stats | _Failure | None, info: Mapping[str, Any]) -> SceneRow:
+    values: dict[str, float | None] = {}
+    for obs in scene.observables:
+        if obs == "k_di":
+            values["k_di"] = k_di(h.N, h.a)
+        elif isinstance(res, Stats):
+            values[obs], values[obs + "_err"] = res.value(obs)
+        else:
+            values[obs] = values[obs + "_err"] = None
+    if res is None:
+        msg = "closed form" if values.get("k_di") is not None else "N = 1: no coupling threshold"
+        return SceneRow(index, dict(point), Status.STABLE.value, "", msg, values, info)
+    if isinstance(res, _Failure):
+        return SceneRow(index, dict(point), res.status, res.method, res.message, values, info)
+    message = res.message
+    if res.ok and res.eta is not None and res.eta_err and res.eta_err > scene.rtol * abs(res.eta):
+        message += (f"; accuracy not met: eta_err/eta = {res.eta_err / abs(res.eta):.2g} "
+                    f"> rtol = {scene.rtol:g}")
+    return SceneRow(index, dict(point), res.status.value, res.method, message, values,
+                    {**info, **({"seed": res.info["seed"]} if "seed" in res.info else {})})
+
+
+def _sweep_rows(scene: Scene, runner: _Runner, points: list[dict[str, float]]) -> list[SceneRow]:
+    hs = [scene.harvester(p) for p in points]
+    results = runner.evaluate(hs)
+    return [_row(scene, i, p, h, r, {}) for i, (p, h, r) in enumerate(zip(points, hs, results))]
+
+
+def _objective(res: Stats | _Failure | None, name: str) -> float | None:
+    if isinstance(res, Stats) and res.ok:
+        return res.value(name)[0]
+    return None
+
+
+def _optimize_rows(scene: Scene, runner: _Runner, points: list[dict[str, float]]) -> list[SceneRow]:
+    opt = scene.optimize
+    assert opt is not None
+    rows = []
+    for index, p in enumerate(points):
+        h0 = scene.harvester(p)
+        lo, hi = opt.interval(h0)
+        grid = np.linspace(lo, hi, opt.points) if hi > lo else np.array([lo])
+        hs = [h0.replace(**{opt.over: float(x)}) for x in grid]
+        res = runner.evaluate(hs)
+        vals = [_objective(r, opt.maximize) for r in res]
+        good = [i for i, v in enumerate(vals) if v is not None]
+        info: dict[str, Any] = {"optimize": {"maximize": opt.maximize, "over": opt.over,
+                                             "interval": [lo, hi], "grid_points": len(grid)}}
+        if not good:
+            first = next((r for r in res if isinstance(r, _Failure)), None)
+            rows.append(_row(scene, index, {**p, opt.over: None}, h0,  # type: ignore[dict-item]
+                             first or _Failure(ERROR, "no stationary point in the search interval", ""),
+                             info))
+            runner.bar.update(1)
+            continue
+        best = max(good, key=lambda i: vals[i])
+        x_opt = float(grid[best])
+        bracket = [float(grid[max(best - 1, 0)]), float(grid[min(best + 1, len(grid) - 1)])]
+        at_bound = "low" if best == 0 and len(grid) > 1 else "high" if best == len(grid) - 1 > 0 else None
+        if at_bound is None and len(grid) > 1 and isinstance(res[best], Stats) and res[best].method == "exact":
+            found = minimize_scalar(
+                lambda x: -(Exact().solve(h0.replace(**{opt.over: x})).value(opt.maximize)[0] or -np.inf),
+                bounds=bracket, method="bounded", options={"xatol": 1e-10 * max(1.0, abs(x_opt))},
+            )
+            x_opt, bracket = float(found.x), [float(found.x), float(found.x)]
+        info["optimize"].update(at_bound=at_bound, bracket=bracket)
+        final = runner.evaluate([h0.replace(**{opt.over: x_opt})])[0]
+        row = _row(scene, index, {**p, opt.over: x_opt}, h0, final, info)
+        if at_bound:
+            row = SceneRow(row.index, row.point, row.status, row.method,
+                           row.message + f"; maximum at the {at_bound} end of the search interval "
+                           f"{opt.over} in [{lo:.6g}, {hi:.6g}] ({opt.maximize} is monotone there)",
+                           row.values, row.info)
+        rows.append(row)
+    return rows
+
+
+def run_scene(
+    scene: Scene,
+    out_dir: str | Path,
+    quick: bool = False,
+    progress: bool | None = None,
+    figures: Sequence[str] | None = None,
+) -> SceneResult:
+    """Run a scene: compute its points, write the outputs it asks for, draw its figures.
+
+    Parameters
+    ----------
+    scene : Scene
+        The study (see :func:`.scene.load_scene`).
+    out_dir : str or Path
+        Output folder (created). Holds ``points.jsonl`` (cache and run log; reruns reuse it),
+        ``<name>.csv``, ``<name>.json``, ``<name>.txt`` and ``<name>_<figure>.png``.
+    quick : bool
+        Run the scene's reduced variant (fewer points, looser rtol) if it declares one.
+    progress : bool or None
+        Progress bar over points; ``None`` shows it only on a terminal.
+    figures : sequence of str, optional
+        Draw only these of the scene's figures (default: all declared; ``[]``: none).
+
+    Returns
+    -------
+    SceneResult
+        Rows, output paths and counts of computed/reused points.
+
+    Raises
+    ------
+    ParameterError
+        A point is not a valid harvester, or ``figures`` names an unknown figure. Solver
+        failures do not raise: they are reported on their points.
+    """
+    from tqdm.auto import tqdm
+
+    if not isinstance(scene, Scene):
+        raise ParameterError(f"scene must be a Scene, got {scene!r} (type {type(scene).__name__})")
+    sc = scene.variant(quick)
+    names = [f.name for f in sc.figures]
+    wanted = names if figures is None else list(figures)
+    for name in wanted:
+        if name not in names:
+            raise ParameterError(f"figure {name!r} is not in scene {sc.name!r}; its figures: {names}")
+    out = Path(out_dir)
+    out.mkdir(parents=True, exist_ok=True)
+    t0 = time.perf_counter()
+    points = list(sc.points())
+    hs0 = [sc.harvester(p) for p in points]  # validates every point before any work
+    total = len(points)
+    if sc.optimize is not None:
+        total = sum(1 + (sc.optimize.points if np.ptp(sc.optimize.interval(h)) > 0 else 1) for h in hs0)
+    cache = PointCache(out)
+    with tqdm(total=total, desc=sc.name, unit="pt", disable=None if progress is None else not progress,
+              leave=False) as bar:
+        runner = _Runner(sc, cache, bar)
+        rows = _optimize_rows(sc, runner, points) if sc.optimize else _sweep_rows(sc, runner, points)
+    result = SceneResult(sc, tuple(rows), out, MappingProxyType({}), None, None, None,
+                         runner.computed, runner.reused, 0.0)
+    if "csv" in sc.outputs:
+        result = replace(result, csv_path=_write_csv(result, out / f"{sc.name}.csv"))
+    if "table" in sc.outputs:
+        table_path = out / f"{sc.name}.txt"
+        table_path.write_text(result.table() + "\n", encoding="utf-8")
+        result = replace(result, table_path=table_path)
+    drawn: dict[str, Path] = {}
+    if wanted:
+        from .plotting import draw_figure
+
+        for spec in sc.figures:
+            if spec.name in wanted:
+                drawn[spec.name] = draw_figure(sc, spec, rows, out / f"{sc.name}_{spec.name}.png")
+    result = replace(result, figures=MappingProxyType(drawn), elapsed=time.perf_counter() - t0)
+    if "json" in sc.outputs:
+        result = replace(result, json_path=out / f"{sc.name}.json")
+        result.json_path.write_text(json.dumps({**result.to_dict(), "quick": quick}, indent=1,
+                                               default=str), encoding="utf-8")
+    return result
+
+
+def _write_csv(result: SceneResult, path: Path) -> Path:
+    cols = result.columns
+    obs = [c for c in cols if c in result.scene.observables]
+    header = [c for c in cols if c not in obs]
+    for o in obs:
+        header += [o] if o in DERIVED else [o, o + "_err"]
+    header += ["status", "method", "message"]
+    with path.open("w", newline="", encoding="utf-8") as fh:
+        writer = csv.writer(fh)
+        writer.writerow(header)
+        for row in result.rows:
+            d = row.to_dict()
+            writer.writerow(["" if d.get(c) is None else d.get(c) for c in header])
+    return path
