@@ -1,4 +1,4 @@
-"""Command-line interface: ``harvester stats``, ``harvester threshold``.
+"""Command-line interface: ``harvester stats``, ``harvester threshold``, ``harvester scene``.
 
 Every command prints a readable table, or one JSON object with ``--json``. Bad arguments
 give a one-line error naming the argument and exit code 2, without a traceback.
@@ -125,7 +125,38 @@ def cmd_validate(args: argparse.Namespace) -> int:
     return run_cli(quick=args.quick, out=args.out, seed=args.seed, progress=not args.no_progress)
 
 
+def cmd_scene(args: argparse.Namespace) -> int:
+    """List the shipped scenes, or run one and print its table and output paths."""
+    from .scene import list_scenes, load_scene
+    from .scene_run import run_scene
+
+    if args.action == "list":
+        scenes = [load_scene(name) for name in list_scenes()]
+        if args.json:
+            print(json.dumps([{"name": s.name, "title": s.title, "points": s.n_points,
+                               "quick_points": s.variant(True).n_points} for s in scenes], indent=2))
+            return 0
+        _print_table([(s.name, f"{s.n_points}/{s.variant(True).n_points}", s.title) for s in scenes],
+                     ("scene", "points (full/quick)", "title"))
+        return 0
+    result = run_scene(load_scene(args.scene), args.out, quick=args.quick,
+                       progress=False if args.no_progress or args.json else None)
+    if args.json:
+        print(json.dumps(result.to_dict(), indent=2, default=str))
+        return 0
+    print(f"{result.scene.title or result.scene.name}{' (quick)' if args.quick else ''}")
+    print(result.table())
+    print(f"\n{len(result.rows)} points: {result.computed} computed, {result.reused} reused, "
+          f"{result.elapsed:.1f} s")
+    for label, path in (("csv", result.csv_path), ("json", result.json_path),
+                        ("table", result.table_path), *result.figures.items()):
+        if path is not None:
+            print(f"{label}: {path}")
+    return 0
+
+
 COMMANDS: dict[str, Callable[[argparse.Namespace], int]] = {
+    "scene": cmd_scene,
     "stats": cmd_stats,
     "validate": cmd_validate,
     "threshold": cmd_threshold,
@@ -163,6 +194,18 @@ def build_parser() -> argparse.ArgumentParser:
                    help="output folder for report.md, report.html, figures (default ./validation_report)")
     p.add_argument("--seed", type=int, default=2017, help="base Monte Carlo seed (default 2017)")
     p.add_argument("--no-progress", action="store_true", help="no progress bar")
+
+    p = sub.add_parser("scene", help="declarative studies: the paper's figures and more")
+    scene_sub = p.add_subparsers(dest="action", required=True, parser_class=_Parser)
+    q = scene_sub.add_parser("list", help="shipped scenes")
+    q.add_argument("--json", action="store_true", help="print one JSON object")
+    q = scene_sub.add_parser("run", help="run a scene: table, CSV/JSON and figures")
+    q.add_argument("scene", metavar="NAME_OR_PATH", help="shipped scene name or TOML file")
+    q.add_argument("--out", default="scene_output", metavar="DIR",
+                   help="output folder; its points.jsonl cache is reused by later runs (default ./scene_output)")
+    q.add_argument("--quick", action="store_true", help="the scene's reduced variant")
+    q.add_argument("--json", action="store_true", help="print one JSON object")
+    q.add_argument("--no-progress", action="store_true", help="no progress bar")
     return parser
 
 
