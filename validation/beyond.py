@@ -19,6 +19,7 @@ so every harmonic ring, any N, a and stable k, obeys :math:`\\eta \\le \\eta(0)`
 from __future__ import annotations
 
 import math
+import shutil
 from pathlib import Path
 from collections.abc import Mapping
 from typing import Any
@@ -180,7 +181,9 @@ def _kdi_map(ctx: Context, sec: Section) -> list[CheckResult]:
     names = [s for s in list_scenes() if "kdi" in s.replace("_", "").lower()]
     if not names:
         return [skipped("k_di(N, a) map (scene)", _SECTION, f"no k_di scene shipped (scenes: {list_scenes()})")]
-    res = run_scene(load_scene(names[0]), ctx.out / "scenes" / names[0], quick=ctx.quick, progress=False)
+    folder = ctx.out / "scenes" / names[0]
+    shutil.rmtree(folder, ignore_errors=True)  # compute afresh, never reuse an earlier run's cache
+    res = run_scene(load_scene(names[0]), folder, quick=ctx.quick, progress=False)
     for name, path in res.figures.items():
         sec.figures.append(Figure(Path(path), f"k_di(N, a) map from scene '{names[0]}' ({name})."))
     bad = [r for r in res.rows if r.status == "error"]
