@@ -143,7 +143,11 @@ class SceneResult:
         out = ["  ".join(h.ljust(w) for h, w in zip(header, widths)),
                "  ".join("-" * w for w in widths)]
         out += ["  ".join(c.ljust(w) for c, w in zip(r, widths)) for r in lines]
-        notes = [f"[{row.index}] {row.status}: {row.message}" for row in self.rows if not row.ok]
+        by_message: dict[tuple[str, str], list[str]] = {}
+        for row in self.rows:
+            if not row.ok:
+                by_message.setdefault((row.status, row.message), []).append(str(row.index))
+        notes = [f"points {', '.join(idx)}: {status}: {msg}" for (status, msg), idx in by_message.items()]
         return "\n".join(out + (["", "notes:", *notes] if notes else []))
 
     def to_dict(self) -> dict[str, Any]:
@@ -239,7 +243,7 @@ class _Runner:
         try:
             res = solve(h, method, **opts)
         except MethodNotAvailableError as exc:
-            res = _Failure(NOT_AVAILABLE, f"method {method!r}: {exc}", method)
+            res = _Failure(NOT_AVAILABLE, str(exc), method)
         except HarvesterError as exc:
             res = _Failure(ERROR, f"method {method!r} failed: {type(exc).__name__}: {exc}", method)
         except (ArithmeticError, ValueError, RuntimeError, FloatingPointError, TypeError) as exc:
