@@ -121,7 +121,9 @@ def draw_figure(scene: Scene, spec: FigureSpec, rows: Sequence[SceneRow], path: 
             for status, (marker, _) in _EDGE.items():
                 bad = [r.point[spec.x] for r in srows if r.status == status and r.point.get(spec.x) is not None]
                 if bad:
-                    ax.plot(bad, [0.02] * len(bad), marker, color=color, ms=5, transform=edge, clip_on=False)
+                    # one row per series so that coinciding x values stay visible
+                    ax.plot(bad, [0.02 + 0.03 * s] * len(bad), marker, color=color, mfc="none", ms=5,
+                            transform=edge, clip_on=False)
                     if panel == 0:
                         counts[status] = counts.get(status, 0) + len(bad)
             for ref in spec.refs:

@@ -65,6 +65,7 @@ __all__ = [
     "Scene",
     "load_scene",
     "list_scenes",
+    "scene_from_dict",
     "SCENE_DIR",
 ]
 

@@ -28,7 +28,7 @@ from .errors import HarvesterError, MethodNotAvailableError, ParameterError
 from .exact import Exact, exact_sweep
 from .model import Harvester
 from .result import Stats, Status
-from .scene import DERIVED, OBSERVABLES, Scene
+from .scene import DERIVED, OBSERVABLES, Scene, load_scene
 from .scene_cache import PointCache, point_key, point_seed
 from .solve import choose_method, solve
 from .stability import MARGINAL_RTOL, k_di
@@ -362,7 +362,7 @@ def _optimize_rows(scene: Scene, runner: _Runner, points: list[dict[str, float]]
 
 
 def run_scene(
-    scene: Scene,
+    scene: Scene | str | Path,
     out_dir: str | Path,
     quick: bool = False,
     progress: bool | None = None,
@@ -372,8 +372,8 @@ def run_scene(
 
     Parameters
     ----------
-    scene : Scene
-        The study (see :func:`.scene.load_scene`).
+    scene : Scene, str or Path
+        The study, or a shipped scene name or TOML path (see :func:`.scene.load_scene`).
     out_dir : str or Path
         Output folder (created). Holds ``points.jsonl`` (cache and run log; reruns reuse it),
         ``<name>.csv``, ``<name>.json``, ``<name>.txt`` and ``<name>_<figure>.png``.
@@ -397,6 +397,8 @@ def run_scene(
     """
     from tqdm.auto import tqdm
 
+    if isinstance(scene, (str, Path)):
+        scene = load_scene(scene)
     if not isinstance(scene, Scene):
         raise ParameterError(f"scene must be a Scene, got {scene!r} (type {type(scene).__name__})")
     sc = scene.variant(quick)
