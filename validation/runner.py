@@ -61,7 +61,7 @@ def validate(
     quick: bool = False,
     out: Path | str = "validation_report",
     seed: int = 2017,
-    steps: Sequence[tuple[str, str]] = STEPS,
+    steps: Sequence[tuple[str | Callable[[Context], Section], str]] | None = None,
     progress: Callable[[str], None] | None = None,
 ) -> Report:
     """Run the validation steps and write ``report.md`` and ``report.html`` into ``out``.
@@ -74,8 +74,8 @@ def validate(
         Output folder, created if needed.
     seed : int
         Base seed of the Monte Carlo runs, >= 0.
-    steps : sequence of (module, title)
-        The steps to run (default :data:`STEPS`); each module has ``run(ctx) -> Section``.
+    steps : sequence of (module or callable, title), optional
+        The steps to run (default :data:`STEPS`); a module name means its ``run(ctx) -> Section``.
     progress : callable, optional
         Called with the title of each step before it starts.
 
@@ -96,18 +96,19 @@ def validate(
         "machine": f"{platform.machine()}, {os.cpu_count()} cores, Python {platform.python_version()}",
         "Monte Carlo seed": str(seed),
     })
-    for module, title in steps:
+    for module, title in (STEPS if steps is None else steps):
         if progress:
             progress(title)
         t0 = time.perf_counter()
         holder: list[Section] = []
 
-        def step(module: str = module) -> list:
-            holder.append(importlib.import_module(module).run(ctx))
+        def step(module: str | Callable[[Context], Section] = module) -> list:
+            fn = importlib.import_module(module).run if isinstance(module, str) else module
+            holder.append(fn(ctx))
             return []
 
         crash = guarded(title, title, step)
-        sec = holder[0] if holder else Section(module.rsplit(".", 1)[-1], title)
+        sec = holder[0] if holder else Section(str(module).rsplit(".", 1)[-1], title)
         sec.checks += crash
         sec.seconds = time.perf_counter() - t0
         report.sections.append(sec)
@@ -128,21 +129,27 @@ def validate(
 
 def run_cli(quick: bool = False, out: Path | str = "validation_report", seed: int = 2017,
             progress: bool = True) -> int:
-    """Run :func:`validate`, print the pass/fail summary; exit code 1 if any check failed."""
+    """Run :func:`validate` over :data:`STEPS`, print the pass/fail summary.
+
+    Returns the exit code: 1 if any check failed, else 0 (skipped checks do not fail).
+    """
+    steps = STEPS
     bar = None
     if progress:
         from tqdm import tqdm
 
-        bar = tqdm(total=len(STEPS) + 1, desc="validate", unit="step", file=sys.stderr)
+        bar = tqdm(total=len(steps) + 1, desc="validate", unit="step", file=sys.stderr)
+    started: list[str] = []
 
     def tick(title: str) -> None:
         if bar is not None:
-            if bar.n or title != STEPS[0][1]:
+            if started:
                 bar.update(1)
             bar.set_postfix_str(title)
+        started.append(title)
 
     t0 = time.perf_counter()
-    report = validate(quick=quick, out=out, seed=seed, progress=tick)
+    report = validate(quick=quick, out=out, seed=seed, steps=steps, progress=tick)
     if bar is not None:
         bar.update(bar.total - bar.n)
         bar.close()

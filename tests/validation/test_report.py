@@ -1,0 +1,68 @@
+"""The report writer: Markdown with linked figures, self-contained HTML, terminal summary."""
+
+from __future__ import annotations
+
+import base64
+
+import pytest
+
+from validation.checks import Outcome, agree, expect, skipped
+from validation.report import Figure, Report, Section, Table, summary_text, write_html, write_markdown
+
+
+@pytest.fixture
+def report(tmp_path):
+    import matplotlib.pyplot as plt
+
+    fig, ax = plt.subplots(figsize=(2, 2))
+    ax.plot([0, 1], [0, 1])
+    png = tmp_path / "fig.png"
+    fig.savefig(png)
+    plt.close(fig)
+    sec = Section("one", "First section", text=["Some `code` and **bold** text."])
+    sec.tables.append(Table("numbers", ("a", "b|c"), [("1", "2")], note="a note"))
+    sec.figures.append(Figure(png, "a line"))
+    sec.checks += [agree("close", "First section", 1.0, 0.1, 1.1, 0.0),
+                   expect("wrong", "First section", False, "must fail"),
+                   skipped("later", "First section", "solver not available")]
+    return Report("Tiny report", [sec], {"mode": "test"})
+
+
+def test_counts_and_failure(report):
+    assert report.counts() == {"PASS": 1, "FAIL": 1, "SKIP": 1}
+    assert report.failed
+
+
+def test_markdown(report, tmp_path):
+    text = write_markdown(report, tmp_path / "report.md").read_text()
+    assert "# Tiny report" in text
+    assert "**1 passed, 1 failed, 1 skipped**" in text
+    assert "![a line](fig.png)" in text
+    assert "| a | b\\|c |" in text
+    assert "| FAIL | wrong | must fail |" in text
+
+
+def test_html_is_self_contained(report, tmp_path):
+    page = write_html(report, tmp_path / "report.html").read_text()
+    png = (tmp_path / "fig.png").read_bytes()
+    assert "data:image/png;base64," + base64.b64encode(png).decode() in page
+    assert "src='fig.png'" not in page and 'src="fig.png"' not in page
+    assert "<code>code</code>" in page and "<b>bold</b>" in page
+    assert "class=\"fail\"" in page and "class=\"skip\"" in page
+
+
+def test_summary_lists_failures_first_and_flags_skips(report):
+    text = summary_text(report)
+    lines = text.splitlines()
+    assert lines[2].startswith("FAIL") and lines[3].startswith("SKIP") and lines[4].startswith("PASS")
+    assert "1 passed, 1 failed, 1 skipped" in text
+    assert "NOT passes" in text
+
+
+def test_table_rejects_ragged_rows():
+    with pytest.raises(ValueError, match="cells"):
+        Table("t", ("a", "b"), [("1",)])
+
+
+def test_outcome_values():
+    assert [o.value for o in Outcome] == ["PASS", "FAIL", "SKIP"]

@@ -1,0 +1,83 @@
+"""The runner and the command line, on tiny fake steps (the real suite runs in CI separately)."""
+
+from __future__ import annotations
+
+import pytest
+
+import validation.runner as runner
+from fpe_harvester.cli import build_parser, main
+from validation.checks import expect
+from validation.report import Section
+
+
+def _passing(ctx):
+    sec = Section("ok", "Passing step")
+    sec.checks.append(expect("fine", "Passing step", True, "ok"))
+    return sec
+
+
+def _failing(ctx):
+    sec = Section("bad", "Failing step")
+    sec.checks.append(expect("wrong", "Failing step", False, "must fail"))
+    return sec
+
+
+def _crashing(ctx):
+    raise RuntimeError("step exploded")
+
+
+def test_validate_writes_both_reports(tmp_path):
+    rep = runner.validate(quick=True, out=tmp_path, steps=[(_passing, "Passing step")])
+    assert not rep.failed
+    assert (tmp_path / "report.md").is_file() and (tmp_path / "report.html").is_file()
+    assert "Passing step" in (tmp_path / "report.md").read_text()
+    # the closing identities section reports every solver that produced nothing as skipped
+    skips = [c.name for c in rep.checks if c.outcome.value == "SKIP"]
+    assert skips == ["identities [exact]", "identities [fpe]", "identities [mc]"]
+
+
+def test_a_crashing_step_becomes_a_failed_check(tmp_path):
+    rep = runner.validate(out=tmp_path, steps=[(_crashing, "Crashing step")])
+    assert rep.failed
+    assert any("step exploded" in c.detail for c in rep.checks)
+
+
+def test_validate_rejects_a_negative_seed(tmp_path):
+    from fpe_harvester import ParameterError
+
+    with pytest.raises(ParameterError, match="seed"):
+        runner.validate(out=tmp_path, seed=-1, steps=[])
+
+
+def test_cli_arguments():
+    args = build_parser().parse_args(["validate", "--quick", "--out", "somewhere"])
+    assert args.command == "validate" and args.quick and args.out == "somewhere" and args.seed == 2017
+    args = build_parser().parse_args(["validate"])
+    assert not args.quick and args.out == "validation_report"
+    with pytest.raises(SystemExit) as exc:
+        build_parser().parse_args(["validate", "--seed", "abc"])
+    assert exc.value.code == 2
+    with pytest.raises(SystemExit) as exc:
+        build_parser().parse_args(["validate", "--bogus"])
+    assert exc.value.code == 2
+
+
+@pytest.mark.parametrize(("steps", "code"), [((( _passing, "Passing step"),), 0),
+                                              (((_passing, "Passing step"), (_failing, "Failing step")), 1)])
+def test_cli_exit_code(monkeypatch, tmp_path, capsys, steps, code):
+    monkeypatch.setattr(runner, "STEPS", steps)
+    assert main(["validate", "--quick", "--no-progress", "--out", str(tmp_path)]) == code
+    out = capsys.readouterr().out
+    assert "passed" in out and "report.md" in out
+    assert (tmp_path / "report.html").is_file()
+
+
+def test_cli_negative_seed_is_a_clean_error(monkeypatch, tmp_path, capsys):
+    monkeypatch.setattr(runner, "STEPS", ())
+    assert main(["validate", "--seed", "-3", "--no-progress", "--out", str(tmp_path)]) == 2
+    assert "seed" in capsys.readouterr().err
+
+
+def test_python_m_validation_parser():
+    args = runner.build_parser().parse_args(["--quick", "--out", "d"])
+    assert args.quick and args.out == "d"
