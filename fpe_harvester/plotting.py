@@ -88,6 +88,8 @@ def draw_figure(scene: Scene, spec: FigureSpec, rows: Sequence[SceneRow], path: 
     import matplotlib.pyplot as plt
     from matplotlib.transforms import blended_transform_factory
 
+    if spec.kind == "map":
+        return _draw_map(scene, spec, _selected(rows, spec), path)
     rows = _selected(rows, spec)
     if spec.xnorm:
         rows = [_normalized(scene, row, spec.x) for row in rows]
@@ -160,6 +162,56 @@ def draw_figure(scene: Scene, spec: FigureSpec, rows: Sequence[SceneRow], path: 
     if notes:
         fig.text(0.01, 0.01, "; ".join(notes), fontsize=7, color="0.3")
     fig.tight_layout(rect=(0, 0.04 if notes else 0, 1, 1))
+    fig.savefig(path, dpi=120)
+    plt.close(fig)
+    return path
+
+
+def _edges(values: Sequence[float], log: bool) -> list[float]:
+    """Cell edges around sorted centres (geometric midpoints on a log axis)."""
+    import numpy as np
+
+    v = np.log(values) if log else np.asarray(values, dtype=float)
+    if len(v) == 1:
+        mid, half = float(v[0]), 0.5 if not log else 0.1
+        e = np.array([mid - half, mid + half])
+    else:
+        inner = 0.5 * (v[1:] + v[:-1])
+        e = np.concatenate([[2 * v[0] - inner[0]], inner, [2 * v[-1] - inner[-1]]])
+    return list(np.exp(e) if log else e)
+
+
+def _draw_map(scene: Scene, spec: FigureSpec, rows: Sequence[SceneRow], path: Path) -> Path:
+    """Colour maps of ``spec.y`` over (``x``, ``series``); cells without a value are grey."""
+    import matplotlib.pyplot as plt
+    import numpy as np
+
+    xs = sorted({r.point[spec.x] for r in rows if r.point.get(spec.x) is not None})
+    ys = sorted({r.point[spec.series] for r in rows if r.point.get(spec.series) is not None})
+    ncol = len(spec.y)
+    fig, axes = plt.subplots(1, ncol, figsize=(5.2 * ncol, 4.0), squeeze=False)
+    missing = 0
+    for ax, obs in zip(axes[0], spec.y):
+        z = np.ma.masked_all((len(ys), len(xs)))
+        for r in rows:
+            val = r.get(obs)
+            if r.ok and val is not None and r.point.get(spec.x) in xs and r.point.get(spec.series) in ys:
+                z[ys.index(r.point[spec.series]), xs.index(r.point[spec.x])] = val
+        missing = max(missing, int(np.ma.count_masked(z)))
+        ax.set_facecolor("0.85")
+        mesh = ax.pcolormesh(_edges(xs, spec.logx), _edges(ys, spec.logy), z, shading="flat")
+        fig.colorbar(mesh, ax=ax, label=LABELS.get(obs, obs))
+        ax.set_xlabel(LABELS.get(spec.x, spec.x))
+        ax.set_ylabel(LABELS.get(spec.series or "", spec.series))
+        if spec.logx:
+            ax.set_xscale("log")
+        if spec.logy:
+            ax.set_yscale("log")
+    fig.suptitle(spec.title or scene.title or scene.name, fontsize=10)
+    if missing:
+        fig.text(0.01, 0.01, f"{missing} cell(s) without a value (grey): unstable, failed or not "
+                 "available; see the table", fontsize=7, color="0.3")
+    fig.tight_layout(rect=(0, 0.04 if missing else 0, 1, 1))
     fig.savefig(path, dpi=120)
     plt.close(fig)
     return path

@@ -280,6 +280,8 @@ class FigureSpec:
     """One figure: ``y`` observables (one panel each) against axis ``x``, one curve per
     value of ``series``, other axes fixed by ``select``. ``xnorm = "k_di"`` (with ``x = "k"``)
     plots :math:`k/|k_{di}|` so that curves of different ``a`` or ``N`` share one axis.
+    ``kind = "map"`` draws each ``y`` as a colour map over ``x`` (horizontal) and ``series``
+    (vertical, required) instead of curves.
 
     Points without a stationary state (unstable), failed points and points whose solver is
     not available are drawn as markers on the bottom edge and counted in a note; metastable
@@ -297,10 +299,14 @@ class FigureSpec:
     refs: tuple[Ref, ...] = ()
     title: str = ""
     xnorm: str = ""
+    kind: str = "lines"
 
     def __post_init__(self) -> None:
         if not isinstance(self.name, str) or not self.name.isidentifier():
             raise _bad("figures.name", self.name, "expected an identifier such as 'eta_vs_k'")
+        check_choice(f"figures.{self.name}.kind", self.kind, ("lines", "map"))
+        if self.kind == "map" and self.series is None:
+            raise ParameterError(f"figures.{self.name}: kind = 'map' needs series (the vertical axis)")
         check_choice(f"figures.{self.name}.x", self.x, AXIS_NAMES)
         ys = (self.y,) if isinstance(self.y, str) else tuple(self.y)
         if not ys:
@@ -485,7 +491,8 @@ def scene_from_dict(data: Mapping[str, Any], name: str | None = None) -> Scene:
     for i, spec in enumerate(fig_list):
         where = f"figures[{i}]"
         table = _keys(where, spec, ("name", "x", "y", "series", "select", "logx", "logy",
-                                    "errorbars", "refs", "title", "xnorm"), required=("name", "x"))
+                                    "errorbars", "refs", "title", "xnorm", "kind"),
+                      required=("name", "x"))
         refs = table.pop("refs", [])
         if not isinstance(refs, list):
             raise _bad(f"{where}.refs", refs, "expected an array of tables")

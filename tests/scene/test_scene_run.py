@@ -27,7 +27,8 @@ def harmonic_scene(**kw: object) -> Scene:
         observables=("eta", "V2", "Vrms", "Pin", "v2", "vV"),
         figures=(FigureSpec("eta_vs_k", x="k", y=("eta", "Vrms"), series="a",
                             refs=(Ref("vline", x="k_di"), Ref("point", x=-0.33, y=0.677))),
-                 FigureSpec("pin_vs_k", x="k", y=("Pin",))),
+                 FigureSpec("pin_vs_k", x="k", y=("Pin",)),
+                 FigureSpec("eta_map", x="k", y=("eta",), series="a", kind="map")),
     )
     base.update(kw)
     return Scene(**base)  # type: ignore[arg-type]
@@ -127,7 +128,7 @@ def test_all_outputs_written(tmp_path: Path) -> None:
     unstable = [r for r in data["rows"] if r["status"] == "unstable"]
     assert unstable and all(r["eta"] is None for r in unstable)  # never NaN
     text = res.table()
-    assert "unstable: k = -0.4 is beyond k_di" in text and set(res.figures) == {"eta_vs_k", "pin_vs_k"}
+    assert "unstable: k = -0.4 is beyond k_di" in text and set(res.figures) == {"eta_vs_k", "pin_vs_k", "eta_map"}
     assert res.table_path.read_text().startswith("a ")
 
 

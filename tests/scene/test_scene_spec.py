@@ -145,6 +145,8 @@ BAD = [
      "refs.hline y must be a real number"),
     ("name = 'x'\n[axes]\nk=[0]\n[[figures]]\nname = 'f'\nx = 'k'\nxnorm = 'a'", "xnorm must be one of"),
     ("name = 'x'\nfigures = 3", "figures: invalid value 3"),
+    ("name = 'x'\n[axes]\nk=[0]\n[[figures]]\nname = 'f'\nx = 'k'\nkind = 'map'", "kind = 'map' needs series"),
+    ("name = 'x'\n[axes]\nk=[0]\n[[figures]]\nname = 'f'\nx = 'k'\nkind = 'bars'", "figures.f.kind must be one of"),
     ("name = 'x'\n[options.rk4]\ndt = 1", "options: unknown key 'rk4'; valid keys: exact, fpe, mc"),
     ("name = 'x'\n[options]\nmc = 3", "options.mc: invalid value 3"),
     ("name = 'x'\noutputs = ['pdf']", "outputs must be one of 'table', 'csv', 'json'; got 'pdf'"),
