@@ -441,6 +441,26 @@ class Scene:
             desc = ", ".join(f"{k} = {v:g}" for k, v in values.items())
             raise ParameterError(f"scene {self.name!r}, point ({desc}): {exc}") from None
 
+    def to_dict(self) -> dict[str, Any]:
+        """JSON-ready description of the scene (values resolved, quick variant omitted)."""
+        def plain(obj: Any) -> Any:
+            if dataclasses.is_dataclass(obj):
+                return {f.name: plain(getattr(obj, f.name)) for f in dataclasses.fields(obj)}
+            if isinstance(obj, Mapping):
+                return {str(k): plain(v) for k, v in obj.items()}
+            if isinstance(obj, (list, tuple)):
+                return [plain(v) for v in obj]
+            return obj
+
+        return {
+            "name": self.name, "title": self.title, "description": self.description,
+            "system": self.system.to_dict(),
+            "axes": {ax.name: {"values": list(ax.values), "unit": ax.unit} for ax in self.axes},
+            "observables": list(self.observables), "rtol": self.rtol, "method": self.method,
+            "options": plain(self.options), "optimize": plain(self.optimize),
+            "figures": [plain(f) for f in self.figures], "outputs": list(self.outputs),
+        }
+
     @property
     def n_points(self) -> int:
         return math.prod(len(ax.values) for ax in self.axes)

@@ -156,7 +156,7 @@ class SceneResult:
             "scene": self.scene.name, "title": self.scene.title,
             "description": self.scene.description, "rtol": self.scene.rtol,
             "method": self.scene.method, "observables": list(self.scene.observables),
-            "system": self.scene.system.to_dict(),
+            "system": self.scene.system.to_dict(), "spec": self.scene.to_dict(),
             "computed": self.computed, "reused": self.reused, "elapsed_s": self.elapsed,
             "figures": {k: str(v) for k, v in self.figures.items()},
             "rows": [row.to_dict() for row in self.rows],

@@ -125,6 +125,7 @@ def test_all_outputs_written(tmp_path: Path) -> None:
     res = scene_run.run_scene(harmonic_scene(), tmp_path, progress=False)
     data = json.loads(res.json_path.read_text())
     assert data["scene"] == "tiny" and len(data["rows"]) == 10
+    assert data["spec"]["axes"]["k"]["values"][-1] == -0.4 and data["spec"]["figures"][0]["series"] == "a"
     unstable = [r for r in data["rows"] if r["status"] == "unstable"]
     assert unstable and all(r["eta"] is None for r in unstable)  # never NaN
     text = res.table()
