@@ -191,16 +191,29 @@ def write_html(report: Report, path: Path) -> Path:
     return path
 
 
-def summary_text(report: Report, width: int = 110) -> str:
-    """Plain-text pass/fail table for the terminal: every check, failures and skips first."""
+def summary_text(report: Report, width: int = 110, show_passed: bool = False) -> str:
+    """Plain-text pass/fail summary for the terminal.
+
+    A table of pass/fail/skip counts per section, then every failed and skipped check (and,
+    with ``show_passed``, every passed one), failures first.
+    """
     order = {Outcome.FAIL: 0, Outcome.SKIP: 1, Outcome.PASS: 2}
-    checks = sorted(report.checks, key=lambda c: order[c.outcome])
-    name_w = min(max((len(c.name) for c in checks), default=5), 60)
-    lines = [f"{'result':6}  {'check':{name_w}}  detail", f"{'-' * 6}  {'-' * name_w}  {'-' * 20}"]
-    for c in checks:
+    title_w = min(max([7, *(len(s.title) for s in report.sections)]), 50)
+    lines = [f"{'section':{title_w}}  {'pass':>5} {'fail':>5} {'skip':>5}  {'time [s]':>8}",
+             f"{'-' * title_w}  {'-' * 5} {'-' * 5} {'-' * 5}  {'-' * 8}"]
+    for sec in report.sections:
+        n = Counter(c.outcome for c in sec.checks)
+        lines.append(f"{sec.title[:title_w]:{title_w}}  {n[Outcome.PASS]:5d} {n[Outcome.FAIL]:5d} "
+                     f"{n[Outcome.SKIP]:5d}  {sec.seconds:8.1f}")
+    checks = sorted((c for c in report.checks if show_passed or c.outcome is not Outcome.PASS),
+                    key=lambda c: order[c.outcome])
+    if checks:
+        name_w = min(max([5, *(len(c.name) for c in checks)]), 60)
         room = max(width - name_w - 10, 20)
-        detail = c.detail if len(c.detail) <= room else c.detail[: room - 3] + "..."
-        lines.append(f"{c.outcome.value:6}  {c.name[:name_w]:{name_w}}  {detail}")
+        lines += ["", f"{'result':6}  {'check':{name_w}}  detail", f"{'-' * 6}  {'-' * name_w}  {'-' * 20}"]
+        for c in checks:
+            detail = c.detail if len(c.detail) <= room else c.detail[: room - 3] + "..."
+            lines.append(f"{c.outcome.value:6}  {c.name[:name_w]:{name_w}}  {detail}")
     counts = report.counts()
     lines.append("")
     lines.append(f"{counts.get('PASS', 0)} passed, {counts.get('FAIL', 0)} failed, {counts.get('SKIP', 0)} skipped")
