@@ -140,7 +140,7 @@ def cmd_scene(args: argparse.Namespace) -> int:
                      ("scene", "points (full/quick)", "title"))
         return 0
     result = run_scene(load_scene(args.scene), args.out, quick=args.quick,
-                       progress=False if args.no_progress or args.json else None)
+                       progress=False if args.no_progress or args.json else None, workers=args.workers)
     if args.json:
         print(json.dumps(result.to_dict(), indent=2, default=str))
         return 0
@@ -206,6 +206,8 @@ def build_parser() -> argparse.ArgumentParser:
     q.add_argument("--quick", action="store_true", help="the scene's reduced variant")
     q.add_argument("--json", action="store_true", help="print one JSON object")
     q.add_argument("--no-progress", action="store_true", help="no progress bar")
+    q.add_argument("--workers", type=int, default=1, metavar="P",
+                   help="processes for Fokker-Planck points (default 1; Monte Carlo is threaded)")
     return parser
 
 

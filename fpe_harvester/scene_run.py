@@ -24,12 +24,12 @@ from typing import Any
 import numpy as np
 from scipy.optimize import minimize_scalar
 
-from .errors import HarvesterError, MethodNotAvailableError, ParameterError
+from .errors import HarvesterError, MethodNotAvailableError, ParameterError, check_int
 from .exact import Exact, exact_sweep
 from .model import Harvester
 from .result import Stats, Status
 from .scene import DERIVED, OBSERVABLES, Scene, load_scene
-from .scene_cache import PointCache, point_key, point_seed
+from .scene_cache import PointCache, point_key, point_seed, stats_from_dict
 from .solve import choose_method, solve
 from .stability import MARGINAL_RTOL, k_di
 
@@ -174,8 +174,8 @@ def _fmt(value: Any) -> str:
 class _Runner:
     """Evaluates harvesters for one scene run, through the cache."""
 
-    def __init__(self, scene: Scene, cache: PointCache, bar: Any) -> None:
-        self.scene, self.cache, self.bar = scene, cache, bar
+    def __init__(self, scene: Scene, cache: PointCache, bar: Any, workers: int = 1) -> None:
+        self.scene, self.cache, self.bar, self.workers = scene, cache, bar, workers
         self.computed = self.reused = 0
         self.needs_solver = any(o in OBSERVABLES for o in scene.observables)
 
@@ -223,10 +223,30 @@ class _Runner:
             for (i, key, _, opts), stats in zip(batch, _exact_batch([hs[t[0]] for t in batch])):
                 out[i] = self._store(hs[i], key, opts, stats)
         in_batch = {t[0] for t in batch}
-        for i, key, method, opts in todo:
-            if i not in in_batch:
-                out[i] = self._solve_one(hs[i], key, method, opts)
+        rest = [t for t in todo if t[0] not in in_batch]
+        # Monte Carlo runs its own threads; other pointwise solvers are single-threaded.
+        pool = [t for t in rest if t[2] != "mc"] if self.workers > 1 else []
+        if len(pool) > 1:
+            self._solve_parallel(hs, pool, out)
+        for i, key, method, opts in rest:
+            if out[i] is None:
+                out[i] = self._store(hs[i], key, opts, _attempt(hs[i], method, opts))
         return out
+
+    def _solve_parallel(self, hs: Sequence[Harvester], todo: list[tuple[int, str, str, dict[str, Any]]],
+                        out: list[Stats | _Failure | None]) -> None:
+        import multiprocessing
+        from concurrent.futures import ProcessPoolExecutor, as_completed
+
+        # spawn, not fork: a forked child of a process whose numba threads are running can hang
+        ctx = multiprocessing.get_context("spawn")
+        with ProcessPoolExecutor(max_workers=self.workers, mp_context=ctx) as ex:
+            futures = {ex.submit(_attempt_portable, hs[i], method, opts): (i, key, opts)
+                       for i, key, method, opts in todo}
+            for fut in as_completed(futures):
+                i, key, opts = futures[fut]
+                res = fut.result()
+                out[i] = self._store(hs[i], key, opts, stats_from_dict(res) if isinstance(res, dict) else res)
 
     def _store(self, h: Harvester, key: str, opts: Mapping[str, Any], res: Stats | _Failure) -> Stats | _Failure:
         extra = {"scene": self.scene.name, "seed": opts.get("seed")}
@@ -238,18 +258,24 @@ class _Runner:
         self.bar.update(1)
         return res
 
-    def _solve_one(self, h: Harvester, key: str, method: str, opts: dict[str, Any]) -> Stats | _Failure:
-        res: Stats | _Failure
-        try:
-            res = solve(h, method, **opts)
-        except MethodNotAvailableError as exc:
-            res = _Failure(NOT_AVAILABLE, str(exc), method)
-        except HarvesterError as exc:
-            res = _Failure(ERROR, f"method {method!r} failed: {type(exc).__name__}: {exc}", method)
-        except (ArithmeticError, ValueError, RuntimeError, FloatingPointError, TypeError) as exc:
-            # A solver bug must not sink a long sweep: report it on the point, keep going.
-            res = _Failure(ERROR, f"method {method!r} raised {type(exc).__name__}: {exc}", method)
-        return self._store(h, key, opts, res)
+
+def _attempt(h: Harvester, method: str, opts: dict[str, Any]) -> Stats | _Failure:
+    """Solve one point; a failure becomes a :class:`_Failure` carrying the reason."""
+    try:
+        return solve(h, method, **opts)
+    except MethodNotAvailableError as exc:
+        return _Failure(NOT_AVAILABLE, str(exc), method)
+    except HarvesterError as exc:
+        return _Failure(ERROR, f"method {method!r} failed: {type(exc).__name__}: {exc}", method)
+    except (ArithmeticError, ValueError, RuntimeError, TypeError) as exc:
+        # A solver bug must not sink a long sweep: report it on the point, keep going.
+        return _Failure(ERROR, f"method {method!r} raised {type(exc).__name__}: {exc}", method)
+
+
+def _attempt_portable(h: Harvester, method: str, opts: dict[str, Any]) -> dict[str, Any] | _Failure:
+    """:func:`_attempt` for a worker process: Stats travel as dicts (their info is read-only)."""
+    res = _attempt(h, method, opts)
+    return res.to_dict() if isinstance(res, Stats) else res
 
 
 def _exact_batch(hs: Sequence[Harvester]) -> list[Stats]:
@@ -367,6 +393,7 @@ def run_scene(
     quick: bool = False,
     progress: bool | None = None,
     figures: Sequence[str] | None = None,
+    workers: int = 1,
 ) -> SceneResult:
     """Run a scene: compute its points, write the outputs it asks for, draw its figures.
 
@@ -383,6 +410,9 @@ def run_scene(
         Progress bar over points; ``None`` shows it only on a terminal.
     figures : sequence of str, optional
         Draw only these of the scene's figures (default: all declared; ``[]``: none).
+    workers : int
+        Processes for single-threaded pointwise solvers (Fokker--Planck), >= 1. Monte Carlo
+        points always run in this process (the simulator is multi-threaded itself).
 
     Returns
     -------
@@ -401,6 +431,7 @@ def run_scene(
         scene = load_scene(scene)
     if not isinstance(scene, Scene):
         raise ParameterError(f"scene must be a Scene, got {scene!r} (type {type(scene).__name__})")
+    workers = check_int("workers", workers, low=1)
     sc = scene.variant(quick)
     names = [f.name for f in sc.figures]
     wanted = names if figures is None else list(figures)
@@ -418,7 +449,7 @@ def run_scene(
     cache = PointCache(out)
     with tqdm(total=total, desc=sc.name, unit="pt", disable=None if progress is None else not progress,
               leave=False) as bar:
-        runner = _Runner(sc, cache, bar)
+        runner = _Runner(sc, cache, bar, workers)
         rows = _optimize_rows(sc, runner, points) if sc.optimize else _sweep_rows(sc, runner, points)
     result = SceneResult(sc, tuple(rows), out, MappingProxyType({}), None, None, None,
                          runner.computed, runner.reused, 0.0)

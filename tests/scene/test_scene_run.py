@@ -209,3 +209,15 @@ def test_shipped_scene_quick_runs(tmp_path: Path, name: str) -> None:
     res = scene_run.run_scene(load_scene(name), tmp_path, quick=True, progress=False)
     assert res.rows and all(p.exists() for p in res.figures.values())
     assert all(r.ok or r.message for r in res.rows)
+
+
+def test_parallel_workers_match_serial(tmp_path: Path) -> None:
+    # x2 forces pointwise solves, which go to the process pool with workers > 1
+    sc = harmonic_scene(observables=("eta", "x2"), figures=())
+    serial = scene_run.run_scene(sc, tmp_path / "serial", progress=False)
+    parallel = scene_run.run_scene(sc, tmp_path / "parallel", progress=False, workers=2)
+    assert parallel.computed == 10
+    assert [r.values for r in parallel.rows] == [r.values for r in serial.rows]
+    assert len((tmp_path / "parallel" / "points.jsonl").read_text().splitlines()) == 10
+    with pytest.raises(Exception, match=r"workers must be an integer in \[1, inf\], got 0"):
+        scene_run.run_scene(sc, tmp_path, workers=0)
