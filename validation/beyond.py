@@ -235,17 +235,17 @@ def _escape_study(ctx: Context, sec: Section) -> list[CheckResult]:
             table.rows.append((f"{n:g}", f"{k:g}", f"{a * a / (3 * abs(k)):.3g}" if n == 1 else "-",
                                f"{row['escaped']}/{row['paths']}", tau, f"{row['wall_time']:.2f}"))
             if row["tau"] is not None and row["escaped"] >= 5:
-                found.append((n, k, row["tau"]))
+                found.append((n, k, row["tau"], row["tau_err"]))
     sec.tables.append(table)
     fit = ""
-    pts = [(1 / abs(k), math.log(t)) for n, k, t in found if n == 1.0]
+    pts = [(1 / abs(k), math.log(t)) for n, k, t, _ in found if n == 1.0]
     if len(pts) >= 3:
         slope, icpt = np.polyfit(*zip(*pts), 1)
         if slope > 0:
             pred = ", ".join(f"k = {k:g}: ~{math.exp(icpt + slope / abs(k)):.2g}" for k in (-0.05, -0.02, -0.01))
             fit = (f" A least-squares fit of log(escape time) against 1/|k| (n = 1) has slope {slope:.3g}; with "
                    f"Delta U = (a^2/3)/|k| this is an effective temperature T_eff = {a * a / 3 / slope:.3g}. "
-                   f"Extrapolated mean escape times (time units of the model): {pred}. Runs much shorter than "
+                   f"Extrapolated (from |k| >= {min(abs(k) for k in ks):g}, so only indicative) mean escape times in model time units: {pred}. Runs much shorter than "
                    "these see a stationary-looking ring, runs comparable to them see 'divergence'.")
         else:
             fit = f" The fitted slope of log(escape time) vs 1/|k| is {slope:.3g} (not Kramers-like)."
@@ -257,6 +257,13 @@ def _escape_study(ctx: Context, sec: Section) -> list[CheckResult]:
         "at |k| ~ 0.02' is therefore where escapes became visible within its finite simulation time." + fit
     )
     checks: list[CheckResult] = []
+    for n in ns:
+        seq = sorted((abs(k), t, e) for nn, k, t, e in found if nn == n)
+        if len(seq) >= 2:
+            ok = all(t1 - 4 * e1 <= t2 + 4 * e2 for (_, t1, e1), (_, t2, e2) in zip(seq[1:], seq[:-1]))
+            checks.append(expect(f"escape time of the n = {n:g} ring decreases as |k| grows", _SECTION, ok,
+                                 "mean escape times (|k|, tau): " + ", ".join(f"({q:g}, {t:.3g})" for q, t, _ in seq)
+                                 + " (within 4 error bars)"))
     if len(found) >= 2:
         sec.figures.append(_plot_escape(ctx, found))
     else:
@@ -276,7 +283,7 @@ def _metastable_status(ctx: Context) -> list[CheckResult]:
     return checks
 
 
-def _plot_escape(ctx: Context, found: list[tuple[float, float, float]]) -> Figure:
+def _plot_escape(ctx: Context, found: list[tuple[float, float, float, float]]) -> Figure:
     import matplotlib
 
     matplotlib.use("Agg")
@@ -284,7 +291,7 @@ def _plot_escape(ctx: Context, found: list[tuple[float, float, float]]) -> Figur
 
     fig, ax = plt.subplots(figsize=(6, 4))
     for n in sorted({f[0] for f in found}):
-        pts = sorted((1 / abs(k), t) for nn, k, t in found if nn == n)
+        pts = sorted((1 / abs(k), t) for nn, k, t, _ in found if nn == n)
         ax.semilogy(*zip(*pts), "o-", label=f"n = {n:g}")
     ax.set_xlabel("1/|k|")
     ax.set_ylabel("mean escape time (Monte Carlo, censored MLE)")
