@@ -1,11 +1,17 @@
 """Validation of fpe-harvester: cross-checks, the paper's numbers, stress tests, benchmarks
-and the report written by ``harvester validate``.
+and the report written by ``harvester validate`` (or ``python -m validation``).
+
+Steps (each ``run(ctx) -> Section``): :mod:`.crosscheck`, :mod:`.paper`, :mod:`.beyond`,
+:mod:`.stress`, :mod:`.figures` (the shipped scenes), :mod:`.benchmarks` (runs the
+``bench_*`` modules); :mod:`.runner` orders them and writes the report (:mod:`.report`);
+:mod:`.checks` holds the pass/fail/skip logic.
 """
 
 from __future__ import annotations
 
 from .checks import CheckResult, Context, Outcome, SolveCache, agree, expect
 from .report import Figure, Report, Section, Table, summary_text, write_html, write_markdown
+from .runner import run_cli, validate
 
 __all__ = [
     "CheckResult",
@@ -21,4 +27,6 @@ __all__ = [
     "summary_text",
     "write_html",
     "write_markdown",
+    "validate",
+    "run_cli",
 ]
