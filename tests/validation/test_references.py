@@ -51,3 +51,13 @@ def test_error_time_pairs_pairs_by_name_prefix():
 def test_exact_result_used_for_the_paper_row():
     r = solve(Harvester.build(a=0.5, n=2, N=3, k=-0.33), "exact")
     assert abs(r.eta - 0.677) <= 0.0005
+
+
+def test_doctests_of_the_validation_package():
+    import doctest
+
+    import validation.benchmarks
+    import validation.checks
+
+    for mod in (validation.checks, validation.benchmarks):
+        assert doctest.testmod(mod).failed == 0
