@@ -220,6 +220,10 @@ def main(argv: Sequence[str] | None = None) -> int:
     except HarvesterError as exc:
         print(f"harvester {args.command}: error: {exc}", file=sys.stderr)
         return 2
+    except BrokenPipeError:
+        # output piped into e.g. `head`: stop quietly, as Unix tools do
+        sys.stderr.close()
+        return 0
 
 
 if __name__ == "__main__":
