@@ -50,12 +50,14 @@ def _series(rows: Sequence[SceneRow], spec: FigureSpec) -> dict[Any, list[SceneR
     for row in rows:
         groups.setdefault(row.point.get(spec.series) if spec.series else None, []).append(row)
     for key in groups:
-        groups[key] = sorted(groups[key], key=lambda r: (r.point.get(spec.x) is None, r.point.get(spec.x) or 0))
+        groups[key] = sorted(groups[key],
+                             key=lambda r: (r.point.get(spec.x) is None, r.point.get(spec.x) or 0))
     return groups
 
 
 def _threshold(scene: Scene, row: SceneRow) -> float | None:
-    h = scene.harvester({k: v for k, v in row.point.items() if k in AXIS_NAMES and k != "k" and v is not None})
+    fixed = {k: v for k, v in row.point.items() if k in AXIS_NAMES and k != "k" and v is not None}
+    h = scene.harvester(fixed)
     return k_di(h.N, h.a)
 
 
@@ -121,7 +123,8 @@ def draw_figure(scene: Scene, spec: FigureSpec, rows: Sequence[SceneRow], path: 
                 ax.errorbar(xs, ys, yerr=[e or 0.0 for e in es] if spec.errorbars else None, fmt="o",
                             mfc="none", color=color, capsize=2, label=label)
             for status, (marker, _) in _EDGE.items():
-                bad = [r.point[spec.x] for r in srows if r.status == status and r.point.get(spec.x) is not None]
+                bad = [r.point[spec.x] for r in srows
+                       if r.status == status and r.point.get(spec.x) is not None]
                 if bad:
                     # one row per series so that coinciding x values stay visible
                     ax.plot(bad, [0.02 + 0.03 * s] * len(bad), marker, color=color, mfc="none", ms=5,

@@ -155,7 +155,9 @@ class Axis:
         table = _keys(where, spec, (*_SPACINGS, "unit"))
         kinds = [key for key in _SPACINGS if key in table]
         if len(kinds) != 1:
-            raise ParameterError(f"{where}: give exactly one of {', '.join(_SPACINGS)}; got {kinds or 'none'}")
+            raise ParameterError(
+                f"{where}: give exactly one of {', '.join(_SPACINGS)}; got {kinds or 'none'}"
+            )
         kind, arg = kinds[0], table[kinds[0]]
         if kind == "values":
             values: Any = arg

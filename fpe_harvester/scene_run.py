@@ -248,7 +248,8 @@ class _Runner:
                 res = fut.result()
                 out[i] = self._store(hs[i], key, opts, stats_from_dict(res) if isinstance(res, dict) else res)
 
-    def _store(self, h: Harvester, key: str, opts: Mapping[str, Any], res: Stats | _Failure) -> Stats | _Failure:
+    def _store(self, h: Harvester, key: str, opts: Mapping[str, Any],
+               res: Stats | _Failure) -> Stats | _Failure:
         extra = {"scene": self.scene.name, "seed": opts.get("seed")}
         if isinstance(res, Stats):
             self.cache.put(key, h, res, extra)
@@ -369,7 +370,8 @@ def _optimize_rows(scene: Scene, runner: _Runner, points: list[dict[str, float]]
         x_opt = float(grid[best])
         bracket = [float(grid[max(best - 1, 0)]), float(grid[min(best + 1, len(grid) - 1)])]
         at_bound = "low" if best == 0 and len(grid) > 1 else "high" if best == len(grid) - 1 > 0 else None
-        if at_bound is None and len(grid) > 1 and isinstance(res[best], Stats) and res[best].method == "exact":
+        exact = isinstance(res[best], Stats) and res[best].method == "exact"
+        if at_bound is None and len(grid) > 1 and exact:
             found = minimize_scalar(
                 lambda x: -(Exact().solve(h0.replace(**{opt.over: x})).value(opt.maximize)[0] or -np.inf),
                 bounds=bracket, method="bounded", options={"xatol": 1e-10 * max(1.0, abs(x_opt))},
