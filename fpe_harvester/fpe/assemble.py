@@ -1,0 +1,175 @@
+"""DG assembly in x with scikit-fem: scalar matrices and the upwind-flux operator.
+
+The truncated hierarchy :math:`\\partial_x(F c) = (K_0 + u(x) K_1) c` is a first-order
+hyperbolic system with a symmetric, singular flux matrix F. Its discontinuous-Galerkin
+weak form on every element K, with the upwind (characteristic) numerical flux
+:math:`\\hat F = F^+ c^- + F^- c^+` (:math:`F^\\pm = R\\Lambda^\\pm R^T`, the positive and
+negative parts of F; :math:`c^\\mp` the traces left and right of a node), reads
+
+.. math::
+
+    \\sum_K \\Big( [\\psi \\hat F]_{\\partial K} - \\int_K F c\\,\\psi' \\,dx
+    - \\int_K \\psi (K_0 + u K_1) c\\,dx \\Big) = 0,
+
+with zero inflow at :math:`\\pm L`. Every term is a Kronecker product of an x-matrix
+(assembled here by scikit-fem) and an :math:`\\alpha`-matrix (from :mod:`.hermite`):
+
+.. math::
+
+    A = X_+ \\otimes F^+ + X_- \\otimes F^- - D \\otimes F - M \\otimes K_0 - M_u \\otimes K_1 .
+
+Unknowns are ordered element by element, x outer and :math:`\\alpha` inner.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from dataclasses import dataclass
+
+import numpy as np
+import scipy.sparse as sp
+from skfem import (
+    Basis,
+    BilinearForm,
+    ElementDG,
+    ElementLineP1,
+    ElementLineP2,
+    ElementLinePp,
+    FacetBasis,
+    InteriorFacetBasis,
+    LinearForm,
+    asm,
+)
+
+__all__ = ["XMatrices", "assemble_x", "split_flux", "dg_operator"]
+
+
+@dataclass(frozen=True)
+class XMatrices:
+    """Scalar DG matrices of one mesh and polynomial order (rows: test, columns: trial).
+
+    Attributes
+    ----------
+    mass, mass_u, deriv : sparse
+        :math:`\\int\\psi_i\\phi_j`, :math:`\\int u\\,\\psi_i\\phi_j`, :math:`\\int\\psi_i'\\phi_j`.
+    xplus, xminus : sparse
+        Face matrices multiplying :math:`F^+` and :math:`F^-` in the upwind flux.
+    integral, x2, x1 : ndarray
+        :math:`\\int\\phi_j`, :math:`\\int x^2\\phi_j`, :math:`\\int x\\phi_j`.
+    basis : skfem.Basis
+        The DG basis (for evaluating fields on a grid).
+    order : int
+        Polynomial order p.
+    perm : ndarray
+        Element-major ordering: ``perm[i]`` is the scikit-fem dof of the i-th unknown.
+    """
+
+    mass: sp.csr_matrix
+    mass_u: sp.csr_matrix
+    deriv: sp.csr_matrix
+    xplus: sp.csr_matrix
+    xminus: sp.csr_matrix
+    integral: np.ndarray
+    x2: np.ndarray
+    x1: np.ndarray
+    basis: Basis
+    order: int
+    perm: np.ndarray
+
+    @property
+    def ndofs(self) -> int:
+        return self.mass.shape[0]
+
+
+def _element(order: int) -> ElementDG:
+    if order == 1:
+        return ElementDG(ElementLineP1())
+    if order == 2:
+        return ElementDG(ElementLineP2())
+    return ElementDG(ElementLinePp(order))
+
+
+def _element_major(basis: Basis) -> np.ndarray:
+    """Permutation putting the dofs of each element together, elements left to right."""
+    order = np.argsort(basis.mesh.p[0, basis.mesh.t[0]])
+    return basis.element_dofs[:, order].T.ravel()
+
+
+def assemble_x(mesh_nodes: np.ndarray, order: int, u: Callable[[np.ndarray], np.ndarray],
+               intorder: int | None = None) -> XMatrices:
+    """Assemble the scalar DG matrices on a 1-D mesh.
+
+    Parameters
+    ----------
+    mesh_nodes : ndarray
+        Sorted node coordinates (a node at every point where ``u`` is not smooth).
+    order : int
+        Polynomial order p in 1..8.
+    u : callable
+        The nonlinear force per unit mass :math:`u(x) = -U'(x)/m`.
+    intorder : int, optional
+        Quadrature order (default ``2 p + 6``, enough for smooth u on graded elements).
+    """
+    from skfem import MeshLine
+
+    mesh = MeshLine(np.asarray(mesh_nodes, dtype=float))
+    e = _element(order)
+    q = intorder or 2 * order + 6
+    basis = Basis(mesh, e, intorder=q)
+    perm = _element_major(basis)
+
+    mass = asm(BilinearForm(lambda a, b, w: a * b), basis)
+    mass_u = asm(BilinearForm(lambda a, b, w: u(w.x[0]) * a * b), basis)
+    deriv = asm(BilinearForm(lambda a, b, w: a * b.grad[0]), basis)
+    integral = asm(LinearForm(lambda b, w: b), basis)
+    x2 = asm(LinearForm(lambda b, w: w.x[0] ** 2 * b), basis)
+    x1 = asm(LinearForm(lambda b, w: w.x[0] * b), basis)
+
+    # Interior nodes: side 0 is the element whose outward normal is n. The upwind flux in
+    # direction n is (nF)^+ c_0 + (nF)^- c_1, added to side 0 and subtracted from side 1;
+    # (nF)^+ = F^+ for n = +1 and -F^- for n = -1.
+    # A fresh element per facet basis: ElementLinePp caches its reference values by array
+    # shape only, so two bases evaluated at different single points must not share one.
+    sides = [InteriorFacetBasis(mesh, _element(order), side=s) for s in (0, 1)]
+    pos = BilinearForm(lambda a, b, w: (w.n[0] > 0) * a * b)
+    neg = BilinearForm(lambda a, b, w: (w.n[0] < 0) * a * b)
+    P = {(s, t): (asm(pos, sides[t], sides[s]), asm(neg, sides[t], sides[s])) for s in (0, 1) for t in (0, 1)}
+    xplus = P[0, 0][0] - P[1, 0][0] - P[0, 1][1] + P[1, 1][1]
+    xminus = P[0, 1][0] - P[1, 1][0] - P[0, 0][1] + P[1, 0][1]
+    # Boundary: outflow only, (nF)^+ c; inflow from outside the domain is zero.
+    for facet in mesh.boundary_facets():
+        fb = FacetBasis(mesh, _element(order), facets=np.array([facet]))
+        xplus = xplus + asm(pos, fb)
+        xminus = xminus - asm(neg, fb)
+
+    def p2(A: sp.spmatrix) -> sp.csr_matrix:
+        A = sp.csr_matrix(A)
+        A.eliminate_zeros()
+        return A[perm][:, perm].tocsr()
+
+    return XMatrices(
+        mass=p2(mass), mass_u=p2(mass_u), deriv=p2(deriv), xplus=p2(xplus), xminus=p2(xminus),
+        integral=integral[perm], x2=x2[perm], x1=x1[perm], basis=basis, order=order, perm=perm,
+    )
+
+
+def split_flux(F: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Positive and negative parts :math:`F^\\pm = R\\Lambda^\\pm R^T` of a symmetric matrix."""
+    lam, R = np.linalg.eigh(F)
+    return (R * np.maximum(lam, 0.0)) @ R.T, (R * np.minimum(lam, 0.0)) @ R.T
+
+
+def dg_operator(X: XMatrices, F: np.ndarray, K0: sp.spmatrix, K1: sp.spmatrix) -> sp.csr_matrix:
+    """The global DG operator :math:`A` (see module docstring), x outer, alpha inner."""
+    Fp, Fm = split_flux(F)
+    tol = 1e-14 * max(1.0, np.abs(F).max())
+    Fp[np.abs(Fp) < tol] = 0.0
+    Fm[np.abs(Fm) < tol] = 0.0
+    A = (
+        sp.kron(X.xplus, sp.csr_matrix(Fp))
+        + sp.kron(X.xminus, sp.csr_matrix(Fm))
+        - sp.kron(X.deriv, sp.csr_matrix(F))
+        - sp.kron(X.mass, K0)
+        - sp.kron(X.mass_u, K1)
+    )
+    return A.tocsr()

@@ -1,0 +1,240 @@
+"""Normalized Hermite algebra of the linear variables (v, V, xi) and the whitening transform.
+
+The density of one harvester is expanded in the linear variables :math:`y = (v, V, \\xi)`
+around a Gaussian weight :math:`N(0, \\Sigma)`, :math:`\\Sigma = L L^T` (Cholesky, v first):
+
+.. math::
+
+    p(x, y) = \\sum_{|\\alpha| \\le M} c_\\alpha(x)\\, h_\\alpha(z)\\,\\phi(z), \\qquad
+    z = L^{-1} y, \\qquad h_\\alpha(z) = \\prod_i \\frac{He_{\\alpha_i}(z_i)}{\\sqrt{\\alpha_i!}},
+
+so that :math:`c_\\alpha(x) = \\int h_\\alpha(z) p(x, z)\\,dz` and :math:`c_0(x)` is the
+x-marginal density. Projecting the Fokker--Planck equation on :math:`h_\\alpha` gives the
+hierarchy (weak form, :math:`\\mathcal{A}` the backward generator)
+
+.. math::
+
+    \\partial_t c = -\\partial_x (F c) + (K_0 + u(x) K_1)\\, c, \\qquad u(x) = -U'(x)/m,
+
+with the symmetric flux matrix :math:`F = L_{00} J_0` (:math:`J_0` multiplication by
+:math:`z_0`, tridiagonal in :math:`\\alpha_0` because v is first in the Cholesky order),
+:math:`K_0` from the linear drift and the noise, :math:`K_1` from the nonlinear force.
+Truncation at total degree M drops :math:`c_\\beta` with :math:`|\\beta| = M + 1`.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+import scipy.sparse as sp
+
+from ..model import Harvester
+
+__all__ = ["HermiteBasis", "linear_drift", "whitening_covariance"]
+
+
+def linear_drift(h: Harvester) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Linear part of the (v, V, xi) dynamics.
+
+    Returns ``(B, e, Q)``: :math:`dy = (B y + e\\,u(x))\\,dt + \\text{noise}` with
+    :math:`u(x) = -U'(x)/m` entering the v equation only (``e = (1, 0, 0)``) and noise
+    covariance rate :math:`Q = \\mathrm{diag}(0, 0, 2D/\\tau^2)`.
+    """
+    p = h.params
+    B = np.array(
+        [
+            [-p.gamma, -p.Kv / p.m, p.sigma / p.m],
+            [p.Kc, -1.0 / p.tau_p, 0.0],
+            [0.0, 0.0, -1.0 / p.tau],
+        ]
+    )
+    Q = np.zeros((3, 3))
+    Q[2, 2] = 2.0 * p.D / p.tau**2
+    return B, np.array([1.0, 0.0, 0.0]), Q
+
+
+@dataclass(frozen=True)
+class HermiteBasis:
+    """Total-degree-M index set of normalized Hermite functions in three variables.
+
+    Parameters
+    ----------
+    M : int
+        Total degree, >= 2 (second moments must be resolved).
+
+    Examples
+    --------
+    >>> HermiteBasis(2).size
+    10
+    >>> HermiteBasis(2).index[(0, 0, 2)]
+    9
+    """
+
+    M: int
+
+    def __post_init__(self) -> None:
+        alphas = [
+            (a0, a1, a2)
+            for deg in range(self.M + 1)
+            for a0 in range(deg, -1, -1)
+            for a1 in range(deg - a0, -1, -1)
+            for a2 in [deg - a0 - a1]
+        ]
+        object.__setattr__(self, "alphas", np.array(alphas, dtype=int))
+        object.__setattr__(self, "index", {a: i for i, a in enumerate(alphas)})
+
+    @property
+    def size(self) -> int:
+        """Number of coefficients, :math:`\\binom{M+3}{3}`."""
+        return len(self.alphas)
+
+    def degree(self) -> np.ndarray:
+        """Total degree of each index."""
+        return self.alphas.sum(axis=1)
+
+    def _shift(self, alpha: tuple[int, ...], i: int, d: int) -> int | None:
+        b = list(alpha)
+        b[i] += d
+        if b[i] < 0:
+            return None
+        return self.index.get(tuple(b))
+
+    def multiply(self, i: int) -> sp.csr_matrix:
+        """Matrix of :math:`c \\mapsto \\int z_i h_\\alpha p` (symmetric, truncated).
+
+        :math:`z_i h_\\alpha = \\sqrt{\\alpha_i+1}\\,h_{\\alpha+e_i} + \\sqrt{\\alpha_i}\\,h_{\\alpha-e_i}`.
+        """
+        rows, cols, vals = [], [], []
+        for r, al in enumerate(map(tuple, self.alphas)):
+            for d, coef in ((1, math.sqrt(al[i] + 1)), (-1, math.sqrt(al[i]))):
+                c = self._shift(al, i, d)
+                if c is not None and coef != 0.0:
+                    rows.append(r)
+                    cols.append(c)
+                    vals.append(coef)
+        return sp.csr_matrix((vals, (rows, cols)), shape=(self.size, self.size))
+
+    def generator(self, Bz: np.ndarray, Qz: np.ndarray) -> sp.csr_matrix:
+        """Matrix :math:`K_0` of the x-independent part of the generator.
+
+        Row :math:`\\alpha` holds the coefficients of :math:`\\mathcal{A}_0 h_\\alpha` with
+        :math:`\\mathcal{A}_0 = (B_z z)\\cdot\\nabla + \\tfrac12 Q_z : \\nabla\\nabla`, so that
+        :math:`\\partial_t c_\\alpha \\ni \\sum_\\beta (K_0)_{\\alpha\\beta} c_\\beta`.
+        """
+        entries: dict[tuple[int, int], float] = {}
+
+        def add(r: int, c: int | None, v: float) -> None:
+            if c is not None and v != 0.0:
+                entries[(r, c)] = entries.get((r, c), 0.0) + v
+
+        for r, al in enumerate(map(tuple, self.alphas)):
+            for i in range(3):
+                if al[i] == 0:
+                    continue
+                be = list(al)
+                be[i] -= 1
+                si = math.sqrt(al[i])
+                for j in range(3):
+                    bij = Bz[i, j]
+                    if bij != 0.0:
+                        up = list(be)
+                        up[j] += 1
+                        add(r, self.index.get(tuple(up)), bij * si * math.sqrt(be[j] + 1))
+                        if be[j] > 0:
+                            dn = list(be)
+                            dn[j] -= 1
+                            add(r, self.index.get(tuple(dn)), bij * si * math.sqrt(be[j]))
+                    qij = Qz[i, j]
+                    if qij != 0.0 and be[j] > 0:
+                        dn = list(be)
+                        dn[j] -= 1
+                        add(r, self.index.get(tuple(dn)), 0.5 * qij * si * math.sqrt(be[j]))
+        if not entries:
+            return sp.csr_matrix((self.size, self.size))
+        keys = np.array(list(entries.keys()))
+        return sp.csr_matrix(
+            (np.array(list(entries.values())), (keys[:, 0], keys[:, 1])), shape=(self.size, self.size)
+        )
+
+    def lowering(self, g: np.ndarray) -> sp.csr_matrix:
+        """Matrix :math:`K_1` of :math:`g\\cdot\\nabla_z h_\\alpha = \\sum_i g_i\\sqrt{\\alpha_i} h_{\\alpha-e_i}`."""
+        rows, cols, vals = [], [], []
+        for r, al in enumerate(map(tuple, self.alphas)):
+            for i in range(3):
+                if al[i] > 0 and g[i] != 0.0:
+                    rows.append(r)
+                    cols.append(self._shift(al, i, -1))
+                    vals.append(g[i] * math.sqrt(al[i]))
+        return sp.csr_matrix((vals, (rows, cols)), shape=(self.size, self.size))
+
+    def second_moment_weights(self, Lchol: np.ndarray) -> np.ndarray:
+        """Weights ``W[i, j, :]`` with :math:`\\langle y_i y_j | x\\rangle = W_{ij}\\cdot c(x)/c_0(x)`.
+
+        Uses :math:`z_k z_l = h_{e_k+e_l}` (k != l), :math:`z_k^2 = \\sqrt2 h_{2e_k} + 1` and
+        :math:`y = L z`.
+        """
+        Wz = np.zeros((3, 3, self.size))
+        for k in range(3):
+            for l in range(3):
+                a = [0, 0, 0]
+                a[k] += 1
+                a[l] += 1
+                if k == l:
+                    Wz[k, k, self.index[tuple(a)]] = math.sqrt(2.0)
+                    Wz[k, k, 0] = 1.0
+                else:
+                    Wz[k, l, self.index[tuple(a)]] = 1.0
+        return np.einsum("ik,jl,klm->ijm", Lchol, Lchol, Wz)
+
+    def first_moment_weights(self, Lchol: np.ndarray) -> np.ndarray:
+        """Weights ``w[i, :]`` with :math:`\\langle y_i | x\\rangle = w_i\\cdot c(x)/c_0(x)`."""
+        wz = np.zeros((3, self.size))
+        for k in range(3):
+            a = [0, 0, 0]
+            a[k] = 1
+            wz[k, self.index[tuple(a)]] = 1.0
+        return Lchol @ wz
+
+
+def whitening_covariance(h: Harvester) -> tuple[np.ndarray, float, float]:
+    """Gaussian weight for the Hermite expansion from a statistical linearization.
+
+    The stiffness :math:`\\kappa` of an equivalent harmonic unit is the fixed point of
+    :math:`\\kappa = \\langle x U'(x)\\rangle / \\langle x^2\\rangle` with x Gaussian of the
+    harmonic variance :math:`\\langle x^2\\rangle(\\kappa)`; for
+    :math:`U = a|x|^n`, :math:`\\langle xU'\\rangle = a n\\,s^n 2^{n/2}\\Gamma(\\tfrac{n+1}{2})/\\sqrt\\pi`.
+
+    Returns
+    -------
+    Sigma : ndarray (3, 3)
+        Stationary covariance of (v, V, xi) of the equivalent harmonic unit.
+    kappa : float
+        Equivalent stiffness (``2a`` for n = 2).
+    x2 : float
+        Its :math:`\\langle x^2\\rangle`.
+    """
+    from scipy.optimize import brentq
+
+    from ..linear import lyapunov_covariance
+
+    a, n = h.a, h.n
+    c_n = a * n * 2.0 ** (n / 2) * math.gamma((n + 1) / 2) / math.sqrt(math.pi)
+
+    def mismatch(log_kappa: float) -> float:
+        s2 = lyapunov_covariance(math.exp(log_kappa), h.params)[0, 0]
+        return math.log(c_n) + (n / 2 - 1.0) * math.log(s2) - log_kappa
+
+    if n == 2.0:
+        kappa = 2.0 * a
+    else:
+        # <x^2>(kappa) decreases monotonically, so the mismatch has one sign change.
+        lo, hi = math.log(2.0 * a) - 1.0, math.log(2.0 * a) + 1.0
+        while mismatch(lo) < 0.0:
+            lo -= 2.0
+        while mismatch(hi) > 0.0:
+            hi += 2.0
+        kappa = math.exp(brentq(mismatch, lo, hi, xtol=1e-12))
+    P = lyapunov_covariance(kappa, h.params)
+    return P[1:, 1:].copy(), kappa, float(P[0, 0])

@@ -1,0 +1,102 @@
+"""The Fokker--Planck solver object (``method="fpe"``) of :func:`fpe_harvester.solve`."""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from dataclasses import dataclass
+from typing import ClassVar
+
+from ..errors import MethodNotAvailableError, check_int, check_real
+from ..model import Harvester
+from ..result import Stats
+from .stationary import _ring_reason, stationary
+
+__all__ = ["FokkerPlanck"]
+
+
+@dataclass(frozen=True)
+class FokkerPlanck:
+    """Stationary statistics of a single oscillator :math:`U = a|x|^n` from its Fokker--Planck equation.
+
+    The density is expanded in normalized Hermite functions of (v, V, xi) up to total
+    degree M and discretized in x by upwind discontinuous Galerkin (scikit-fem); M and
+    the mesh are refined until the estimated relative error on eta is below ``tol``
+    (see :func:`~fpe_harvester.fpe.stationary`). Reaching the limits gives status
+    NOT_CONVERGED with the best estimate and its error.
+
+    Parameters
+    ----------
+    tol : float
+        Requested relative error on eta, in (0, 0.1]. Default 1e-4.
+    M : int, optional
+        Hermite total degree (>= 2). Together with ``elements``: a fixed level whose
+        error is estimated against one refinement of each knob.
+    elements : int, optional
+        Number of elements in x (even, >= 2).
+    order : int, optional
+        DG polynomial order, 2..5 (default 3).
+    domain : float
+        Domain factor :math:`\\Theta = U(L)/T_{eff}` in [5, 200]. Default 30.
+    max_M : int
+        Largest Hermite degree the refinement may use (default 24).
+    max_seconds : float, optional
+        Wall-time budget of the refinement.
+    progress : bool or callable
+        True prints one line per level; a callable receives the lines.
+
+    Examples
+    --------
+    >>> from fpe_harvester import Harvester, solve
+    >>> r = solve(Harvester.build(a=0.5, n=2), "fpe", tol=1e-6)
+    >>> r.status.value, abs(r.eta - 20 / 39) < 1e-6
+    ('stable', True)
+    """
+
+    name: ClassVar[str] = "fpe"
+
+    tol: float = 1e-4
+    M: int | None = None
+    elements: int | None = None
+    order: int | None = None
+    domain: float = 30.0
+    max_M: int = 24
+    max_seconds: float | None = None
+    progress: bool | Callable[[str], None] = False
+
+    def __post_init__(self) -> None:
+        object.__setattr__(self, "tol", check_real("tol", self.tol, low=0.0, high=0.1, low_open=True))
+        if self.M is not None:
+            object.__setattr__(self, "M", check_int("M", self.M, low=2, high=60))
+        if self.elements is not None:
+            el = check_int("elements", self.elements, low=2, high=2048)
+            if el % 2:
+                raise MethodNotAvailableError(f"elements must be even (a node at x = 0), got {el}")
+            object.__setattr__(self, "elements", el)
+        if self.order is not None:
+            object.__setattr__(self, "order", check_int("order", self.order, low=2, high=5))
+        object.__setattr__(self, "domain", check_real("domain", self.domain, low=5.0, high=200.0))
+        object.__setattr__(self, "max_M", check_int("max_M", self.max_M, low=4, high=60))
+        if self.max_seconds is not None:
+            object.__setattr__(self, "max_seconds",
+                               check_real("max_seconds", self.max_seconds, low=0.0, low_open=True))
+
+    def unsupported_reason(self, h: Harvester) -> str | None:
+        """``None`` for a single oscillator, else why not (rings: use mc, or exact if harmonic)."""
+        if h.N != 1:
+            return _ring_reason(h)
+        return None
+
+    def solve(self, h: Harvester) -> Stats:
+        """Stationary statistics with error estimates (status NOT_CONVERGED if tol is not met)."""
+        reason = self.unsupported_reason(h)
+        if reason:
+            raise MethodNotAvailableError(reason)
+        progress = self.progress
+        if progress is True:
+            progress = print
+        sol = stationary(
+            h, self.tol, M=self.M, half_elements=None if self.elements is None else self.elements // 2,
+            order=self.order, theta=self.domain, max_M=max(self.max_M, self.M or 0),
+            max_seconds=self.max_seconds, grid=3, progress=progress or None,
+        )
+        return sol.stats
