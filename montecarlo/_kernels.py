@@ -1,0 +1,431 @@
+"""numba kernels: one splitting step of the harvester ring and the path loop of one chunk.
+
+Private module. The Python side (:mod:`montecarlo.scheme`) builds the coefficient arrays:
+
+``cf`` (per step size h)
+    ``cf[0:9]`` the 3x3 propagator :math:`E = e^{Ah}` of the linear part of (x, v, V),
+    row-major; ``cf[9:12]`` its response :math:`g = \\int_0^h e^{As}b\\,ds` to a unit
+    constant force; ``cf[12] = h``; ``cf[13] = e^{-h/\\tau}``;
+    ``cf[14] = \\sqrt{(D/\\tau)(1 - e^{-2h/\\tau})}``; ``cf[15] = e^{-h/2\\tau}``.
+``pp`` (physical)
+    ``m, gamma, Kv, Kc, tau_p, sigma, k, a, n, c, threshold, D/tau`` where ``c`` is the
+    stiffness kept inside the linear flow (``2k``, plus ``2a`` for the harmonic potential)
+    and ``threshold`` the escape amplitude.
+
+One step is the Strang splitting ``O(h/2) D(h) O(h/2)`` of the generator into the exact
+Ornstein--Uhlenbeck flow ``O`` of xi and the deterministic flow ``D`` of (x, v, V) with xi
+frozen; consecutive half steps of ``O`` merge, so the loop runs ``D(h) O(h)`` and measures
+after ``D`` (xi-dependent observables get the exact half-step factor ``e^{-h/2tau}``).
+Inside ``D`` the neighbours' positions enter as a constant force evaluated at the
+predicted midpoint; the on-site force is either part of the exact linear flow (n = 2),
+a Strang kick around it (smooth n), or, for the kink n = 1, handled by an exact
+piecewise-linear flow with located zero crossings and Filippov sticking.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+from numba import njit
+
+KIND_LINEAR = 0
+KIND_KICK = 1
+KIND_KINK = 2
+
+#: Moments accumulated per level, in this order.
+MOMENTS = ("V2", "vV", "v2", "x2", "vxi", "stuck")
+N_MOM = len(MOMENTS)
+
+# A crossing whose return to x = 0 would take less than SNAP * h sticks at once: the
+# dropped chatter has kinetic energy O(h^2) and moves x and V by O(h^3).
+SNAP = 1.0
+MAX_EVENTS = 64
+N_SAMPLE = 8
+N_TAYLOR = 11
+
+
+@njit(cache=True, nogil=True, inline="always")
+def _onsite_force(x: float, a: float, n: float) -> float:
+    """-U'(x) = -a n |x|^(n-1) sign(x), with fast paths for integer n."""
+    ax = abs(x)
+    if n == 3.0:
+        p = ax * ax * 3.0
+    elif n == 4.0:
+        p = ax * ax * ax * 4.0
+    elif ax == 0.0:
+        return 0.0
+    else:
+        p = n * ax ** (n - 1.0)
+    return -a * p if x > 0.0 else a * p
+
+
+@njit(cache=True, nogil=True)
+def _series(x: float, v: float, V: float, F: float, pp: np.ndarray, cs: np.ndarray) -> None:
+    """Taylor coefficients ``cs[i, k] = y_i^(k)(0)/k!`` of the linear flow with constant force F.
+
+    Within one step (|A| h << 1) degree N_TAYLOR leaves a relative error below 1e-13.
+    """
+    m, gamma, Kv, Kc, tau_p, c = pp[0], pp[1], pp[2], pp[3], pp[4], pp[9]
+    cs[0, 0], cs[1, 0], cs[2, 0] = x, v, V
+    # the first derivative carries the constant force; later ones are powers of A
+    dx, dv, dV = v, (F - c * x - Kv * V) / m - gamma * v, Kc * v - V / tau_p
+    fac = 1.0
+    for kk in range(1, N_TAYLOR + 1):
+        fac = fac / kk
+        cs[0, kk], cs[1, kk], cs[2, kk] = dx * fac, dv * fac, dV * fac
+        dx, dv, dV = dv, (-c * dx - Kv * dV) / m - gamma * dv, Kc * dv - dV / tau_p
+
+
+@njit(cache=True, nogil=True, inline="always")
+def _horner(cs: np.ndarray, row: int, t: float, shift: int) -> float:
+    """sum_k cs[row, k] t^(k - shift) over k >= shift."""
+    r = cs[row, N_TAYLOR]
+    for kk in range(N_TAYLOR - 1, shift - 1, -1):
+        r = r * t + cs[row, kk]
+    return r
+
+
+@njit(cache=True, nogil=True, inline="always")
+def _dhorner(cs: np.ndarray, row: int, t: float, shift: int) -> float:
+    """Derivative in t of :func:`_horner`."""
+    r = 0.0
+    for kk in range(N_TAYLOR, shift, -1):
+        r = r * t + (kk - shift) * cs[row, kk]
+    return r
+
+
+@njit(cache=True, nogil=True)
+def _first_crossing(cs: np.ndarray, s: float, shift: int, rem: float) -> float:
+    """First t in (0, rem] where s x(t) <= 0, or -1. ``shift`` deflates a root at t = 0.
+
+    x(t) = t^shift g(t) with s g(0) > 0; the grid brackets the first sign change of g and
+    safeguarded Newton polishes it to round-off.
+    """
+    lo = 0.0
+    hi = -1.0
+    for i in range(1, N_SAMPLE + 1):
+        ti = rem * i / N_SAMPLE
+        if s * _horner(cs, 0, ti, shift) <= 0.0:
+            hi = ti
+            break
+        lo = ti
+    if hi < 0.0:
+        return -1.0
+    t = 0.5 * (lo + hi)
+    for _ in range(60):
+        g = _horner(cs, 0, t, shift)
+        if s * g > 0.0:
+            lo = t
+        else:
+            hi = t
+        dg = _dhorner(cs, 0, t, shift)
+        tn = t - g / dg if dg != 0.0 else 0.5 * (lo + hi)
+        if not (lo < tn < hi):
+            tn = 0.5 * (lo + hi)
+        if abs(tn - t) <= 1e-15 * rem or hi - lo <= 1e-15 * rem:
+            t = tn
+            break
+        t = tn
+    # the returned time must have x on the far side (or at 0) so the next region is consistent
+    return hi if s * _horner(cs, 0, t, shift) > 0.0 else t
+
+
+@njit(cache=True, nogil=True)
+def _kink_unit(x: float, v: float, V: float, stuck: bool, f: float, cf: np.ndarray,
+               pp: np.ndarray, counters: np.ndarray, cs: np.ndarray) -> tuple:
+    """Advance one unit of the n = 1 potential over one D step with external force f.
+
+    Exact piecewise flow: each side of x = 0 is linear with constant force f - a s; zero
+    crossings are located on the flow's Taylor series (bracketing + safeguarded Newton); at
+    x = v = 0 the unit sticks while the net force |f - Kv V| <= a (set-valued sign), and V
+    then decays exactly.
+    """
+    m, Kv, tau_p, a, c = pp[0], pp[2], pp[4], pp[7], pp[9]
+    h = cf[12]
+    if not stuck and x != 0.0:
+        s = 1.0 if x > 0.0 else -1.0
+        Fs = f - a * s
+        xn = cf[0] * x + cf[1] * v + cf[2] * V + cf[9] * Fs
+        acc = (abs(Fs) + abs(c * x) + m * pp[1] * abs(v) + Kv * abs(V)) / m
+        if s * xn > 0.0 and s * x > h * (abs(v) + 2.0 * h * acc):
+            vn = cf[3] * x + cf[4] * v + cf[5] * V + cf[10] * Fs
+            Vn = cf[6] * x + cf[7] * v + cf[8] * V + cf[11] * Fs
+            return xn, vn, Vn, False
+    counters[0] += 1
+    t = 0.0
+    for _ in range(MAX_EVENTS):
+        rem = h - t
+        if rem <= 0.0:
+            return x, v, V, stuck
+        if stuck and abs(f - Kv * V) > a:
+            stuck = False
+            x, v = 0.0, 0.0
+        if stuck:
+            Vend = V * math.exp(-rem / tau_p)
+            net_end = f - Kv * Vend
+            if abs(net_end) <= a:
+                return 0.0, 0.0, Vend, True
+            # the net force relaxes monotonically toward f and reaches +-a at time u
+            s = 1.0 if net_end > 0.0 else -1.0
+            u = -tau_p * math.log((f - s * a) / (Kv * V))
+            u = min(max(u, 0.0), rem)
+            V = V * math.exp(-u / tau_p)
+            t += u
+            stuck = False
+            x, v = 0.0, 0.0
+            continue
+        shift = 0
+        if x != 0.0:
+            s = 1.0 if x > 0.0 else -1.0
+        elif v != 0.0:
+            s = 1.0 if v > 0.0 else -1.0
+            shift = 1
+        else:
+            net = f - Kv * V
+            if abs(net) <= a:
+                stuck = True
+                continue
+            s = 1.0 if net > 0.0 else -1.0
+            shift = 2
+        _series(x, v, V, f - a * s, pp, cs)
+        tc = _first_crossing(cs, s, shift, rem)
+        if tc < 0.0:
+            return _horner(cs, 0, rem, 0), _horner(cs, 1, rem, 0), _horner(cs, 2, rem, 0), False
+        v, V = _horner(cs, 1, tc, 0), _horner(cs, 2, tc, 0)
+        x = 0.0
+        t += tc
+        counters[1] += 1
+        net = f - Kv * V
+        if abs(net) < a and 2.0 * m * abs(v) < SNAP * h * (a - abs(net)):
+            v = 0.0
+            stuck = True
+            counters[2] += 1
+    # event budget exhausted (long chatter): the unit is at or next to x = 0
+    counters[3] += 1
+    if abs(f - Kv * V) <= a:
+        return 0.0, 0.0, V, True
+    return x, v, V, stuck
+
+
+@njit(cache=True, nogil=True)
+def _external_force(xi, xm, f, pp) -> None:
+    """f = sigma xi + k (x_{j-1} + x_{j+1}) with neighbours at their predicted midpoints."""
+    N, P = xi.shape
+    sigma, k = pp[5], pp[6]
+    for j in range(N):
+        jm = (j + N - 1) % N
+        jp = (j + 1) % N
+        for p in range(P):
+            f[j, p] = sigma * xi[j, p]
+            if N > 1:
+                f[j, p] += k * (xm[jm, p] + xm[jp, p])
+
+
+@njit(cache=True, nogil=True)
+def _linear_flow(x, v, V, f, cf) -> None:
+    N, P = x.shape
+    for j in range(N):
+        for p in range(P):
+            x0, v0, V0, fp = x[j, p], v[j, p], V[j, p], f[j, p]
+            x[j, p] = cf[0] * x0 + cf[1] * v0 + cf[2] * V0 + cf[9] * fp
+            v[j, p] = cf[3] * x0 + cf[4] * v0 + cf[5] * V0 + cf[10] * fp
+            V[j, p] = cf[6] * x0 + cf[7] * v0 + cf[8] * V0 + cf[11] * fp
+
+
+@njit(cache=True, nogil=True)
+def _kick(x, v, F, h, pp, update) -> None:
+    """Half kick v += (h/2) F/m; with ``update`` first recompute F = -U'(x)."""
+    N, P = x.shape
+    m, a, n = pp[0], pp[7], pp[8]
+    hk = 0.5 * h / m
+    for j in range(N):
+        for p in range(P):
+            if update:
+                F[j, p] = _onsite_force(x[j, p], a, n)
+            v[j, p] += hk * F[j, p]
+
+
+@njit(cache=True, nogil=True)
+def _kink_flow(x, v, V, stuck, f, w, cf, pp, counters, cs) -> None:
+    N, P = x.shape
+    for j in range(N):
+        for p in range(P):
+            if w[p] > 0.0:
+                x[j, p], v[j, p], V[j, p], stuck[j, p] = _kink_unit(
+                    x[j, p], v[j, p], V[j, p], stuck[j, p], f[j, p], cf, pp, counters, cs)
+
+
+@njit(cache=True, nogil=True)
+def _d_step(x, v, V, xi, F, stuck, xm, fext, w, cf, pp, kind, counters, cs) -> None:
+    """Deterministic flow D(h) of P rings of N units with xi frozen; arrays (N, P), in place.
+
+    Paths are the inner loops: one path's steps form a serial dependency chain, so only
+    independent paths side by side keep the floating-point pipelines busy. ``kind`` is
+    tested once per call, outside the loops (inside them it cost a factor ten).
+    """
+    N, P = x.shape
+    h = cf[12]
+    if kind == KIND_KICK:
+        _kick(x, v, F, h, pp, False)
+    if N > 1:
+        for j in range(N):
+            for p in range(P):
+                xm[j, p] = x[j, p] + 0.5 * h * v[j, p]
+    _external_force(xi, xm, fext, pp)
+    if kind == KIND_KINK:
+        _kink_flow(x, v, V, stuck, fext, w, cf, pp, counters, cs)
+    else:
+        _linear_flow(x, v, V, fext, cf)
+    if kind == KIND_KICK:
+        _kick(x, v, F, h, pp, True)
+
+
+@njit(cache=True, nogil=True)
+def _measure(x, v, V, xi, stuck, w, cf, acc) -> float:
+    """Add the moments of the live paths (weight w = 1) to acc; return unit-steps counted."""
+    N, P = x.shape
+    half = cf[15]
+    s0 = s1 = s2 = s3 = s4 = s5 = 0.0
+    for j in range(N):
+        for p in range(P):
+            wp = w[p]
+            s0 += wp * V[j, p] * V[j, p]
+            s1 += wp * v[j, p] * V[j, p]
+            s2 += wp * v[j, p] * v[j, p]
+            s3 += wp * x[j, p] * x[j, p]
+            s4 += wp * v[j, p] * xi[j, p]
+            s5 += wp if stuck[j, p] else 0.0
+    acc[0] += s0
+    acc[1] += s1
+    acc[2] += s2
+    acc[3] += s3
+    acc[4] += s4 * half
+    acc[5] += s5
+    live = 0.0
+    for p in range(P):
+        live += w[p]
+    return live * N
+
+
+@njit(cache=True, nogil=True)
+def _check_escape(x, v, V, xi, F, stuck, w, thr, t, esc_time) -> None:
+    """Retire paths with some |x_j| > thr (or non-finite): record the time, zero their state."""
+    N, P = x.shape
+    for p in range(P):
+        if w[p] == 0.0:
+            continue
+        out = False
+        for j in range(N):
+            if not abs(x[j, p]) <= thr:
+                out = True
+        if out:
+            w[p] = 0.0
+            esc_time[p] = t
+            for j in range(N):
+                x[j, p] = 0.0
+                v[j, p] = 0.0
+                V[j, p] = 0.0
+                xi[j, p] = 0.0
+                F[j, p] = 0.0
+                stuck[j, p] = False
+
+
+@njit(cache=True, nogil=True)
+def _run(gen, P: int, N: int, nburn: int, nrun: int, cf_f: np.ndarray, cf_c: np.ndarray,
+         pp: np.ndarray, kind: int, coupled: bool, sums: np.ndarray, counts: np.ndarray,
+         esc_time: np.ndarray, counters: np.ndarray) -> None:
+    """Simulate P independent rings of N units from rest and accumulate their time averages.
+
+    Parameters
+    ----------
+    gen : numpy.random.Generator
+        This chunk's own stream (deterministic for a given seed, whatever the thread count).
+    nburn, nrun : int
+        Burn-in and measured steps of size ``cf_c[12]`` if ``coupled`` else ``cf_f[12]``.
+    coupled : bool
+        If True, each coarse step ``cf_c`` is also done as two fine steps ``cf_f`` (h/2) driven
+        by the same Brownian increments (exact OU composition): level 0 = fine, 1 = coarse.
+        If False, only level 0 is run, with step ``cf_f``.
+    sums : (2, N_MOM) array
+        Sums over measured unit-steps of the moments :data:`MOMENTS`, per level (accumulated).
+    counts : (2,) array
+        Number of unit-steps summed per level (accumulated).
+    esc_time : (P,) array
+        Time at which path p first had some |x_j| > threshold, or -1.
+    counters : (5,) int64 array
+        Kink statistics (slow-path unit steps, crossings, snaps to sticking, exhausted event
+        budgets) and, in slot 4, the number of ring steps taken (all levels).
+    """
+    thr = pp[10]
+    sd = math.sqrt(pp[11])
+    xf, vf, Vf = np.zeros((N, P)), np.zeros((N, P)), np.zeros((N, P))
+    xif, Ff = np.zeros((N, P)), np.zeros((N, P))
+    xc, vc, Vc = np.zeros((N, P)), np.zeros((N, P)), np.zeros((N, P))
+    xic, Fc = np.zeros((N, P)), np.zeros((N, P))
+    sf = np.zeros((N, P), dtype=np.bool_)
+    sc = np.zeros((N, P), dtype=np.bool_)
+    xm = np.zeros((N, P))
+    z1 = np.zeros((N, P))
+    z2 = np.zeros((N, P))
+    w = np.ones(P)
+    cs = np.zeros((3, N_TAYLOR + 1))
+    fext = np.zeros((N, P))
+    esc_time[:] = -1.0
+    for j in range(N):
+        for p in range(P):
+            xif[j, p] = sd * gen.standard_normal()
+            xic[j, p] = xif[j, p]
+    h = cf_c[12] if coupled else cf_f[12]
+    # the two fine half-step normals combine into the coarse normal exactly
+    w1 = cf_f[13] * cf_f[14] / cf_c[14]
+    w2 = cf_f[14] / cf_c[14]
+    for step in range(nburn + nrun):
+        live = 0
+        for p in range(P):
+            if w[p] > 0.0:
+                live += 1
+        if live == 0:
+            break
+        meas = step >= nburn
+        t_end = (step + 1) * h
+        if coupled:
+            counters[4] += 3 * live
+            for j in range(N):
+                for p in range(P):
+                    z1[j, p] = gen.standard_normal()
+                    z2[j, p] = gen.standard_normal()
+            _d_step(xf, vf, Vf, xif, Ff, sf, xm, fext, w, cf_f, pp, kind, counters, cs)
+            _check_escape(xf, vf, Vf, xif, Ff, sf, w, thr, t_end - 0.5 * h, esc_time)
+            if meas:
+                counts[0] += _measure(xf, vf, Vf, xif, sf, w, cf_f, sums[0])
+            for j in range(N):
+                for p in range(P):
+                    xif[j, p] = cf_f[13] * xif[j, p] + cf_f[14] * z1[j, p]
+            _d_step(xf, vf, Vf, xif, Ff, sf, xm, fext, w, cf_f, pp, kind, counters, cs)
+            _d_step(xc, vc, Vc, xic, Fc, sc, xm, fext, w, cf_c, pp, kind, counters, cs)
+            _check_escape(xf, vf, Vf, xif, Ff, sf, w, thr, t_end, esc_time)
+            _check_escape(xc, vc, Vc, xic, Fc, sc, w, thr, t_end, esc_time)
+            if meas:
+                counts[0] += _measure(xf, vf, Vf, xif, sf, w, cf_f, sums[0])
+                counts[1] += _measure(xc, vc, Vc, xic, sc, w, cf_c, sums[1])
+            for j in range(N):
+                for p in range(P):
+                    xif[j, p] = cf_f[13] * xif[j, p] + cf_f[14] * z2[j, p]
+                    xic[j, p] = cf_c[13] * xic[j, p] + cf_c[14] * (w1 * z1[j, p] + w2 * z2[j, p])
+        else:
+            counters[4] += live
+            _d_step(xf, vf, Vf, xif, Ff, sf, xm, fext, w, cf_f, pp, kind, counters, cs)
+            _check_escape(xf, vf, Vf, xif, Ff, sf, w, thr, t_end, esc_time)
+            if meas:
+                counts[0] += _measure(xf, vf, Vf, xif, sf, w, cf_f, sums[0])
+            for j in range(N):
+                for p in range(P):
+                    xif[j, p] = cf_f[13] * xif[j, p] + cf_f[14] * gen.standard_normal()
+
+
+def run_chunk(gen, P: int, N: int, nburn: int, nrun: int, cf_f: np.ndarray, cf_c: np.ndarray,
+              pp: np.ndarray, kind: int, coupled: bool, sums: np.ndarray, counts: np.ndarray,
+              esc_time: np.ndarray, counters: np.ndarray) -> None:
+    """Run :func:`_run` (arguments as there) on a scratch block sized for this chunk."""
+    _run(gen, P, N, nburn, nrun, cf_f, cf_c, pp, kind, coupled, sums, counts, esc_time, counters)

@@ -1,0 +1,240 @@
+"""Ensembles of independent replicas: the lower-level entry point of the Monte Carlo engine.
+
+A *replica* is ``paths`` independent rings started at rest (x = v = V = 0, xi drawn from
+its stationary law), run for ``t_burn`` without measuring and then for ``t_run`` while the
+moments are averaged over time, units and paths. Replicas are statistically independent,
+so their spread gives honest standard errors (the samples inside one path are correlated).
+
+Random numbers: every chunk of paths owns a :class:`numpy.random.Generator` (PCG64) seeded by
+``SeedSequence(seed, spawn_key=(replica, chunk))`` and drawn from inside the numba kernel
+(measured fastest, see ``validation/bench_montecarlo.py``). Chunks run on a thread pool with
+the GIL released, so results depend on the seed only, not on the number of threads.
+"""
+
+from __future__ import annotations
+
+import math
+import os
+import time
+from concurrent.futures import ThreadPoolExecutor
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from fpe_harvester.errors import ParameterError, check_int, check_real
+from fpe_harvester.model import Harvester
+
+from ._kernels import MOMENTS, N_MOM, run_chunk
+from .scheme import physical_vector, scheme_kind, step_coefficients
+
+__all__ = ["Ensemble", "simulate", "default_threads"]
+
+
+def default_threads() -> int:
+    """Number of worker threads: the CPUs this process may use."""
+    try:
+        return max(1, len(os.sched_getaffinity(0)))
+    except AttributeError:  # pragma: no cover - non-Linux
+        return max(1, os.cpu_count() or 1)
+
+
+@dataclass(frozen=True)
+class Ensemble:
+    """Raw result of :func:`simulate`: per-replica sums, counts and escape times.
+
+    Attributes
+    ----------
+    sums : ndarray, shape (replicas, levels, 6)
+        Sums over measured unit-steps of ``V^2, vV, v^2, x^2, v xi, stuck`` (see
+        :data:`montecarlo._kernels.MOMENTS`; ``v xi`` already at the Strang point).
+    counts : ndarray, shape (replicas, levels)
+        Number of unit-steps summed (fewer than ``paths * N * t_run/dt`` when paths escaped).
+    escape_times : ndarray, shape (replicas, paths)
+        Time of the first ``|x_j| > threshold`` of each path (burn-in included), ``inf`` if none.
+    dts : tuple of float
+        Time step of each level: ``(dt,)``, or ``(dt/2, dt)`` with Richardson coupling.
+    """
+
+    sums: np.ndarray
+    counts: np.ndarray
+    escape_times: np.ndarray
+    dts: tuple[float, ...]
+    paths: int
+    t_burn: float
+    t_run: float
+    threshold: float
+    path_steps: int
+    wall_time: float
+    kink_counters: tuple[int, int, int, int] = (0, 0, 0, 0)
+    seed_entropy: int | None = None
+    first_replica: int = 0
+    notes: dict[str, object] = field(default_factory=dict)
+
+    @property
+    def replicas(self) -> int:
+        return int(self.sums.shape[0])
+
+    def moments(self, level: int = 0) -> dict[str, np.ndarray]:
+        """Per-replica averages ``{name: array(replicas)}`` of one level (NaN where nothing counted)."""
+        cnt = self.counts[:, level]
+        safe = np.where(cnt > 0, cnt, 1.0)
+        out = {name: np.where(cnt > 0, self.sums[:, level, i] / safe, np.nan) for i, name in enumerate(MOMENTS)}
+        return out
+
+    def escaped_fraction(self) -> float:
+        """Fraction of all paths that crossed the escape threshold."""
+        return float(np.isfinite(self.escape_times).mean())
+
+    def merge(self, other: Ensemble) -> Ensemble:
+        """Concatenate the replicas of two runs with identical settings."""
+        if other.dts != self.dts or other.paths != self.paths or other.t_run != self.t_run:
+            raise ParameterError("can only merge ensembles with the same dt, paths and t_run")
+        return Ensemble(
+            sums=np.concatenate([self.sums, other.sums]),
+            counts=np.concatenate([self.counts, other.counts]),
+            escape_times=np.concatenate([self.escape_times, other.escape_times]),
+            dts=self.dts, paths=self.paths, t_burn=self.t_burn, t_run=self.t_run,
+            threshold=self.threshold,
+            path_steps=self.path_steps + other.path_steps,
+            wall_time=self.wall_time + other.wall_time,
+            kink_counters=tuple(a + b for a, b in zip(self.kink_counters, other.kink_counters)),
+            seed_entropy=self.seed_entropy,
+            first_replica=min(self.first_replica, other.first_replica),
+            notes=dict(self.notes),
+        )
+
+
+def _chunks(paths: int, chunk: int) -> list[int]:
+    full, rest = divmod(paths, chunk)
+    return [chunk] * full + ([rest] if rest else [])
+
+
+def simulate(
+    h: Harvester,
+    *,
+    dt: float = 0.02,
+    paths: int = 256,
+    replicas: int = 8,
+    t_burn: float = 20.0,
+    t_run: float = 100.0,
+    seed: int | None = None,
+    richardson: bool = False,
+    threshold: float = 100.0,
+    chunk: int = 32,
+    threads: int | None = None,
+    first_replica: int = 0,
+) -> Ensemble:
+    """Simulate independent replicas of ``h`` and return their raw moment sums.
+
+    Parameters
+    ----------
+    h : Harvester
+        Any potential (n >= 1), ring size and coupling.
+    dt : float
+        Time step, > 0. With ``richardson=True`` the ensemble runs at ``dt/2`` (level 0)
+        and at ``dt`` (level 1) on the same Brownian paths.
+    paths : int
+        Paths (rings) per replica, >= 2.
+    replicas : int
+        Number of independent replicas, >= 1.
+    t_burn, t_run : float
+        Burn-in (>= 0) and measuring time (> 0) per path, in model time units.
+    seed : int or None
+        Root of the :class:`numpy.random.SeedSequence`; None draws fresh entropy (recorded in
+        ``seed_entropy`` so that the run can be repeated).
+    richardson : bool
+        Run the coupled coarse level too (bias estimate at 1.5x the cost of level 0).
+    threshold : float
+        Escape amplitude, > 0: a path stops at its first ``|x_j| > threshold``.
+    chunk : int
+        Paths per random stream / task, >= 1.
+    threads : int or None
+        Worker threads (default: the usable CPUs). Results do not depend on it.
+    first_replica : int
+        Index of the first replica in the seed tree (continuing a run draws new streams).
+
+    Returns
+    -------
+    Ensemble
+
+    Examples
+    --------
+    >>> e = simulate(Harvester.build(a=0.5), dt=0.05, paths=4, replicas=2, t_burn=1.0,
+    ...              t_run=2.0, seed=3)
+    >>> e.sums.shape, e.counts[0, 0]
+    ((2, 1, 6), 160.0)
+    """
+    if not isinstance(h, Harvester):
+        raise ParameterError(f"h must be a Harvester, got {h!r} (type {type(h).__name__})")
+    dt = check_real("dt", dt, low=0.0, low_open=True)
+    paths = check_int("paths", paths, low=2)
+    replicas = check_int("replicas", replicas, low=1)
+    t_burn = check_real("t_burn", t_burn, low=0.0)
+    t_run = check_real("t_run", t_run, low=0.0, low_open=True)
+    threshold = check_real("threshold", threshold, low=0.0, low_open=True)
+    chunk = check_int("chunk", chunk, low=1)
+    threads = default_threads() if threads is None else check_int("threads", threads, low=1)
+    first_replica = check_int("first_replica", first_replica, low=0)
+    if seed is not None:
+        seed = check_int("seed", seed, low=0)
+    nrun = max(1, int(round(t_run / dt)))
+    nburn = int(round(t_burn / dt))
+    ss = np.random.SeedSequence(seed)
+    levels = 2 if richardson else 1
+    cf_f = step_coefficients(h, 0.5 * dt if richardson else dt)
+    cf_c = step_coefficients(h, dt)
+    pp = physical_vector(h, threshold)
+    kind = scheme_kind(h)
+    sizes = _chunks(paths, chunk)
+    tasks = [(r, c) for r in range(replicas) for c in range(len(sizes))]
+
+    def work(task: tuple[int, int]) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+        r, c = task
+        child = np.random.SeedSequence(ss.entropy, spawn_key=(first_replica + r, c))
+        gen = np.random.Generator(np.random.PCG64(child))
+        sums = np.zeros((2, N_MOM))
+        counts = np.zeros(2)
+        esc = np.empty(sizes[c])
+        counters = np.zeros(5, dtype=np.int64)
+        run_chunk(gen, sizes[c], h.N, nburn, nrun, cf_f, cf_c, pp, kind, richardson, sums, counts,
+                  esc, counters)
+        return sums, counts, esc, counters
+
+    t0 = time.perf_counter()
+    if threads == 1 or len(tasks) == 1:
+        results = [work(t) for t in tasks]
+    else:
+        with ThreadPoolExecutor(max_workers=threads) as pool:
+            results = list(pool.map(work, tasks))
+    wall = time.perf_counter() - t0
+    sums = np.zeros((replicas, levels, N_MOM))
+    counts = np.zeros((replicas, levels))
+    esc_times = np.full((replicas, paths), np.inf)
+    counters = np.zeros(5, dtype=np.int64)
+    offsets = np.concatenate([[0], np.cumsum(sizes)])
+    for (r, c), (s, n, e, k) in zip(tasks, results):
+        sums[r] += s[:levels]
+        counts[r] += n[:levels]
+        esc_times[r, offsets[c]:offsets[c + 1]] = np.where(e >= 0.0, e, np.inf)
+        counters += k
+    return Ensemble(
+        sums=sums,
+        counts=counts,
+        escape_times=esc_times,
+        dts=(0.5 * dt, dt) if richardson else (dt,),
+        paths=paths,
+        t_burn=nburn * dt,
+        t_run=nrun * dt,
+        threshold=threshold,
+        path_steps=int(counters[4]),
+        wall_time=wall,
+        kink_counters=tuple(int(v) for v in counters[:4]),
+        seed_entropy=int(ss.entropy) if seed is None else seed,
+        first_replica=first_replica,
+        notes={"threads": threads, "chunk": chunk, "scheme_kind": kind},
+    )
+
+
+def path_step_rate(e: Ensemble) -> float:
+    """Ring steps per second of wall time achieved by a run (all levels counted)."""
+    return e.path_steps / e.wall_time if e.wall_time > 0 else math.inf

@@ -1,0 +1,125 @@
+"""MonteCarlo solver: agreement with the exact harmonic solver, identities, statuses, seeds."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+
+from fpe_harvester import Harvester, Status, solve
+from fpe_harvester.errors import ParameterError
+from montecarlo import MonteCarlo
+
+FAST = dict(tol=0.02, dt=0.05, paths=128, t_run=50.0, min_replicas=6, progress=False)
+
+
+@pytest.mark.parametrize(
+    ("N", "k", "seed"),
+    [(1, 0.0, 1), (2, -0.15, 2), (3, -0.2, 3), (5, -0.15, 4), (5, 0.3, 5)],
+)
+def test_harmonic_rings_agree_with_exact(N: int, k: float, seed: int) -> None:
+    h = Harvester.build(a=0.5, n=2, N=N, k=k)
+    ex = solve(h, "exact")
+    mc = solve(h, "mc", seed=seed, **FAST)
+    assert mc.status is Status.STABLE, mc.message
+    for name in ("eta", "V2", "Pin", "v2", "vV"):
+        value, err = mc.value(name)
+        assert err > 0
+        assert abs(value - getattr(ex, name)) < 4 * err, (name, value, err, getattr(ex, name))
+    assert mc.eta_err / mc.eta < 0.02
+
+
+def test_spec_identities_hold_within_error() -> None:
+    h = Harvester.build(a=0.5, n=3, N=3, k=-0.3)
+    r = solve(h, "mc", seed=7, **FAST)
+    p = h.params
+    res1, se1 = r.info["identity_V2_minus_KcTaup_vV"]
+    res2, se2 = r.info["identity_Pin_minus_mgamma_v2_minus_Kv_vV"]
+    assert abs(res1) < 4 * se1 + 1e-3 * r.V2
+    assert abs(res2) < 4 * se2 + 1e-3 * r.Pin
+    # and from the returned values themselves, within their errors
+    assert abs(r.V2 - p.Kc * p.tau_p * r.vV) < 4 * math.hypot(r.V2_err, p.Kc * p.tau_p * r.vV_err)
+    lhs, rhs = r.Pin, p.m * p.gamma * r.v2 + p.Kv * r.vV
+    assert abs(lhs - rhs) < 4 * math.hypot(r.Pin_err, r.v2_err, r.vV_err)
+
+
+def test_same_seed_identical_different_seed_different() -> None:
+    h = Harvester.build(a=0.5, n=3, N=2, k=-0.2)
+    opts = dict(dt=0.05, paths=16, t_run=10.0, t_burn=5.0, min_replicas=2, max_replicas=2,
+                progress=False)
+    a = solve(h, "mc", seed=11, **opts)
+    b = solve(h, "mc", seed=11, **opts)
+    c = solve(h, "mc", seed=12, **opts)
+    d = solve(h, "mc", seed=11, threads=1, **opts)
+    assert (a.V2, a.Pin, a.eta_err) == (b.V2, b.Pin, b.eta_err)
+    assert (a.V2, a.Pin) == (d.V2, d.Pin)
+    assert a.V2 != c.V2 and a.Pin != c.Pin
+
+
+def test_unsupported_reason_is_none_for_every_harvester() -> None:
+    for h in (Harvester.build(n=1), Harvester.build(n=1.3, N=4, k=-1.0), Harvester.build(N=2, k=-9.0)):
+        assert MonteCarlo().unsupported_reason(h) is None
+
+
+@pytest.mark.parametrize(
+    ("kwargs", "match"),
+    [
+        ({"dt": 0.0}, "dt must be in"),
+        ({"dt": -0.1}, "dt must be in"),
+        ({"paths": 1}, "paths must be an integer"),
+        ({"tol": float("nan")}, "tol must be finite"),
+        ({"tol": 1.5}, "tol must be in"),
+        ({"min_replicas": 1}, "min_replicas"),
+        ({"min_replicas": 10, "max_replicas": 5}, "max_replicas"),
+        ({"t_run": float("inf")}, "t_run must be finite"),
+        ({"max_time": 0}, "max_time"),
+        ({"escape": -1.0}, "escape"),
+        ({"seed": -3}, "seed"),
+        ({"seed": 1.5}, "seed must be an integer"),
+        ({"progress": "yes"}, "progress must be"),
+        ({"richardson": 1}, "richardson must be"),
+        ({"dt": 5.0, "t_run": 1.0}, "dt must not exceed t_run"),
+    ],
+)
+def test_bad_settings_raise(kwargs: dict, match: str) -> None:
+    with pytest.raises(ParameterError, match=match):
+        MonteCarlo(**kwargs)
+
+
+def test_bad_problem_and_unknown_option_raise() -> None:
+    with pytest.raises(ParameterError, match="tau_p must be finite"):
+        Harvester.build(tau_p=float("nan"))
+    with pytest.raises(ParameterError, match="h must be a Harvester"):
+        MonteCarlo().solve("not a harvester")  # type: ignore[arg-type]
+    with pytest.raises(ParameterError, match="invalid option for method 'mc'"):
+        solve(Harvester.build(), "mc", bogus=1)
+
+
+def test_escape_detected_beyond_k_di() -> None:
+    h = Harvester.build(a=0.5, n=2, N=2, k=-0.4)  # k_di = -0.25
+    r = solve(h, "mc", seed=3, dt=0.05, paths=32, t_run=100.0, min_replicas=2, progress=False)
+    assert r.status is Status.UNSTABLE
+    assert r.eta is None and r.V2 is None
+    assert r.growth_rate > 0
+    assert r.info["escape_fraction"] > 0.9
+    assert 0 < r.info["escape_time_median"] < 140
+    assert "beyond k_di" in r.message
+
+
+def test_metastable_ring_is_labelled() -> None:
+    h = Harvester.build(a=0.5, n=1.5, N=3, k=-0.2)
+    r = solve(h, "mc", seed=5, dt=0.05, paths=32, t_run=50.0, min_replicas=2, max_replicas=2,
+              progress=False)
+    assert r.status is Status.METASTABLE
+    assert "quasi-stationary" in r.message
+    assert 0.0 <= r.info["escape_fraction"] <= 1.0
+
+
+def test_time_budget_gives_not_converged_with_numbers() -> None:
+    h = Harvester.build(a=0.5, n=3)
+    r = solve(h, "mc", seed=2, tol=1e-4, dt=0.05, paths=16, t_run=5.0, min_replicas=2,
+              max_time=0.01, progress=False)
+    assert r.status is Status.NOT_CONVERGED
+    assert "NOT CONVERGED" in r.message
+    assert r.eta is not None and np.isfinite(r.eta_err)
