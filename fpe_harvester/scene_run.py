@@ -14,6 +14,7 @@ from __future__ import annotations
 
 import csv
 import json
+import os
 import time
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field, replace
@@ -35,6 +36,9 @@ from .stability import MARGINAL_RTOL, k_di
 
 __all__ = ["SceneRow", "SceneResult", "run_scene"]
 
+#: Methods worth a process pool: single-threaded and slow (Monte Carlo runs its own threads,
+#: exact points cost microseconds).
+_POOLED: tuple[str, ...] = ("fpe",)
 #: Row statuses besides :class:`Status` values.
 NOT_AVAILABLE = "not_available"
 ERROR = "error"
@@ -224,8 +228,7 @@ class _Runner:
                 out[i] = self._store(hs[i], key, opts, stats)
         in_batch = {t[0] for t in batch}
         rest = [t for t in todo if t[0] not in in_batch]
-        # Monte Carlo runs its own threads; other pointwise solvers are single-threaded.
-        pool = [t for t in rest if t[2] != "mc"] if self.workers > 1 else []
+        pool = [t for t in rest if t[2] in _POOLED] if self.workers > 1 else []
         if len(pool) > 1:
             self._solve_parallel(hs, pool, out)
         for i, key, method, opts in rest:
@@ -395,7 +398,7 @@ def run_scene(
     quick: bool = False,
     progress: bool | None = None,
     figures: Sequence[str] | None = None,
-    workers: int = 1,
+    workers: int | None = None,
 ) -> SceneResult:
     """Run a scene: compute its points, write the outputs it asks for, draw its figures.
 
@@ -412,9 +415,10 @@ def run_scene(
         Progress bar over points; ``None`` shows it only on a terminal.
     figures : sequence of str, optional
         Draw only these of the scene's figures (default: all declared; ``[]``: none).
-    workers : int
-        Processes for single-threaded pointwise solvers (Fokker--Planck), >= 1. Monte Carlo
-        points always run in this process (the simulator is multi-threaded itself).
+    workers : int, optional
+        Processes for single-threaded pointwise solvers (Fokker--Planck), >= 1; default: the
+        number of CPUs. Monte Carlo points always run in this process (the simulator is
+        multi-threaded itself); harmonic points are vectorized in this process.
 
     Returns
     -------
@@ -433,7 +437,7 @@ def run_scene(
         scene = load_scene(scene)
     if not isinstance(scene, Scene):
         raise ParameterError(f"scene must be a Scene, got {scene!r} (type {type(scene).__name__})")
-    workers = check_int("workers", workers, low=1)
+    workers = (os.cpu_count() or 1) if workers is None else check_int("workers", workers, low=1)
     sc = scene.variant(quick)
     names = [f.name for f in sc.figures]
     wanted = names if figures is None else list(figures)

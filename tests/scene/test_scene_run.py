@@ -211,10 +211,11 @@ def test_shipped_scene_quick_runs(tmp_path: Path, name: str) -> None:
     assert all(r.ok or r.message for r in res.rows)
 
 
-def test_parallel_workers_match_serial(tmp_path: Path) -> None:
-    # x2 forces pointwise solves, which go to the process pool with workers > 1
+def test_parallel_workers_match_serial(tmp_path: Path, monkeypatch) -> None:
+    # x2 forces pointwise solves; pooling them (normally only "fpe" is) exercises the pool cheaply
     sc = harmonic_scene(observables=("eta", "x2"), figures=())
-    serial = scene_run.run_scene(sc, tmp_path / "serial", progress=False)
+    serial = scene_run.run_scene(sc, tmp_path / "serial", progress=False, workers=1)
+    monkeypatch.setattr(scene_run, "_POOLED", ("exact",))
     parallel = scene_run.run_scene(sc, tmp_path / "parallel", progress=False, workers=2)
     assert parallel.computed == 10
     assert [r.values for r in parallel.rows] == [r.values for r in serial.rows]
