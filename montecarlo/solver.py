@@ -279,6 +279,7 @@ class MonteCarlo:
             "scheme": SCHEME_NAMES[scheme_kind(h)],
             "rng": _RNG,
             "bias_eta": est.bias["eta"],
+            "bias_eta_se": est.bias_se["eta"],
             "bias_V2": est.bias["V2"],
             "bias_Pin": est.bias["Pin"],
             "escape_threshold": ens.threshold,
