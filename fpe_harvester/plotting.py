@@ -5,9 +5,11 @@ field. Points are drawn by status so that nothing is hidden or silently dropped:
 
 * stable: filled markers joined by a line, with error bars when the method has them;
 * marginal (at the threshold, finite limit): filled diamond;
-* metastable or not converged (values with a caveat): open markers with error bars;
-* unstable, failed or not available (no value): a marker on the bottom edge of the panel,
-  counted in a note under the figure.
+* metastable (no path escaped) or not converged (values with a caveat): open markers with
+  error bars;
+* unstable, failed, not available (no value) or metastable with escaped paths (averages
+  over the time before escape, not stationary values): a marker on the bottom edge of the
+  panel, counted in a note under the figure.
 """
 
 from __future__ import annotations
@@ -33,8 +35,17 @@ LABELS = {
     "a": "potential strength $a$", "n": "exponent $n$", "N": "number of units $N$",
 }
 _OPEN = ("metastable", "not_converged")
-_EDGE = {"unstable": ("v", "no stationary state"), "error": ("x", "solver failed"),
-         "not_available": ("s", "solver not available")}
+_EDGE = {"unstable": ("v", "no stationary state"), "escaped": ("^", "escaped (metastable, paths left)"),
+         "error": ("x", "solver failed"), "not_available": ("s", "solver not available")}
+
+
+def _escaped(row: SceneRow) -> bool:
+    """Metastable point where some paths escaped: its averages are not stationary values."""
+    return row.status == "metastable" and (row.info.get("escape_fraction") or 0.0) > 0.0
+
+
+def _edge_status(row: SceneRow) -> str:
+    return "escaped" if _escaped(row) else row.status
 
 
 def _selected(rows: Sequence[SceneRow], spec: FigureSpec) -> list[SceneRow]:
@@ -108,7 +119,7 @@ def draw_figure(scene: Scene, spec: FigureSpec, rows: Sequence[SceneRow], path: 
             ok = [(r.point[spec.x], r.get(y), r.values.get(y + "_err"), r.status) for r in srows
                   if r.ok and r.get(y) is not None and r.point.get(spec.x) is not None]
             caveat = [(r.point[spec.x], r.get(y), r.values.get(y + "_err")) for r in srows
-                      if r.status in _OPEN and r.get(y) is not None]
+                      if r.status in _OPEN and r.get(y) is not None and not _escaped(r)]
             if ok:
                 xs, ys, es, st = zip(*ok)
                 ax.plot(xs, ys, "-o", color=color, ms=3.5, label=label)
@@ -124,7 +135,7 @@ def draw_figure(scene: Scene, spec: FigureSpec, rows: Sequence[SceneRow], path: 
                             mfc="none", color=color, capsize=2, label=label)
             for status, (marker, _) in _EDGE.items():
                 bad = [r.point[spec.x] for r in srows
-                       if r.status == status and r.point.get(spec.x) is not None]
+                       if _edge_status(r) == status and r.point.get(spec.x) is not None]
                 if bad:
                     # one row per series so that coinciding x values stay visible
                     ax.plot(bad, [0.02 + 0.03 * s] * len(bad), marker, color=color, mfc="none", ms=5,

@@ -22,11 +22,14 @@ from .result import Stats, Status
 __all__ = ["PointCache", "point_key", "point_seed"]
 
 CACHE_NAME = "points.jsonl"
+#: Solver settings that do not change the result's meaning: not part of the cache key
+#: (Monte Carlo results do not depend on the thread count; the seed is derived from the point).
+_NOT_IN_KEY = ("seed", "progress", "threads")
 _STATS_FIELDS = ("V2", "Pin", "eta", "Vrms", "v2", "vV", "x2")
 
 
 def _canonical(h: Harvester, method: str, rtol: float | None, options: Mapping[str, Any]) -> str:
-    opts = {key: val for key, val in options.items() if key != "seed"}
+    opts = {key: val for key, val in options.items() if key not in _NOT_IN_KEY}
     return json.dumps(
         {"h": h.to_dict(), "method": method, "rtol": rtol, "options": opts},
         sort_keys=True, default=str,
@@ -34,7 +37,7 @@ def _canonical(h: Harvester, method: str, rtol: float | None, options: Mapping[s
 
 
 def point_key(h: Harvester, method: str, rtol: float | None, options: Mapping[str, Any]) -> str:
-    """Cache key: hash of harvester, method, accuracy and settings (the seed excluded)."""
+    """Cache key: hash of harvester, method, accuracy and settings (seed, progress, threads excluded)."""
     return hashlib.sha256(_canonical(h, method, rtol, options).encode()).hexdigest()[:24]
 
 

@@ -39,6 +39,8 @@ __all__ = ["SceneRow", "SceneResult", "run_scene"]
 #: Methods worth a process pool: single-threaded and slow (Monte Carlo runs its own threads,
 #: exact points cost microseconds).
 _POOLED: tuple[str, ...] = ("fpe",)
+#: Solver details copied onto rows (escapes decide how a metastable point is drawn).
+_CARRIED_INFO = ("seed", "escape_fraction", "escape_time_median")
 #: Row statuses besides :class:`Status` values.
 NOT_AVAILABLE = "not_available"
 ERROR = "error"
@@ -187,7 +189,8 @@ class _Runner:
         method = choose_method(h) if self.scene.method == "auto" else self.scene.method
         opts: dict[str, Any] = {}
         if method in ("fpe", "mc"):
-            opts["tol"] = self.scene.rtol
+            # the scene draws its own progress bar over points
+            opts.update(tol=self.scene.rtol, progress=False)
         if method == "mc":
             opts["seed"] = point_seed(self.scene.name, h)
         opts.update(self.scene.options.get(method, {}))
@@ -332,8 +335,8 @@ def _row(scene: Scene, index: int, point: Mapping[str, float], h: Harvester,
     if res.ok and res.eta is not None and res.eta_err and res.eta_err > scene.rtol * abs(res.eta):
         message += (f"; accuracy not met: eta_err/eta = {res.eta_err / abs(res.eta):.2g} "
                     f"> rtol = {scene.rtol:g}")
-    return SceneRow(index, dict(point), res.status.value, res.method, message, values,
-                    {**info, **({"seed": res.info["seed"]} if "seed" in res.info else {})})
+    carried = {key: res.info[key] for key in _CARRIED_INFO if key in res.info}
+    return SceneRow(index, dict(point), res.status.value, res.method, message, values, {**info, **carried})
 
 
 def _sweep_rows(scene: Scene, runner: _Runner, points: list[dict[str, float]]) -> list[SceneRow]:
