@@ -19,7 +19,7 @@ from collections.abc import Iterator, Mapping
 from pathlib import Path
 from typing import Any
 
-from .checks import CheckResult, Context, expect, guarded, skipped
+from .checks import CheckResult, Context, expect, skipped
 from .report import Figure, Section, Table
 
 __all__ = ["BENCH_MODULES", "error_time_pairs", "run"]
@@ -157,7 +157,7 @@ def run(ctx: Context) -> Section:
     targets = Table("Speed targets (reported, not failed)", ("benchmark", "measurement", "time [s]", "target [s]",
                                                              "met"))
     for module, solver in BENCH_MODULES:
-        sec.checks += guarded(f"benchmark {module}", _SECTION,
+        sec.checks += ctx.check(f"benchmark {module}", _SECTION,
                               lambda module=module, solver=solver: _run_one(ctx, module, solver, sec, curves, targets))
     if curves:
         sec.figures.insert(0, _plot(ctx, curves))

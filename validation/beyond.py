@@ -35,7 +35,7 @@ from fpe_harvester.model import Harvester, Params
 from fpe_harvester.result import Status
 from fpe_harvester.stability import k_di
 
-from .checks import CheckResult, Context, agree, expect, guarded, skipped
+from .checks import CheckResult, Context, agree, expect, skipped
 from .report import Figure, Section, Table
 
 __all__ = ["eta_mode", "eta_bound", "optimum", "plateau", "escape_time", "run"]
@@ -307,9 +307,9 @@ def run(ctx: Context) -> Section:
     """Optimum and bound (exact), k_di maps (scene), escape times (Monte Carlo)."""
     sec = Section("beyond", _SECTION)
     rng = np.random.default_rng(ctx.seed)
-    sec.checks += guarded("closed form of eta(kappa)", _SECTION, lambda: _closed_form_checks(rng))
-    sec.checks += guarded("optimum eta vs N and a", _SECTION, lambda: _optimum_study(ctx, sec))
-    sec.checks += guarded("k_di(N, a) map (scene)", _SECTION, lambda: _kdi_map(ctx, sec))
-    sec.checks += guarded("escape time vs k (Monte Carlo)", _SECTION, lambda: _escape_study(ctx, sec))
-    sec.checks += guarded("metastable status from the mc solver", _SECTION, lambda: _metastable_status(ctx))
+    sec.checks += ctx.check("closed form of eta(kappa)", _SECTION, lambda: _closed_form_checks(rng))
+    sec.checks += ctx.check("optimum eta vs N and a", _SECTION, lambda: _optimum_study(ctx, sec))
+    sec.checks += ctx.check("k_di(N, a) map (scene)", _SECTION, lambda: _kdi_map(ctx, sec))
+    sec.checks += ctx.check("escape time vs k (Monte Carlo)", _SECTION, lambda: _escape_study(ctx, sec))
+    sec.checks += ctx.check("metastable status from the mc solver", _SECTION, lambda: _metastable_status(ctx))
     return sec

@@ -221,11 +221,14 @@ def guarded(
     section: str,
     fn: Callable[[], list[CheckResult] | CheckResult],
     timeout: float | None = None,
+    out_of_budget: str | None = None,
 ) -> list[CheckResult]:
     """Run a check function; turn a missing solver into SKIP and any crash into FAIL.
 
     The wall time is recorded on every returned result. A crash is a failure with the
     exception and its location in the detail, so one broken check does not stop the run.
+    Exceeding ``timeout`` seconds is a hang (FAIL), unless ``out_of_budget`` is given: then
+    the timeout was the run's overall budget, and the check is skipped with that reason.
     """
     t0 = time.perf_counter()
     try:
@@ -235,7 +238,7 @@ def guarded(
     except MethodNotAvailableError as exc:
         results = [skipped(name, section, f"solver not available for this case: {exc}")]
     except CheckTimeout as exc:
-        results = [failed(name, section, f"hang: {exc}")]
+        results = [skipped(name, section, out_of_budget) if out_of_budget else failed(name, section, f"hang: {exc}")]
     except Exception as exc:  # noqa: BLE001 - every crash must be reported, not raised
         where = traceback.extract_tb(exc.__traceback__)[-1]
         results = [failed(name, section, f"crashed: {type(exc).__name__}: {exc} "
@@ -306,18 +309,42 @@ class Context:
     out: Path
     cache: SolveCache
     seed: int = 2017
+    deadline: float | None = None
+
+    def check(self, name: str, section: str, fn: Callable[[], list[CheckResult] | CheckResult],
+              cap: float | None = None) -> list[CheckResult]:
+        """:func:`guarded` under the per-check budget ``cap`` [s] and the run's ``deadline``.
+
+        Past the deadline (a :func:`time.perf_counter` value; quick mode) checks are skipped
+        with that reason instead of run, so that CI always gets a report in time.
+        """
+        if self.deadline is None:
+            return guarded(name, section, fn, timeout=cap)
+        left = self.deadline - time.perf_counter()
+        reason = "the quick run's overall time budget was used up before this check could finish"
+        if left <= 0:
+            return [skipped(name, section, reason)]
+        if cap is not None and cap <= left:
+            return guarded(name, section, fn, timeout=cap)
+        return guarded(name, section, fn, timeout=left, out_of_budget=reason)
+
+    def require(self, *methods: str) -> None:
+        """Raise :class:`MethodNotAvailableError` unless every solver named is installed."""
+        missing = [f"{m}: {why}" for m in methods if (why := solver_available(m))]
+        if missing:
+            raise MethodNotAvailableError("; ".join(missing))
 
     @property
     def mc_options(self) -> dict[str, Any]:
         """Monte Carlo settings: target relative error on eta and a wall-time budget [s] per point."""
         if self.quick:
-            return {"seed": self.seed, "tol": 0.02, "max_time": 6.0}
-        return {"seed": self.seed, "tol": 0.005, "max_time": 90.0}
+            return {"seed": self.seed, "tol": 0.02, "max_time": 6.0, "progress": False}
+        return {"seed": self.seed, "tol": 0.005, "max_time": 90.0, "progress": False}
 
     @property
     def fpe_options(self) -> dict[str, Any]:
-        """Fokker--Planck settings: requested relative error on eta."""
-        return {"tol": 1e-3 if self.quick else 1e-4}
+        """Fokker--Planck settings: requested relative error on eta and a wall-time budget [s] per point."""
+        return {"tol": 1e-3, "max_seconds": 15.0} if self.quick else {"tol": 1e-4, "max_seconds": 300.0}
 
     def options(self, method: str) -> dict[str, Any]:
         return {"mc": self.mc_options, "fpe": self.fpe_options}.get(method, {})

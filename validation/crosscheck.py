@@ -27,7 +27,7 @@ from fpe_harvester.model import Harvester
 from fpe_harvester.result import Stats
 from fpe_harvester.stability import k_di
 
-from .checks import CheckResult, Context, agree, expect, guarded
+from .checks import CheckResult, Context, agree, expect
 from .report import Section, Table
 
 __all__ = ["run", "identity_checks", "HARMONIC_RINGS", "NONLINEAR_GRID", "QUICK_NONLINEAR"]
@@ -75,6 +75,7 @@ def identity_checks(label: str, r: Stats, h: Harvester, section: str = _SECTION)
 
 
 def _exact_vs_mc(ctx: Context, N: int, k: float) -> list[CheckResult]:
+    ctx.require("mc")
     h = Harvester.build(a=0.5, n=2, N=N, k=k)
     ex = ctx.solve(h, "exact")
     mc = ctx.solve(h, "mc")
@@ -82,6 +83,7 @@ def _exact_vs_mc(ctx: Context, N: int, k: float) -> list[CheckResult]:
 
 
 def _fpe_vs_mc(ctx: Context, n: float, a: float) -> list[CheckResult]:
+    ctx.require("fpe", "mc")
     h = Harvester.build(a=a, n=n)
     fp = ctx.solve(h, "fpe")
     mc = ctx.solve(h, "mc")
@@ -150,13 +152,15 @@ def run(ctx: Context) -> Section:
     )
     rng = np.random.default_rng(ctx.seed)
     for N in dense_N:
-        sec.checks += guarded(f"fourier vs dense: N = {N}", _SECTION, lambda N=N: _fourier_vs_dense(ctx, rng, N))
+        sec.checks += ctx.check(f"fourier vs dense: N = {N}", _SECTION,
+                                lambda N=N: _fourier_vs_dense(ctx, rng, N))
     for a in fpe_a:
-        sec.checks += guarded(f"fpe vs exact: a = {a:g}", _SECTION, lambda a=a: _fpe_vs_exact(ctx, a))
+        sec.checks += ctx.check(f"fpe vs exact: a = {a:g}", _SECTION, lambda a=a: _fpe_vs_exact(ctx, a))
     for N, k in rings:
-        sec.checks += guarded(f"exact vs mc: N = {N}, k = {k:g}", _SECTION, lambda N=N, k=k: _exact_vs_mc(ctx, N, k))
+        sec.checks += ctx.check(f"exact vs mc: N = {N}, k = {k:g}", _SECTION,
+                                lambda N=N, k=k: _exact_vs_mc(ctx, N, k))
     for n, a in grid:
-        sec.checks += guarded(f"fpe vs mc: n = {n:g}, a = {a:g}", _SECTION, lambda n=n, a=a: _fpe_vs_mc(ctx, n, a))
+        sec.checks += ctx.check(f"fpe vs mc: n = {n:g}, a = {a:g}", _SECTION, lambda n=n, a=a: _fpe_vs_mc(ctx, n, a))
     sec.tables.append(_results_table(ctx))
     return sec
 

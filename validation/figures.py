@@ -12,7 +12,7 @@ from __future__ import annotations
 import shutil
 from pathlib import Path
 
-from .checks import CheckResult, Context, expect, guarded, skipped
+from .checks import CheckResult, Context, expect, skipped
 from .report import Figure, Section, Table
 
 __all__ = ["run", "MAX_ROWS"]
@@ -82,5 +82,5 @@ def run(ctx: Context) -> Section:
         "Each point uses the cheapest adequate solver; error bars where the method has them."
     )
     for name in names:
-        sec.checks += guarded(f"scene {name}", _SECTION, lambda name=name: _run_one(ctx, name, sec))
+        sec.checks += ctx.check(f"scene {name}", _SECTION, lambda name=name: _run_one(ctx, name, sec))
     return sec

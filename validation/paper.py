@@ -25,7 +25,7 @@ from fpe_harvester.model import Harvester
 from fpe_harvester.result import Stats
 from fpe_harvester.stability import k_di
 
-from .checks import Context, agree, guarded
+from .checks import Context, agree
 from .report import Section, Table
 
 __all__ = ["PaperRow", "PAPER_ROWS", "RING_N", "solve_first", "run"]
@@ -129,7 +129,7 @@ def run(ctx: Context) -> Section:
             holder.append(_row_result(ctx, row))
             return []
 
-        sec.checks += guarded(row.case, _SECTION, compute)
+        sec.checks += ctx.check(row.case, _SECTION, compute)
         if not holder:
             table.rows.append((row.case, "-", "/".join(row.methods), "not available", f"{row.eta:.3f}", "-", "-",
                                "-", f"{row.Vrms:.3f}", "-", "-", "-"))

@@ -95,3 +95,33 @@ def test_identities_pass_on_exact_and_fail_on_a_wrong_result():
     assert outcomes == [Outcome.FAIL, Outcome.PASS]
     lacking = Stats.from_moments(V2=r.V2, Pin=r.Pin, R=1.0, method="mc")
     assert [c.outcome for c in identity_checks("h", lacking, h)] == [Outcome.FAIL]
+
+
+def test_context_skips_checks_past_the_quick_budget(tmp_path):
+    from validation.checks import Context
+
+    past = Context(quick=True, out=tmp_path, cache=SolveCache(), deadline=time.perf_counter() - 1.0)
+    (r,) = past.check("late", "s", lambda: expect("late", "s", True, "ran"))
+    assert r.outcome is Outcome.SKIP and "budget" in r.detail
+
+    def spin():
+        t0 = time.perf_counter()
+        while time.perf_counter() - t0 < 5:
+            pass
+
+    soon = Context(quick=True, out=tmp_path, cache=SolveCache(), deadline=time.perf_counter() + 0.2)
+    (r,) = soon.check("slow", "s", spin, cap=10.0)
+    assert r.outcome is Outcome.SKIP  # the run's budget ran out, not the check's own cap
+    free = Context(quick=False, out=tmp_path, cache=SolveCache())
+    (r,) = free.check("slow", "s", spin, cap=0.2)
+    assert r.outcome is Outcome.FAIL and "hang" in r.detail
+
+
+def test_require_names_the_missing_solver(tmp_path, monkeypatch):
+    import validation.checks as checks
+
+    monkeypatch.setattr(checks, "solver_available", lambda m: None if m == "exact" else f"{m} missing")
+    ctx = checks.Context(quick=True, out=tmp_path, cache=SolveCache())
+    ctx.require("exact")
+    with pytest.raises(MethodNotAvailableError, match="mc: mc missing"):
+        ctx.require("exact", "mc")
