@@ -136,22 +136,13 @@ def _kink_unit(x: float, v: float, V: float, stuck: bool, f: float, cf: np.ndarr
                pp: np.ndarray, counters: np.ndarray, cs: np.ndarray) -> tuple:
     """Advance one unit of the n = 1 potential over one D step with external force f.
 
-    Exact piecewise flow: each side of x = 0 is linear with constant force f - a s; zero
+    The slow path of :func:`_kink_flow`, for units at, stuck at or near x = 0. Exact piecewise flow: each side of x = 0 is linear with constant force f - a s; zero
     crossings are located on the flow's Taylor series (bracketing + safeguarded Newton); at
     x = v = 0 the unit sticks while the net force |f - Kv V| <= a (set-valued sign), and V
     then decays exactly.
     """
-    m, Kv, tau_p, a, c = pp[0], pp[2], pp[4], pp[7], pp[9]
+    m, Kv, tau_p, a = pp[0], pp[2], pp[4], pp[7]
     h = cf[12]
-    if not stuck and x != 0.0:
-        s = 1.0 if x > 0.0 else -1.0
-        Fs = f - a * s
-        xn = cf[0] * x + cf[1] * v + cf[2] * V + cf[9] * Fs
-        acc = (abs(Fs) + abs(c * x) + m * pp[1] * abs(v) + Kv * abs(V)) / m
-        if s * xn > 0.0 and s * x > h * (abs(v) + 2.0 * h * acc):
-            vn = cf[3] * x + cf[4] * v + cf[5] * V + cf[10] * Fs
-            Vn = cf[6] * x + cf[7] * v + cf[8] * V + cf[11] * Fs
-            return xn, vn, Vn, False
     counters[0] += 1
     t = 0.0
     for _ in range(MAX_EVENTS):
@@ -248,12 +239,29 @@ def _kick(x, v, F, h, pp, update) -> None:
 
 @njit(cache=True, nogil=True)
 def _kink_flow(x, v, V, stuck, f, w, cf, pp, counters, cs) -> None:
+    """D step of the kink potential: one exact affine step away from x = 0, events near it."""
     N, P = x.shape
+    m, gamma, Kv, a, c = pp[0], pp[1], pp[2], pp[7], pp[9]
+    h = cf[12]
     for j in range(N):
         for p in range(P):
-            if w[p] > 0.0:
-                x[j, p], v[j, p], V[j, p], stuck[j, p] = _kink_unit(
-                    x[j, p], v[j, p], V[j, p], stuck[j, p], f[j, p], cf, pp, counters, cs)
+            if w[p] == 0.0:
+                continue
+            x0, v0, V0 = x[j, p], v[j, p], V[j, p]
+            if not stuck[j, p] and x0 != 0.0:
+                s = 1.0 if x0 > 0.0 else -1.0
+                Fs = f[j, p] - a * s
+                xn = cf[0] * x0 + cf[1] * v0 + cf[2] * V0 + cf[9] * Fs
+                # no crossing possible within the step: |x| exceeds the distance reachable
+                # with the current speed and a generous bound on the acceleration
+                acc = (abs(Fs) + abs(c * x0) + m * gamma * abs(v0) + Kv * abs(V0)) / m
+                if s * xn > 0.0 and s * x0 > h * (abs(v0) + 2.0 * h * acc):
+                    x[j, p] = xn
+                    v[j, p] = cf[3] * x0 + cf[4] * v0 + cf[5] * V0 + cf[10] * Fs
+                    V[j, p] = cf[6] * x0 + cf[7] * v0 + cf[8] * V0 + cf[11] * Fs
+                    continue
+            x[j, p], v[j, p], V[j, p], stuck[j, p] = _kink_unit(
+                x0, v0, V0, stuck[j, p], f[j, p], cf, pp, counters, cs)
 
 
 @njit(cache=True, nogil=True)
@@ -332,15 +340,18 @@ def _check_escape(x, v, V, xi, F, stuck, w, thr, t, esc_time) -> None:
 
 
 @njit(cache=True, nogil=True)
-def _run(gen, P: int, N: int, nburn: int, nrun: int, cf_f: np.ndarray, cf_c: np.ndarray,
-         pp: np.ndarray, kind: int, coupled: bool, sums: np.ndarray, counts: np.ndarray,
-         esc_time: np.ndarray, counters: np.ndarray) -> None:
+def _run(gen, P: int, N: int, nburn: int, nrun: int, stride: int, cf_f: np.ndarray,
+         cf_c: np.ndarray, pp: np.ndarray, kind: int, coupled: bool, sums: np.ndarray,
+         counts: np.ndarray, esc_time: np.ndarray, counters: np.ndarray) -> None:
     """Simulate P independent rings of N units from rest and accumulate their time averages.
 
     Parameters
     ----------
     gen : numpy.random.Generator
         This chunk's own stream (deterministic for a given seed, whatever the thread count).
+    stride : int
+        Moments are accumulated every ``stride``-th step of the measured part (samples far
+        closer than the correlation time add cost, not information).
     nburn, nrun : int
         Burn-in and measured steps of size ``cf_c[12]`` if ``coupled`` else ``cf_f[12]``.
     coupled : bool
@@ -387,7 +398,7 @@ def _run(gen, P: int, N: int, nburn: int, nrun: int, cf_f: np.ndarray, cf_c: np.
                 live += 1
         if live == 0:
             break
-        meas = step >= nburn
+        meas = step >= nburn and (step - nburn) % stride == 0
         t_end = (step + 1) * h
         if coupled:
             counters[4] += 3 * live
@@ -424,8 +435,9 @@ def _run(gen, P: int, N: int, nburn: int, nrun: int, cf_f: np.ndarray, cf_c: np.
                     xif[j, p] = cf_f[13] * xif[j, p] + cf_f[14] * gen.standard_normal()
 
 
-def run_chunk(gen, P: int, N: int, nburn: int, nrun: int, cf_f: np.ndarray, cf_c: np.ndarray,
-              pp: np.ndarray, kind: int, coupled: bool, sums: np.ndarray, counts: np.ndarray,
-              esc_time: np.ndarray, counters: np.ndarray) -> None:
+def run_chunk(gen, P: int, N: int, nburn: int, nrun: int, stride: int, cf_f: np.ndarray,
+              cf_c: np.ndarray, pp: np.ndarray, kind: int, coupled: bool, sums: np.ndarray,
+              counts: np.ndarray, esc_time: np.ndarray, counters: np.ndarray) -> None:
     """Run :func:`_run` (arguments as there) on a scratch block sized for this chunk."""
-    _run(gen, P, N, nburn, nrun, cf_f, cf_c, pp, kind, coupled, sums, counts, esc_time, counters)
+    _run(gen, P, N, nburn, nrun, stride, cf_f, cf_c, pp, kind, coupled, sums, counts, esc_time,
+         counters)
