@@ -166,7 +166,7 @@ def simulate(
     --------
     >>> e = simulate(Harvester.build(a=0.5), dt=0.05, paths=4, replicas=2, t_burn=1.0,
     ...              t_run=2.0, seed=3)
-    >>> e.sums.shape, e.counts[0, 0]
+    >>> e.sums.shape, float(e.counts[0, 0])
     ((2, 1, 6), 160.0)
     """
     if not isinstance(h, Harvester):
