@@ -20,7 +20,7 @@ import numpy as np
 from fpe_harvester.errors import ParameterError, check_int, check_real
 from fpe_harvester.model import Harvester
 from fpe_harvester.result import Stats, Status
-from fpe_harvester.stability import classify, growth_rate, k_di, mode_eigenvalues
+from fpe_harvester.stability import classify, growth_rate, k_di, max_sin2, mode_eigenvalues
 
 from .estimate import Estimate, estimate
 from .scheme import SCHEME_NAMES, scheme_kind
@@ -63,8 +63,11 @@ class MonteCarlo:
         Measured time per path, > 0. Default 100.
     max_time : float
         Wall-time budget in seconds, > 0. Default 600.
-    escape : float
-        Escape threshold on |x_j|, > 0. Default 100.
+    escape : float or None
+        Escape threshold on |x_j|, > 0. None (default): 100, or for a metastable ring four
+        times the barrier amplitude :math:`x^* = (a n / (4|k| s))^{1/(2-n)}` where the
+        anti-phase coupling force :math:`4|k| s x` (:math:`s = \\max_q \\sin^2(\\pi q/N)`)
+        overtakes the on-site force, if that is larger.
     progress : bool or None
         tqdm bar on stderr; None shows it only for runs longer than 2 s.
     richardson : bool
@@ -92,7 +95,7 @@ class MonteCarlo:
     t_burn: float | None = None
     t_run: float = 100.0
     max_time: float = 600.0
-    escape: float = 100.0
+    escape: float | None = None
     progress: bool | None = None
     richardson: bool = True
     threads: int | None = None
@@ -113,7 +116,8 @@ class MonteCarlo:
         if self.dt > self.t_run:
             raise ParameterError(f"dt must not exceed t_run = {self.t_run:g}, got {self.dt!r}")
         object.__setattr__(self, "max_time", check_real("max_time", self.max_time, low=0.0, low_open=True))
-        object.__setattr__(self, "escape", check_real("escape", self.escape, low=0.0, low_open=True))
+        if self.escape is not None:
+            object.__setattr__(self, "escape", check_real("escape", self.escape, low=0.0, low_open=True))
         if self.progress is not None and not isinstance(self.progress, bool):
             raise ParameterError(f"progress must be True, False or None, got {self.progress!r} "
                                  f"(type {type(self.progress).__name__})")
@@ -132,7 +136,16 @@ class MonteCarlo:
     def _run(self, h: Harvester, replicas: int, first: int, t_burn: float) -> Ensemble:
         return simulate(h, dt=self.dt, paths=self.paths, replicas=replicas, t_burn=t_burn,
                         t_run=self.t_run, seed=self.seed, richardson=self.richardson,
-                        threshold=self.escape, threads=self.threads, first_replica=first)
+                        threshold=self.threshold(h), threads=self.threads, first_replica=first)
+
+    def threshold(self, h: Harvester) -> float:
+        """Escape threshold used for ``h`` (see ``escape``)."""
+        if self.escape is not None:
+            return self.escape
+        if h.confinement == "metastable":
+            x_star = (h.a * h.n / (4.0 * abs(h.k) * max_sin2(h.N))) ** (1.0 / (2.0 - h.n))
+            return float(max(100.0, 4.0 * x_star))
+        return 100.0
 
     def run(self, h: Harvester) -> tuple[Ensemble, Estimate, bool]:
         """Adaptive replica loop; returns the ensemble, its estimate and whether tol was met."""
@@ -144,7 +157,7 @@ class MonteCarlo:
         t_burn = _auto_burn(h) if self.t_burn is None else self.t_burn
         threads = self.threads or default_threads()
         start = time.perf_counter()
-        bar = tqdm(total=self.max_replicas, desc=f"mc N={h.N} n={h.n:g}", unit="replica",
+        bar = tqdm(desc=f"mc N={h.N} n={h.n:g}", unit="replica",
                    file=sys.stderr, disable=self.progress is False,
                    delay=0.0 if self.progress else 2.0, leave=False)
         ens = self._run(h, self.min_replicas, 0, t_burn)
@@ -202,11 +215,11 @@ class MonteCarlo:
             return Stats(status=Status.UNSTABLE, method=self.name, growth_rate=rate, info=info, message=(
                 f"unstable: harmonic ring with k = {h.k:g} beyond k_di = {kd:.10g}; the critical "
                 f"mode grows like exp({rate:.4g} t). {esc:.1%} of the simulated paths passed "
-                f"|x| = {self.escape:g} (times in info); no stationary statistics exist."))
+                f"|x| = {self.threshold(h):g} (times in info); no stationary statistics exist."))
         if est.replicas == 0:
             status = Status.METASTABLE if h.confinement == "metastable" else Status.UNSTABLE
             return Stats(status=status, method=self.name, info=info, message=(
-                f"every path escaped (|x| > {self.escape:g}) before measuring: no statistics. "
+                f"every path escaped (|x| > {self.threshold(h):g}) before measuring: no statistics. "
                 f"Median escape time {info['escape_time_median']:.4g}."))
         stats = self._stats(h, est, info)
         return self._label(h, stats, est, esc, met, kd)
@@ -244,12 +257,12 @@ class MonteCarlo:
         elif h.confinement == "metastable":
             fields.update(status=Status.METASTABLE, message=(
                 f"metastable: n = {h.n:g} < 2 with k = {h.k:g} < 0 is unbounded below at large "
-                f"amplitude. {esc:.2%} of paths escaped (|x| > {self.escape:g}) within "
+                f"amplitude. {esc:.2%} of paths escaped (|x| > {self.threshold(h):g}) within "
                 f"t_burn + t_run = {s.info['t_burn'] + s.info['t_run']:g}; the numbers are "
                 "quasi-stationary averages over the time before escape." + note))
         elif esc > 0.0:
             fields.update(status=Status.NOT_CONVERGED, message=(
-                f"{esc:.2%} of paths escaped (|x| > {self.escape:g}) although this system is "
+                f"{esc:.2%} of paths escaped (|x| > {self.threshold(h):g}) although this system is "
                 "confined: numerical instability or a too-low escape threshold; numbers are "
                 "averages before escape. Lower dt or raise escape." + note))
         elif not met:
