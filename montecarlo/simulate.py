@@ -13,7 +13,6 @@ the GIL released, so results depend on the seed only, not on the number of threa
 
 from __future__ import annotations
 
-import math
 import os
 import time
 from concurrent.futures import ThreadPoolExecutor
@@ -241,7 +240,3 @@ def simulate(
         notes={"threads": threads, "chunk": chunk, "scheme_kind": kind, "sample_stride": stride},
     )
 
-
-def path_step_rate(e: Ensemble) -> float:
-    """Ring steps per second of wall time achieved by a run (all levels counted)."""
-    return e.path_steps / e.wall_time if e.wall_time > 0 else math.inf
