@@ -153,7 +153,8 @@ class SceneResult:
         for row in self.rows:
             if not row.ok:
                 by_message.setdefault((row.status, row.message), []).append(str(row.index))
-        notes = [f"points {', '.join(idx)}: {status}: {msg}" for (status, msg), idx in by_message.items()]
+        notes = [f"points {', '.join(idx)}: " + (msg if msg.startswith(status) else f"{status}: {msg}")
+                 for (status, msg), idx in by_message.items()]
         return "\n".join(out + (["", "notes:", *notes] if notes else []))
 
     def to_dict(self) -> dict[str, Any]:
