@@ -31,10 +31,10 @@ __all__ = ["XMesh"]
 class XMesh:
     """Symmetric graded mesh on :math:`[-L, L]` with a node at 0.
 
-    Nodes equidistribute the monitor :math:`s(x) = x/\ell + w\,\Theta (x/L)^n` (length
-    scale :math:`\ell` of the bulk, plus ``w`` elements per unit of :math:`U/T_{eff}` so that
-    steep walls get short elements): :math:`s(x_i) = s(L)\,(i/N_h)^\beta`, where
-    :math:`\beta > 1` grades toward the kink at 0.
+    Nodes equidistribute the monitor :math:`s(x) = x/\\ell + w\\,\\Theta (x/L)^n` (length
+    scale :math:`\\ell` of the bulk, plus ``w`` elements per unit of :math:`U/T_{eff}` so that
+    steep walls get short elements): :math:`s(x_i) = s(L)\\,(i/N_h)^\\beta`, where
+    :math:`\\beta > 1` grades toward the kink at 0.
 
     Parameters
     ----------
@@ -45,13 +45,13 @@ class XMesh:
     n : float
         Potential exponent, >= 1 (shape of the wall term).
     scale : float
-        Bulk length scale :math:`\ell > 0` (e.g. :math:`\sqrt{\langle x^2\rangle}`).
+        Bulk length scale :math:`\\ell > 0` (e.g. :math:`\\sqrt{\\langle x^2\\rangle}`).
     theta : float
-        :math:`\Theta = U(L)/T_{eff} > 0`.
+        :math:`\\Theta = U(L)/T_{eff} > 0`.
     wall : float
         Weight ``w >= 0`` of the wall term (0: uniform in x apart from the grading).
     grading : float
-        :math:`\beta` in [1, 6].
+        :math:`\\beta` in [1, 6].
 
     Examples
     --------

@@ -10,10 +10,12 @@ error of :math:`f_2` is estimated by the tail of a geometric series,
 
     \\varepsilon = |e_2|\\,\\max\\Big(1, \\frac{r}{1 - r}\\Big),
 
-never less than the last difference (conservative when convergence is fast), and growing
-as the convergence slows (the algebraic convergence of the kink case n = 1). When the
-sequence is not yet contracting (:math:`r \\ge 0.9`) the estimate is :math:`10|e_2|` and
-the level is flagged as pre-asymptotic.
+never less than the last difference (conservative when convergence is fast). In M the
+convergence may be algebraic (the kink of n = 1 makes the density non-smooth), where the
+geometric tail underestimates: with :math:`f(M) = f_\\infty + C M^{-q}` and steps of 2,
+:math:`r = ((M-2)/M)^{q+1}` gives q and the tail :math:`|e_2| M / (2q)`; the larger of the
+two estimates is used. When the sequence is not yet contracting (:math:`r \\ge 0.9`) the
+estimate is :math:`10|e_2|` and the level is flagged as pre-asymptotic.
 """
 
 from __future__ import annotations
@@ -28,17 +30,26 @@ from ..model import Harvester
 from .discretize import Level, Whitening, solve_level
 from .mesh import XMesh
 
-__all__ = ["tail_error", "Plan", "RefinementResult", "refine"]
+__all__ = ["tail_error", "reported_eta_error", "Plan", "RefinementResult", "refine"]
 
 #: Observables carried through the refinement (each gets its own estimate).
 OBSERVABLES = ("eta", "V2", "Pin", "v2", "vV", "x2")
 
 
-def tail_error(values: Sequence[float]) -> tuple[float, bool]:
+def tail_error(values: Sequence[float], degrees: Sequence[int] | None = None) -> tuple[float, bool]:
     """Error estimate of the last of up to three successive refinements.
 
-    Returns ``(error, asymptotic)``; with two values the last difference is returned and
-    ``asymptotic`` is False; with one value the error is ``inf``.
+    Parameters
+    ----------
+    values : sequence of float
+        The observable on successive levels (coarse to fine).
+    degrees : sequence of int, optional
+        The Hermite degrees of the levels (steps of 2); enables the algebraic tail.
+
+    Returns
+    -------
+    (error, asymptotic)
+        With two values the last difference and ``False``; with one value ``inf``.
 
     Examples
     --------
@@ -57,7 +68,31 @@ def tail_error(values: Sequence[float]) -> tuple[float, bool]:
     r = e2 / e1
     if r >= 0.9:
         return 10.0 * e2, False
-    return e2 * max(1.0, r / (1.0 - r)), True
+    err = e2 * max(1.0, r / (1.0 - r))
+    if degrees is not None and r > 0.0:
+        M = degrees[-1]
+        q = math.log(r) / math.log((M - 2.0) / M) - 1.0
+        if q > 0.0:
+            err = max(err, e2 * M / (2.0 * q))
+        else:
+            err = max(err, 10.0 * e2)
+    return err, True
+
+
+def reported_eta_error(moments: dict[str, float], errors: dict[str, float]) -> tuple[float, float]:
+    """Error on eta to report, and the covariance of the V2 and Pin errors to go with it.
+
+    The error of eta is estimated directly from its own refinement sequence: the
+    truncation errors of V2 and Pin are strongly correlated and partly cancel in the
+    ratio. The returned covariance (:math:`|\\rho| \\le 1`) makes first-order propagation
+    from V2 and Pin as close to that estimate as it can be.
+    """
+    V2, Pin, eta = moments["V2"], moments["Pin"], abs(moments["eta"])
+    a, b = errors["V2"] / V2, errors["Pin"] / Pin
+    rel = errors["eta"] / eta
+    rel_cov = min(max(rel, abs(a - b)), a + b)
+    cov = (a * a + b * b - rel_cov**2) / 2.0 * V2 * Pin
+    return errors["eta"], cov
 
 
 @dataclass(frozen=True)
@@ -118,10 +153,10 @@ def refine(h: Harvester, tol: float, plan: Plan, progress: Callable[[str], None]
            ) -> RefinementResult:
     """Refine M and the mesh until the estimated relative error on eta is below ``tol``.
 
-    At each step the error in M (levels M - 4, M - 2, M on the current mesh) and in the
-    mesh (N/4, N/2, N elements at the current M) are estimated with :func:`tail_error`;
-    the larger one is refined (M + 2 or twice the elements) until their sum is below
-    ``tol * |eta|`` or a limit of ``plan`` is hit.
+    M grows in steps of 2 on the current mesh until its error estimate (levels M - 4,
+    M - 2, M, :func:`tail_error`) is below ``tol * |eta| / 2``; then the mesh error
+    (last doubling) is computed at that M, and the larger part is refined (M + 2 or twice
+    the elements) until the sum is below ``tol * |eta|`` or a limit of ``plan`` is hit.
     """
     t0 = time.perf_counter()
     w = Whitening.of(h)
@@ -140,42 +175,53 @@ def refine(h: Harvester, tol: float, plan: Plan, progress: Callable[[str], None]
                          f"({lv.seconds:.2f} s)")
         return cache[key]
 
-    def estimates(M: int, nh: int, fine_M: Level | None = None, fine_x: Level | None = None
-                  ) -> tuple[dict[str, float], float, float, bool]:
-        if fine_M is not None:
-            seq_M = [level(M, nh), fine_M]
-            seq_x = [level(M, nh), fine_x]
-        else:
-            seq_M = [level(m, nh) for m in (M - 4, M - 2, M) if m >= 2]
-            seq_x = [level(M, n) for n in (nh // 4, nh // 2, nh) if n >= 1 and (n == nh or nh % n == 0)]
+    def estimates(M: int, nh: int, fixed: bool = False) -> tuple[dict[str, float], float, float]:
+        # Mesh: the last doubling, |f(N) - f(N/2)|, bounds the error of f(N) for any
+        # convergence order >= 1 (coarser meshes are often pre-asymptotic, so no ratio).
+        # Hermite: tail estimate from M - 4, M - 2, M; a fixed level M is instead compared
+        # with M + 2, whose own tail is added (the error of f(M) is |f(M) - f(M+2)| + tail).
+        coarse = level(M, nh // 2) if nh >= 2 else level(M, 2 * nh)
+        degs = [m for m in ((M - 2, M, M + 2) if fixed else (M - 4, M - 2, M)) if m >= 2]
+        seq_M = [level(m, nh) for m in degs]
         errs: dict[str, float] = {}
-        asym = True
         eM = ex = 0.0
         for name in OBSERVABLES:
-            em, am = tail_error([lv.moments[name] for lv in seq_M])
-            ey, ay = tail_error([lv.moments[name] for lv in seq_x])
+            vals = [lv.moments[name] for lv in seq_M]
+            em, _ = tail_error(vals, degs)
+            if fixed:
+                em += abs(vals[-1] - level(M, nh).moments[name])
+            ey = abs(level(M, nh).moments[name] - coarse.moments[name])
             errs[name] = em + ey
             if name == "eta":
-                eM, ex, asym = em, ey, am and ay
-        return errs, eM, ex, asym
+                eM, ex = em, ey
+        return errs, eM, ex
 
     if plan.fixed:
         M, nh = plan.M, plan.half_elements
-        errs, eM, ex, _ = estimates(M, nh, level(M + 2, nh), level(M, 2 * nh))
+        errs, eM, ex = estimates(M, nh, fixed=True)
         best = level(M, nh)
-        ok = errs["eta"] <= tol * abs(best.moments["eta"])
+        rel = reported_eta_error(best.moments, errs)[0] / abs(best.moments["eta"])
+        ok = rel <= tol
         reason = "" if ok else (f"fixed M = {M}, {2 * nh} elements: estimated relative error "
-                                f"{errs['eta'] / abs(best.moments['eta']):.2g} > tol = {tol:.2g}")
+                                f"{rel:.2g} > tol = {tol:.2g}")
         return RefinementResult(best, errs, eM, ex, ok, reason, _history(cache), time.perf_counter() - t0)
 
     M, nh = plan.M, plan.half_elements
     while True:
         best = level(M, nh)
-        errs, eM, ex, _ = estimates(M, nh)
         eta = abs(best.moments["eta"])
-        if errs["eta"] <= tol * eta:
-            return RefinementResult(best, errs, eM, ex, True, "", _history(cache), time.perf_counter() - t0)
-        grow_M = eM >= ex
+        # Refine M first on the current mesh (lower degrees are cheap and cached); the mesh
+        # sequence at the current M is computed only once the Hermite part is small.
+        seq_M = [level(m, nh) for m in (M - 4, M - 2, M) if m >= 2]
+        eM, _ = tail_error([lv.moments["eta"] for lv in seq_M], [lv.M for lv in seq_M])
+        if eM <= 0.5 * tol * eta:
+            errs, eM, ex = estimates(M, nh)
+            if reported_eta_error(best.moments, errs)[0] <= tol * eta:
+                return RefinementResult(best, errs, eM, ex, True, "", _history(cache),
+                                        time.perf_counter() - t0)
+            grow_M = eM >= ex
+        else:
+            grow_M = True
         nxt_M, nxt_nh = (M + 2, nh) if grow_M else (M, 2 * nh)
         na = (nxt_M + 1) * (nxt_M + 2) * (nxt_M + 3) // 6
         dofs = 2 * nxt_nh * (plan.order + 1) * na
@@ -190,9 +236,11 @@ def refine(h: Harvester, tol: float, plan: Plan, progress: Callable[[str], None]
         elif plan.max_seconds is not None and elapsed > plan.max_seconds:
             limit = f"time budget max_seconds = {plan.max_seconds:g} s used up"
         if limit is not None:
-            reason = (f"tol = {tol:.2g} not reached: estimated relative error on eta "
-                      f"{errs['eta'] / eta:.2g} (Hermite part {eM / eta:.2g}, mesh part {ex / eta:.2g}) "
-                      f"at M = {M}, {2 * nh} elements; {limit}")
+            errs, eM, ex = estimates(M, nh)
+            rel = reported_eta_error(best.moments, errs)[0] / eta
+            reason = (f"tol = {tol:.2g} not reached: estimated relative error on eta {rel:.2g} "
+                      f"(Hermite part {eM / eta:.2g}, mesh part {ex / eta:.2g}) at M = {M}, "
+                      f"{2 * nh} elements; {limit}")
             return RefinementResult(best, errs, eM, ex, False, reason, _history(cache),
                                     time.perf_counter() - t0)
         M, nh = nxt_M, nxt_nh

@@ -21,6 +21,7 @@ on a grid, and the residuals of the exact stationary identities (SPEC section 1)
 
 from __future__ import annotations
 
+import dataclasses
 from collections.abc import Callable
 from dataclasses import dataclass, field
 
@@ -32,7 +33,7 @@ from ..model import Harvester
 from ..result import Stats, Status
 from .assemble import _element
 from .discretize import Level
-from .refine import Plan, RefinementResult, refine
+from .refine import Plan, RefinementResult, refine, reported_eta_error
 
 __all__ = ["FPESolution", "stationary", "default_plan"]
 
@@ -80,7 +81,7 @@ def default_plan(h: Harvester, M: int | None = None, half_elements: int | None =
     kink = h.n < 2.0
     return Plan(
         M=6 if M is None else M,
-        half_elements=(8 if kink else 4) if half_elements is None else half_elements,
+        half_elements=(8 if kink else 8) if half_elements is None else half_elements,
         order=3 if order is None else order,
         theta=theta,
         grading=2.5 if kink else 1.0,
@@ -113,14 +114,9 @@ def _stats(h: Harvester, ref: RefinementResult, tol: float) -> Stats:
     mo = lv.moments
     er = ref.errors
     V2, Pin = mo["V2"], mo["Pin"]
-    a, b = er["V2"] / V2, er["Pin"] / Pin
-    # The truncation errors of V2 and Pin are correlated; pick the correlation (|rho| <= 1)
-    # that reproduces the directly estimated error of eta as closely as possible.
-    rel_eta = er["eta"] / abs(mo["eta"])
-    rel_eta = min(max(rel_eta, abs(a - b)), a + b)
-    cov = (a * a + b * b - rel_eta**2) / 2.0 * V2 * Pin
+    eta_err, cov = reported_eta_error(mo, er)
     status = Status.STABLE if ref.converged else Status.NOT_CONVERGED
-    message = (f"converged: estimated relative error on eta {er['eta'] / abs(mo['eta']):.2g} <= tol = {tol:.2g}"
+    message = (f"converged: estimated relative error on eta {eta_err / abs(mo['eta']):.2g} <= tol = {tol:.2g}"
                if ref.converged else ref.reason + "; the numbers are the best estimate with its error")
     info = {
         "M": lv.M, "order": lv.order, "elements": lv.mesh.elements, "L": lv.mesh.L, "dofs": lv.dofs,
@@ -128,11 +124,13 @@ def _stats(h: Harvester, ref: RefinementResult, tol: float) -> Stats:
         "eta_err_direct": er["eta"], "residual_V2": mo["res_V2"], "residual_power": mo["res_power"],
         "kappa_eq": lv.whitening.kappa, "seconds": ref.seconds, "history": ref.history,
     }
-    return Stats.from_moments(
+    stats = Stats.from_moments(
         V2=V2, Pin=Pin, R=h.params.R, V2_err=er["V2"], Pin_err=er["Pin"], cov_V2_Pin=cov,
         v2=mo["v2"], v2_err=er["v2"], vV=mo["vV"], vV_err=er["vV"], x2=mo["x2"], x2_err=er["x2"],
         status=status, message=message, method="fpe", info=info,
     )
+    # eta's own refinement estimate, not the bound propagated from V2 and Pin.
+    return dataclasses.replace(stats, eta_err=eta_err)
 
 
 def stationary(

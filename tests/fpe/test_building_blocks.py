@@ -1,0 +1,115 @@
+"""Hermite algebra, mesh, DG assembly and the block solver, checked in isolation."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+import scipy.sparse as sp
+import scipy.sparse.linalg as spla
+
+from fpe_harvester import Harvester, ParameterError
+from fpe_harvester.fpe import HermiteBasis, XMesh
+from fpe_harvester.fpe.assemble import assemble_x, split_flux
+from fpe_harvester.fpe.blocksolve import BlockTridiagonal
+from fpe_harvester.fpe.hermite import whitening_covariance
+from fpe_harvester.linear import lyapunov_covariance
+
+
+def test_hermite_index_set_size_and_symmetry() -> None:
+    for M in (2, 5, 9):
+        hb = HermiteBasis(M)
+        assert hb.size == math.comb(M + 3, 3)
+        J = hb.multiply(0)
+        assert abs(J - J.T).max() == 0.0
+        assert hb.degree().max() == M
+
+
+def test_flux_matrix_eigenvalues_are_hermite_roots() -> None:
+    """Each v-chain of the truncated multiplication matrix has the roots of He_k as eigenvalues."""
+    hb = HermiteBasis(4)
+    lam = np.sort(np.linalg.eigvalsh(hb.multiply(0).toarray()))
+    expected = []
+    for s in range(5):  # degree of (alpha1, alpha2)
+        k = 4 - s + 1
+        roots = np.polynomial.hermite_e.hermeroots([0] * k + [1])
+        expected.extend(list(roots) * (s + 1))
+    assert np.allclose(lam, np.sort(expected), atol=1e-12)
+
+
+def test_generator_reproduces_gaussian_stationary_moments() -> None:
+    """For a linear (v, V, xi) system whitened by its own stationary covariance, the
+    generator annihilates the degree-2 equations at c = e_0 (the weight is stationary)."""
+    B = np.array([[-1.0, -1.0, 1.0], [1.0, -0.5, 0.0], [0.0, 0.0, -1.0]])
+    Q = np.diag([0.0, 0.0, 2.0])
+    import scipy.linalg as sl
+
+    S = sl.solve_continuous_lyapunov(B, -Q)
+    L = np.linalg.cholesky(S)
+    Li = np.linalg.inv(L)
+    K0 = HermiteBasis(3).generator(Li @ B @ L, Li @ Q @ Li.T)
+    c = np.zeros(K0.shape[0])
+    c[0] = 1.0
+    assert np.abs(K0 @ c).max() < 1e-12
+
+
+def test_whitening_is_lyapunov_for_harmonic() -> None:
+    h = Harvester.build(a=0.5, n=2)
+    Sigma, kappa, x2 = whitening_covariance(h)
+    assert kappa == 1.0
+    assert np.allclose(Sigma, lyapunov_covariance(1.0, h.params)[1:, 1:])
+
+
+def test_mesh_has_node_at_zero_and_is_symmetric() -> None:
+    nodes = XMesh(3.0, 7, n=1.0, scale=0.5, theta=30.0, grading=2.5).nodes()
+    assert 0.0 in nodes
+    assert np.allclose(nodes, -nodes[::-1])
+    assert np.all(np.diff(nodes) > 0)
+    h = np.diff(nodes)
+    assert h[7] < h[0]  # graded toward the kink
+
+
+def test_mesh_rejects_bad_input() -> None:
+    with pytest.raises(ParameterError, match="half_elements"):
+        XMesh(1.0, 0)
+    with pytest.raises(ParameterError, match="L must be"):
+        XMesh(-1.0, 3)
+
+
+@pytest.mark.parametrize("order", [2, 3, 4])
+def test_dg_upwind_scalar_advection_is_exact_for_polynomials(order: int) -> None:
+    """d/dx c = s(x) with inflow 0 at -1: DG upwind reproduces a polynomial solution."""
+    nodes = np.linspace(-1.0, 1.0, 5)
+    X = assemble_x(nodes, order, lambda x: 0.0 * x)
+    # weak form: xplus c - deriv c = mass s, for F = 1 (F^+ = 1, F^- = 0)
+    A = (X.xplus - X.deriv).tocsc()
+    exact = lambda x: (x + 1.0) ** 2  # noqa: E731
+    from skfem import LinearForm, asm
+
+    s = asm(LinearForm(lambda v, w: 2.0 * (w.x[0] + 1.0) * v), X.basis)[X.perm]
+    c = spla.spsolve(A, s)
+    assert abs(c @ X.integral - 8.0 / 3.0) < 1e-12
+    assert np.isclose(c @ X.x2, np.trapezoid(np.linspace(-1, 1, 20001) ** 2 * exact(np.linspace(-1, 1, 20001)),
+                                             np.linspace(-1, 1, 20001)), rtol=1e-6)
+
+
+def test_split_flux() -> None:
+    F = HermiteBasis(3).multiply(0).toarray()
+    Fp, Fm = split_flux(F)
+    assert np.allclose(Fp + Fm, F)
+    assert np.linalg.eigvalsh(Fp).min() > -1e-12
+    assert np.linalg.eigvalsh(Fm).max() < 1e-12
+
+
+def test_block_tridiagonal_matches_sparse_lu(rng: np.random.Generator) -> None:
+    nb, b = 5, 6
+    A = sp.lil_matrix((nb * b, nb * b))
+    for k in range(nb):
+        A[k * b:(k + 1) * b, k * b:(k + 1) * b] = rng.normal(size=(b, b)) + 8 * np.eye(b)
+        if k:
+            A[k * b, (k - 1) * b + 2] = rng.normal()
+            A[(k - 1) * b + 3, k * b + 1] = rng.normal()
+    A = A.tocsr()
+    r = rng.normal(size=nb * b)
+    assert np.allclose(BlockTridiagonal(A, b).solve(r), spla.spsolve(A.tocsc(), r), atol=1e-12)

@@ -1,0 +1,182 @@
+"""The stationary Fokker--Planck solver: exact harmonic limit, convergence, identities, errors."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+
+from fpe_harvester import Harvester, MethodNotAvailableError, ParameterError, Status, solve
+from fpe_harvester.fpe import FokkerPlanck, stationary
+from fpe_harvester.fpe.discretize import Whitening, solve_level
+from fpe_harvester.fpe.mesh import XMesh
+from fpe_harvester.fpe.refine import tail_error
+from fpe_harvester.linear import lyapunov_covariance, mode_moments
+
+
+def _level(h: Harvester, M: int, half: int, order: int = 3, grading: float = 1.0):
+    w = Whitening.of(h)
+    mesh = XMesh(w.domain(h, 30.0), half, n=h.n, scale=math.sqrt(w.x2), theta=30.0, wall=0.1,
+                 grading=grading)
+    return solve_level(h, M, mesh, order, w)
+
+
+@pytest.mark.parametrize("a", [0.5, 1.0, 2.0])
+def test_harmonic_matches_exact_to_1e8(a: float) -> None:
+    h = Harvester.build(a=a, n=2)
+    ex = mode_moments(2.0 * a, h.params)
+    mo = _level(h, 6, 12).moments
+    for key in ("V2", "Pin", "v2", "vV", "x2"):
+        assert mo[key] == pytest.approx(float(ex[key]), rel=1e-8), key
+    assert mo["eta"] == pytest.approx(float(ex["V2"] / ex["Pin"]), rel=1e-8)
+
+
+def test_harmonic_solver_object_reports_honest_error() -> None:
+    h = Harvester.build(a=0.5, n=2)
+    r = solve(h, "fpe", tol=1e-6)
+    assert r.status is Status.STABLE and r.method == "fpe"
+    assert abs(r.eta - 20 / 39) <= max(r.eta_err, 1e-12)
+    assert r.eta_err <= 1e-6 * r.eta
+    assert abs(r.V2 - 20 / 143) <= max(r.V2_err, 1e-12)
+    for key in ("M", "elements", "order", "L", "dofs", "seconds", "history"):
+        assert key in r.info
+
+
+def test_mesh_convergence_order_harmonic() -> None:
+    """P3 upwind DG: error in eta falls at least like h^3 (fit over three meshes)."""
+    h = Harvester.build(a=0.5, n=2)
+    halves = np.array([3, 6, 12])
+    err = np.array([abs(_level(h, 6, k).moments["eta"] / (20 / 39) - 1.0) for k in halves])
+    slope = np.polyfit(np.log(halves), np.log(err), 1)[0]
+    assert slope < -3.0
+    assert err[-1] < 1e-8
+
+
+def test_hermite_convergence_is_geometric_for_smooth_potential() -> None:
+    """n = 3: the error in eta versus degree M decays geometrically (log-linear fit)."""
+    h = Harvester.build(a=0.5, n=3)
+    Ms = [2, 4, 6, 8]
+    vals = {M: _level(h, M, 8).moments["eta"] for M in [*Ms, 10]}
+    err = np.array([abs(vals[M] - vals[10]) for M in Ms])
+    rate = np.polyfit(Ms, np.log(err), 1)[0]
+    assert rate < -1.0  # at least a factor e per degree
+    assert err[-1] < 1e-5 * vals[10]
+
+
+@pytest.mark.parametrize("n", [1.0, 3.0, 8.0])
+def test_stationary_identities_hold_to_reported_accuracy(n: float) -> None:
+    r = FokkerPlanck(M=6, elements=16, tol=0.1).solve(Harvester.build(a=0.5, n=n))
+    rel = r.eta_err / r.eta
+    assert abs(r.info["residual_V2"]) <= rel
+    assert abs(r.info["residual_power"]) <= rel
+    assert abs(r.V2 - 2.0 * r.vV) <= r.V2_err + r.vV_err  # V2 = Kc tau_p <vV>
+
+
+def test_kink_reports_1e3_error_consistent_with_refinement() -> None:
+    """n = 1 (algebraic convergence): a fixed level reports an error of order 1e-3 that
+    covers the distance to a much finer Hermite truncation."""
+    h = Harvester.build(a=0.5, n=1)
+    r = FokkerPlanck(M=6, elements=8, tol=0.1).solve(h)
+    assert r.status is Status.STABLE
+    assert 3e-4 * r.eta < r.eta_err < 1e-2 * r.eta
+    finer = _level(h, 10, 4, grading=2.5).moments["eta"]
+    assert abs(finer - r.eta) <= r.eta_err
+    assert abs(r.eta - 0.609) < 0.01  # the paper's simulation value
+
+
+@pytest.mark.slow
+def test_kink_tol_1e3() -> None:
+    r = solve(Harvester.build(a=0.5, n=1), "fpe", tol=1e-3)
+    assert r.status is Status.STABLE and r.eta_err <= 1e-3 * r.eta
+    finer = _level(Harvester.build(a=0.5, n=1), r.info["M"] + 4, r.info["elements"] // 2, grading=2.5)
+    assert abs(finer.moments["eta"] - r.eta) <= r.eta_err
+
+
+def test_solution_fields_harmonic() -> None:
+    """Marginal density is the exact Gaussian; <V|x>, <xi|x> are the exact regression lines."""
+    h = Harvester.build(a=0.5, n=2)
+    sol = stationary(h, tol=1e-5, grid=201)
+    P = lyapunov_covariance(1.0, h.params)
+    x = sol.x
+    gauss = np.exp(-x**2 / (2 * P[0, 0])) / math.sqrt(2 * math.pi * P[0, 0])
+    # Pointwise the P3 DG field is O(h^4) accurate (~1e-4 here); the moments superconverge.
+    assert np.abs(sol.density - gauss).max() < 1e-3 * gauss.max()
+    inner = np.abs(x) < 2 * math.sqrt(P[0, 0])
+    assert np.abs(sol.V_mean[inner] - P[0, 2] / P[0, 0] * x[inner]).max() < 1e-3
+    assert np.abs(sol.xi_mean[inner] - P[0, 3] / P[0, 0] * x[inner]).max() < 1e-3
+    assert np.abs(sol.v_mean[inner]).max() < 1e-3
+    assert np.trapezoid(sol.density, x) == pytest.approx(1.0, rel=1e-6)
+    assert abs(sol.residuals["V2"]) < 1e-8 and abs(sol.residuals["power"]) < 1e-8
+
+
+def test_not_converged_is_explicit() -> None:
+    h = Harvester.build(a=0.5, n=8)
+    r = FokkerPlanck(tol=1e-9, max_M=8).solve(h)
+    assert r.status is Status.NOT_CONVERGED
+    assert "max_M" in r.message and "best estimate" in r.message
+    assert r.eta is not None and r.eta_err is not None and r.eta_err > 1e-9 * r.eta
+
+
+def test_fixed_level_error_from_next_refinement() -> None:
+    h = Harvester.build(a=0.5, n=3)
+    r = FokkerPlanck(M=4, elements=8, tol=0.1).solve(h)
+    assert r.info["M"] == 4 and r.info["elements"] == 8
+    ref = _level(h, 8, 8).moments["eta"]
+    assert abs(r.eta - ref) <= r.eta_err
+
+
+def test_tail_error_cases() -> None:
+    assert tail_error([1.0]) == (math.inf, False)
+    assert tail_error([1.0, 1.5]) == (0.5, False)
+    err, ok = tail_error([1.0, 2.0, 3.0])
+    assert not ok and err == 10.0
+    slow, _ = tail_error([1.0, 1.5, 1.7], [6, 8, 10])
+    assert slow > 0.2 * 0.4 / 0.6  # the algebraic tail exceeds the geometric one
+
+
+def test_rings_are_refused_with_advice() -> None:
+    fp = FokkerPlanck()
+    assert "mc" in fp.unsupported_reason(Harvester.build(a=0.5, n=3, N=3, k=-0.1))
+    assert "exact" in fp.unsupported_reason(Harvester.build(a=0.5, n=2, N=2, k=0.1))
+    assert fp.unsupported_reason(Harvester.build(a=0.5, n=3)) is None
+    with pytest.raises(MethodNotAvailableError, match="N = 3"):
+        solve(Harvester.build(a=0.5, n=3, N=3, k=-0.1), "fpe")
+    with pytest.raises(MethodNotAvailableError, match="single oscillator"):
+        stationary(Harvester.build(a=0.5, n=3, N=3, k=-0.1))
+
+
+@pytest.mark.parametrize(
+    ("kwargs", "match"),
+    [
+        ({"tol": 0.0}, "tol"),
+        ({"tol": "1e-4"}, "tol"),
+        ({"tol": float("nan")}, "tol"),
+        ({"M": 1}, "M"),
+        ({"order": 7}, "order"),
+        ({"domain": 1.0}, "domain"),
+        ({"max_M": 2}, "max_M"),
+    ],
+)
+def test_bad_settings(kwargs: dict, match: str) -> None:
+    with pytest.raises(ParameterError, match=match):
+        FokkerPlanck(**kwargs)
+
+
+def test_bad_settings_via_solve_and_odd_elements() -> None:
+    with pytest.raises(ParameterError, match="tol"):
+        solve(Harvester.build(a=0.5, n=3), "fpe", tol=-1.0)
+    with pytest.raises(MethodNotAvailableError, match="even"):
+        FokkerPlanck(elements=7)
+    with pytest.raises(ParameterError, match="h must be a Harvester"):
+        stationary("not a harvester")  # type: ignore[arg-type]
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("n", [1.5, 3.0, 4.0, 8.0])
+@pytest.mark.parametrize("a", [0.5, 1.0, 2.0])
+def test_converges_for_nonlinear_potentials(n: float, a: float) -> None:
+    r = solve(Harvester.build(a=a, n=n), "fpe", tol=1e-5)
+    assert r.status is Status.STABLE
+    finer = _level(Harvester.build(a=a, n=n), r.info["M"] + 2, r.info["elements"], grading=2.5 if n < 2 else 1.0)
+    assert abs(finer.moments["eta"] - r.eta) <= r.eta_err
