@@ -180,7 +180,7 @@ def stationary(
     Examples
     --------
     >>> from fpe_harvester import Harvester
-    >>> sol = stationary(Harvester.build(a=0.5, n=2), tol=1e-6)
+    >>> sol = stationary(Harvester.build(a=0.5, n=2), tol=1e-4, M=4, half_elements=8)
     >>> abs(sol.stats.eta - 20 / 39) < 1e-6
     True
     """

@@ -56,12 +56,12 @@ def test_mesh_convergence_order_harmonic() -> None:
 def test_hermite_convergence_is_geometric_for_smooth_potential() -> None:
     """n = 3: the error in eta versus degree M decays geometrically (log-linear fit)."""
     h = Harvester.build(a=0.5, n=3)
-    Ms = [2, 4, 6, 8]
-    vals = {M: _level(h, M, 8).moments["eta"] for M in [*Ms, 10]}
-    err = np.array([abs(vals[M] - vals[10]) for M in Ms])
+    Ms = [2, 4, 6]
+    vals = {M: _level(h, M, 8).moments["eta"] for M in [*Ms, 8]}
+    err = np.array([abs(vals[M] - vals[8]) for M in Ms])
     rate = np.polyfit(Ms, np.log(err), 1)[0]
     assert rate < -1.0  # at least a factor e per degree
-    assert err[-1] < 1e-5 * vals[10]
+    assert err[-1] < 1e-4 * vals[8]
 
 
 @pytest.mark.parametrize("n", [1.0, 3.0, 8.0])
@@ -96,7 +96,7 @@ def test_kink_tol_1e3() -> None:
 def test_solution_fields_harmonic() -> None:
     """Marginal density is the exact Gaussian; <V|x>, <xi|x> are the exact regression lines."""
     h = Harvester.build(a=0.5, n=2)
-    sol = stationary(h, tol=1e-5, grid=201)
+    sol = stationary(h, tol=1e-4, M=6, half_elements=16, grid=201)
     P = lyapunov_covariance(1.0, h.params)
     x = sol.x
     gauss = np.exp(-x**2 / (2 * P[0, 0])) / math.sqrt(2 * math.pi * P[0, 0])
@@ -106,7 +106,7 @@ def test_solution_fields_harmonic() -> None:
     assert np.abs(sol.V_mean[inner] - P[0, 2] / P[0, 0] * x[inner]).max() < 1e-3
     assert np.abs(sol.xi_mean[inner] - P[0, 3] / P[0, 0] * x[inner]).max() < 1e-3
     assert np.abs(sol.v_mean[inner]).max() < 1e-3
-    assert np.trapezoid(sol.density, x) == pytest.approx(1.0, rel=1e-6)
+    assert np.trapezoid(sol.density, x) == pytest.approx(1.0, rel=1e-4)
     assert abs(sol.residuals["V2"]) < 1e-8 and abs(sol.residuals["power"]) < 1e-8
 
 
