@@ -44,12 +44,18 @@ def _auto_burn(h: Harvester) -> float:
 class MonteCarlo:
     """Monte Carlo solver for any harvester (any n >= 1, any ring, any k).
 
+    Reports ``V2, Pin, eta, Vrms, v2, vV, x2`` with errors, so that the stationary identities
+    :math:`\\langle V^2\\rangle = K_c\\tau_p\\langle vV\\rangle` and
+    :math:`\\sigma\\langle v\\xi\\rangle = m\\gamma\\langle v^2\\rangle + K_v\\langle vV\\rangle`
+    can be checked from the result (``info`` also carries both residuals with their errors).
+
     Parameters
     ----------
     seed : int or None
         Root seed (``SeedSequence``); None draws fresh entropy, recorded in ``info``.
     tol : float
-        Target relative error on eta, in (0, 1). Default 1e-2.
+        Target relative error on eta, in (0, 1): the standard error over replicas and (with
+        ``richardson``) the time-step bias estimate, added in quadrature. Default 1e-2.
     dt : float
         Time step, > 0 (model time units). With ``richardson`` the reported numbers come
         from ``dt/2`` and ``dt`` gives the bias estimate. Default 0.02.

@@ -196,7 +196,8 @@ def _bias_study(quick: bool) -> dict[str, Any]:
     out: dict[str, Any] = {}
     cases = {
         "harmonic_a0.5": (Harvester.build(a=0.5), (0.4, 0.2, 0.1), 64),
-        "kink_a2_n1": (Harvester.build(a=2.0, n=1), (0.04, 0.02) if quick else (0.08, 0.04, 0.02, 0.01), 128),
+        "kink_a2_n1": (Harvester.build(a=2.0, n=1), (0.04, 0.02) if quick else (0.08, 0.04, 0.02, 0.01),
+                       64 if quick else 128),
         "steep_a0.5_n1.1": (Harvester.build(a=0.5, n=1.1), (0.04, 0.02) if quick else (0.08, 0.04, 0.02), 128),
     }
     for name, (h, dts, paths) in cases.items():
@@ -216,7 +217,8 @@ def _bias_study(quick: bool) -> dict[str, Any]:
             fit = float(np.polyfit(np.log([r["dt"] for r in good]), np.log([abs(r["diff"]) for r in good]), 1)[0])
         out[name] = {"rows": rows, "fitted_order_from_resolved_points": fit}
     h = Harvester.build(a=2.0, n=1)
-    kw = dict(paths=256 if quick else 1024, replicas=6 if quick else 12, t_burn=20.0, t_run=40.0 if quick else 100.0)
+    kw = dict(paths=128 if quick else 1024, replicas=6 if quick else 12, t_burn=20.0,
+              t_run=40.0 if quick else 100.0)
     naive = estimate(simulate_naive(h, dt=0.01, seed=31, **kw), h)
     ours = estimate(simulate(h, dt=0.02, seed=32, richardson=True, **kw), h, order=1.0)
     out["kink_a2_naive_vs_engine_dt_0.01"] = {
