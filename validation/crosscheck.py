@@ -92,7 +92,7 @@ def _fpe_vs_mc(ctx: Context, n: float, a: float) -> list[CheckResult]:
 
 def _fpe_vs_exact(ctx: Context, a: float) -> list[CheckResult]:
     h = Harvester.build(a=a, n=2)
-    fp = ctx.solve(h, "fpe", tol=1e-6 if ctx.quick else 1e-8)
+    fp = ctx.solve(h, "fpe", tol=1e-4 if ctx.quick else 1e-8)
     ex = ctx.solve(h, "exact")
     return _compare(f"fpe vs exact: n = 2, a = {a:g}", fp, ex, names=("eta", "V2", "Pin", "v2", "vV"),
                     rel_floor=1e-12)
@@ -146,7 +146,7 @@ def run(ctx: Context) -> Section:
     sec.text.append(
         f"Harmonic rings (a = 0.5) compared with Monte Carlo: (N, k) = {list(rings)}. "
         f"Single nonlinear units (n, a): {list(grid)}. Fokker-Planck vs exact at n = 2, a in {list(fpe_a)}. "
-        f"(Fokker-Planck asked for tol = {1e-6 if ctx.quick else 1e-8:g} there.) Dense Lyapunov cross-check for N in {list(dense_N)} with random parameters."
+        f"(Fokker-Planck asked for tol = {1e-4 if ctx.quick else 1e-8:g} there.) Dense Lyapunov cross-check for N in {list(dense_N)} with random parameters."
         + (" Quick mode: subsets; the full run covers N = 1, 2, 3, 5 and the whole 5 x 3 grid." if ctx.quick
            else "")
     )
