@@ -194,8 +194,11 @@ class Optimize:
         Closed search interval. ``"k_di"`` (for ``over = "k"``) is the harmonic threshold of
         each point, where eta reaches its finite marginal limit.
     points : int
-        Size of the uniform grid scanned first, >= 3. For exact (harmonic) points the best
-        grid cell is then refined with a bounded scalar optimizer.
+        Size of the uniform grid scanned first, >= 3. For exact (harmonic) points an interior
+        best grid point is then refined with a bounded scalar optimizer (scipy); for the other
+        methods the result is the best grid point, the neighbouring grid points its bracket.
+        A maximum on a bound is reported as such in the row's message (harmonic eta(k) on
+        [k_di, 0] is monotone decreasing, so its optimum is the marginal limit at k_di).
     """
 
     maximize: str = "eta"

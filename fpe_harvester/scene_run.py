@@ -379,18 +379,20 @@ def _optimize_rows(scene: Scene, runner: _Runner, points: list[dict[str, float]]
         at_bound = "low" if best == 0 and len(grid) > 1 else "high" if best == len(grid) - 1 > 0 else None
         exact = isinstance(res[best], Stats) and res[best].method == "exact"
         if at_bound is None and len(grid) > 1 and exact:
-            found = minimize_scalar(
-                lambda x: -(Exact().solve(h0.replace(**{opt.over: x})).value(opt.maximize)[0] or -np.inf),
-                bounds=bracket, method="bounded", options={"xatol": 1e-10 * max(1.0, abs(x_opt))},
-            )
+            def loss(x: float) -> float:
+                value = Exact().solve(h0.replace(**{opt.over: x})).value(opt.maximize)[0]
+                return np.inf if value is None else -value
+
+            found = minimize_scalar(loss, bounds=bracket, method="bounded",
+                                    options={"xatol": 1e-10 * max(1.0, abs(x_opt))})
             x_opt, bracket = float(found.x), [float(found.x), float(found.x)]
         info["optimize"].update(at_bound=at_bound, bracket=bracket)
         final = runner.evaluate([h0.replace(**{opt.over: x_opt})])[0]
         row = _row(scene, index, {**p, opt.over: x_opt}, h0, final, info)
         if at_bound:
             row = SceneRow(row.index, row.point, row.status, row.method,
-                           row.message + f"; maximum at the {at_bound} end of the search interval "
-                           f"{opt.over} in [{lo:.6g}, {hi:.6g}] ({opt.maximize} is monotone there)",
+                           row.message + f"; the largest {opt.maximize} on the grid is at the {at_bound} "
+                           f"end of the search interval {opt.over} in [{lo:.6g}, {hi:.6g}]",
                            row.values, row.info)
         rows.append(row)
     return rows

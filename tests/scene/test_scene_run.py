@@ -182,7 +182,7 @@ def test_optimize_at_threshold_and_interior(tmp_path: Path) -> None:
         dense = exact_sweep(0.5, np.linspace(k_di(N, 0.5), 0.0, 2001), N)["eta"]
         assert row.point["k"] == k_di(N, 0.5) and row.status == "marginal"
         assert row.values["eta"] == pytest.approx(dense.max(), rel=1e-12)
-        assert "maximum at the low end" in row.message
+        assert "the largest eta on the grid is at the low end" in row.message
     # <vV> has an interior maximum over tau_p: the grid cell is refined by a bounded optimizer
     sc = Scene("opt2", system=Harvester.build(a=0.5, n=2), observables=("vV",),
                optimize=Optimize("vV", "tau_p", (0.1, 5.0), points=7))
