@@ -303,7 +303,7 @@ def _measure(x, v, V, xi, stuck, w, cf, acc) -> float:
             s2 += wp * v[j, p] * v[j, p]
             s3 += wp * x[j, p] * x[j, p]
             s4 += wp * v[j, p] * xi[j, p]
-            s5 += wp if stuck[j, p] else 0.0
+            s5 += wp * stuck[j, p]
     acc[0] += s0
     acc[1] += s1
     acc[2] += s2
@@ -320,6 +320,13 @@ def _measure(x, v, V, xi, stuck, w, cf, acc) -> float:
 def _check_escape(x, v, V, xi, F, stuck, w, thr, t, esc_time) -> None:
     """Retire paths with some |x_j| > thr (or non-finite): record the time, zero their state."""
     N, P = x.shape
+    # branch-free scan first: escapes are rare, the scan vectorizes, NaN counts as escaped
+    n_bad = 0
+    for j in range(N):
+        for p in range(P):
+            n_bad += 0 if abs(x[j, p]) <= thr else 1
+    if n_bad == 0:
+        return
     for p in range(P):
         if w[p] == 0.0:
             continue

@@ -119,7 +119,7 @@ def simulate(
     seed: int | None = None,
     richardson: bool = False,
     threshold: float = 100.0,
-    chunk: int = 32,
+    chunk: int = 256,
     threads: int | None = None,
     first_replica: int = 0,
     sample_every: float = 0.05,
