@@ -271,7 +271,7 @@ def _nonlinear_cases(ctx: Context) -> list[tuple[str, Callable[[], list[CheckRes
 def run(ctx: Context) -> Section:
     """Every stress case, each under a wall-time budget (a hang fails)."""
     sec = Section("stress", _SECTION)
-    budget = 40.0 if ctx.quick else 900.0
+    budget = 30.0 if ctx.quick else 900.0
     sec.text.append(
         "PASS means: accurate to the stated error (exact: stated error 0 plus a relative round-off floor "
         f"of {EXACT_FLOOR:g} against a 40-digit Lyapunov solve; Fokker-Planck and Monte Carlo: 4 combined "
