@@ -225,8 +225,8 @@ class MonteCarlo:
         if est.replicas == 0:
             status = Status.METASTABLE if h.confinement == "metastable" else Status.UNSTABLE
             return Stats(status=status, method=self.name, info=info, message=(
-                f"every path escaped (|x| > {self.threshold(h):g}) before measuring: no statistics. "
-                f"Median escape time {info['escape_time_median']:.4g}."))
+                f"no replica measured anything: every path escaped (|x| > {self.threshold(h):g}) "
+                f"during burn-in (median escape time {info['escape_time_median']}). No statistics."))
         stats = self._stats(h, est, info)
         return self._label(h, stats, est, esc, met, kd)
 

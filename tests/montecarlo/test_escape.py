@@ -54,3 +54,15 @@ def test_escape_study_bad_input() -> None:
         escape_study(h, t_max=1.0, points=1)
     with pytest.raises(ParameterError, match="threshold must be"):
         escape_study(h, t_max=1.0, threshold=-1.0)
+
+
+def test_everything_escaping_in_burn_in_gives_no_numbers() -> None:
+    from fpe_harvester import Status, solve
+
+    h = Harvester.build(a=0.5, n=1.5, N=3, k=-1.0)
+    r = solve(h, "mc", seed=1, dt=0.05, paths=16, t_burn=60.0, t_run=10.0, min_replicas=2,
+              progress=False)
+    assert r.status is Status.METASTABLE
+    assert r.eta is None and r.V2 is None and r.eta_err is None
+    assert r.info["escape_fraction"] == 1.0
+    assert "No statistics" in r.message
