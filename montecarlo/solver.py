@@ -222,11 +222,12 @@ class MonteCarlo:
                 f"unstable: harmonic ring with k = {h.k:g} beyond k_di = {kd:.10g}; the critical "
                 f"mode grows like exp({rate:.4g} t). {esc:.1%} of the simulated paths passed "
                 f"|x| = {self.threshold(h):g} (times in info); no stationary statistics exist."))
-        if est.replicas == 0:
+        if est.replicas < 2:
             status = Status.METASTABLE if h.confinement == "metastable" else Status.UNSTABLE
             return Stats(status=status, method=self.name, info=info, message=(
-                f"no replica measured anything: every path escaped (|x| > {self.threshold(h):g}) "
-                f"during burn-in (median escape time {info['escape_time_median']}). No statistics."))
+                f"{est.replicas} replica(s) measured anything, too few for an error bar: the paths "
+                f"escaped (|x| > {self.threshold(h):g}) during burn-in (median escape time "
+                f"{info['escape_time_median']}). No statistics."))
         stats = self._stats(h, est, info)
         return self._label(h, stats, est, esc, met, kd)
 
