@@ -35,7 +35,10 @@ def _auto_burn(h: Harvester) -> float:
     """Burn-in: 8 slowest linear relaxation times for harmonic rings, else 40, in [20, 2000]."""
     if h.is_linear:
         kap = float(max(h.mode_stiffness().min(), 0.0))
-        rate = -float(mode_eigenvalues(kap, h.params).real.max())
+        re = mode_eigenvalues(kap, h.params).real
+        # at k = k_di the zero eigenvalue is x's free diffusion, which never equilibrates
+        re = re[re < -1e-12]
+        rate = -float(re.max()) if re.size else 0.0
         return float(min(2000.0, max(20.0, 8.0 / rate))) if rate > 0 else 2000.0
     return 40.0
 

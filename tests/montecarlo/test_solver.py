@@ -136,3 +136,15 @@ def test_uncoupled_kink_ring_equals_single_unit() -> None:
         (a, da), (b, db) = ring.value(name), single.value(name)
         assert abs(a - b) < 4 * math.hypot(da, db), name
     assert ring.info["kink_crossings"] > 0 and 0.0 <= ring.info["stuck_fraction"] < 0.5
+
+
+def test_marginal_ring_reports_finite_V2_and_no_x2() -> None:
+    h = Harvester.build(a=0.5, N=4, k=-0.25)  # k = k_di: the q = 2 mode has zero stiffness
+    ex = solve(h, "exact")
+    r = solve(h, "mc", seed=2, dt=0.05, paths=64, t_run=50.0, min_replicas=6, max_replicas=6,
+              progress=False)
+    assert r.status is Status.MARGINAL and ex.status is Status.MARGINAL
+    assert r.x2 is None and r.x2_err is None
+    assert r.info["t_burn"] < 100.0
+    for name in ("eta", "V2", "Pin"):
+        assert abs(r.value(name)[0] - getattr(ex, name)) < 4 * r.value(name)[1], name
