@@ -20,6 +20,8 @@ from pathlib import Path
 
 from fpe_harvester.errors import check_int
 
+from fpe_harvester.result import Status
+
 from .checks import Context, SolveCache, guarded, skipped
 from .report import Report, Section, summary_text, write_html, write_markdown
 
@@ -48,16 +50,25 @@ def _identities(ctx: Context) -> Section:
 
     sec = Section("identities", "Identities of SPEC section 1 (every solver, every result of this run)")
     sec.text.append(
-        "For every stable result computed in this run: V2 = Kc tau_p vV (d<V^2>/dt = 0) and "
+        "For every result computed in this run that describes a stationary state (stable, marginal, "
+        "not converged with its best estimate and error, or metastable with no escaped path): V2 = Kc tau_p vV (d<V^2>/dt = 0) and "
         "Pin = m gamma v2 + Kv vV (power balance), each within 4 combined error bars of the "
         "result's own errors (exact: relative floor 1e-12)."
     )
+    excluded = []
     for h, method, r in ctx.cache.results():
-        if not r.ok and r.V2 is None:
+        escaped = r.info.get("escape_fraction") != 0
+        if r.status is Status.UNSTABLE or (r.status is Status.METASTABLE and escaped) or r.V2 is None:
+            # No stationary state (a metastable one that no path left counts as quasi-stationary):
+            # the identities are properties of a stationary state, so they do not apply.
+            excluded.append(f"{method} at a={h.a:g}, n={h.n:g}, N={h.N}, k={h.k:.6g} ({r.status.value})")
             continue
         label = f"a={h.a:g}, n={h.n:g}, N={h.N}, k={h.k:.6g}" + (f", {r.status.value}" if not r.ok else "")
         sec.checks += guarded(f"identities [{method}] {label}", sec.title,
                               lambda h=h, r=r, label=label: identity_checks(label, r, h, sec.title))
+    if excluded:
+        sec.text.append("Not checked (no stationary state, so the identities do not apply): "
+                        + "; ".join(excluded) + ".")
     methods = {m for _, m, _ in ctx.cache.results()}
     sec.checks += [skipped(f"identities [{m}]", sec.title, f"no {m!r} result was computed in this run "
                            "(solver not available)") for m in ("exact", "fpe", "mc") if m not in methods]
