@@ -3,7 +3,8 @@
 The modules ``validation.bench_exact``, ``validation.bench_fpe`` and
 ``validation.bench_montecarlo`` each provide ``run(quick, out) -> dict`` and write their own
 JSON and PNG. Their dicts differ in layout, so (time, error) pairs are found by key names:
-in every dict (nested ones and rows of lists included) an error key (name contains ``err``)
+in every dict (nested ones and rows of lists included) an error key (name contains ``err`` or
+the word ``se``)
 is paired with the time key (name ends in ``_s`` or contains ``time``/``seconds``) that shares
 the longest name prefix with it. The pairs of all modules go on one log-log plot.
 Speed targets (``X_target_s`` next to ``X_s``) are tabulated, not failed: timings belong to
@@ -37,8 +38,9 @@ def _is_time(key: str) -> bool:
 
 
 def _is_error(key: str) -> bool:
+    """Error-like keys: ``*err*`` or a standard error ``se`` as a ``_``-separated word."""
     low = key.lower()
-    return "err" in low and "target" not in low
+    return ("err" in low or "se" in low.split("_")) and "target" not in low and "note" not in low
 
 
 def _prefix_len(a: str, b: str) -> int:

@@ -42,10 +42,11 @@ def test_bound_and_closed_form():
 
 def test_error_time_pairs_pairs_by_name_prefix():
     data = {"dense_s": 2.0, "dense_eta_err": 1e-12, "fourier_s": 1e-3, "fourier_eta_err": 0.0,
-            "rows": [{"dt": 0.1, "wall_time": 3.0, "eta_rel_error": 0.01}], "ignored_target_s": 1.0}
+            "rows": [{"dt": 0.1, "wall_time": 3.0, "eta_rel_error": 0.01}], "ignored_target_s": 1.0,
+            "curve": [{"wall_s": 0.5, "replicas": 8, "rel_se_eta": 0.02}]}
     pairs = sorted(error_time_pairs(data))
-    assert pairs == [("dense_eta_err", 2.0, 1e-12), ("fourier_eta_err", 1e-3, 0.0),
-                     ("rows[0] eta_rel_error", 3.0, 0.01)]
+    assert pairs == [("curve[0] rel_se_eta", 0.5, 0.02), ("dense_eta_err", 2.0, 1e-12),
+                     ("fourier_eta_err", 1e-3, 0.0), ("rows[0] eta_rel_error", 3.0, 0.01)]
 
 
 def test_exact_result_used_for_the_paper_row():
