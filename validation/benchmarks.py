@@ -87,7 +87,7 @@ def _series_name(label: str) -> str:
     """Group pairs into curves: the label with list indices removed."""
     import re
 
-    return re.sub(r"\[\d+\]", "", label)
+    return re.sub(r"\.\d+(\.\d+)?(?= )", "", re.sub(r"\[\d+\]", "", label))
 
 
 def _targets(data: Any, prefix: str = "") -> Iterator[tuple[str, float, float]]:
@@ -109,11 +109,20 @@ def _plot(ctx: Context, curves: dict[str, list[tuple[float, float]]]) -> Figure:
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    fig, ax = plt.subplots(figsize=(8, 5))
+    fig, ax = plt.subplots(figsize=(9, 5.5))
+    colors = {"exact": "tab:blue", "fpe": "tab:green", "mc": "tab:red"}
+    markers = "os^vDP*Xph<>"
+    used: dict[str, int] = {}
     for label, pts in sorted(curves.items()):
         pts = sorted(pts)
+        solver = label.split(":")[0]
+        baseline = "numpy_em" in label or "dense" in label
+        i = used[solver] = used.get(solver, -1) + 1
+        style = dict(color="black" if baseline else colors.get(solver, "gray"), marker=markers[i % len(markers)],
+                     ls="--" if baseline else "-", lw=1, ms=4)
         # An error of exactly 0 (exact arithmetic agreed to the last bit) is drawn at 1e-17.
-        ax.loglog([p[0] for p in pts], [max(p[1], 1e-17) for p in pts], "o-" if len(pts) > 1 else "s", ms=4, label=label)
+        ax.loglog([p[0] for p in pts], [max(p[1], 1e-17) for p in pts], label=label + (" (baseline)" if baseline else ""),
+                  **(style if len(pts) > 1 else {**style, "ls": "none"}))
     ax.set_xlabel("wall time [s]")
     ax.set_ylabel("error (as reported by each benchmark)")
     ax.grid(True, which="both", alpha=0.3)
@@ -122,8 +131,9 @@ def _plot(ctx: Context, curves: dict[str, list[tuple[float, float]]]) -> Figure:
     path = ctx.out / "bench_error_vs_time.png"
     fig.savefig(path, dpi=110)
     plt.close(fig)
-    return Figure(path, "Error versus wall time of every solver and baseline, measured in this run (log-log; "
-                        "an error of exactly 0 is drawn at 1e-17).")
+    return Figure(path, "Error versus wall time of every solver (blue exact, green Fokker-Planck, red Monte Carlo) "
+                        "and baseline (black dashed: numpy Euler-Maruyama, scipy dense Lyapunov), measured in "
+                        "this run (log-log; an error of exactly 0 is drawn at 1e-17).")
 
 
 def _run_one(ctx: Context, module: str, solver: str, sec: Section,
