@@ -206,8 +206,8 @@ def build_parser() -> argparse.ArgumentParser:
     q.add_argument("--quick", action="store_true", help="the scene's reduced variant")
     q.add_argument("--json", action="store_true", help="print one JSON object")
     q.add_argument("--no-progress", action="store_true", help="no progress bar")
-    q.add_argument("--workers", type=int, default=None, metavar="P",
-                   help="processes for Fokker-Planck points (default: number of CPUs; Monte Carlo is threaded)")
+    q.add_argument("--workers", type=int, default=1, metavar="P",
+                   help="processes for Fokker-Planck points (default 1; Monte Carlo is threaded)")
     return parser
 
 

@@ -14,7 +14,6 @@ from __future__ import annotations
 
 import csv
 import json
-import os
 import time
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field, replace
@@ -245,8 +244,11 @@ class _Runner:
         import multiprocessing
         from concurrent.futures import ProcessPoolExecutor, as_completed
 
-        # spawn, not fork: a forked child of a process whose numba threads are running can hang
-        ctx = multiprocessing.get_context("spawn")
+        # fork where available: spawn re-runs the caller's __main__ in every worker, which
+        # breaks user scripts without an ``if __name__ == "__main__"`` guard. Only
+        # Fokker--Planck points go to the pool; they use no numba threads.
+        methods = multiprocessing.get_all_start_methods()
+        ctx = multiprocessing.get_context("fork" if "fork" in methods else "spawn")
         with ProcessPoolExecutor(max_workers=self.workers, mp_context=ctx) as ex:
             futures = {ex.submit(_attempt_portable, hs[i], method, opts): (i, key, opts)
                        for i, key, method, opts in todo}
@@ -404,7 +406,7 @@ def run_scene(
     quick: bool = False,
     progress: bool | None = None,
     figures: Sequence[str] | None = None,
-    workers: int | None = None,
+    workers: int = 1,
 ) -> SceneResult:
     """Run a scene: compute its points, write the outputs it asks for, draw its figures.
 
@@ -421,10 +423,10 @@ def run_scene(
         Progress bar over points; ``None`` shows it only on a terminal.
     figures : sequence of str, optional
         Draw only these of the scene's figures (default: all declared; ``[]``: none).
-    workers : int, optional
-        Processes for single-threaded pointwise solvers (Fokker--Planck), >= 1; default: the
-        number of CPUs. Monte Carlo points always run in this process (the simulator is
-        multi-threaded itself); harmonic points are vectorized in this process.
+    workers : int
+        Processes for single-threaded pointwise solvers (Fokker--Planck), >= 1 (default 1:
+        everything in this process). Monte Carlo points always run in this process (the
+        simulator is multi-threaded itself); harmonic points are vectorized in this process.
 
     Returns
     -------
@@ -443,7 +445,7 @@ def run_scene(
         scene = load_scene(scene)
     if not isinstance(scene, Scene):
         raise ParameterError(f"scene must be a Scene, got {scene!r} (type {type(scene).__name__})")
-    workers = (os.cpu_count() or 1) if workers is None else check_int("workers", workers, low=1)
+    workers = check_int("workers", workers, low=1)
     sc = scene.variant(quick)
     names = [f.name for f in sc.figures]
     wanted = names if figures is None else list(figures)
