@@ -154,11 +154,11 @@ def run(ctx: Context) -> Section:
     for N in dense_N:
         sec.checks += ctx.check(f"fourier vs dense: N = {N}", _SECTION,
                                 lambda N=N: _fourier_vs_dense(ctx, rng, N))
-    for a in fpe_a:
-        sec.checks += ctx.check(f"fpe vs exact: a = {a:g}", _SECTION, lambda a=a: _fpe_vs_exact(ctx, a))
     for N, k in rings:
         sec.checks += ctx.check(f"exact vs mc: N = {N}, k = {k:g}", _SECTION,
                                 lambda N=N, k=k: _exact_vs_mc(ctx, N, k))
+    for a in fpe_a:
+        sec.checks += ctx.check(f"fpe vs exact: a = {a:g}", _SECTION, lambda a=a: _fpe_vs_exact(ctx, a))
     for n, a in grid:
         sec.checks += ctx.check(f"fpe vs mc: n = {n:g}, a = {a:g}", _SECTION, lambda n=n, a=a: _fpe_vs_mc(ctx, n, a))
     sec.tables.append(_results_table(ctx))

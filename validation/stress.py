@@ -33,7 +33,7 @@ from .checks import CheckResult, Context, agree, expect, skipped, solver_availab
 from .crosscheck import identity_checks
 from .report import Section, Table
 
-__all__ = ["mp_mode_moments", "mp_ring_moments", "run"]
+__all__ = ["mp_mode_moments", "mp_ring_moments", "run", "run_exact", "run_solvers"]
 
 _SECTION = "Stress tests"
 #: Relative round-off floor allowed on top of the exact solver's stated error of 0.
@@ -268,9 +268,24 @@ def _nonlinear_cases(ctx: Context) -> list[tuple[str, Callable[[], list[CheckRes
     return cases
 
 
+def run_exact(ctx: Context) -> Section:
+    """The harmonic stress cases (exact solver; about a second in all)."""
+    return _run(ctx, "stress_exact", f"{_SECTION}: exact solver", _harmonic_cases(ctx))
+
+
+def run_solvers(ctx: Context) -> Section:
+    """The nonlinear stress cases (Fokker--Planck and Monte Carlo)."""
+    return _run(ctx, "stress_solvers", f"{_SECTION}: Fokker-Planck and Monte Carlo", _nonlinear_cases(ctx))
+
+
 def run(ctx: Context) -> Section:
-    """Every stress case, each under a wall-time budget (a hang fails)."""
-    sec = Section("stress", _SECTION)
+    """Every stress case in one section."""
+    return _run(ctx, "stress", _SECTION, _harmonic_cases(ctx) + _nonlinear_cases(ctx))
+
+
+def _run(ctx: Context, key: str, title: str, cases: list[tuple[str, Callable[[], list[CheckResult]]]]) -> Section:
+    """Each case under a wall-time budget (a hang fails)."""
+    sec = Section(key, title)
     budget = 30.0 if ctx.quick else 900.0
     sec.text.append(
         "PASS means: accurate to the stated error (exact: stated error 0 plus a relative round-off floor "
@@ -281,7 +296,7 @@ def run(ctx: Context) -> Section:
         f"with a message). Each case runs under a {budget:g} s wall-time budget; exceeding it is a hang (FAIL)."
     )
     table = Table("Stress cases", ("case", "outcome", "time [s]"))
-    for label, case in _harmonic_cases(ctx) + _nonlinear_cases(ctx):
+    for label, case in cases:
         res = ctx.check(label, _SECTION, case, cap=budget)
         sec.checks += res
         worst = "FAIL" if any(c.outcome.value == "FAIL" for c in res) else (
