@@ -81,3 +81,15 @@ def test_cli_negative_seed_is_a_clean_error(monkeypatch, tmp_path, capsys):
 def test_python_m_validation_parser():
     args = runner.build_parser().parse_args(["--quick", "--out", "d"])
     assert args.quick and args.out == "d"
+
+
+def test_module_steps_are_imported_and_a_missing_one_fails(tmp_path):
+    rep = runner.validate(out=tmp_path, steps=[("validation.no_such_module:run", "Missing step")])
+    assert rep.failed
+    (sec,) = [s for s in rep.sections if s.title == "Missing step"]
+    assert "ModuleNotFoundError" in sec.checks[0].detail
+
+
+def test_report_keeps_the_plan_order(tmp_path):
+    rep = runner.validate(out=tmp_path, steps=[(_failing, "Failing step"), (_passing, "Passing step")])
+    assert [s.title for s in rep.sections][:2] == ["Failing step", "Passing step"]
