@@ -30,7 +30,7 @@ from fpe_harvester.stability import k_di
 from .checks import CheckResult, Context, agree, expect
 from .report import Section, Table
 
-__all__ = ["run", "identity_checks", "HARMONIC_RINGS", "NONLINEAR_GRID", "QUICK_NONLINEAR"]
+__all__ = ["run", "identity_checks", "describe", "results_table", "HARMONIC_RINGS", "NONLINEAR_GRID", "QUICK_NONLINEAR"]
 
 #: (N, k) of the harmonic rings compared with Monte Carlo (a = 0.5; all inside the stable range).
 HARMONIC_RINGS = ((1, 0.0), (2, -0.15), (3, -0.25), (5, -0.2))
@@ -161,7 +161,6 @@ def run(ctx: Context) -> Section:
         sec.checks += ctx.check(f"fpe vs exact: a = {a:g}", _SECTION, lambda a=a: _fpe_vs_exact(ctx, a))
     for n, a in grid:
         sec.checks += ctx.check(f"fpe vs mc: n = {n:g}, a = {a:g}", _SECTION, lambda n=n, a=a: _fpe_vs_mc(ctx, n, a))
-    sec.tables.append(_results_table(ctx))
     return sec
 
 
@@ -171,11 +170,21 @@ def _fmt(v: float | None, e: float | None) -> str:
     return f"{v:.6g}" if not e else f"{v:.6g} +- {e:.2g}"
 
 
-def _results_table(ctx: Context) -> Table:
+def describe(h: Harvester) -> str:
+    """Short label of a harvester: a, n, N, k and the parameters that differ from the defaults."""
+    from fpe_harvester.model import Params
+
+    base = Params().to_dict()
+    extra = ", ".join(f"{k}={v:g}" for k, v in h.params.to_dict().items() if v != base[k])
+    return f"a={h.a:g}, n={h.n:g}, N={h.N}, k={h.k:.6g}" + (f", {extra}" if extra else "")
+
+
+def results_table(ctx: Context) -> Table:
+    """Every result solved in this run, with its status, errors and solver time."""
     rows = []
     for h, method, r in ctx.cache.results():
-        rows.append((f"a={h.a:g}, n={h.n:g}, N={h.N}, k={h.k:g}", method, r.status.value,
-                     _fmt(*r.value("eta")), _fmt(*r.value("V2")), _fmt(*r.value("Pin")),
-                     f"{r.info.get('wall_time', r.info.get('seconds', '-'))}"))
-    return Table("Every result computed for the cross-checks", ("system", "method", "status", "eta", "V2", "Pin",
-                                                                "solver time [s]"), rows)
+        t = r.info.get("wall_time", r.info.get("seconds"))
+        rows.append((describe(h), method, r.status.value, _fmt(*r.value("eta")), _fmt(*r.value("V2")),
+                     _fmt(*r.value("Pin")), f"{t:.3g}" if isinstance(t, (int, float)) else "-"))
+    return Table("Every result computed in this run", ("system", "method", "status", "eta", "V2", "Pin",
+                                                       "solver time [s]"), rows)

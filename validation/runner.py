@@ -48,7 +48,7 @@ STEPS: tuple[tuple[str, str], ...] = (
 
 
 def _identities(ctx: Context) -> Section:
-    from .crosscheck import identity_checks
+    from .crosscheck import describe, identity_checks, results_table
 
     sec = Section("identities", "Identities of SPEC section 1 (every solver, every result of this run)")
     sec.text.append(
@@ -63,14 +63,15 @@ def _identities(ctx: Context) -> Section:
         if r.status is Status.UNSTABLE or (r.status is Status.METASTABLE and escaped) or r.V2 is None:
             # No stationary state (a metastable one that no path left counts as quasi-stationary):
             # the identities are properties of a stationary state, so they do not apply.
-            excluded.append(f"{method} at a={h.a:g}, n={h.n:g}, N={h.N}, k={h.k:.6g} ({r.status.value})")
+            excluded.append(f"{method} at {describe(h)} ({r.status.value})")
             continue
-        label = f"a={h.a:g}, n={h.n:g}, N={h.N}, k={h.k:.6g}" + (f", {r.status.value}" if not r.ok else "")
+        label = describe(h) + (f", {r.status.value}" if not r.ok else "")
         sec.checks += guarded(f"identities [{method}] {label}", sec.title,
                               lambda h=h, r=r, label=label: identity_checks(label, r, h, sec.title))
     if excluded:
         sec.text.append("Not checked (no stationary state, so the identities do not apply): "
                         + "; ".join(excluded) + ".")
+    sec.tables.append(results_table(ctx))
     methods = {m for _, m, _ in ctx.cache.results()}
     sec.checks += [skipped(f"identities [{m}]", sec.title, f"no {m!r} result was computed in this run "
                            "(solver not available)") for m in ("exact", "fpe", "mc") if m not in methods]
