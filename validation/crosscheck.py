@@ -161,7 +161,35 @@ def run(ctx: Context) -> Section:
         sec.checks += ctx.check(f"fpe vs exact: a = {a:g}", _SECTION, lambda a=a: _fpe_vs_exact(ctx, a))
     for n, a in grid:
         sec.checks += ctx.check(f"fpe vs mc: n = {n:g}, a = {a:g}", _SECTION, lambda n=n, a=a: _fpe_vs_mc(ctx, n, a))
+    for prefix in ("exact vs mc", "fpe vs mc"):
+        note = systematic_offset([c for c in sec.checks if c.name.startswith(prefix) and c.name.endswith(": eta")])
+        if note:
+            sec.text.append(f"**Diagnostic ({prefix}, eta; not a pass/fail check).** {note}")
     return sec
+
+
+def systematic_offset(checks: list[CheckResult]) -> str:
+    """Sign test and mean normalized difference over a group of comparisons.
+
+    Each check passing on its own can hide a common offset; if the errors were unbiased, the
+    signs of (a - b) would be fair coin flips. Truncation errors are often one-sided, so this
+    is a diagnostic, not a check.
+    """
+    import math
+
+    pts = [(c.value - c.reference, c.tolerance / 4.0) for c in checks
+           if c.value is not None and c.reference is not None and c.tolerance]
+    if len(pts) < 3:
+        return ""
+    n = len(pts)
+    pos = sum(d > 0 for d, _ in pts)
+    k = max(pos, n - pos)
+    p = min(1.0, 2.0 * sum(math.comb(n, j) for j in range(k, n + 1)) / 2.0**n)
+    z = [d / s for d, s in pts if s > 0]
+    zbar = sum(z) / len(z) if z else float("nan")
+    return (f"{pos} of {n} differences are positive (two-sided sign-test p = {p:.2g}); mean normalized "
+            f"difference {zbar:+.2f} (in units of the combined error), RMS {math.sqrt(sum(x * x for x in z) / len(z)):.2f}"
+            + (". The signs suggest a common offset smaller than the stated errors." if p < 0.01 else "."))
 
 
 def _fmt(v: float | None, e: float | None) -> str:

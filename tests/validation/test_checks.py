@@ -125,3 +125,14 @@ def test_require_names_the_missing_solver(tmp_path, monkeypatch):
     ctx.require("exact")
     with pytest.raises(MethodNotAvailableError, match="mc: mc missing"):
         ctx.require("exact", "mc")
+
+
+def test_systematic_offset_diagnostic():
+    from validation.crosscheck import systematic_offset
+
+    same_sign = [agree("c: eta", "s", 1.0 + 0.001 * i, 0.002, 1.0, 0.002) for i in range(1, 11)]
+    assert all(c.outcome is Outcome.PASS for c in same_sign)  # each passes on its own ...
+    assert "common offset" in systematic_offset(same_sign)  # ... but together they are one-sided
+    mixed = [agree("c: eta", "s", 1.0 + 0.001 * (-1) ** i, 0.002, 1.0, 0.002) for i in range(10)]
+    assert "5 of 10" in systematic_offset(mixed) and "common offset" not in systematic_offset(mixed)
+    assert systematic_offset(mixed[:2]) == ""
