@@ -277,8 +277,9 @@ def _attempt(h: Harvester, method: str, opts: dict[str, Any]) -> Stats | _Failur
         return _Failure(NOT_AVAILABLE, str(exc), method)
     except HarvesterError as exc:
         return _Failure(ERROR, f"method {method!r} failed: {type(exc).__name__}: {exc}", method)
-    except (ArithmeticError, ValueError, RuntimeError, TypeError) as exc:
-        # A solver bug must not sink a long sweep: report it on the point, keep going.
+    except Exception as exc:  # noqa: BLE001
+        # A solver bug (or a warning turned into an error) must not sink a long sweep:
+        # report it on the point and go on. KeyboardInterrupt still stops the run.
         return _Failure(ERROR, f"method {method!r} raised {type(exc).__name__}: {exc}", method)
 
 
