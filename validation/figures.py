@@ -15,7 +15,7 @@ from pathlib import Path
 from .checks import CheckResult, Context, expect, skipped
 from .report import Figure, Section, Table
 
-__all__ = ["run", "MAX_ROWS"]
+__all__ = ["run", "run_exact", "run_solvers", "MAX_ROWS"]
 
 _SECTION = "The paper's figures (scenes)"
 #: Rows of each scene's data shown in the report (the CSV has them all).
@@ -68,19 +68,42 @@ def _run_one(ctx: Context, name: str, sec: Section) -> list[CheckResult]:
                    f"figures {sorted(res.figures)}")]
 
 
+def _is_exact(name: str) -> bool:
+    """True for a scene whose every point is harmonic (exact solver, about a second)."""
+    from fpe_harvester.scene import load_scene
+
+    scene = load_scene(name)
+    return scene.system.is_linear and all(ax.name != "n" for ax in scene.axes)
+
+
 def run(ctx: Context) -> Section:
     """Every shipped scene except the k_di map (run in 'Beyond the paper')."""
-    sec = Section("figures", _SECTION)
+    return _run(ctx, "figures", _SECTION, None)
+
+
+def run_exact(ctx: Context) -> Section:
+    """The harmonic scenes (exact solver; cheap)."""
+    return _run(ctx, "figures_exact", f"{_SECTION}: harmonic (exact)", True)
+
+
+def run_solvers(ctx: Context) -> Section:
+    """The scenes that need Fokker--Planck or Monte Carlo."""
+    return _run(ctx, "figures_solvers", f"{_SECTION}: nonlinear (Fokker-Planck, Monte Carlo)", False)
+
+
+def _run(ctx: Context, key: str, title: str, exact: bool | None) -> Section:
+    sec = Section(key, title)
     try:
         from fpe_harvester.scene import list_scenes
     except ImportError as exc:
-        sec.checks.append(skipped("paper figures (scenes)", _SECTION, f"fpe_harvester.scene not available ({exc})"))
+        sec.checks.append(skipped("paper figures (scenes)", title, f"fpe_harvester.scene not available ({exc})"))
         return sec
-    names = [n for n in list_scenes() if "kdi" not in n.replace("_", "").lower()]
+    names = [n for n in list_scenes() if "kdi" not in n.replace("_", "").lower()
+             and (exact is None or _is_exact(n) == exact)]
     sec.text.append(
         f"Scenes run{' in quick mode (reduced grids, looser accuracy)' if ctx.quick else ''}: {', '.join(names)}. "
         "Each point uses the cheapest adequate solver; error bars where the method has them."
     )
     for name in names:
-        sec.checks += ctx.check(f"scene {name}", _SECTION, lambda name=name: _run_one(ctx, name, sec))
+        sec.checks += ctx.check(f"scene {name}", title, lambda name=name: _run_one(ctx, name, sec))
     return sec
