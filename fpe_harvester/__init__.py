@@ -2,8 +2,8 @@
 
 Public API: the model (:class:`Params`, :class:`Potential`, :class:`Harvester`), the one
 entry point :func:`solve` with its result :class:`Stats`, the exact harmonic solver
-(:class:`Exact`, :func:`exact_sweep`) and stability thresholds (:func:`k_di`,
-:func:`threshold`).
+(:class:`Exact`, :func:`exact_sweep`), stability thresholds (:func:`k_di`,
+:func:`threshold`) and declarative studies (:class:`Scene`, :func:`run_scene`).
 """
 
 from __future__ import annotations
@@ -18,6 +18,8 @@ from .errors import (
 from .exact import Exact, exact_sweep
 from .model import Harvester, Params, Potential
 from .result import QUANTITIES, Stats, Status
+from .scene import Axis, FigureSpec, Optimize, Scene, list_scenes, load_scene
+from .scene_run import SceneResult, run_scene
 from .solve import METHODS, choose_method, get_solver, solve
 from .stability import Threshold, critical_mode, growth_rate, k_di, ring_spectrum, threshold
 
@@ -42,6 +44,14 @@ __all__ = [
     "critical_mode",
     "growth_rate",
     "ring_spectrum",
+    "Scene",
+    "Axis",
+    "Optimize",
+    "FigureSpec",
+    "load_scene",
+    "list_scenes",
+    "run_scene",
+    "SceneResult",
     "HarvesterError",
     "ParameterError",
     "UnstableSystemError",
