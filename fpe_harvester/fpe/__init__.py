@@ -3,7 +3,9 @@ upwind discontinuous Galerkin in x (scikit-fem), tolerance-driven refinement.
 
 Public API: the solver object :class:`FokkerPlanck` (``method="fpe"``), the richer
 :func:`stationary` returning an :class:`FPESolution` (density, conditional means,
-identity residuals), and the building blocks :class:`HermiteBasis` and :class:`XMesh`.
+identity residuals), time-dependent runs through py-pde (:func:`transient`, with the exact
+harmonic reference :func:`lyapunov_transient`), and the building blocks
+:class:`HermiteBasis` and :class:`XMesh`.
 """
 
 from __future__ import annotations
@@ -12,5 +14,15 @@ from .hermite import HermiteBasis
 from .mesh import XMesh
 from .solver import FokkerPlanck
 from .stationary import FPESolution, stationary
+from .transient import TransientSolution, lyapunov_transient, transient
 
-__all__ = ["FokkerPlanck", "stationary", "FPESolution", "HermiteBasis", "XMesh"]
+__all__ = [
+    "FokkerPlanck",
+    "stationary",
+    "FPESolution",
+    "transient",
+    "TransientSolution",
+    "lyapunov_transient",
+    "HermiteBasis",
+    "XMesh",
+]

@@ -1,0 +1,148 @@
+"""Benchmark of the Fokker--Planck solver: error versus wall time, time to a tolerance.
+
+For the single oscillator with a = 0.5 and n = 2, 3, 4, 8 (smooth) and n = 1 (kink):
+
+* an error-versus-time curve over fixed discretization levels (Hermite degree M at a
+  fixed mesh), errors against the exact value (n = 2) or against the most accurate
+  tolerance-driven run (other n; its own estimated error is recorded with it);
+* the wall time of tolerance-driven solves (``tol = 1e-4, 1e-6`` smooth, ``1e-3`` kink),
+  the error they report and the error they actually have;
+* when the Monte Carlo package is importable, the cost of one Monte Carlo estimate of
+  eta for n = 3, extrapolated to 1e-4 relative (time ~ 1/error^2), for the ratio.
+
+``python -m validation.bench_fpe`` runs the full benchmark (minutes) and writes
+``bench_fpe.json`` and ``bench_fpe.png`` in the current directory.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import pathlib
+import time
+from typing import Any
+
+from fpe_harvester import Harvester
+from fpe_harvester.fpe import stationary
+from fpe_harvester.fpe.discretize import Whitening, solve_level
+from fpe_harvester.fpe.mesh import XMesh
+from fpe_harvester.linear import mode_moments
+
+__all__ = ["run"]
+
+TARGETS = {"smooth_1e-4_s": 0.5, "smooth_1e-6_s": 5.0, "kink_1e-3_s": 10.0}
+
+
+def _curve(h: Harvester, degrees: list[int], half: int, grading: float) -> list[dict[str, float]]:
+    w = Whitening.of(h)
+    mesh = XMesh(w.domain(h, 30.0), half, n=h.n, scale=math.sqrt(w.x2), theta=30.0, wall=0.1,
+                 grading=grading)
+    out = []
+    for M in degrees:
+        t0 = time.perf_counter()
+        lv = solve_level(h, M, mesh, 3, w)
+        out.append({"M": M, "elements": 2 * half, "dofs": lv.dofs, "seconds": time.perf_counter() - t0,
+                    "eta": lv.moments["eta"]})
+    return out
+
+
+def _tol_run(h: Harvester, tol: float, max_seconds: float) -> dict[str, Any]:
+    t0 = time.perf_counter()
+    sol = stationary(h, tol=tol, max_seconds=max_seconds, grid=3)
+    s = sol.stats
+    return {"tol": tol, "seconds": time.perf_counter() - t0, "eta": s.eta, "eta_err": s.eta_err,
+            "status": s.status.value, "M": s.info["M"], "elements": s.info["elements"],
+            "dofs": s.info["dofs"]}
+
+
+def _monte_carlo(h: Harvester, quick: bool) -> dict[str, Any] | None:
+    try:
+        from montecarlo import MonteCarlo
+    except ImportError:
+        return None
+    t0 = time.perf_counter()
+    r = MonteCarlo(seed=1, tol=0.05 if quick else 0.01, max_time=60.0 if quick else 300.0).solve(h)
+    sec = time.perf_counter() - t0
+    if r.eta is None or not r.eta_err:
+        return {"seconds": sec, "status": r.status.value}
+    rel = r.eta_err / r.eta
+    return {"seconds": sec, "eta": r.eta, "eta_err": r.eta_err, "rel_err": rel,
+            "seconds_for_1e-4_extrapolated": sec * (rel / 1e-4) ** 2}
+
+
+def run(quick: bool = False, out: pathlib.Path | None = None) -> dict:
+    """Measure accuracy versus wall time of the Fokker--Planck solver.
+
+    Parameters
+    ----------
+    quick : bool
+        Fewer levels, tol = 1e-4 (smooth) and 1e-3 (kink) only, no Monte Carlo (well
+        under a minute on an idle 2-core machine).
+    out : pathlib.Path, optional
+        Directory for ``bench_fpe.json`` and ``bench_fpe.png``.
+
+    Returns
+    -------
+    dict
+        ``cases`` (per n: curve, tolerance runs, reference), ``targets`` and ``monte_carlo``.
+    """
+    cases: dict[str, Any] = {}
+    smooth = [2.0, 3.0] if quick else [2.0, 3.0, 4.0, 8.0]
+    for n in [*smooth, 1.0]:
+        h = Harvester.build(a=0.5, n=n)
+        kink = n < 2.0
+        tols = [1e-3] if kink else ([1e-4] if quick else [1e-4, 1e-6])
+        runs = [_tol_run(h, tol, 60.0 if quick else 600.0) for tol in tols]
+        if n == 2.0:
+            mo = mode_moments(1.0, h.params)
+            ref, ref_err, ref_src = float(mo["V2"] / mo["Pin"]), 0.0, "exact"
+        else:
+            best = min(runs, key=lambda r: r["eta_err"])
+            ref, ref_err, ref_src = best["eta"], best["eta_err"], f"fpe tol={best['tol']:g}"
+        degrees = [2, 4, 6] if quick else ([2, 4, 6, 8, 10, 12] if kink else [2, 4, 6, 8, 10])
+        curve = _curve(h, degrees, 8, 2.5 if kink else 1.0)
+        for pt in [*curve, *runs]:
+            pt["rel_error"] = abs(pt["eta"] - ref) / abs(ref)
+            pt["resolved"] = pt["rel_error"] > ref_err / abs(ref)
+        cases[f"n={n:g}"] = {"n": n, "a": 0.5, "reference": ref, "reference_err": ref_err,
+                             "reference_source": ref_src, "curve": curve, "tol_runs": runs}
+    mc = None if quick else _monte_carlo(Harvester.build(a=0.5, n=3.0), quick)
+    result = {"quick": quick, "cases": cases, "targets": TARGETS, "monte_carlo_n3": mc}
+    if out is not None:
+        out = pathlib.Path(out)
+        out.mkdir(parents=True, exist_ok=True)
+        (out / "bench_fpe.json").write_text(json.dumps(result, indent=2))
+        _plot(result, out / "bench_fpe.png")
+    return result
+
+
+def _plot(result: dict, path: pathlib.Path) -> None:
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    fig, ax = plt.subplots(figsize=(6.5, 4.5))
+    for name, case in result["cases"].items():
+        pts = [p for p in case["curve"] if p["rel_error"] > 0]
+        line, = ax.loglog([p["seconds"] for p in pts], [p["rel_error"] for p in pts], "o-", label=name)
+        runs = case["tol_runs"]
+        ax.loglog([r["seconds"] for r in runs], [max(r["eta_err"] / r["eta"], 1e-16) for r in runs], "s",
+                  mfc="none", color=line.get_color())
+    ax.axhline(1e-4, color="0.7", lw=0.8)
+    ax.axhline(1e-6, color="0.7", lw=0.8)
+    ax.set_xlabel("wall time [s]")
+    ax.set_ylabel("relative error of eta")
+    ax.set_title("Fokker-Planck solver (a = 0.5): o fixed levels (M = 2, 4, ...), □ tol runs (reported)")
+    ax.legend(fontsize=8)
+    fig.tight_layout()
+    fig.savefig(path, dpi=120)
+    plt.close(fig)
+
+
+if __name__ == "__main__":
+    res = run(quick=False, out=pathlib.Path("."))
+    for key, case in res["cases"].items():
+        for r in case["tol_runs"]:
+            print(f"{key}: tol={r['tol']:g} {r['seconds']:.2f} s eta={r['eta']:.10f} +- {r['eta_err']:.2g} "
+                  f"(actual {r['rel_error']:.2g}) {r['status']}")
