@@ -189,8 +189,12 @@ def failed(name: str, section: str, why: str) -> CheckResult:
     return CheckResult(name, section, Outcome.FAIL, why)
 
 
-class CheckTimeout(Exception):
-    """A check exceeded its wall-time budget (counts as a hang)."""
+class CheckTimeout(BaseException):
+    """A check exceeded its wall-time budget (counts as a hang).
+
+    A :class:`BaseException`, like :class:`KeyboardInterrupt`, so that code under test that
+    catches ``Exception`` (e.g. a scene runner recording failed points) cannot swallow it.
+    """
 
 
 @contextmanager

@@ -136,3 +136,17 @@ def test_systematic_offset_diagnostic():
     mixed = [agree("c: eta", "s", 1.0 + 0.001 * (-1) ** i, 0.002, 1.0, 0.002) for i in range(10)]
     assert "5 of 10" in systematic_offset(mixed) and "common offset" not in systematic_offset(mixed)
     assert systematic_offset(mixed[:2]) == ""
+
+
+def test_timeout_is_not_swallowed_by_broad_handlers():
+    def swallowing():
+        try:
+            t0 = time.perf_counter()
+            while time.perf_counter() - t0 < 5:
+                pass
+        except Exception:  # code under test that records errors and carries on
+            return expect("c", "s", True, "swallowed")
+        return expect("c", "s", True, "finished")
+
+    (r,) = guarded("c", "s", swallowing, timeout=0.2)
+    assert r.outcome is Outcome.FAIL and "hang" in r.detail
