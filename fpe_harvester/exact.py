@@ -9,7 +9,7 @@ import numpy as np
 
 from .errors import MethodNotAvailableError, ParameterError, check_int
 from .linear import mode_moments, ring_moments
-from .model import Harvester, Params
+from .model import Harvester, Params, mode_sin2
 from .result import Stats, Status
 from .stability import MARGINAL_RTOL, classify, growth_rate, k_di
 
@@ -20,8 +20,9 @@ __all__ = ["Exact", "exact_sweep"]
 class Exact:
     """Exact stationary moments of a harmonic ring (any N) from its Fourier modes.
 
-    Cost is O(N) closed-form evaluations; errors are reported as 0 (round-off, ~1e-15
-    relative). Handles only ``n = 2``.
+    Cost is O(N) closed-form evaluations. The reported errors are floating-point round-off
+    bounds (~1e-16 relative, larger only for ``x2`` next to the threshold, where it diverges).
+    Handles only ``n = 2``.
 
     Examples
     --------
@@ -68,22 +69,42 @@ class Exact:
                 f"marginal: k = k_di = {kd:.10g}; the critical mode has zero stiffness, so its x "
                 "diffuses (x2 is unbounded) while V2, Pin and eta are the finite limits"
             )
-        mom = ring_moments(kap, h.params)
-        zero = 0.0
-        x2 = None if status == "marginal" else float(mom["x2"])
+        mom, err = _moments_with_roundoff(kap, 2.0 * h.a + 4.0 * abs(h.k), h.params)
+        marginal = status == "marginal"
         return Stats.from_moments(
-            V2=float(mom["V2"]),
-            Pin=float(mom["Pin"]),
+            V2=float(mom["V2"]), V2_err=float(err["V2"]),
+            Pin=float(mom["Pin"]), Pin_err=float(err["Pin"]),
             R=h.params.R,
-            v2=float(mom["v2"]), v2_err=zero,
-            vV=float(mom["vV"]), vV_err=zero,
-            x2=x2, x2_err=None if x2 is None else zero,
+            v2=float(mom["v2"]), v2_err=float(err["v2"]),
+            vV=float(mom["vV"]), vV_err=float(err["vV"]),
+            x2=None if marginal else float(mom["x2"]),
+            x2_err=None if marginal else float(err["x2"]),
             status=Status(status),
             message=message,
             method=self.name,
             growth_rate=growth_rate(h),
             info=info,
         )
+
+
+#: Round-off of a computed stiffness 2a + 4k sin^2(pi q/N), relative to 2a + 4|k|.
+_KAPPA_ROUNDOFF = 4.0 * np.finfo(float).eps
+
+
+def _moments_with_roundoff(
+    kap: np.ndarray, scale: np.ndarray | float, params: Params
+) -> tuple[dict[str, np.ndarray], dict[str, np.ndarray]]:
+    """Ring moments (means over the last axis) and their floating-point error.
+
+    The error is the change of each moment when every stiffness moves by its own round-off
+    :math:`\\delta = 4\\epsilon(2a + 4|k|)`, plus a few ulps of the result. It is ~1e-16
+    relative for well-conditioned rings and grows like :math:`\\delta/\\kappa_{min}` for
+    ``x2`` close to the threshold, where ``x2`` diverges.
+    """
+    mom = ring_moments(kap, params)
+    shifted = ring_moments(kap + _KAPPA_ROUNDOFF * np.asarray(scale)[..., None], params)
+    err = {key: np.abs(shifted[key] - mom[key]) + _KAPPA_ROUNDOFF * np.abs(mom[key]) for key in mom}
+    return mom, err
 
 
 def exact_sweep(
@@ -106,8 +127,10 @@ def exact_sweep(
     Returns
     -------
     dict of numpy.ma.MaskedArray
-        ``V2``, ``Vrms``, ``Pin``, ``eta``, ``v2``, ``vV``; points with no stationary state
-        (``k < k_di``) are masked, never NaN. Also ``"stable"`` (bool array, marginal included).
+        ``V2``, ``Vrms``, ``Pin``, ``eta``, ``v2``, ``vV`` and the round-off errors
+        ``V2_err``, ``Pin_err``, ``eta_err``, ``v2_err``, ``vV_err``; points with no stationary
+        state (``k < k_di``) are masked, never NaN. Also plain arrays ``"stable"`` (bool,
+        marginal included), ``"marginal"`` (bool) and ``"kappa_min"`` (smallest mode stiffness).
 
     Notes
     -----
@@ -123,18 +146,21 @@ def exact_sweep(
         raise ParameterError("k must be finite everywhere in the sweep")
     if N == 1 and np.any(k_arr != 0):
         raise ParameterError("k must be 0 for a single unit (N = 1)")
-    s2 = np.sin(np.pi * np.arange(N) / N) ** 2
-    kap = 2.0 * a_arr[..., None] + 4.0 * k_arr[..., None] * s2
+    kap = 2.0 * a_arr[..., None] + 4.0 * k_arr[..., None] * mode_sin2(N)
     kmin = kap.min(axis=-1)
     scale = 2.0 * a_arr + 4.0 * np.abs(k_arr)
     marginal = np.abs(kmin) <= MARGINAL_RTOL * scale
     kap = np.where(marginal[..., None] & (kap == kmin[..., None]), 0.0, kap)
     stable = (kmin > 0) | marginal
-    mom = ring_moments(np.where(stable[..., None], kap, 1.0), params)
+    mom, err = _moments_with_roundoff(np.where(stable[..., None], kap, 1.0), scale, params)
     out: dict[str, np.ma.MaskedArray] = {}
     for key in ("V2", "Pin", "v2", "vV"):
         out[key] = np.ma.masked_array(mom[key], mask=~stable)
+        out[key + "_err"] = np.ma.masked_array(err[key], mask=~stable)
     out["eta"] = out["V2"] / (params.R * out["Pin"])
+    out["eta_err"] = out["eta"] * np.ma.hypot(out["V2_err"] / out["V2"], out["Pin_err"] / out["Pin"])
     out["Vrms"] = np.ma.sqrt(out["V2"])
+    out["kappa_min"] = kmin
+    out["marginal"] = marginal
     out["stable"] = stable
     return out

@@ -28,7 +28,17 @@ import numpy as np
 
 from .errors import ParameterError, check_int, check_real
 
-__all__ = ["Params", "Potential", "Harvester"]
+__all__ = ["Params", "Potential", "Harvester", "mode_sin2"]
+
+
+def mode_sin2(N: int) -> np.ndarray:
+    """:math:`\\sin^2(\\pi q/N)` for the ring modes q = 0..N-1.
+
+    Mirror modes q and N - q are computed from the same folded index min(q, N - q), so they
+    are bit-identical (degenerate stiffnesses stay degenerate near the threshold).
+    """
+    q = np.arange(N)
+    return np.sin(math.pi * np.minimum(q, N - q) / N) ** 2
 
 
 @dataclass(frozen=True)
@@ -270,8 +280,7 @@ class Harvester:
         Meaningful for ``n = 2`` only (for other n, it is the stiffness the coupling adds
         to a unit stiffness ``2a``).
         """
-        q = np.arange(self.N)
-        return 2.0 * self.a + 4.0 * self.k * np.sin(math.pi * q / self.N) ** 2
+        return 2.0 * self.a + 4.0 * self.k * mode_sin2(self.N)
 
     def to_dict(self) -> dict[str, object]:
         """Plain-dict description (for JSON)."""

@@ -31,7 +31,7 @@ from .result import Stats, Status
 from .scene import DERIVED, OBSERVABLES, Scene, load_scene
 from .scene_cache import PointCache, point_key, point_seed, stats_from_dict
 from .solve import choose_method, solve
-from .stability import MARGINAL_RTOL, k_di
+from .stability import k_di
 
 __all__ = ["SceneRow", "SceneResult", "run_scene"]
 
@@ -303,16 +303,17 @@ def _exact_batch(hs: Sequence[Harvester]) -> list[Stats]:
         a = np.array([hs[i].a for i in idx])
         k = np.array([hs[i].k for i in idx])
         sweep = exact_sweep(a, k, N, params)
-        s2 = np.sin(np.pi * np.arange(N) / N) ** 2
-        kmin = (2.0 * a[:, None] + 4.0 * k[:, None] * s2).min(axis=1)
-        strict = kmin > MARGINAL_RTOL * (2.0 * a + 4.0 * np.abs(k))
+        kmin = sweep["kappa_min"]
+        strict = sweep["stable"] & ~sweep["marginal"]
         for j, i in enumerate(idx):
             if not strict[j]:
                 results[i] = Exact().solve(hs[i])
                 continue
             results[i] = Stats.from_moments(
-                V2=float(sweep["V2"][j]), Pin=float(sweep["Pin"][j]), R=params.R,
-                v2=float(sweep["v2"][j]), v2_err=0.0, vV=float(sweep["vV"][j]), vV_err=0.0,
+                V2=float(sweep["V2"][j]), V2_err=float(sweep["V2_err"][j]),
+                Pin=float(sweep["Pin"][j]), Pin_err=float(sweep["Pin_err"][j]), R=params.R,
+                v2=float(sweep["v2"][j]), v2_err=float(sweep["v2_err"][j]),
+                vV=float(sweep["vV"][j]), vV_err=float(sweep["vV_err"][j]),
                 status=Status.STABLE, message="stable", method="exact",
                 info={"N": N, "kappa_min": float(kmin[j]), "k_di": k_di(N, float(a[j])),
                       "vectorized": True},

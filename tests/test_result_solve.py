@@ -41,7 +41,7 @@ def test_to_dict_is_json_and_value_lookup():
     r = solve(Harvester.build())
     d = json.loads(json.dumps(r.to_dict()))
     assert d["status"] == "stable" and d["method"] == "exact"
-    assert r.value("eta") == (r.eta, 0.0)
+    assert r.value("eta") == (r.eta, r.eta_err)
     with pytest.raises(KeyError, match="unknown observable 'power'"):
         r.value("power")
     assert Stats(status="marginal").status is Status.MARGINAL
