@@ -27,6 +27,7 @@ import numpy as np
 
 from fpe_harvester import Harvester, Params, exact_sweep, solve
 from fpe_harvester.linear import dense_covariance
+from validation.report import save_benchmark
 
 __all__ = ["run", "rational_eta"]
 
@@ -105,11 +106,7 @@ def run(quick: bool = False, out: Path | None = None) -> dict[str, Any]:
         })
     res["fourier_vs_dense"] = rows
 
-    if out is not None:
-        out = Path(out)
-        out.mkdir(parents=True, exist_ok=True)
-        (out / "bench_exact.json").write_text(json.dumps(res, indent=2))
-        _plot(res, out / "bench_exact.png")
+    save_benchmark(res, out, "bench_exact", _plot)
     return res
 
 

@@ -16,7 +16,6 @@ For the single oscillator with a = 0.5 and n = 2, 3, 4, 8 (smooth) and n = 1 (ki
 
 from __future__ import annotations
 
-import json
 import math
 import pathlib
 import time
@@ -27,6 +26,7 @@ from fpe_harvester.fpe import stationary
 from fpe_harvester.fpe.discretize import Whitening, solve_level
 from fpe_harvester.fpe.mesh import XMesh
 from fpe_harvester.linear import mode_moments
+from validation.report import save_benchmark
 
 __all__ = ["run"]
 
@@ -111,11 +111,7 @@ def run(quick: bool = False, out: pathlib.Path | None = None) -> dict:
                              "reference_source": ref_src, "curve": curve, "tol_runs": runs}
     mc = None if quick else _monte_carlo(Harvester.build(a=0.5, n=3.0), quick)
     result = {"quick": quick, "cases": cases, "targets": TARGETS, "monte_carlo_n3": mc}
-    if out is not None:
-        out = pathlib.Path(out)
-        out.mkdir(parents=True, exist_ok=True)
-        (out / "bench_fpe.json").write_text(json.dumps(result, indent=2))
-        _plot(result, out / "bench_fpe.png")
+    save_benchmark(result, out, "bench_fpe", _plot)
     return result
 
 

@@ -37,6 +37,7 @@ from numba import njit, prange
 from fpe_harvester import Harvester
 from montecarlo import estimate, simulate, simulate_naive
 from montecarlo.simulate import default_threads
+from validation.report import save_benchmark
 
 __all__ = ["run"]
 
@@ -259,11 +260,7 @@ def run(quick: bool = False, out: Path | None = None) -> dict[str, Any]:
     }
     res["equal_error"] = _equal_error(quick)
     res["bias"] = _bias_study(quick)
-    if out is not None:
-        out = Path(out)
-        out.mkdir(parents=True, exist_ok=True)
-        (out / "bench_montecarlo.json").write_text(json.dumps(res, indent=2))
-        _plot(res, out / "bench_montecarlo.png")
+    save_benchmark(res, out, "bench_montecarlo", _plot)
     return res
 
 

@@ -7,15 +7,29 @@ from __future__ import annotations
 
 import base64
 import html
+import json
 import re
 from collections import Counter
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 
 from .checks import CheckResult, Outcome
 
-__all__ = ["Table", "Figure", "Section", "Report", "write_markdown", "write_html", "summary_text"]
+__all__ = [
+    "Table", "Figure", "Section", "Report", "write_markdown", "write_html", "summary_text",
+    "save_benchmark",
+]
+
+
+def save_benchmark(res: dict, out: Path | str | None, stem: str, plot: Callable[[dict, Path], None]) -> None:
+    """Write a benchmark's ``{stem}.json`` and ``{stem}.png`` into ``out`` (nothing if None)."""
+    if out is None:
+        return
+    out = Path(out)
+    out.mkdir(parents=True, exist_ok=True)
+    (out / f"{stem}.json").write_text(json.dumps(res, indent=2))
+    plot(res, out / f"{stem}.png")
 
 
 @dataclass
