@@ -3,8 +3,9 @@
 A level is fixed by the Hermite degree M, the mesh and the polynomial order p. The
 stationary coefficients solve :math:`A c = 0` (see :mod:`.assemble`) with the density's
 normalization :math:`\\int c_0\\,dx = 1`. The operator is nonsingular only through the
-(exponentially small) outflow at :math:`\\pm L`, so one equation, the :math:`\\alpha = 0`
-test at the node x = 0, is replaced by :math:`c_r = 1` and the solution rescaled.
+(exponentially small) outflow at :math:`\\pm L`, so one step of inverse iteration,
+:math:`c = A^{-1} b` with :math:`b_{i0} = \\int\\psi_i\\,dx`, gives the null vector up to
+that outflow; it is then rescaled to unit mass.
 """
 
 from __future__ import annotations
@@ -155,18 +156,22 @@ def solve_level(h: Harvester, M: int, mesh: XMesh, order: int, w: Whitening) -> 
     pot = h.potential
     X = assemble_x(mesh.nodes(), order, lambda x: -pot.dU(x) / m)
     na = hb.size
-    A = dg_operator(X, F, K0, K1).tolil()
-    # Pin c_0 at the node x = 0 (left vertex of the first element right of 0: local dof 0).
-    r = (mesh.half_elements * (order + 1)) * na
-    A.rows[r] = [r]
-    A.data[r] = [1.0]
-    rhs = np.zeros(A.shape[0])
-    rhs[r] = 1.0
-    solver = BlockTridiagonal(A.tocsr(), (order + 1) * na)
-    C = solver.solve(rhs).reshape(-1, na)
+    A = dg_operator(X, F, K0, K1).tocsr()
+    # One step of inverse iteration: A is nonsingular only through the outflow at +-L, so
+    # A^{-1} b is the stationary density up to O(outflow) for any b with a component along
+    # the left null vector (the alpha = 0 test of psi = 1). b = (int psi_i dx) on alpha = 0
+    # has the component 2L > 0 whatever the shape of the density, unlike pinning one value
+    # (ill-conditioned where the true c_0 is small, e.g. quasi-static drives with a density
+    # minimum at x = 0).
+    rhs = np.zeros((X.integral.size, na))
+    rhs[:, 0] = X.integral
+    solver = BlockTridiagonal(A, (order + 1) * na)
+    C = solver.solve(rhs.ravel()).reshape(-1, na)
     mass = float(C[:, 0] @ X.integral)
-    if not math.isfinite(mass) or mass <= 0.0:
-        raise FloatingPointError(f"degenerate stationary solution at M = {M} (mass {mass})")
+    scale = float(np.abs(C[:, 0]) @ np.abs(X.integral))
+    if not (math.isfinite(mass) and math.isfinite(scale)) or abs(mass) <= 1e-8 * scale:
+        raise FloatingPointError(f"degenerate stationary solution at M = {M} (mass {mass}, "
+                                 f"integral of |c_0| {scale})")
     C /= mass
     moments = _moments(h, X, hb, C, w)
     return Level(M, order, mesh, C, moments, A.shape[0], time.perf_counter() - t0, X, hb, w)

@@ -25,6 +25,7 @@ Truncation at total degree M drops :math:`c_\\beta` with :math:`|\\beta| = M + 1
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
 from dataclasses import dataclass
 
 import numpy as np
@@ -201,40 +202,87 @@ class HermiteBasis:
 def whitening_covariance(h: Harvester) -> tuple[np.ndarray, float, float]:
     """Gaussian weight for the Hermite expansion from a statistical linearization.
 
-    The stiffness :math:`\\kappa` of an equivalent harmonic unit is the fixed point of
-    :math:`\\kappa = \\langle x U'(x)\\rangle / \\langle x^2\\rangle` with x Gaussian of the
-    harmonic variance :math:`\\langle x^2\\rangle(\\kappa)`; for
-    :math:`U = a|x|^n`, :math:`\\langle xU'\\rangle = a n\\,s^n 2^{n/2}\\Gamma(\\tfrac{n+1}{2})/\\sqrt\\pi`.
+    The stiffness :math:`\\kappa` of an equivalent harmonic unit is the root of the mismatch
+
+    .. math::
+
+        \\mu(\\kappa) = \\ln\\frac{\\langle x U'(x)\\rangle}{\\kappa\\langle x^2\\rangle}
+        = \\ln c_n + (\\tfrac n2 - 1)\\ln s^2(\\kappa) - \\ln\\kappa,
+
+    with x Gaussian of the harmonic variance :math:`s^2 = \\langle x^2\\rangle(\\kappa)`; for
+    :math:`U = a|x|^n`, :math:`\\langle xU'\\rangle = c_n s^n`,
+    :math:`c_n = a n\\,2^{n/2}\\Gamma(\\tfrac{n+1}{2})/\\sqrt\\pi`. :math:`\\mu` decreases
+    monotonically and tends to :math:`+\\infty` as :math:`\\kappa \\to 0`. As
+    :math:`\\kappa \\to \\infty` the harmonic unit becomes quasi-static,
+    :math:`s \\approx F_{rms}/\\kappa` (F the drive), so :math:`\\mu \\sim (1 - n)\\ln\\kappa`
+    and a root exists for n > 1. For n = 1 the limit is the constant
+    :math:`\\ln(a\\sqrt{2/\\pi}/F_{rms})`, positive when the constant restoring force exceeds
+    the rms drive (the mass mostly sits at the kink): there is no root, and the
+    statistical linearization only says "stiffer than any finite kappa".
+
+    In that case :math:`\\kappa` minimizes :math:`\\mu` on a bounded interval: the smallest
+    stiffness at which :math:`\\mu` is within 0.01 of its infimum, i.e. beyond which any
+    further stiffening changes the matched moment ratio by less than 1 %. Every larger
+    :math:`\\kappa` is equally (in)consistent, and the smallest keeps the widest Gaussian
+    weight in (v, V), the safe side for the Hermite expansion. The choice only sets the
+    weight and the domain; the refinement measures the resulting accuracy.
 
     Returns
     -------
     Sigma : ndarray (3, 3)
         Stationary covariance of (v, V, xi) of the equivalent harmonic unit.
     kappa : float
-        Equivalent stiffness (``2a`` for n = 2).
+        Equivalent stiffness (``2a`` for n = 2), > 0 and finite for every a > 0, n >= 1.
     x2 : float
         Its :math:`\\langle x^2\\rangle`.
     """
     from scipy.optimize import brentq
 
-    from ..linear import lyapunov_covariance
+    from ..linear import lyapunov_covariance, mode_moments
 
     a, n = h.a, h.n
     c_n = a * n * 2.0 ** (n / 2) * math.gamma((n + 1) / 2) / math.sqrt(math.pi)
 
     def mismatch(log_kappa: float) -> float:
-        s2 = lyapunov_covariance(math.exp(log_kappa), h.params)[0, 0]
+        # closed form: the numerical Lyapunov solve loses positivity at extreme kappa
+        s2 = float(mode_moments(math.exp(log_kappa), h.params)["x2"])
         return math.log(c_n) + (n / 2 - 1.0) * math.log(s2) - log_kappa
 
     if n == 2.0:
         kappa = 2.0 * a
     else:
-        # <x^2>(kappa) decreases monotonically, so the mismatch has one sign change.
-        lo, hi = math.log(2.0 * a) - 1.0, math.log(2.0 * a) + 1.0
-        while mismatch(lo) < 0.0:
-            lo -= 2.0
-        while mismatch(hi) > 0.0:
-            hi += 2.0
-        kappa = math.exp(brentq(mismatch, lo, hi, xtol=1e-12))
+        kappa = math.exp(_equivalent_log_stiffness(mismatch, math.log(2.0 * a), brentq))
     P = lyapunov_covariance(kappa, h.params)
     return P[1:, 1:].copy(), kappa, float(P[0, 0])
+
+
+#: Search window in ln(kappa) around ln(2a), and the flatness criteria of the fallback.
+_SEARCH_DECADES = 40.0
+_FLAT_STEP = 1e-4
+_FLAT_GAP = 0.01
+
+
+def _equivalent_log_stiffness(mismatch: Callable[[float], float], start: float,
+                              brentq: Callable[..., float]) -> float:
+    """Root of the decreasing ``mismatch`` in ln(kappa), or the bounded minimizer if none.
+
+    The search stays within ``start +- _SEARCH_DECADES`` e-folds (the closed-form moments
+    stay finite there); see :func:`whitening_covariance` for the fallback.
+    """
+    # Infimum of mu: reached (to _FLAT_STEP) at the far end of the window only when n = 1.
+    far = start + _SEARCH_DECADES
+    m_far = mismatch(far)
+    flat = abs(mismatch(far - 2.0) - m_far) < _FLAT_STEP
+    # Stop at the root, or where mu comes within _FLAT_GAP of a flat infimum if that is
+    # reached first (continuous in a across the threshold of the no-root case).
+    target = max(m_far + _FLAT_GAP, 0.0) if flat else 0.0
+    lo, hi = start - 1.0, start + 1.0
+    while mismatch(lo) < target and lo > start - _SEARCH_DECADES:
+        lo -= 2.0
+    while mismatch(hi) > target and hi < far:
+        hi += 2.0
+    if mismatch(lo) <= target:
+        return lo
+    if mismatch(hi) >= target:
+        return hi
+    return brentq(lambda t: mismatch(t) - target, lo, hi, xtol=1e-12)

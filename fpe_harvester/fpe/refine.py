@@ -27,6 +27,8 @@ from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 from typing import Any
 
+import numpy as np
+
 from ..model import Harvester
 from .discretize import Level, Whitening, solve_level
 from .mesh import XMesh
@@ -145,7 +147,7 @@ class Plan:
 class RefinementResult:
     """Best level, its error estimates and the history of levels computed."""
 
-    best: Level
+    best: Level | None
     errors: dict[str, float]
     error_M: float
     error_x: float
@@ -170,16 +172,40 @@ def refine(h: Harvester, tol: float, plan: Plan, progress: Callable[[str], None]
     base = XMesh(L, plan.half_elements, n=h.n, scale=math.sqrt(w.x2), theta=plan.theta,
                  wall=plan.wall, grading=plan.grading)
     cache: dict[tuple[int, int], Level] = {}
+    failed: dict[tuple[int, int], str] = {}
 
     def level(M: int, nh: int) -> Level:
         key = (M, nh)
+        if key in failed:
+            raise _LevelFailed(failed[key])
         if key not in cache:
-            cache[key] = solve_level(h, M, base.with_elements(nh), plan.order, w)
+            try:
+                lv = solve_level(h, M, base.with_elements(nh), plan.order, w)
+            except (ArithmeticError, ValueError, np.linalg.LinAlgError) as exc:
+                failed[key] = f"level M = {M}, {2 * nh} elements failed ({exc})"
+                raise _LevelFailed(failed[key]) from exc
+            bad = _unphysical(lv)
+            if bad:
+                failed[key] = f"level M = {M}, {2 * nh} elements is unphysical ({bad})"
+                raise _LevelFailed(failed[key])
+            cache[key] = lv
             if progress is not None:
                 lv = cache[key]
                 progress(f"M={M} elements={2 * nh} dofs={lv.dofs} eta={lv.moments['eta']:.10g} "
                          f"({lv.seconds:.2f} s)")
         return cache[key]
+
+    def usable(ms: Sequence[int], nh: int) -> list[Level]:
+        # Lower degrees only feed the tail estimate: one that fails (a low-order Hermite
+        # truncation can lose positivity) is dropped from the sequence, not fatal.
+        out = []
+        for m in ms:
+            try:
+                out.append(level(m, nh))
+            except _LevelFailed:
+                if m == ms[-1]:
+                    raise
+        return out
 
     def estimates(M: int, nh: int, fixed: bool = False) -> tuple[dict[str, float], float, float]:
         # Mesh: the last doubling, |f(N) - f(N/2)|, bounds the error of f(N) for any
@@ -188,7 +214,8 @@ def refine(h: Harvester, tol: float, plan: Plan, progress: Callable[[str], None]
         # with M + 2, whose own tail is added (the error of f(M) is |f(M) - f(M+2)| + tail).
         coarse = level(M, nh // 2) if nh >= 2 else level(M, 2 * nh)
         degs = [m for m in ((M - 2, M, M + 2) if fixed else (M - 4, M - 2, M)) if m >= 2]
-        seq_M = [level(m, nh) for m in degs]
+        seq_M = usable(degs, nh)
+        degs = [lv.M for lv in seq_M]
         errs: dict[str, float] = {}
         eM = ex = 0.0
         for name in OBSERVABLES:
@@ -202,55 +229,117 @@ def refine(h: Harvester, tol: float, plan: Plan, progress: Callable[[str], None]
                 eM, ex = em, ey
         return errs, eM, ex
 
-    if plan.fixed:
-        M, nh = plan.M, plan.half_elements
-        errs, eM, ex = estimates(M, nh, fixed=True)
-        best = level(M, nh)
-        rel = reported_eta_error(best.moments, errs)[0] / abs(best.moments["eta"])
-        ok = rel <= tol
-        reason = "" if ok else (f"fixed M = {M}, {2 * nh} elements: estimated relative error "
-                                f"{rel:.2g} > tol = {tol:.2g}")
-        return RefinementResult(best, errs, eM, ex, ok, reason, _history(cache), time.perf_counter() - t0)
+    try:
+        if plan.fixed:
+            M, nh = plan.M, plan.half_elements
+            errs, eM, ex = estimates(M, nh, fixed=True)
+            best = level(M, nh)
+            rel = reported_eta_error(best.moments, errs)[0] / abs(best.moments["eta"])
+            ok = rel <= tol
+            reason = "" if ok else (f"fixed M = {M}, {2 * nh} elements: estimated relative error "
+                                    f"{rel:.2g} > tol = {tol:.2g}")
+            return RefinementResult(best, errs, eM, ex, ok, reason, _history(cache), time.perf_counter() - t0)
 
-    M, nh = plan.M, plan.half_elements
-    while True:
-        best = level(M, nh)
-        eta = abs(best.moments["eta"])
-        # Refine M first on the current mesh (lower degrees are cheap and cached); the mesh
-        # sequence at the current M is computed only once the Hermite part is small.
-        seq_M = [level(m, nh) for m in (M - 4, M - 2, M) if m >= 2]
-        eM, _ = tail_error([lv.moments["eta"] for lv in seq_M], [lv.M for lv in seq_M])
-        if eM <= 0.5 * tol * eta:
-            errs, eM, ex = estimates(M, nh)
-            if reported_eta_error(best.moments, errs)[0] <= tol * eta:
-                return RefinementResult(best, errs, eM, ex, True, "", _history(cache),
+        M, nh = plan.M, plan.half_elements
+        while True:
+            best = level(M, nh)
+            eta = abs(best.moments["eta"])
+            # Refine M first on the current mesh (lower degrees are cheap and cached); the mesh
+            # sequence at the current M is computed only once the Hermite part is small.
+            seq_M = usable([m for m in (M - 4, M - 2, M) if m >= 2], nh)
+            eM, _ = tail_error([lv.moments["eta"] for lv in seq_M], [lv.M for lv in seq_M])
+            if eM <= 0.5 * tol * eta:
+                errs, eM, ex = estimates(M, nh)
+                if reported_eta_error(best.moments, errs)[0] <= tol * eta:
+                    return RefinementResult(best, errs, eM, ex, True, "", _history(cache),
+                                            time.perf_counter() - t0)
+                grow_M = eM >= ex
+            else:
+                grow_M = True
+            nxt_M, nxt_nh = (M + 2, nh) if grow_M else (M, 2 * nh)
+            na = (nxt_M + 1) * (nxt_M + 2) * (nxt_M + 3) // 6
+            dofs = 2 * nxt_nh * (plan.order + 1) * na
+            elapsed = time.perf_counter() - t0
+            limit = None
+            if nxt_M > plan.max_M:
+                limit = f"Hermite degree M would exceed max_M = {plan.max_M}"
+            elif nxt_nh > plan.max_half_elements:
+                limit = f"elements would exceed {2 * plan.max_half_elements}"
+            elif dofs > plan.max_dofs:
+                limit = f"unknowns would exceed max_dofs = {plan.max_dofs}"
+            elif plan.max_seconds is not None:
+                need = [(m, nxt_nh) for m in (nxt_M - 4, nxt_M - 2, nxt_M)
+                        if m >= 2 and (m, nxt_nh) not in cache]
+                predicted = sum(_predicted_seconds(cache, m, k, plan.order) for m, k in need)
+                if elapsed + predicted > plan.max_seconds:
+                    limit = (f"time budget max_seconds = {plan.max_seconds:g} s: {elapsed:.3g} s used, "
+                             f"the next level would need about {predicted:.3g} s more")
+            if limit is not None:
+                errs, eM, ex = estimates(M, nh)
+                rel = reported_eta_error(best.moments, errs)[0] / eta
+                reason = (f"tol = {tol:.2g} not reached: estimated relative error on eta {rel:.2g} "
+                          f"(Hermite part {eM / eta:.2g}, mesh part {ex / eta:.2g}) at M = {M}, "
+                          f"{2 * nh} elements; {limit}")
+                return RefinementResult(best, errs, eM, ex, False, reason, _history(cache),
                                         time.perf_counter() - t0)
-            grow_M = eM >= ex
-        else:
-            grow_M = True
-        nxt_M, nxt_nh = (M + 2, nh) if grow_M else (M, 2 * nh)
-        na = (nxt_M + 1) * (nxt_M + 2) * (nxt_M + 3) // 6
-        dofs = 2 * nxt_nh * (plan.order + 1) * na
-        elapsed = time.perf_counter() - t0
-        limit = None
-        if nxt_M > plan.max_M:
-            limit = f"Hermite degree M would exceed max_M = {plan.max_M}"
-        elif nxt_nh > plan.max_half_elements:
-            limit = f"elements would exceed {2 * plan.max_half_elements}"
-        elif dofs > plan.max_dofs:
-            limit = f"unknowns would exceed max_dofs = {plan.max_dofs}"
-        elif plan.max_seconds is not None and elapsed > plan.max_seconds:
-            limit = f"time budget max_seconds = {plan.max_seconds:g} s used up"
-        if limit is not None:
-            errs, eM, ex = estimates(M, nh)
-            rel = reported_eta_error(best.moments, errs)[0] / eta
-            reason = (f"tol = {tol:.2g} not reached: estimated relative error on eta {rel:.2g} "
-                      f"(Hermite part {eM / eta:.2g}, mesh part {ex / eta:.2g}) at M = {M}, "
-                      f"{2 * nh} elements; {limit}")
-            return RefinementResult(best, errs, eM, ex, False, reason, _history(cache),
-                                    time.perf_counter() - t0)
-        M, nh = nxt_M, nxt_nh
+            M, nh = nxt_M, nxt_nh
+    except _LevelFailed as exc:
+        return _broken(str(exc), cache, tol, time.perf_counter() - t0)
 
 
 def _history(cache: dict[tuple[int, int], Level]) -> list[dict[str, Any]]:
     return [lv.summary() for _, lv in sorted(cache.items())]
+
+class _LevelFailed(Exception):
+    """A level could not be solved or gave unphysical moments (refinement breaks down)."""
+
+
+def _unphysical(lv: Level) -> str:
+    """Why the moments of ``lv`` cannot be a density's (empty if they can)."""
+    mo = lv.moments
+    for name in ("V2", "Pin", "v2", "x2", "eta"):
+        if not math.isfinite(mo[name]) or mo[name] <= 0.0:
+            return f"{name} = {mo[name]:.3g}"
+    return ""
+
+
+def _cost_unit(M: int, order: int) -> float:
+    # Dense LU per element: ((p + 1) * C(M + 3, 3))^3.
+    return float((order + 1) * math.comb(M + 3, 3)) ** 3
+
+
+def _predicted_seconds(cache: dict[tuple[int, int], Level], M: int, nh: int, order: int) -> float:
+    """Predicted wall time (s) of level (M, nh) from the costliest measured level.
+
+    The cost grows like the number of elements times :math:`((p+1)\\binom{M+3}{3})^3`
+    (dense block LU); it is scaled from the measured level of largest such cost, whose
+    timing is the least dominated by fixed overheads.
+    """
+    if not cache:
+        return 0.0
+    (m0, k0), lv0 = max(cache.items(), key=lambda kv: kv[0][1] * _cost_unit(kv[0][0], order))
+    return lv0.seconds * (nh / k0) * _cost_unit(M, order) / _cost_unit(m0, order)
+
+
+def _broken(why: str, cache: dict[tuple[int, int], Level], tol: float, seconds: float
+            ) -> RefinementResult:
+    """NOT_CONVERGED result when a level fails: the finest good level, errors from the spread.
+
+    With the refinement broken there is no asymptotic estimate: the error of each observable
+    is the largest difference between the kept level and the other good levels (its own
+    magnitude if there is only one). ``best`` is None when no level worked.
+    """
+    advice = ("the Hermite expansion around the equivalent harmonic unit does not resolve this "
+              "density (strongly non-Gaussian, e.g. a quasi-static drive or a kink force larger "
+              "than the drive); use method='mc', or fix M and elements to inspect the levels")
+    if not cache:
+        return RefinementResult(None, {}, math.inf, math.inf, False, f"{why}; {advice}", [], seconds)
+    key = max(cache, key=lambda k: (k[1] * _cost_unit(k[0], 3), k))
+    best = cache[key]
+    errs = {}
+    for name in OBSERVABLES:
+        others = [abs(lv.moments[name] - best.moments[name]) for k, lv in cache.items() if k != key]
+        errs[name] = max(others) if others else abs(best.moments[name])
+    reason = (f"tol = {tol:.2g} not reached: refinement broke down, {why}; kept M = {best.M}, "
+              f"{best.mesh.elements} elements, error = spread over the good levels; {advice}")
+    return RefinementResult(best, errs, errs["eta"], 0.0, False, reason, _history(cache), seconds)

@@ -6,9 +6,11 @@ from collections.abc import Callable
 from dataclasses import dataclass
 from typing import ClassVar
 
-from ..errors import MethodNotAvailableError, check_int, check_real
+import numpy as np
+
+from ..errors import HarvesterError, MethodNotAvailableError, check_int, check_real
 from ..model import Harvester
-from ..result import Stats
+from ..result import Stats, Status
 from .stationary import _ring_reason, stationary
 
 __all__ = ["FokkerPlanck"]
@@ -94,9 +96,18 @@ class FokkerPlanck:
         progress = self.progress
         if progress is True:
             progress = print
-        sol = stationary(
-            h, self.tol, M=self.M, half_elements=None if self.elements is None else self.elements // 2,
-            order=self.order, theta=self.domain, max_M=max(self.max_M, self.M or 0),
-            max_seconds=self.max_seconds, grid=3, progress=progress or None,
-        )
+        try:
+            sol = stationary(
+                h, self.tol, M=self.M, half_elements=None if self.elements is None else self.elements // 2,
+                order=self.order, theta=self.domain, max_M=max(self.max_M, self.M or 0),
+                max_seconds=self.max_seconds, grid=3, progress=progress or None,
+            )
+        except HarvesterError:
+            raise
+        except (ArithmeticError, ValueError, np.linalg.LinAlgError) as exc:
+            # Numerical breakdown outside the refinement loop (whitening, field evaluation):
+            # report it as a status, the caller asked for numbers, not a traceback.
+            return Stats(status=Status.NOT_CONVERGED, method="fpe",
+                         message=f"Fokker-Planck solve failed numerically ({type(exc).__name__}: {exc}); "
+                                 "use method='mc'", info={"tol": self.tol})
         return sol.stats

@@ -28,7 +28,7 @@ from dataclasses import dataclass, field
 import numpy as np
 from skfem import Basis
 
-from ..errors import MethodNotAvailableError, ParameterError, check_int, check_real
+from ..errors import MethodNotAvailableError, NotConvergedError, ParameterError, check_int, check_real
 from ..model import Harvester
 from ..result import Stats, Status
 from .assemble import _element
@@ -55,8 +55,9 @@ class FPESolution:
         :math:`\\langle\\xi|x\\rangle`; masked where :math:`p(x) < 10^{-9}\\max p`.
     residuals : dict
         ``V2`` and ``power``: the relative residuals :math:`r_V, r_P` of the exact identities.
-    level : Level
-        The discretization level the numbers come from.
+    level : Level or None
+        The discretization level the numbers come from; None (and empty fields) when no
+        level could be solved (status NOT_CONVERGED, see the message).
     """
 
     stats: Stats
@@ -66,10 +67,12 @@ class FPESolution:
     V_mean: np.ma.MaskedArray
     xi_mean: np.ma.MaskedArray
     residuals: dict[str, float]
-    level: Level = field(repr=False)
+    level: Level | None = field(repr=False)
 
     def evaluate(self, x: np.ndarray) -> dict[str, np.ndarray]:
         """Density and conditional means at arbitrary points ``x`` (inside [-L, L])."""
+        if self.level is None:
+            raise NotConvergedError(f"no solved level to evaluate: {self.stats.message}")
         return _fields(self.level, np.asarray(x, dtype=float))
 
 
@@ -111,6 +114,9 @@ def _fields(lv: Level, x: np.ndarray) -> dict[str, np.ndarray]:
 
 def _stats(h: Harvester, ref: RefinementResult, tol: float) -> Stats:
     lv = ref.best
+    if lv is None:
+        return Stats(status=Status.NOT_CONVERGED, message=ref.reason, method="fpe",
+                     info={"tol": tol, "seconds": ref.seconds, "history": ref.history})
     mo = lv.moments
     er = ref.errors
     V2, Pin = mo["V2"], mo["Pin"]
@@ -206,6 +212,10 @@ def stationary(
     ref = refine(h, tol, plan, progress)
     stats = _stats(h, ref, tol)
     lv = ref.best
+    if lv is None:
+        empty = np.ma.masked_array(np.zeros(0))
+        return FPESolution(stats=stats, x=np.zeros(0), density=np.zeros(0), v_mean=empty,
+                           V_mean=empty, xi_mean=empty, residuals={}, level=None)
     x = np.linspace(-lv.mesh.L, lv.mesh.L, grid)
     f = _fields(lv, x)
     return FPESolution(

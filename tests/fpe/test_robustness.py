@@ -1,0 +1,107 @@
+"""Regressions: no crash for hard single units, honest NOT_CONVERGED, time budget."""
+
+from __future__ import annotations
+
+import math
+
+import pytest
+
+from fpe_harvester import Harvester, Status, solve
+from fpe_harvester.fpe import refine as refine_mod
+from fpe_harvester.fpe.discretize import Whitening, solve_level
+from fpe_harvester.fpe.hermite import whitening_covariance
+from fpe_harvester.fpe.mesh import XMesh
+from fpe_harvester.fpe.stationary import default_plan
+
+
+@pytest.mark.parametrize("a", [1e-6, 0.5, 1.7, 1.77, 2.0, 100.0, 1e6])
+def test_equivalent_stiffness_is_finite_for_kink(a: float) -> None:
+    # n = 1: no root of the linearization mismatch above a ~ 1.77 (used to overflow).
+    Sigma, kappa, x2 = whitening_covariance(Harvester.build(a=a, n=1))
+    assert math.isfinite(kappa) and kappa > 0.0 and x2 > 0.0
+    assert all(Sigma[i, i] > 0.0 for i in range(3))
+
+
+def test_equivalent_stiffness_is_continuous_across_no_root_threshold() -> None:
+    ks = [whitening_covariance(Harvester.build(a=a, n=1))[1] for a in (1.76, 1.77, 1.78, 2.0)]
+    assert max(ks) / min(ks) < 20.0
+    # beyond the threshold kappa no longer depends on a (the mismatch is flat)
+    assert ks[2] == pytest.approx(ks[3], rel=1e-6)
+
+
+def test_root_found_for_other_exponents() -> None:
+    # the fixed point kappa <x^2> = <x U'> holds where a root exists
+    h = Harvester.build(a=0.5, n=3)
+    _, kappa, x2 = whitening_covariance(h)
+    s = math.sqrt(x2)
+    xu = 0.5 * 3 * s**3 * 2**1.5 * math.gamma(2.0) / math.sqrt(math.pi)
+    assert kappa * x2 == pytest.approx(xu, rel=1e-9)
+
+
+def test_strong_kink_does_not_crash() -> None:
+    r = solve(Harvester.build(a=2, n=1), "fpe", tol=1e-3, max_seconds=20)
+    assert r.status in (Status.STABLE, Status.NOT_CONVERGED)
+    if r.status is Status.NOT_CONVERGED:
+        assert "method='mc'" in r.message or "not reached" in r.message
+    if r.eta is not None:
+        assert r.eta_err is not None and math.isfinite(r.eta_err)
+
+
+def _level(h: Harvester, M: int, half: int):
+    w = Whitening.of(h)
+    plan = default_plan(h)
+    mesh = XMesh(w.domain(h, plan.theta), half, n=h.n, scale=math.sqrt(w.x2), theta=plan.theta,
+                 wall=plan.wall, grading=plan.grading)
+    return solve_level(h, M, mesh, plan.order, w)
+
+
+def test_low_degree_level_of_sub_quadratic_potential_is_not_degenerate() -> None:
+    # a = 2, n = 1.75 at M = 2 used to give a negative mass from pinning c_0(0) = 1.
+    lv = _level(Harvester.build(a=2, n=1.75), 2, 8)
+    assert lv.moments["V2"] > 0.0 and lv.moments["Pin"] > 0.0
+
+
+def test_slow_drive_level_is_not_degenerate() -> None:
+    # tau = 100: quasi-static drive, density small at x = 0; M = 8 used to be "degenerate".
+    lv = _level(Harvester.build(a=0.5, n=3, tau=100.0), 8, 8)
+    assert math.isfinite(lv.moments["eta"]) and lv.moments["V2"] > 0.0
+
+
+def test_failed_level_becomes_not_converged(monkeypatch: pytest.MonkeyPatch) -> None:
+    real = refine_mod.solve_level
+
+    def flaky(h, M, mesh, order, w):  # noqa: ANN001, ANN202
+        if M >= 8:
+            raise FloatingPointError("simulated breakdown")
+        return real(h, M, mesh, order, w)
+
+    monkeypatch.setattr(refine_mod, "solve_level", flaky)
+    r = solve(Harvester.build(a=0.5, n=4), "fpe", tol=1e-8)
+    assert r.status is Status.NOT_CONVERGED and "simulated breakdown" in r.message
+    assert r.eta is not None and r.eta_err > 0.0
+
+
+def test_no_solvable_level_gives_empty_stats(monkeypatch: pytest.MonkeyPatch) -> None:
+    def broken(*args, **kwargs):  # noqa: ANN002, ANN003, ANN202
+        raise FloatingPointError("simulated breakdown")
+
+    monkeypatch.setattr(refine_mod, "solve_level", broken)
+    r = solve(Harvester.build(a=0.5, n=4), "fpe", tol=1e-3)
+    assert r.status is Status.NOT_CONVERGED and r.eta is None and "method='mc'" in r.message
+
+
+def test_budget_stops_before_a_level_predicted_too_costly() -> None:
+    r = solve(Harvester.build(a=0.5, n=4), "fpe", tol=1e-9, max_seconds=0.2)
+    assert r.status is Status.NOT_CONVERGED
+    assert "max_seconds" in r.message and "next level would need" in r.message
+    assert r.eta is not None and r.eta_err > 0.0
+
+
+def test_predicted_cost_scales_with_block_size_cubed() -> None:
+    class _Lv:
+        seconds = 1.0
+
+    cache = {(6, 8): _Lv()}
+    ratio = ((4 * math.comb(11, 3)) / (4 * math.comb(9, 3))) ** 3
+    assert refine_mod._predicted_seconds(cache, 8, 8, 3) == pytest.approx(ratio)
+    assert refine_mod._predicted_seconds(cache, 6, 16, 3) == pytest.approx(2.0)
