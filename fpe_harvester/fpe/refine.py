@@ -268,8 +268,10 @@ def refine(h: Harvester, tol: float, plan: Plan, progress: Callable[[str], None]
             elif dofs > plan.max_dofs:
                 limit = f"unknowns would exceed max_dofs = {plan.max_dofs}"
             elif plan.max_seconds is not None:
-                need = [(m, nxt_nh) for m in (nxt_M - 4, nxt_M - 2, nxt_M)
-                        if m >= 2 and (m, nxt_nh) not in cache]
+                # The next step may also need the coarse-mesh level of its error estimate.
+                need = [(m, k) for m, k in ((nxt_M - 4, nxt_nh), (nxt_M - 2, nxt_nh),
+                                            (nxt_M, nxt_nh), (nxt_M, max(nxt_nh // 2, 1)))
+                        if m >= 2 and (m, k) not in cache]
                 predicted = sum(_predicted_seconds(cache, m, k, plan.order) for m, k in need)
                 if elapsed + predicted > plan.max_seconds:
                     limit = (f"time budget max_seconds = {plan.max_seconds:g} s: {elapsed:.3g} s used, "
@@ -311,14 +313,23 @@ def _cost_unit(M: int, order: int) -> float:
 def _predicted_seconds(cache: dict[tuple[int, int], Level], M: int, nh: int, order: int) -> float:
     """Predicted wall time (s) of level (M, nh) from the costliest measured level.
 
-    The cost grows like the number of elements times :math:`((p+1)\\binom{M+3}{3})^3`
-    (dense block LU); it is scaled from the measured level of largest such cost, whose
-    timing is the least dominated by fixed overheads.
+    Cost = elements x :math:`n_b^q`, :math:`n_b = (p+1)\\binom{M+3}{3}`. The dense block LU
+    gives q = 3 asymptotically; at moderate M assembly and O(n_b^2) work dominate, so q is
+    measured from the two costliest levels on one mesh and clipped to [2, 3] (timings are
+    noisy on a busy machine; 3 when only one level is known).
     """
     if not cache:
         return 0.0
-    (m0, k0), lv0 = max(cache.items(), key=lambda kv: kv[0][1] * _cost_unit(kv[0][0], order))
-    return lv0.seconds * (nh / k0) * _cost_unit(M, order) / _cost_unit(m0, order)
+    unit = lambda m: _cost_unit(m, order) ** (1.0 / 3.0)  # noqa: E731  n_b
+    ranked = sorted(cache.items(), key=lambda kv: kv[0][1] * unit(kv[0][0]) ** 3)
+    (m0, k0), lv0 = ranked[-1]
+    q = 3.0
+    same = [(m, lv) for (m, k), lv in ranked[:-1] if k == k0 and m < m0]
+    if same and lv0.seconds > 0.0:
+        m1, lv1 = same[-1]
+        if lv1.seconds > 0.0:
+            q = min(max(math.log(lv0.seconds / lv1.seconds) / math.log(unit(m0) / unit(m1)), 2.0), 3.0)
+    return lv0.seconds * (nh / k0) * (unit(M) / unit(m0)) ** q
 
 
 def _broken(why: str, cache: dict[tuple[int, int], Level], tol: float, seconds: float

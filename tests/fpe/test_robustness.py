@@ -97,11 +97,20 @@ def test_budget_stops_before_a_level_predicted_too_costly() -> None:
     assert r.eta is not None and r.eta_err > 0.0
 
 
-def test_predicted_cost_scales_with_block_size_cubed() -> None:
+def test_predicted_cost_scales_with_block_size() -> None:
     class _Lv:
-        seconds = 1.0
+        def __init__(self, seconds: float) -> None:
+            self.seconds = seconds
 
-    cache = {(6, 8): _Lv()}
-    ratio = ((4 * math.comb(11, 3)) / (4 * math.comb(9, 3))) ** 3
-    assert refine_mod._predicted_seconds(cache, 8, 8, 3) == pytest.approx(ratio)
+    nb = {m: 4 * math.comb(m + 3, 3) for m in (4, 6, 8)}
+    # one measured level: the asymptotic cubic growth of the dense block LU
+    cache = {(6, 8): _Lv(1.0)}
+    assert refine_mod._predicted_seconds(cache, 8, 8, 3) == pytest.approx((nb[8] / nb[6]) ** 3)
     assert refine_mod._predicted_seconds(cache, 6, 16, 3) == pytest.approx(2.0)
+    # measured growth between M = 4 and 6 is used, clipped to [2, 3]
+    cache = {(4, 8): _Lv((nb[4] / nb[6]) ** 2.5), (6, 8): _Lv(1.0)}
+    assert refine_mod._predicted_seconds(cache, 8, 8, 3) == pytest.approx((nb[8] / nb[6]) ** 2.5)
+    cache = {(4, 8): _Lv(0.9), (6, 8): _Lv(1.0)}
+    assert refine_mod._predicted_seconds(cache, 8, 8, 3) == pytest.approx((nb[8] / nb[6]) ** 2)
+    cache = {(4, 8): _Lv(1e-9), (6, 8): _Lv(1.0)}
+    assert refine_mod._predicted_seconds(cache, 8, 8, 3) == pytest.approx((nb[8] / nb[6]) ** 3)

@@ -96,7 +96,7 @@ def test_kink_tol_1e3() -> None:
 def test_solution_fields_harmonic() -> None:
     """Marginal density is the exact Gaussian; <V|x>, <xi|x> are the exact regression lines."""
     h = Harvester.build(a=0.5, n=2)
-    sol = stationary(h, tol=1e-4, M=6, half_elements=16, grid=201)
+    sol = stationary(h, tol=1e-4, M=4, half_elements=16, grid=201)
     P = lyapunov_covariance(1.0, h.params)
     x = sol.x
     gauss = np.exp(-x**2 / (2 * P[0, 0])) / math.sqrt(2 * math.pi * P[0, 0])
