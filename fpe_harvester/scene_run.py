@@ -185,8 +185,9 @@ class _Runner:
         self.computed = self.reused = 0
         self.needs_solver = any(o in OBSERVABLES for o in scene.observables)
 
-    def method_of(self, h: Harvester) -> tuple[str, dict[str, Any]]:
-        method = choose_method(h) if self.scene.method == "auto" else self.scene.method
+    def method_of(self, h: Harvester, method: str | None = None) -> tuple[str, dict[str, Any]]:
+        if method is None:
+            method = choose_method(h) if self.scene.method == "auto" else self.scene.method
         opts: dict[str, Any] = {}
         if method in ("fpe", "mc"):
             # the scene draws its own progress bar over points
@@ -236,8 +237,21 @@ class _Runner:
             self._solve_parallel(hs, pool, out)
         for i, key, method, opts in rest:
             if out[i] is None:
-                out[i] = self._store(hs[i], key, opts, _attempt(hs[i], method, opts))
+                out[i] = self._store(hs[i], key, opts, self._solve_point(hs[i], method, opts))
         return out
+
+    def _solve_point(self, h: Harvester, method: str, opts: dict[str, Any]) -> Stats | _Failure:
+        """Solve one point; with method "auto", a Fokker--Planck point that produced no numbers
+        (density not resolved) falls back to Monte Carlo, and the message says so."""
+        res = _attempt(h, method, opts)
+        if (self.scene.method == "auto" and method == "fpe" and isinstance(res, Stats)
+                and res.status is Status.NOT_CONVERGED and res.eta is None):
+            mc_method, mc_opts = self.method_of(h, "mc")
+            fallback = _attempt(h, mc_method, mc_opts)
+            if isinstance(fallback, Stats):
+                note = f"Fokker-Planck gave no result ({res.message}); Monte Carlo used instead"
+                return replace(fallback, message=f"{fallback.message}; {note}")
+        return res
 
     def _solve_parallel(self, hs: Sequence[Harvester], todo: list[tuple[int, str, str, dict[str, Any]]],
                         out: list[Stats | _Failure | None]) -> None:

@@ -222,3 +222,17 @@ def test_parallel_workers_match_serial(tmp_path: Path, monkeypatch) -> None:
     assert len((tmp_path / "parallel" / "points.jsonl").read_text().splitlines()) == 10
     with pytest.raises(Exception, match=r"workers must be an integer in \[1, inf\], got 0"):
         scene_run.run_scene(sc, tmp_path, workers=0)
+
+
+def test_auto_falls_back_to_monte_carlo_when_fokker_planck_gives_no_result(tmp_path):
+    # n = 1, a = 2: the kink force exceeds the drive most of the time; the Hermite expansion
+    # cannot resolve that density and Fokker-Planck returns NOT_CONVERGED without numbers.
+    from fpe_harvester import Harvester, Scene, run_scene
+
+    scene = Scene(name="fallback", system=Harvester.build(a=2.0, n=1), observables=("eta",),
+                  rtol=0.05, options={"mc": {"paths": 64, "t_run": 40.0, "min_replicas": 4}},
+                  outputs=())
+    row = run_scene(scene, tmp_path, progress=False).rows[0]
+    assert row.method == "mc" and row.status == "stable"
+    assert "Monte Carlo used instead" in row.message
+    assert 0.1 < row.values["eta"] < 0.2 and row.values["eta_err"] > 0
