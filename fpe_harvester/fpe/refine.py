@@ -127,7 +127,8 @@ class Plan:
     max_M, max_half_elements, max_dofs : int
         Limits; the solve reports NOT_CONVERGED when tol needs more.
     max_seconds : float or None
-        Wall-time budget for the adaptation.
+        Wall-time budget for the adaptation (s); no step starts whose predicted cost
+        would exceed it.
     """
 
     M: int
@@ -165,6 +166,13 @@ def refine(h: Harvester, tol: float, plan: Plan, progress: Callable[[str], None]
     M - 2, M, :func:`tail_error`) is below ``tol * |eta| / 2``; then the mesh error
     (last doubling) is computed at that M, and the larger part is refined (M + 2 or twice
     the elements) until the sum is below ``tol * |eta|`` or a limit of ``plan`` is hit.
+
+    The time budget is checked before each step against the elapsed time plus the
+    predicted cost of the levels the step needs (:func:`_predicted_seconds`). A level that
+    fails or gives unphysical moments (V2, Pin, v2, x2 <= 0) ends the refinement with
+    ``converged=False``, the finest good level and the spread of the good levels as error
+    (``best`` is None if no level worked); a failed lower degree that only feeds the tail
+    estimate is dropped instead.
     """
     t0 = time.perf_counter()
     w = Whitening.of(h)
