@@ -64,7 +64,7 @@ class Exact:
             )
         message = "stable"
         if status == "marginal":
-            kap = np.where(np.abs(kap) <= MARGINAL_RTOL * (2 * h.a + 4 * abs(h.k)), 0.0, kap)
+            kap = _clip_marginal(kap, 2.0 * h.a + 4.0 * abs(h.k))
             message = (
                 f"marginal: k = k_di = {kd:.10g}; the critical mode has zero stiffness, so its x "
                 "diffuses (x2 is unbounded) while V2, Pin and eta are the finite limits"
@@ -85,6 +85,11 @@ class Exact:
             growth_rate=growth_rate(h),
             info=info,
         )
+
+
+def _clip_marginal(kap: np.ndarray, scale: np.ndarray | float) -> np.ndarray:
+    """Set stiffnesses within round-off of zero (``MARGINAL_RTOL * scale``) to exactly 0."""
+    return np.where(np.abs(kap) <= MARGINAL_RTOL * np.asarray(scale)[..., None], 0.0, kap)
 
 
 #: Round-off of a computed stiffness 2a + 4k sin^2(pi q/N), relative to 2a + 4|k|.
@@ -150,7 +155,7 @@ def exact_sweep(
     kmin = kap.min(axis=-1)
     scale = 2.0 * a_arr + 4.0 * np.abs(k_arr)
     marginal = np.abs(kmin) <= MARGINAL_RTOL * scale
-    kap = np.where(marginal[..., None] & (kap == kmin[..., None]), 0.0, kap)
+    kap = _clip_marginal(kap, scale)
     stable = (kmin > 0) | marginal
     mom, err = _moments_with_roundoff(np.where(stable[..., None], kap, 1.0), scale, params)
     out: dict[str, np.ma.MaskedArray] = {}
