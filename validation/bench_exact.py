@@ -15,8 +15,6 @@ Measured in one run:
 
 from __future__ import annotations
 
-import argparse
-import json
 import time
 from collections.abc import Callable
 from fractions import Fraction
@@ -27,7 +25,7 @@ import numpy as np
 
 from fpe_harvester import Harvester, Params, exact_sweep, solve
 from fpe_harvester.linear import dense_covariance
-from validation.report import save_benchmark
+from validation.report import bench_main, save_benchmark
 
 __all__ = ["run", "rational_eta"]
 
@@ -139,14 +137,5 @@ def _plot(res: dict[str, Any], path: Path) -> None:
     plt.close(fig)
 
 
-def main() -> None:  # pragma: no cover - thin CLI
-    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--quick", action="store_true")
-    ap.add_argument("--out", type=Path, default=Path("validation_report"))
-    args = ap.parse_args()
-    res = run(quick=args.quick, out=args.out)
-    print(json.dumps({k: v for k, v in res.items() if k != "fourier_vs_dense"}, indent=2))
-
-
 if __name__ == "__main__":  # pragma: no cover
-    main()
+    bench_main(run, __doc__, drop=("fourier_vs_dense",))

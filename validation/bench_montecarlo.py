@@ -23,8 +23,6 @@ and ``bench_montecarlo.png``.
 
 from __future__ import annotations
 
-import argparse
-import json
 import math
 import time
 from concurrent.futures import ThreadPoolExecutor
@@ -37,7 +35,7 @@ from numba import njit, prange
 from fpe_harvester import Harvester
 from montecarlo import estimate, simulate, simulate_naive
 from montecarlo.simulate import default_threads
-from validation.report import save_benchmark
+from validation.report import bench_main, save_benchmark
 
 __all__ = ["run"]
 
@@ -307,14 +305,5 @@ def _plot(res: dict[str, Any], path: Path) -> None:
     plt.close(fig)
 
 
-def main() -> None:  # pragma: no cover - thin CLI
-    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--quick", action="store_true")
-    ap.add_argument("--out", type=Path, default=Path("validation_report"))
-    args = ap.parse_args()
-    res = run(quick=args.quick, out=args.out)
-    print(json.dumps(res, indent=2))
-
-
 if __name__ == "__main__":  # pragma: no cover
-    main()
+    bench_main(run, __doc__)
