@@ -45,12 +45,12 @@ class Exact:
         reason = self.unsupported_reason(h)
         if reason:
             raise MethodNotAvailableError(reason + "; use method='fpe' (N = 1) or 'mc'")
-        status, kmin = classify(h)
         kap = h.mode_stiffness()
+        status, kmin = classify(h, kappa=kap)
+        rate = growth_rate(h, kappa=kap)
         kd = k_di(h.N, h.a)
         info = {"N": h.N, "kappa_min": kmin, "k_di": kd}
         if status == "unstable":
-            rate = growth_rate(h)
             q = int(np.argmin(kap))
             return Stats(
                 status=Status.UNSTABLE,
@@ -82,7 +82,7 @@ class Exact:
             status=Status(status),
             message=message,
             method=self.name,
-            growth_rate=growth_rate(h),
+            growth_rate=rate,
             info=info,
         )
 
