@@ -41,7 +41,7 @@ from skfem import (
     asm,
 )
 
-__all__ = ["XMatrices", "assemble_x", "split_flux", "dg_operator"]
+__all__ = ["XMatrices", "assemble_x", "split_flux", "dg_terms", "dg_operator"]
 
 
 @dataclass(frozen=True)
@@ -50,8 +50,9 @@ class XMatrices:
 
     Attributes
     ----------
-    mass, mass_u, deriv : sparse
-        :math:`\\int\\psi_i\\phi_j`, :math:`\\int u\\,\\psi_i\\phi_j`, :math:`\\int\\psi_i'\\phi_j`.
+    mass, mass_u, mass_x, deriv : sparse
+        :math:`\\int\\psi_i\\phi_j`, :math:`\\int u\\,\\psi_i\\phi_j`, :math:`\\int x\\,\\psi_i\\phi_j`,
+        :math:`\\int\\psi_i'\\phi_j`.
     xplus, xminus : sparse
         Face matrices multiplying :math:`F^+` and :math:`F^-` in the upwind flux.
     integral, x2, x1 : ndarray
@@ -66,6 +67,7 @@ class XMatrices:
 
     mass: sp.csr_matrix
     mass_u: sp.csr_matrix
+    mass_x: sp.csr_matrix
     deriv: sp.csr_matrix
     xplus: sp.csr_matrix
     xminus: sp.csr_matrix
@@ -120,6 +122,7 @@ def assemble_x(mesh_nodes: np.ndarray, order: int, u: Callable[[np.ndarray], np.
 
     mass = asm(BilinearForm(lambda a, b, w: a * b), basis)
     mass_u = asm(BilinearForm(lambda a, b, w: u(w.x[0]) * a * b), basis)
+    mass_x = asm(BilinearForm(lambda a, b, w: w.x[0] * a * b), basis)
     deriv = asm(BilinearForm(lambda a, b, w: a * b.grad[0]), basis)
     integral = asm(LinearForm(lambda b, w: b), basis)
     x2 = asm(LinearForm(lambda b, w: w.x[0] ** 2 * b), basis)
@@ -148,7 +151,7 @@ def assemble_x(mesh_nodes: np.ndarray, order: int, u: Callable[[np.ndarray], np.
         return A[perm][:, perm].tocsr()
 
     return XMatrices(
-        mass=p2(mass), mass_u=p2(mass_u), deriv=p2(deriv), xplus=p2(xplus), xminus=p2(xminus),
+        mass=p2(mass), mass_u=p2(mass_u), mass_x=p2(mass_x), deriv=p2(deriv), xplus=p2(xplus), xminus=p2(xminus),
         integral=integral[perm], x2=x2[perm], x1=x1[perm], basis=basis, order=order, perm=perm,
     )
 
@@ -159,17 +162,28 @@ def split_flux(F: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     return (R * np.maximum(lam, 0.0)) @ R.T, (R * np.minimum(lam, 0.0)) @ R.T
 
 
-def dg_operator(X: XMatrices, F: np.ndarray, K0: sp.spmatrix, K1: sp.spmatrix) -> sp.csr_matrix:
-    """The global DG operator :math:`A` (see module docstring), x outer, alpha inner."""
+def dg_terms(X: XMatrices, F: np.ndarray, K0: sp.spmatrix, K1: sp.spmatrix,
+             K2: sp.spmatrix | None = None) -> list[tuple[sp.csr_matrix, sp.spmatrix]]:
+    """The pairs :math:`(X_t, H_t)` with :math:`A = \\sum_t X_t \\otimes H_t` (see :func:`dg_operator`)."""
     Fp, Fm = split_flux(F)
     tol = 1e-14 * max(1.0, np.abs(F).max())
     Fp[np.abs(Fp) < tol] = 0.0
     Fm[np.abs(Fm) < tol] = 0.0
-    A = (
-        sp.kron(X.xplus, sp.csr_matrix(Fp))
-        + sp.kron(X.xminus, sp.csr_matrix(Fm))
-        - sp.kron(X.deriv, sp.csr_matrix(F))
-        - sp.kron(X.mass, K0)
-        - sp.kron(X.mass_u, K1)
-    )
+    terms = [(X.xplus, sp.csr_matrix(Fp)), (X.xminus, sp.csr_matrix(Fm)), (X.deriv, -sp.csr_matrix(F)),
+             (X.mass, -K0), (X.mass_u, -K1)]
+    if K2 is not None and K2.nnz:
+        terms.append((X.mass_x, -K2))
+    return terms
+
+
+def dg_operator(X: XMatrices, F: np.ndarray, K0: sp.spmatrix, K1: sp.spmatrix,
+                K2: sp.spmatrix | None = None) -> sp.csr_matrix:
+    """The global DG operator :math:`A` (see module docstring), x outer, alpha inner.
+
+    ``K2`` (optional) multiplies x, from a weight centred on a conditional mean linear in x
+    (:func:`fpe_harvester.fpe.discretize.hierarchy_matrices`): adds :math:`-M_x \\otimes K_2`.
+    """
+    A = sp.csr_matrix((X.ndofs * F.shape[0],) * 2)
+    for Xt, Ht in dg_terms(X, F, K0, K1, K2):
+        A = A + sp.kron(Xt, Ht)
     return A.tocsr()

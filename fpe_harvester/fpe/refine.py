@@ -14,8 +14,8 @@ never less than the last difference (conservative when convergence is fast). In 
 convergence may be algebraic (the kink of n = 1 makes the density non-smooth), where the
 geometric tail underestimates: with :math:`f(M) = f_\\infty + C M^{-q}` and steps of 2,
 :math:`r = ((M-2)/M)^{q+1}` gives q and the tail :math:`|e_2| M / (2q)`; the larger of the
-two estimates is used, and never less than :math:`\\sqrt{|e_1 e_2|}` (steep potentials
-converge irregularly in M). When the sequence is not yet contracting (:math:`r \\ge 0.9`) the
+two estimates is used, and never less than :math:`\\sqrt{|e_1 e_2|}` when the two steps have opposite signs (steep
+potentials converge irregularly in M). When the sequence is not yet contracting (:math:`r \\ge 0.9`) the
 estimate is :math:`10|e_2|` and the level is flagged as pre-asymptotic.
 """
 
@@ -33,7 +33,7 @@ from ..model import Harvester
 from .discretize import Level, Whitening, solve_level
 from .mesh import XMesh
 
-__all__ = ["tail_error", "reported_eta_error", "Plan", "RefinementResult", "refine"]
+__all__ = ["tail_error", "mesh_error", "reported_eta_error", "Plan", "RefinementResult", "refine"]
 
 #: Observables carried through the refinement (each gets its own estimate).
 OBSERVABLES = ("eta", "V2", "Pin", "v2", "vV", "x2")
@@ -72,10 +72,10 @@ def tail_error(values: Sequence[float], degrees: Sequence[int] | None = None) ->
     if r >= 0.9:
         return 10.0 * e2, False
     err = e2 * max(1.0, r / (1.0 - r))
-    if degrees is not None:
-        # Hermite sequences of steep potentials (n = 8) converge irregularly: a small last
-        # step can follow a large one by chance, so the geometric mean of the two steps is
-        # a floor.
+    if degrees is not None and (values[-1] - values[-2]) * (values[-2] - values[-3]) < 0.0:
+        # Hermite sequences of steep potentials (n = 8) converge irregularly, with steps of
+        # alternating sign: a small last step can follow a large one by chance, so there the
+        # geometric mean of the two steps is a floor.
         err = max(err, math.sqrt(e1 * e2))
     if degrees is not None and r > 0.0:
         M = degrees[-1]
@@ -85,6 +85,36 @@ def tail_error(values: Sequence[float], degrees: Sequence[int] | None = None) ->
         else:
             err = max(err, 10.0 * e2)
     return err, True
+
+
+def mesh_error(values: Sequence[float], order: int) -> float:
+    """Error of the finest of up to three meshes, each twice as fine as the previous.
+
+    With two meshes the last difference :math:`e_2 = |f_N - f_{N/2}|` (a bound for any
+    convergence order >= 1). With three, the observed order
+    :math:`q_{obs} = \\log_2(e_1/e_2)` (:math:`e_1 = |f_{N/2} - f_{N/4}|`) is used in the
+    Richardson estimate :math:`e_2/(2^q - 1)` with :math:`q = \\min(q_{obs}, p + 1)`: never
+    faster than the L2 order p + 1 of the DG discretization (functionals often converge
+    faster; the cap keeps the estimate conservative). If the sequence is not contracting at
+    least at first order (:math:`q_{obs} < 1`) the estimate stays :math:`e_2`.
+
+    Examples
+    --------
+    >>> round(mesh_error([1.1, 1.01], 3), 6)
+    0.09
+    >>> round(mesh_error([1.0017, 1.0001, 1.0], 3), 8)  # observed order 4 = p + 1
+    6.67e-06
+    """
+    if len(values) < 2:
+        return math.inf
+    e2 = abs(values[-1] - values[-2])
+    if len(values) < 3 or e2 == 0.0:
+        return e2
+    e1 = abs(values[-2] - values[-3])
+    if e1 == 0.0 or e2 > 0.5 * e1:
+        return e2
+    q = min(math.log2(e1 / e2), order + 1.0)
+    return e2 / (2.0**q - 1.0)
 
 
 def reported_eta_error(moments: dict[str, float], errors: dict[str, float]) -> tuple[float, float]:
@@ -216,11 +246,19 @@ def refine(h: Harvester, tol: float, plan: Plan, progress: Callable[[str], None]
         return out
 
     def estimates(M: int, nh: int, fixed: bool = False) -> tuple[dict[str, float], float, float]:
-        # Mesh: the last doubling, |f(N) - f(N/2)|, bounds the error of f(N) for any
-        # convergence order >= 1 (coarser meshes are often pre-asymptotic, so no ratio).
+        # Mesh: Richardson from the meshes nh/4, nh/2, nh with the observed order capped at
+        # p + 1 (:func:`mesh_error`); the last difference alone if the sequence is not
+        # contracting. A coarsest mesh of one element per half is still used; below that the
+        # next finer mesh serves as the comparison.
         # Hermite: tail estimate from M - 4, M - 2, M; a fixed level M is instead compared
         # with M + 2, whose own tail is added (the error of f(M) is |f(M) - f(M+2)| + tail).
-        coarse = level(M, nh // 2) if nh >= 2 else level(M, 2 * nh)
+        meshes = []
+        if nh >= 4:
+            try:  # the coarsest mesh only sharpens the estimate; it may fail to solve
+                meshes.append(level(M, nh // 4))
+            except _LevelFailed:
+                pass
+        meshes.append(level(M, nh // 2) if nh >= 2 else level(M, 2 * nh))
         degs = [m for m in ((M - 2, M, M + 2) if fixed else (M - 4, M - 2, M)) if m >= 2]
         seq_M = usable(degs, nh)
         degs = [lv.M for lv in seq_M]
@@ -231,7 +269,10 @@ def refine(h: Harvester, tol: float, plan: Plan, progress: Callable[[str], None]
             em, _ = tail_error(vals, degs)
             if fixed:
                 em += abs(vals[-1] - level(M, nh).moments[name])
-            ey = abs(level(M, nh).moments[name] - coarse.moments[name])
+            if meshes[-1].mesh.half_elements > nh:
+                ey = abs(level(M, nh).moments[name] - meshes[-1].moments[name])
+            else:
+                ey = mesh_error([lv.moments[name] for lv in meshes] + [level(M, nh).moments[name]], plan.order)
             errs[name] = em + ey
             if name == "eta":
                 eM, ex = em, ey
@@ -278,7 +319,8 @@ def refine(h: Harvester, tol: float, plan: Plan, progress: Callable[[str], None]
             elif plan.max_seconds is not None:
                 # The next step may also need the coarse-mesh level of its error estimate.
                 need = [(m, k) for m, k in ((nxt_M - 4, nxt_nh), (nxt_M - 2, nxt_nh),
-                                            (nxt_M, nxt_nh), (nxt_M, max(nxt_nh // 2, 1)))
+                                            (nxt_M, nxt_nh), (nxt_M, max(nxt_nh // 2, 1)),
+                                            (nxt_M, max(nxt_nh // 4, 1)))
                         if m >= 2 and (m, k) not in cache]
                 predicted = sum(_predicted_seconds(cache, m, k, plan.order) for m, k in need)
                 if elapsed + predicted > plan.max_seconds:

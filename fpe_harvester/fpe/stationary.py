@@ -83,8 +83,8 @@ def default_plan(h: Harvester, M: int | None = None, half_elements: int | None =
     """
     kink = h.n < 2.0
     return Plan(
-        M=6 if M is None else M,
-        half_elements=(8 if kink else 8) if half_elements is None else half_elements,
+        M=4 if M is None else M,
+        half_elements=8 if half_elements is None else half_elements,
         order=3 if order is None else order,
         theta=theta,
         grading=2.5 if kink else 1.0,
@@ -107,8 +107,11 @@ def _fields(lv: Level, x: np.ndarray) -> dict[str, np.ndarray]:
     mask = dens < 1e-9 * max(float(dens.max()), 1e-300)
     safe = np.where(mask, 1.0, dens)
     out = {"density": dens}
+    shift = np.asarray(lv.whitening.shift, dtype=float)
     for i, name in enumerate(("v_mean", "V_mean", "xi_mean")):
-        out[name] = np.ma.masked_array(np.where(mask, 0.0, num[:, i] / safe), mask=mask)
+        # <y|x> = <y'|x> + b x (the weight is centred on b x)
+        mean = num[:, i] / safe + shift[i] * np.asarray(x, dtype=float)
+        out[name] = np.ma.masked_array(np.where(mask, 0.0, mean), mask=mask)
     return out
 
 

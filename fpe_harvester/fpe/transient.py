@@ -101,7 +101,7 @@ def initial_coefficients(lv_parts: tuple[Any, HermiteBasis, Whitening], P0: np.n
     sxx = P0[0, 0]
     gain = P0[1:, 0] / sxx
     cond = P0[1:, 1:] - np.outer(P0[1:, 0], P0[1:, 0]) / sxx
-    # Conditional law of z = L^{-1} y given x: mean Li gain x, covariance Li cond Li^T.
+    # Conditional law of z = L^{-1} (y - b x) given x: mean Li (gain - b) x, covariance Li cond Li^T.
     Cz = Li @ cond @ Li.T
     Lz = np.linalg.cholesky(Cz + 1e-300 * np.eye(3)) if np.all(np.linalg.eigvalsh(Cz) > 0) else None
     if Lz is None:
@@ -115,7 +115,7 @@ def initial_coefficients(lv_parts: tuple[Any, HermiteBasis, Whitening], P0: np.n
     basis = X.basis
     xq = np.asarray(basis.global_coordinates())[0]  # (nelems, nqp)
     dx = basis.dx
-    mu = np.multiply.outer(xq, Li @ gain)  # (nelems, nqp, 3)
+    mu = np.multiply.outer(xq, Li @ (gain - np.asarray(w.shift, dtype=float)))  # (nelems, nqp, 3)
     px = np.exp(-(xq**2) / (2 * sxx)) / math.sqrt(2 * math.pi * sxx)
     b = np.zeros((basis.N, hb.size))
     phi = np.stack([np.asarray(basis.basis[i][0]) for i in range(basis.element_dofs.shape[0])])
@@ -243,10 +243,10 @@ def transient(
     w = Whitening.of(h)
     mesh = XMesh(w.domain(h, theta), half_elements, n=h.n, scale=math.sqrt(w.x2), theta=theta,
                  wall=0.1, grading=2.5 if h.n < 2 else 1.0)
-    hb, F, K0, K1 = hierarchy_matrices(h, M, w)
+    hb, F, K0, K1, K2 = hierarchy_matrices(h, M, w)
     pot, m = h.potential, h.params.m
     X = assemble_x(mesh.nodes(), order, lambda x: -pot.dU(x) / m)
-    A = dg_operator(X, F, K0, K1)
+    A = dg_operator(X, F, K0, K1, K2)
     G = (-(sp.kron(_mass_inverse(X, order + 1), sp.identity(hb.size)) @ A)).tocsr()
 
     if P0 is None:

@@ -11,7 +11,7 @@ from fpe_harvester import Harvester, MethodNotAvailableError, ParameterError, St
 from fpe_harvester.fpe import FokkerPlanck, stationary
 from fpe_harvester.fpe.discretize import Whitening, solve_level
 from fpe_harvester.fpe.mesh import XMesh
-from fpe_harvester.fpe.refine import tail_error
+from fpe_harvester.fpe.refine import mesh_error, tail_error
 from fpe_harvester.linear import lyapunov_covariance, mode_moments
 
 
@@ -133,6 +133,45 @@ def test_tail_error_cases() -> None:
     assert not ok and err == 10.0
     slow, _ = tail_error([1.0, 1.5, 1.7], [6, 8, 10])
     assert slow > 0.2 * 0.4 / 0.6  # the algebraic tail exceeds the geometric one
+
+
+def test_tail_error_floor_only_for_alternating_steps() -> None:
+    # Monotone geometric sequence: the tail, not the geometric mean of the steps.
+    mono, _ = tail_error([1.0, 1.01, 1.0101], [6, 8, 10])
+    alt, _ = tail_error([1.0, 1.01, 1.0099], [6, 8, 10])
+    assert alt >= 0.999 * math.sqrt(0.01 * 1e-4)
+    assert mono == pytest.approx(1e-4, rel=1e-9) and mono < 0.5 * alt
+
+
+def test_mesh_error_uses_capped_observed_order() -> None:
+    # order-8 convergence observed, capped at p + 1 = 4: last difference / 15
+    assert mesh_error([1.0 + 256e-6, 1.0 + 1e-6, 1.0], 3) == pytest.approx(1e-6 / 15)
+    # first-order or worse: the last difference itself
+    assert mesh_error([1.0 + 1.5e-3, 1.0 + 1e-3, 1.0], 3) == pytest.approx(1e-3)
+    assert mesh_error([1.0 + 1e-3, 1.0], 3) == pytest.approx(1e-3)
+    assert mesh_error([1.0], 3) == math.inf
+
+
+def test_conditional_weight_makes_harmonic_density_exact_at_low_M() -> None:
+    # The weight centred on b x is the exact conditional law for n = 2 (c_alpha = 0 for
+    # alpha != 0 up to the mesh error): already M = 2 reproduces the Lyapunov moments.
+    h = Harvester.build(a=0.5, n=2)
+    w = Whitening.of(h)
+    assert w.shift[0] == 0.0 and abs(w.shift[1]) > 0.0
+    lv = _level(h, 2, 12)
+    assert lv.moments["eta"] == pytest.approx(20 / 39, rel=1e-8)
+    assert lv.moments["x2"] == pytest.approx(float(mode_moments(1.0, h.params)["x2"]), rel=1e-8)
+
+
+def test_conditional_and_marginal_weights_agree_for_n3() -> None:
+    h = Harvester.build(a=0.5, n=3)
+    mo = {}
+    for cond in (True, False):
+        w = Whitening.of(h, conditional=cond)
+        mesh = XMesh(w.domain(h, 30.0), 8, n=h.n, scale=math.sqrt(w.x2), theta=30.0, wall=0.1)
+        mo[cond] = solve_level(h, 8, mesh, 3, w).moments
+    for key in ("eta", "V2", "Pin", "x2"):
+        assert mo[True][key] == pytest.approx(mo[False][key], rel=1e-4), key
 
 
 def test_rings_are_refused_with_advice() -> None:
