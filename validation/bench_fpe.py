@@ -10,8 +10,9 @@ For the single oscillator with a = 0.5 and n = 2, 3, 4, 8 (smooth) and n = 1 (ki
 * when the Monte Carlo package is importable, the cost of one Monte Carlo estimate of
   eta for n = 3, extrapolated to 1e-4 relative (time ~ 1/error^2), for the ratio.
 
-``python -m validation.bench_fpe`` runs the full benchmark (minutes) and writes
-``bench_fpe.json`` and ``bench_fpe.png`` in the current directory.
+``python -m validation.bench_fpe [--quick] [--out DIR]`` runs the benchmark (the full one
+takes tens of minutes) and writes ``bench_fpe.json`` and ``bench_fpe.png`` into DIR
+(default ``./validation_report``).
 """
 
 from __future__ import annotations
@@ -26,7 +27,7 @@ from fpe_harvester.fpe import stationary
 from fpe_harvester.fpe.discretize import Whitening, solve_level
 from fpe_harvester.fpe.mesh import XMesh
 from fpe_harvester.linear import mode_moments
-from validation.report import save_benchmark
+from validation.report import bench_main, save_benchmark
 
 __all__ = ["run"]
 
@@ -140,8 +141,4 @@ def _plot(result: dict, path: pathlib.Path) -> None:
 
 
 if __name__ == "__main__":
-    res = run(quick=False, out=pathlib.Path("."))
-    for key, case in res["cases"].items():
-        for r in case["tol_runs"]:
-            print(f"{key}: tol={r['tol']:g} {r['seconds']:.2f} s eta={r['eta']:.10f} +- {r['eta_err']:.2g} "
-                  f"(actual {r['rel_error']:.2g}) {r['status']}")
+    bench_main(run, __doc__)

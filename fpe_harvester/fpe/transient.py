@@ -50,7 +50,9 @@ class TransientSolution:
     t : ndarray
         Times (units of the model).
     V2, Pin, eta, v2, vV, x2 : ndarray
-        Moments at each time; ``eta`` is the instantaneous ratio :math:`V^2/(R P_{in})`
+        Moments at each time of the density renormalized to the mass still in the domain
+        (what leaves through :math:`\\pm L` is a truncation artefact; see ``mass``); ``eta``
+        is the instantaneous ratio :math:`V^2/(R P_{in})`
         (undefined while :math:`P_{in} \\le 0`: masked there).
     mass : ndarray
         :math:`\\int p\\,dx` (1 up to the outflow at :math:`\\pm L`).
@@ -286,7 +288,9 @@ def transient(
     def record(st: pde.ScalarField, t: float) -> None:
         C = st.data.reshape(-1, hb.size)
         mass = float(C[:, 0] @ X.integral)
-        mo = _moments(h, X, hb, C, w)
+        # Moments of the density still in the domain (the outflow at +-L is a truncation
+        # artefact, recorded in ``mass``).
+        mo = _moments(h, X, hb, C / mass if mass > 0 else C, w)
         if not (np.all(np.isfinite(C)) and abs(mass - mass0) < 1e-3 and mo["V2"] > 0 and mo["x2"] > 0):
             raise NotConvergedError(
                 f"transient run unstable at t = {t:.4g} (mass {mass:.6g}, V2 {mo['V2']:.4g}): the "
