@@ -96,7 +96,7 @@ def run(quick: bool = False, out: pathlib.Path | None = None) -> dict:
             tols = [1e-2] if kink else [1e-3]
         else:
             tols = [1e-3] if kink else [1e-4, 1e-6]
-        runs = [_tol_run(h, tol, 60.0 if quick else 600.0) for tol in tols]
+        runs = [_tol_run(h, tol, 60.0 if quick else 240.0) for tol in tols]
         if n == 2.0:
             mo = mode_moments(1.0, h.params)
             ref, ref_err, ref_src = float(mo["V2"] / mo["Pin"]), 0.0, "exact"

