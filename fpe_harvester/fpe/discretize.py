@@ -66,17 +66,18 @@ class Whitening:
         """Weight of harvester ``h``: conditional on x or marginal.
 
         ``conditional=None`` picks the measured better choice: conditional for
-        :math:`n \\le 4`, marginal for steeper potentials. Measured at a = 0.5, tol = 1e-4:
-        n = 2 is exact at M = 2 with the conditional weight; n = 3 has a 4x smaller Hermite
-        error at every M (2.8 s against 3.3 s); n = 1, 1.5, 4 are the same either way; for
-        n = 8 the conditional weight makes the Hermite sequence irregular (M = 14 and 88 s
-        against M = 12 and 36 s) because a mean linear in x is a poor guess at steep walls.
+        :math:`2 \\le n \\le 4`, marginal otherwise. Measured at a = 0.5, tol = 1e-4: n = 2
+        is exact at M = 2 with the conditional weight; n = 3 has a 4x smaller Hermite error
+        at every M (2.8 s against 3.3 s); n = 1, 1.5, 4 are the same either way; for n = 8
+        the conditional weight makes the Hermite sequence irregular (M = 14 and 88 s against
+        M = 12 and 36 s) because a mean linear in x is a poor guess at steep walls; for the
+        kink (n = 1, a = 2) it turns an unphysical low level into a wild sequence.
         """
         from ..linear import lyapunov_covariance
 
         Sigma, kappa, x2 = whitening_covariance(h)
         if conditional is None:
-            conditional = h.n <= 4.0
+            conditional = 2.0 <= h.n <= 4.0
         if not conditional:
             return cls(Sigma, np.linalg.cholesky(Sigma), kappa, x2)
         P = lyapunov_covariance(kappa, h.params)

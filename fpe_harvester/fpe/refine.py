@@ -35,6 +35,10 @@ from .mesh import XMesh
 
 __all__ = ["tail_error", "mesh_error", "reported_eta_error", "Plan", "RefinementResult", "refine"]
 
+#: Largest relative spread of eta over the good levels for which a broken-down refinement
+#: still returns its finest level (with the spread as error); beyond it, no estimate.
+BROKEN_SPREAD = 0.1
+
 #: Observables carried through the refinement (each gets its own estimate).
 OBSERVABLES = ("eta", "V2", "Pin", "v2", "vV", "x2")
 
@@ -388,7 +392,10 @@ def _broken(why: str, cache: dict[tuple[int, int], Level], tol: float, seconds: 
 
     With the refinement broken there is no asymptotic estimate: the error of each observable
     is the largest difference between the kept level and the other good levels (its own
-    magnitude if there is only one). ``best`` is None when no level worked.
+    magnitude if there is only one). ``best`` is None when no level worked, or when the
+    levels disagree in eta by more than ``BROKEN_SPREAD`` (a wild sequence, e.g. the kink
+    with a = 2: 0.008, 0.020, 0.019, 0.076 at M = 2..8 while Monte Carlo gives 0.15, whose
+    spread would be a false error bar).
     """
     advice = ("the Hermite expansion around the equivalent harmonic unit does not resolve this "
               "density (strongly non-Gaussian, e.g. a quasi-static drive or a kink force larger "
@@ -401,6 +408,14 @@ def _broken(why: str, cache: dict[tuple[int, int], Level], tol: float, seconds: 
     for name in OBSERVABLES:
         others = [abs(lv.moments[name] - best.moments[name]) for k, lv in cache.items() if k != key]
         errs[name] = max(others) if others else abs(best.moments[name])
+    spread = errs["eta"] / abs(best.moments["eta"])
+    if spread > BROKEN_SPREAD:
+        # Levels this far apart are not a converging sequence: their spread is no error bar.
+        why = (f"{why}; " + (f"the good levels disagree by {spread:.0%} in eta (more than "
+                             f"{BROKEN_SPREAD:.0%})" if len(cache) > 1 else "only one level worked")
+               + ", so no estimate is given")
+        return RefinementResult(None, {}, math.inf, math.inf, False, f"tol = {tol:.2g} not reached: "
+                                f"refinement broke down, {why}; {advice}", _history(cache), seconds)
     reason = (f"tol = {tol:.2g} not reached: refinement broke down, {why}; kept M = {best.M}, "
               f"{best.mesh.elements} elements, error = spread over the good levels; {advice}")
     return RefinementResult(best, errs, errs["eta"], 0.0, False, reason, _history(cache), seconds)
