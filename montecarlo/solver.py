@@ -232,7 +232,7 @@ class MonteCarlo:
                 f"escaped (|x| > {self.threshold(h):g}) during burn-in (median escape time "
                 f"{info['escape_time_median']}). No statistics."))
         stats = self._stats(h, est, info)
-        return self._label(h, stats, est, esc, met, kd)
+        return self._label(h, stats, est, esc, met, kd, harmonic_status)
 
     def _stats(self, h: Harvester, est: Estimate, info: dict[str, Any]) -> Stats:
         mean, se = est.mean, est.se
@@ -251,7 +251,7 @@ class MonteCarlo:
                         "eta": eta, "eta_err": eta_err})
 
     def _label(self, h: Harvester, s: Stats, est: Estimate, esc: float, met: bool,
-               kd: float | None) -> Stats:
+               kd: float | None, harmonic_status: str | None) -> Stats:
         rel = s.eta_err / abs(s.eta) if s.eta else math.inf
         fields = {f: getattr(s, f) for f in s.__dataclass_fields__}
         bias_rel = abs(est.bias["eta"] / s.eta) if s.eta else 0.0
@@ -260,7 +260,7 @@ class MonteCarlo:
         note = "" if met else (
             f" NOT CONVERGED: relative error on eta {rel:.2e} > tol {self.tol:g} after "
             f"{est.replicas} replicas; {why}.")
-        if h.is_linear and classify(h)[0] == "marginal":
+        if harmonic_status == "marginal":
             fields.update(status=Status.MARGINAL, x2=None, x2_err=None, message=(
                 f"marginal: k = k_di = {kd:.10g}; x of the critical mode diffuses (x2 not reported); "
                 "V2, Pin, eta are finite." + note))
