@@ -8,7 +8,7 @@ from typing import ClassVar
 import numpy as np
 
 from .errors import MethodNotAvailableError, ParameterError, check_int
-from .linear import mode_moments, ring_moments
+from .linear import ring_moments
 from .model import Harvester, Params, mode_sin2
 from .result import Stats, Status
 from .stability import MARGINAL_RTOL, classify, growth_rate, k_di

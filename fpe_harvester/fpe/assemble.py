@@ -151,7 +151,8 @@ def assemble_x(mesh_nodes: np.ndarray, order: int, u: Callable[[np.ndarray], np.
         return A[perm][:, perm].tocsr()
 
     return XMatrices(
-        mass=p2(mass), mass_u=p2(mass_u), mass_x=p2(mass_x), deriv=p2(deriv), xplus=p2(xplus), xminus=p2(xminus),
+        mass=p2(mass), mass_u=p2(mass_u), mass_x=p2(mass_x), deriv=p2(deriv), xplus=p2(xplus),
+        xminus=p2(xminus),
         integral=integral[perm], x2=x2[perm], x1=x1[perm], basis=basis, order=order, perm=perm,
     )
 

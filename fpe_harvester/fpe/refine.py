@@ -14,9 +14,11 @@ never less than the last difference (conservative when convergence is fast). In 
 convergence may be algebraic (the kink of n = 1 makes the density non-smooth), where the
 geometric tail underestimates: with :math:`f(M) = f_\\infty + C M^{-q}` and steps of 2,
 :math:`r = ((M-2)/M)^{q+1}` gives q and the tail :math:`|e_2| M / (2q)`; the larger of the
-two estimates is used, and never less than :math:`\\sqrt{|e_1 e_2|}` when the two steps have opposite signs (steep
-potentials converge irregularly in M). When the sequence is not yet contracting (:math:`r \\ge 0.9`) the
-estimate is :math:`10|e_2|` and the level is flagged as pre-asymptotic.
+two estimates is used, and never less than :math:`\\sqrt{|e_1 e_2|}` when the two steps
+have opposite signs (steep potentials converge irregularly in M). When the sequence is not
+yet contracting (:math:`r \\ge 0.9`) the estimate is :math:`10|e_2|` and the level is
+flagged as pre-asymptotic. The mesh error is a Richardson estimate from three meshes
+(:func:`mesh_error`).
 """
 
 from __future__ import annotations
@@ -276,7 +278,8 @@ def refine(h: Harvester, tol: float, plan: Plan, progress: Callable[[str], None]
             if meshes[-1].mesh.half_elements > nh:
                 ey = abs(level(M, nh).moments[name] - meshes[-1].moments[name])
             else:
-                ey = mesh_error([lv.moments[name] for lv in meshes] + [level(M, nh).moments[name]], plan.order)
+                seq = [lv.moments[name] for lv in meshes] + [level(M, nh).moments[name]]
+                ey = mesh_error(seq, plan.order)
             errs[name] = em + ey
             if name == "eta":
                 eM, ex = em, ey

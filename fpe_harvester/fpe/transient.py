@@ -32,11 +32,10 @@ import scipy.sparse.linalg  # noqa: F401  (sp.linalg.spsolve)
 
 from ..errors import MethodNotAvailableError, NotConvergedError, ParameterError, check_int, check_real
 from ..model import Harvester
-from .assemble import dg_operator
+from .assemble import assemble_x, dg_operator
 from .discretize import Level, Whitening, _moments, hierarchy_matrices
-from .mesh import XMesh
-from .assemble import assemble_x
 from .hermite import HermiteBasis
+from .mesh import XMesh
 
 __all__ = ["TransientSolution", "transient", "initial_coefficients", "lyapunov_transient"]
 

@@ -223,5 +223,6 @@ def test_converges_for_nonlinear_potentials(n: float, a: float) -> None:
     assert r.eta is not None and r.eta_err is not None, r.message
     if r.status is Status.STABLE:
         assert r.eta_err <= 1e-4 * r.eta
-    finer = _level(h, r.info["M"] + 2, r.info["elements"], grading=2.5 if n < 2 else 1.0)
+    finer = _level(h, r.info["M"] + 2, r.info["elements"], order=r.info["order"],
+                   grading=2.5 if n < 2 else 1.0)
     assert abs(finer.moments["eta"] - r.eta) <= r.eta_err
