@@ -36,7 +36,7 @@ class FokkerPlanck:
     elements : int, optional
         Number of elements in x (even, >= 2).
     order : int, optional
-        DG polynomial order, 2..5 (default 3; 4 for n > 4).
+        DG polynomial order, 2..5 (default 3).
     domain : float
         Domain factor :math:`\\Theta = U(L)/T_{eff}` in [5, 200]. Default 30.
     max_M : int

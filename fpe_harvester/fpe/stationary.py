@@ -79,15 +79,17 @@ class FPESolution:
 def default_plan(h: Harvester, M: int | None = None, half_elements: int | None = None,
                  order: int | None = None, theta: float = 30.0) -> Plan:
     """Starting discretization for ``h``: smooth potentials (n >= 2) on a mesh graded toward
-    the walls, n < 2 (kink or non-smooth force at 0) graded toward 0. DG order P3, P4 for
-    steep walls (n > 4): measured at a = 0.5, tol = 1e-4, n = 8 needs 16 P4 elements (21 s)
-    against 32 P3 elements (37 s), while P4 is slower for n = 1.5, 3, 4 (by 30-50 %).
+    the walls, n < 2 (kink or non-smooth force at 0) graded toward 0; DG order P3.
+
+    P4 was measured as an alternative at tol = 1e-4 and is not a robust gain: n = 8 took
+    21 s (16 P4 elements) against 37 s (32 P3) at a = 0.5 but 51 s against 16 s at a = 2;
+    for n = 1.5, 3, 4 (a = 0.5) P4 is 30-50 % slower.
     """
     kink = h.n < 2.0
     return Plan(
         M=4 if M is None else M,
         half_elements=8 if half_elements is None else half_elements,
-        order=(4 if h.n > 4.0 else 3) if order is None else order,
+        order=3 if order is None else order,
         theta=theta,
         grading=2.5 if kink else 1.0,
         wall=0.1,
@@ -172,7 +174,7 @@ def stationary(
     half_elements : int, optional
         Elements per half-domain to start from (>= 1).
     order : int, optional
-        DG polynomial order in 2..5 (default 3; 4 for n > 4).
+        DG polynomial order in 2..5 (default 3).
     theta : float
         Domain factor :math:`U(L)/T_{eff}` in [5, 200]. Default 30.
     max_M, max_dofs : int
