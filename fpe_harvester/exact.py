@@ -46,6 +46,7 @@ class Exact:
         if reason:
             raise MethodNotAvailableError(reason + "; use method='fpe' (N = 1) or 'mc'")
         kap = h.mode_stiffness()
+        scale = 2.0 * h.a + 4.0 * abs(h.k)
         status, kmin = classify(h, kappa=kap)
         rate = growth_rate(h, kappa=kap)
         kd = k_di(h.N, h.a)
@@ -64,12 +65,12 @@ class Exact:
             )
         message = "stable"
         if status == "marginal":
-            kap = _clip_marginal(kap, 2.0 * h.a + 4.0 * abs(h.k))
+            kap = _clip_marginal(kap, scale)
             message = (
                 f"marginal: k = k_di = {kd:.10g}; the critical mode has zero stiffness, so its x "
                 "diffuses (x2 is unbounded) while V2, Pin and eta are the finite limits"
             )
-        mom, err = _moments_with_roundoff(kap, 2.0 * h.a + 4.0 * abs(h.k), h.params)
+        mom, err = _moments_with_roundoff(kap, scale, h.params)
         marginal = status == "marginal"
         return Stats.from_moments(
             V2=float(mom["V2"]), V2_err=float(err["V2"]),

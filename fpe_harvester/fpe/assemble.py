@@ -1,6 +1,6 @@
 """DG assembly in x with scikit-fem: scalar matrices and the upwind-flux operator.
 
-The truncated hierarchy :math:`\\partial_x(F c) = (K_0 + u(x) K_1) c` is a first-order
+The truncated hierarchy :math:`\\partial_x(F c) = (K_0 + u(x) K_1 + x K_2) c` is a first-order
 hyperbolic system with a symmetric, singular flux matrix F. Its discontinuous-Galerkin
 weak form on every element K, with the upwind (characteristic) numerical flux
 :math:`\\hat F = F^+ c^- + F^- c^+` (:math:`F^\\pm = R\\Lambda^\\pm R^T`, the positive and
@@ -9,14 +9,15 @@ negative parts of F; :math:`c^\\mp` the traces left and right of a node), reads
 .. math::
 
     \\sum_K \\Big( [\\psi \\hat F]_{\\partial K} - \\int_K F c\\,\\psi' \\,dx
-    - \\int_K \\psi (K_0 + u K_1) c\\,dx \\Big) = 0,
+    - \\int_K \\psi (K_0 + u K_1 + x K_2) c\\,dx \\Big) = 0,
 
 with zero inflow at :math:`\\pm L`. Every term is a Kronecker product of an x-matrix
 (assembled here by scikit-fem) and an :math:`\\alpha`-matrix (from :mod:`.hermite`):
 
 .. math::
 
-    A = X_+ \\otimes F^+ + X_- \\otimes F^- - D \\otimes F - M \\otimes K_0 - M_u \\otimes K_1 .
+    A = X_+ \\otimes F^+ + X_- \\otimes F^- - D \\otimes F - M \\otimes K_0
+        - M_u \\otimes K_1 - M_x \\otimes K_2 .
 
 Unknowns are ordered element by element, x outer and :math:`\\alpha` inner.
 """
@@ -41,7 +42,7 @@ from skfem import (
     asm,
 )
 
-__all__ = ["XMatrices", "assemble_x", "split_flux", "dg_terms", "dg_operator"]
+__all__ = ["XMatrices", "assemble_x", "split_flux", "dg_operator"]
 
 
 @dataclass(frozen=True)
@@ -163,20 +164,6 @@ def split_flux(F: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     return (R * np.maximum(lam, 0.0)) @ R.T, (R * np.minimum(lam, 0.0)) @ R.T
 
 
-def dg_terms(X: XMatrices, F: np.ndarray, K0: sp.spmatrix, K1: sp.spmatrix,
-             K2: sp.spmatrix | None = None) -> list[tuple[sp.csr_matrix, sp.spmatrix]]:
-    """The pairs :math:`(X_t, H_t)` with :math:`A = \\sum_t X_t \\otimes H_t` (see :func:`dg_operator`)."""
-    Fp, Fm = split_flux(F)
-    tol = 1e-14 * max(1.0, np.abs(F).max())
-    Fp[np.abs(Fp) < tol] = 0.0
-    Fm[np.abs(Fm) < tol] = 0.0
-    terms = [(X.xplus, sp.csr_matrix(Fp)), (X.xminus, sp.csr_matrix(Fm)), (X.deriv, -sp.csr_matrix(F)),
-             (X.mass, -K0), (X.mass_u, -K1)]
-    if K2 is not None and K2.nnz:
-        terms.append((X.mass_x, -K2))
-    return terms
-
-
 def dg_operator(X: XMatrices, F: np.ndarray, K0: sp.spmatrix, K1: sp.spmatrix,
                 K2: sp.spmatrix | None = None) -> sp.csr_matrix:
     """The global DG operator :math:`A` (see module docstring), x outer, alpha inner.
@@ -184,7 +171,17 @@ def dg_operator(X: XMatrices, F: np.ndarray, K0: sp.spmatrix, K1: sp.spmatrix,
     ``K2`` (optional) multiplies x, from a weight centred on a conditional mean linear in x
     (:func:`fpe_harvester.fpe.discretize.hierarchy_matrices`): adds :math:`-M_x \\otimes K_2`.
     """
-    A = sp.csr_matrix((X.ndofs * F.shape[0],) * 2)
-    for Xt, Ht in dg_terms(X, F, K0, K1, K2):
-        A = A + sp.kron(Xt, Ht)
+    Fp, Fm = split_flux(F)
+    tol = 1e-14 * max(1.0, np.abs(F).max())
+    Fp[np.abs(Fp) < tol] = 0.0
+    Fm[np.abs(Fm) < tol] = 0.0
+    A = (
+        sp.kron(X.xplus, sp.csr_matrix(Fp))
+        + sp.kron(X.xminus, sp.csr_matrix(Fm))
+        - sp.kron(X.deriv, sp.csr_matrix(F))
+        - sp.kron(X.mass, K0)
+        - sp.kron(X.mass_u, K1)
+    )
+    if K2 is not None and K2.nnz:
+        A = A - sp.kron(X.mass_x, K2)
     return A.tocsr()

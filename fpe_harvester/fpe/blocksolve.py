@@ -96,4 +96,3 @@ class BlockTridiagonal:
             t[up.rows] = up.values @ x[k + 1][up.cols]
             x[k] = y[k] - sl.lu_solve(self.lu[k], t, check_finite=False)
         return x.ravel()
-

@@ -21,10 +21,10 @@ import scipy.sparse as sp
 from ..model import Harvester
 from .assemble import XMatrices, assemble_x, dg_operator
 from .blocksolve import BlockTridiagonal
-from .hermite import HermiteBasis, linear_drift, whitening_covariance
+from .hermite import HermiteBasis, equivalent_harmonic, linear_drift
 from .mesh import XMesh
 
-__all__ = ["Whitening", "Level", "solve_level", "hierarchy_matrices"]
+__all__ = ["Whitening", "Level", "solve_level", "assemble_level", "hierarchy_matrices"]
 
 
 @dataclass(frozen=True)
@@ -73,22 +73,22 @@ class Whitening:
         M = 12 and 36 s) because a mean linear in x is a poor guess at steep walls; for the
         kink (n = 1, a = 2) it turns an unphysical low level into a wild sequence.
         """
-        from ..linear import lyapunov_covariance
-
-        Sigma, kappa, x2 = whitening_covariance(h)
+        kappa, P = equivalent_harmonic(h)
+        x2 = float(P[0, 0])
         if conditional is None:
             conditional = 2.0 <= h.n <= 4.0
         if not conditional:
+            Sigma = P[1:, 1:].copy()
             return cls(Sigma, np.linalg.cholesky(Sigma), kappa, x2)
-        P = lyapunov_covariance(kappa, h.params)
-        cov = P[1:, 0]
-        b = cov / P[0, 0]
+        b = P[1:, 0] / x2
         # <x v> = 0 exactly in a stationary state; drop its round-off so v = L_00 z_0 stays
         # the transport variable (F tridiagonal in the v index).
         b[0] = 0.0
-        cov = b * P[0, 0]
-        cond = P[1:, 1:] - np.outer(cov, cov) / P[0, 0]
-        return cls(cond, np.linalg.cholesky(cond), kappa, float(P[0, 0]), b)
+        cond = P[1:, 1:] - np.outer(b, b) * x2
+        return cls(cond, np.linalg.cholesky(cond), kappa, x2, b)
+
+    def __post_init__(self) -> None:
+        object.__setattr__(self, "shift", np.asarray(self.shift, dtype=float))
 
     @property
     def temperature(self) -> float:
@@ -119,7 +119,7 @@ def hierarchy_matrices(h: Harvester, M: int, w: Whitening) -> tuple[HermiteBasis
     hb = HermiteBasis(M)
     B, e, Q = linear_drift(h)
     Li = np.linalg.inv(w.chol)
-    b = np.asarray(w.shift, dtype=float)
+    b = w.shift
     F = w.chol[0, 0] * hb.multiply(0).toarray()
     K0 = hb.generator(Li @ (B - np.outer(b, [1.0, 0.0, 0.0])) @ w.chol, Li @ Q @ Li.T)
     K1 = hb.lowering(Li @ e)
@@ -168,13 +168,22 @@ class Level:
         }
 
 
+def assemble_level(h: Harvester, M: int, mesh: XMesh, order: int, w: Whitening
+                   ) -> tuple[HermiteBasis, np.ndarray, XMatrices, sp.csr_matrix]:
+    """Hermite basis, flux matrix F, scalar x-matrices and the global DG operator A of one level."""
+    hb, F, K0, K1, K2 = hierarchy_matrices(h, M, w)
+    m, pot = h.params.m, h.potential
+    X = assemble_x(mesh.nodes(), order, lambda x: -pot.dU(x) / m)
+    return hb, F, X, dg_operator(X, F, K0, K1, K2)
+
+
 def _moments(h: Harvester, X: XMatrices, hb: HermiteBasis, C: np.ndarray, w: Whitening) -> dict[str, float]:
     p = h.params
     # y = y' + b x with y' = L z: <y_i y_j> = <y'_i y'_j> + b_i <x y'_j> + b_j <x y'_i> + b_i b_j <x^2>.
     W = hb.second_moment_weights(w.chol)
     Y = np.einsum("ijm,km->ijk", W, C) @ X.integral
     xy = hb.first_moment_weights(w.chol) @ (C.T @ X.x1)
-    b = np.asarray(w.shift, dtype=float)
+    b = w.shift
     Y = Y + np.outer(b, xy) + np.outer(xy, b) + np.outer(b, b) * float(C[:, 0] @ X.x2)
     v2, vV, vxi, V2 = Y[0, 0], Y[0, 1], Y[0, 2], Y[1, 1]
     Pin = p.sigma * vxi
@@ -204,12 +213,8 @@ def solve_level(h: Harvester, M: int, mesh: XMesh, order: int, w: Whitening) -> 
         The Gaussian weight.
     """
     t0 = time.perf_counter()
-    hb, F, K0, K1, K2 = hierarchy_matrices(h, M, w)
-    m = h.params.m
-    pot = h.potential
-    X = assemble_x(mesh.nodes(), order, lambda x: -pot.dU(x) / m)
+    hb, F, X, A = assemble_level(h, M, mesh, order, w)
     na = hb.size
-    A = dg_operator(X, F, K0, K1, K2)
     # Inverse iteration for the generalized problem A c = lambda (M_x (x) I) c: A is
     # nonsingular only through the outflow at +-L, whose eigenvalue lambda_0 is exponentially
     # small, and the stationary density is its eigenvector (the quasi-stationary density of

@@ -33,7 +33,7 @@ import scipy.sparse as sp
 
 from ..model import Harvester
 
-__all__ = ["HermiteBasis", "linear_drift", "whitening_covariance"]
+__all__ = ["HermiteBasis", "linear_drift", "equivalent_harmonic", "whitening_covariance"]
 
 
 def linear_drift(h: Harvester) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -200,7 +200,14 @@ class HermiteBasis:
 
 
 def whitening_covariance(h: Harvester) -> tuple[np.ndarray, float, float]:
-    """Gaussian weight for the Hermite expansion from a statistical linearization.
+    """Gaussian weight for the Hermite expansion: ``(Sigma, kappa, x2)`` of the equivalent
+    harmonic unit (:func:`equivalent_harmonic`), Sigma the covariance of (v, V, xi)."""
+    kappa, P = equivalent_harmonic(h)
+    return P[1:, 1:].copy(), kappa, float(P[0, 0])
+
+
+def equivalent_harmonic(h: Harvester) -> tuple[float, np.ndarray]:
+    """Stiffness and stationary covariance of the equivalent harmonic unit (statistical linearization).
 
     The stiffness :math:`\\kappa` of an equivalent harmonic unit is the root of the mismatch
 
@@ -229,12 +236,10 @@ def whitening_covariance(h: Harvester) -> tuple[np.ndarray, float, float]:
 
     Returns
     -------
-    Sigma : ndarray (3, 3)
-        Stationary covariance of (v, V, xi) of the equivalent harmonic unit.
     kappa : float
         Equivalent stiffness (``2a`` for n = 2), > 0 and finite for every a > 0, n >= 1.
-    x2 : float
-        Its :math:`\\langle x^2\\rangle`.
+    P : ndarray (4, 4)
+        Stationary covariance of (x, v, V, xi) of the harmonic unit with that stiffness.
     """
     from scipy.optimize import brentq
 
@@ -252,8 +257,7 @@ def whitening_covariance(h: Harvester) -> tuple[np.ndarray, float, float]:
         kappa = 2.0 * a
     else:
         kappa = math.exp(_equivalent_log_stiffness(mismatch, math.log(2.0 * a), brentq))
-    P = lyapunov_covariance(kappa, h.params)
-    return P[1:, 1:].copy(), kappa, float(P[0, 0])
+    return kappa, lyapunov_covariance(kappa, h.params)
 
 
 #: Search window in ln(kappa) around ln(2a), and the flatness criteria of the fallback.
@@ -267,7 +271,7 @@ def _equivalent_log_stiffness(mismatch: Callable[[float], float], start: float,
     """Root of the decreasing ``mismatch`` in ln(kappa), or the bounded minimizer if none.
 
     The search stays within ``start +- _SEARCH_DECADES`` e-folds (the closed-form moments
-    stay finite there); see :func:`whitening_covariance` for the fallback.
+    stay finite there); see :func:`equivalent_harmonic` for the fallback.
     """
     # Infimum of mu: reached (to _FLAT_STEP) at the far end of the window only when n = 1.
     far = start + _SEARCH_DECADES

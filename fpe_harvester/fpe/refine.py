@@ -313,8 +313,7 @@ def refine(h: Harvester, tol: float, plan: Plan, progress: Callable[[str], None]
             else:
                 grow_M = True
             nxt_M, nxt_nh = (M + 2, nh) if grow_M else (M, 2 * nh)
-            na = (nxt_M + 1) * (nxt_M + 2) * (nxt_M + 3) // 6
-            dofs = 2 * nxt_nh * (plan.order + 1) * na
+            dofs = 2 * nxt_nh * _block_size(nxt_M, plan.order)
             elapsed = time.perf_counter() - t0
             limit = None
             if nxt_M > plan.max_M:
@@ -349,6 +348,7 @@ def refine(h: Harvester, tol: float, plan: Plan, progress: Callable[[str], None]
 def _history(cache: dict[tuple[int, int], Level]) -> list[dict[str, Any]]:
     return [lv.summary() for _, lv in sorted(cache.items())]
 
+
 class _LevelFailed(Exception):
     """A level could not be solved or gave unphysical moments (refinement breaks down)."""
 
@@ -362,9 +362,14 @@ def _unphysical(lv: Level) -> str:
     return ""
 
 
+def _block_size(M: int, order: int) -> int:
+    """Unknowns per element, :math:`n_b = (p + 1)\\binom{M+3}{3}`."""
+    return (order + 1) * math.comb(M + 3, 3)
+
+
 def _cost_unit(M: int, order: int) -> float:
-    # Dense LU per element: ((p + 1) * C(M + 3, 3))^3.
-    return float((order + 1) * math.comb(M + 3, 3)) ** 3
+    # Dense LU per element: n_b^3.
+    return float(_block_size(M, order)) ** 3
 
 
 def _predicted_seconds(cache: dict[tuple[int, int], Level], M: int, nh: int, order: int) -> float:
@@ -377,7 +382,7 @@ def _predicted_seconds(cache: dict[tuple[int, int], Level], M: int, nh: int, ord
     """
     if not cache:
         return 0.0
-    unit = lambda m: _cost_unit(m, order) ** (1.0 / 3.0)  # noqa: E731  n_b
+    unit = lambda m: float(_block_size(m, order))  # noqa: E731  n_b
     ranked = sorted(cache.items(), key=lambda kv: kv[0][1] * unit(kv[0][0]) ** 3)
     (m0, k0), lv0 = ranked[-1]
     q = 3.0

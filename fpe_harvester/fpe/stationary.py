@@ -111,7 +111,7 @@ def _fields(lv: Level, x: np.ndarray) -> dict[str, np.ndarray]:
     mask = dens < 1e-9 * max(float(dens.max()), 1e-300)
     safe = np.where(mask, 1.0, dens)
     out = {"density": dens}
-    shift = np.asarray(lv.whitening.shift, dtype=float)
+    shift = lv.whitening.shift
     for i, name in enumerate(("v_mean", "V_mean", "xi_mean")):
         # <y|x> = <y'|x> + b x (the weight is centred on b x)
         mean = num[:, i] / safe + shift[i] * np.asarray(x, dtype=float)

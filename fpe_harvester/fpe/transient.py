@@ -32,8 +32,7 @@ import scipy.sparse.linalg  # noqa: F401  (sp.linalg.spsolve)
 
 from ..errors import MethodNotAvailableError, NotConvergedError, ParameterError, check_int, check_real
 from ..model import Harvester
-from .assemble import assemble_x, dg_operator
-from .discretize import Level, Whitening, _moments, hierarchy_matrices
+from .discretize import Level, Whitening, _moments, assemble_level
 from .hermite import HermiteBasis
 from .mesh import XMesh
 
@@ -116,7 +115,7 @@ def initial_coefficients(lv_parts: tuple[Any, HermiteBasis, Whitening], P0: np.n
     basis = X.basis
     xq = np.asarray(basis.global_coordinates())[0]  # (nelems, nqp)
     dx = basis.dx
-    mu = np.multiply.outer(xq, Li @ (gain - np.asarray(w.shift, dtype=float)))  # (nelems, nqp, 3)
+    mu = np.multiply.outer(xq, Li @ (gain - w.shift))  # (nelems, nqp, 3)
     px = np.exp(-(xq**2) / (2 * sxx)) / math.sqrt(2 * math.pi * sxx)
     b = np.zeros((basis.N, hb.size))
     phi = np.stack([np.asarray(basis.basis[i][0]) for i in range(basis.element_dofs.shape[0])])
@@ -244,10 +243,7 @@ def transient(
     w = Whitening.of(h)
     mesh = XMesh(w.domain(h, theta), half_elements, n=h.n, scale=math.sqrt(w.x2), theta=theta,
                  wall=0.1, grading=2.5 if h.n < 2 else 1.0)
-    hb, F, K0, K1, K2 = hierarchy_matrices(h, M, w)
-    pot, m = h.potential, h.params.m
-    X = assemble_x(mesh.nodes(), order, lambda x: -pot.dU(x) / m)
-    A = dg_operator(X, F, K0, K1, K2)
+    hb, F, X, A = assemble_level(h, M, mesh, order, w)
     G = (-(sp.kron(_mass_inverse(X, order + 1), sp.identity(hb.size)) @ A)).tocsr()
 
     if P0 is None:
