@@ -43,13 +43,15 @@ class _Coupling:
     ``left`` lives on the rows ``rows`` of the block, ``right`` on the columns ``cols``.
     """
 
-    def __init__(self, block: sp.spmatrix, known: dict[bytes, tuple[np.ndarray, np.ndarray]]) -> None:
-        block = sp.csr_matrix(block)
-        block.eliminate_zeros()
-        rows, cols = block.nonzero()
-        self.rows = np.unique(rows)
-        self.cols = np.unique(cols)
-        dense = block[self.rows][:, self.cols].toarray()
+    def __init__(self, r: np.ndarray, c: np.ndarray, v: np.ndarray,
+                 known: dict[bytes, tuple[np.ndarray, np.ndarray]]) -> None:
+        # (r, c, v): the nonzero entries of the block in block-local indices.
+        keep = v != 0.0
+        r, c, v = r[keep], c[keep], v[keep]
+        self.rows, ri = np.unique(r, return_inverse=True)
+        self.cols, ci = np.unique(c, return_inverse=True)
+        dense = np.zeros((len(self.rows), len(self.cols)))
+        dense[ri, ci] = v
         # The DG couplings of a uniform reference element repeat from element to element:
         # one SVD per distinct block.
         key = np.array(dense.shape).tobytes() + dense.tobytes()
@@ -120,18 +122,36 @@ class BlockTridiagonal:
         self.nblocks = N = n // block
         self.mid = m = N // 2
         b = block
-        rows = [A[k * b:(k + 1) * b] for k in range(N)]
+        # Split the entries by block row and column once (scipy's 2-D slicing is slow here).
+        A.sum_duplicates()
+        Ac = A.tocoo()
+        br, bc = Ac.row // b, Ac.col // b
+        if np.any(np.abs(br - bc) > 1):
+            raise ValueError("matrix has entries outside the block tridiagonal")
+        order = np.lexsort((bc, br))
+        keys = (br * 3 + (bc - br + 1))[order]
+        cuts = np.searchsorted(keys, np.arange(3 * N + 1))
+        R, C, V = Ac.row[order] % b, Ac.col[order] % b, Ac.data[order]
+
+        def part(k: int, d: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+            i = 3 * k + d + 1
+            sl_ = slice(cuts[i], cuts[i + 1])
+            return R[sl_], C[sl_], V[sl_]
+
         known: dict[bytes, tuple[np.ndarray, np.ndarray]] = {}
         #: lower[k - 1] = A_{k,k-1}, upper[k] = A_{k,k+1}
-        self.lower = [_Coupling(rows[k][:, (k - 1) * b:k * b], known) for k in range(1, N)]
-        self.upper = [_Coupling(rows[k][:, (k + 1) * b:(k + 2) * b], known) for k in range(N - 1)]
+        self.lower = [_Coupling(*part(k, -1), known) for k in range(1, N)]
+        self.upper = [_Coupling(*part(k, 1), known) for k in range(N - 1)]
         self.lu: list[Any] = [None] * N
         # W[k] = S_k^{-1} (left factor of A_{k,k+1}) for k < m (left sweep),
         # W[k] = T_k^{-1} (left factor of A_{k,k-1}) for k > m (right sweep).
         self.W: list[Any] = [None] * N
 
         def diag(k: int) -> np.ndarray:
-            return rows[k][:, k * b:(k + 1) * b].toarray()
+            r, c, v = part(k, 0)
+            out = np.zeros((b, b), order="F")
+            out[r, c] = v
+            return out
 
         def placed(c: _Coupling) -> np.ndarray:
             out = np.zeros((b, c.rank))
