@@ -113,3 +113,33 @@ def test_block_tridiagonal_matches_sparse_lu(rng: np.random.Generator) -> None:
     A = A.tocsr()
     r = rng.normal(size=nb * b)
     assert np.allclose(BlockTridiagonal(A, b).solve(r), spla.spsolve(A.tocsc(), r), atol=1e-12)
+
+
+@pytest.mark.parametrize("nblocks", [1, 2, 3, 6, 7])
+@pytest.mark.parametrize("threads", [1, 2])
+def test_block_tridiagonal_low_rank_couplings(rng: np.random.Generator, nblocks: int, threads: int) -> None:
+    # Couplings of rank 2 on a few rows and columns (like the DG traces times F+-), some
+    # repeated from block to block (the factorization shares their low-rank factors).
+    b = 8
+    A = sp.lil_matrix((nblocks * b, nblocks * b))
+    same = rng.normal(size=(3, 2)) @ rng.normal(size=(2, 4))
+    for k in range(nblocks):
+        A[k * b:(k + 1) * b, k * b:(k + 1) * b] = rng.normal(size=(b, b)) + 6 * np.eye(b)
+        if k:
+            A[k * b:k * b + 3, (k - 1) * b + 4:k * b] = same
+            A[(k - 1) * b + 5:k * b, k * b:k * b + 4] = rng.normal(size=(3, 2)) @ rng.normal(size=(2, 4))
+    A = A.tocsr()
+    r = rng.normal(size=nblocks * b)
+    x = BlockTridiagonal(A, b, threads=threads).solve(r)
+    assert np.allclose(x, spla.spsolve(A.tocsc(), r), rtol=1e-11, atol=1e-12)
+
+
+def test_block_tridiagonal_rejects_bad_input() -> None:
+    A = sp.eye(6, format="lil")
+    A[0, 5] = 1.0
+    with pytest.raises(ValueError, match="outside the block tridiagonal"):
+        BlockTridiagonal(A.tocsr(), 2)
+    with pytest.raises(ValueError, match="multiple of the block size"):
+        BlockTridiagonal(sp.eye(7, format="csr"), 2)
+    with pytest.raises(ValueError, match="threads"):
+        BlockTridiagonal(sp.eye(6, format="csr"), 2, threads=3)
