@@ -83,7 +83,9 @@ def default_plan(h: Harvester, M: int | None = None, half_elements: int | None =
 
     P4 was measured as an alternative at tol = 1e-4 and is not a robust gain: n = 8 took
     21 s (16 P4 elements) against 37 s (32 P3) at a = 0.5 but 51 s against 16 s at a = 2;
-    for n = 1.5, 3, 4 (a = 0.5) P4 is 30-50 % slower.
+    for n = 1.5, 3, 4 (a = 0.5) P4 is 30-50 % slower (timings of the earlier one-sweep
+    block solver). P2 is no gain for the kink either: n = 1, a = 0.5, tol = 1e-3 took 50 s
+    (M = 16, 32 elements) against 22 s with P3 (twisted solver).
     """
     kink = h.n < 2.0
     return Plan(
