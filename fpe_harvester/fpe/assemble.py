@@ -159,9 +159,28 @@ def assemble_x(mesh_nodes: np.ndarray, order: int, u: Callable[[np.ndarray], np.
 
 
 def split_flux(F: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Positive and negative parts :math:`F^\\pm = R\\Lambda^\\pm R^T` of a symmetric matrix."""
-    lam, R = np.linalg.eigh(F)
-    return (R * np.maximum(lam, 0.0)) @ R.T, (R * np.minimum(lam, 0.0)) @ R.T
+    """Positive and negative parts :math:`F^\\pm = R\\Lambda^\\pm R^T` of a symmetric matrix.
+
+    F is decomposed into its irreducible diagonal blocks (for the Hermite flux matrix these
+    are the :math:`\\alpha_0`-chains, Jacobi matrices that depend only on their length),
+    and each distinct block is diagonalized once: O(M^2) small eigenproblems instead of
+    one of size :math:`\\binom{M+3}{3}`.
+    """
+    from scipy.sparse.csgraph import connected_components
+
+    F = np.asarray(F, dtype=float)
+    ncomp, label = connected_components(sp.csr_matrix(F != 0.0), directed=False)
+    Fp, Fm = np.zeros_like(F), np.zeros_like(F)
+    parts: dict[bytes, tuple[np.ndarray, np.ndarray]] = {}
+    for comp in range(ncomp):
+        idx = np.flatnonzero(label == comp)
+        block = F[np.ix_(idx, idx)]
+        key = np.array(block.shape).tobytes() + block.tobytes()
+        if key not in parts:
+            lam, R = np.linalg.eigh(block)
+            parts[key] = ((R * np.maximum(lam, 0.0)) @ R.T, (R * np.minimum(lam, 0.0)) @ R.T)
+        Fp[np.ix_(idx, idx)], Fm[np.ix_(idx, idx)] = parts[key]
+    return Fp, Fm
 
 
 def dg_operator(X: XMatrices, F: np.ndarray, K0: sp.spmatrix, K1: sp.spmatrix,
