@@ -24,7 +24,7 @@ from .blocksolve import BlockTridiagonal
 from .hermite import HermiteBasis, equivalent_harmonic, linear_drift
 from .mesh import XMesh
 
-__all__ = ["Whitening", "Level", "solve_level", "assemble_level", "hierarchy_matrices"]
+__all__ = ["Whitening", "Level", "solve_level", "assemble_level", "hierarchy_matrices", "x_matrices"]
 
 
 @dataclass(frozen=True)
@@ -172,9 +172,28 @@ def assemble_level(h: Harvester, M: int, mesh: XMesh, order: int, w: Whitening
                    ) -> tuple[HermiteBasis, np.ndarray, XMatrices, sp.csr_matrix]:
     """Hermite basis, flux matrix F, scalar x-matrices and the global DG operator A of one level."""
     hb, F, K0, K1, K2 = hierarchy_matrices(h, M, w)
-    m, pot = h.params.m, h.potential
-    X = assemble_x(mesh.nodes(), order, lambda x: -pot.dU(x) / m)
+    X = x_matrices(h, mesh, order)
     return hb, F, X, dg_operator(X, F, K0, K1, K2)
+
+
+#: Scalar DG matrices of recently used (mesh, order, potential): the refinement solves
+#: several Hermite degrees on one mesh. Small and first-in first-out.
+_X_CACHE: dict[tuple[Any, ...], XMatrices] = {}
+_X_CACHE_SIZE = 16
+
+
+def x_matrices(h: Harvester, mesh: XMesh, order: int) -> XMatrices:
+    """:func:`~.assemble.assemble_x` for the force :math:`-U'(x)/m` of ``h``, cached (read-only)."""
+    nodes = mesh.nodes()
+    key = (nodes.tobytes(), order, h.potential, h.params.m)
+    X = _X_CACHE.get(key)
+    if X is None:
+        m, pot = h.params.m, h.potential
+        X = assemble_x(nodes, order, lambda x: -pot.dU(x) / m)
+        while len(_X_CACHE) >= _X_CACHE_SIZE:
+            _X_CACHE.pop(next(iter(_X_CACHE)), None)
+        _X_CACHE[key] = X
+    return X
 
 
 def _moments(h: Harvester, X: XMatrices, hb: HermiteBasis, C: np.ndarray, w: Whitening) -> dict[str, float]:
