@@ -17,7 +17,6 @@ takes tens of minutes) and writes ``bench_fpe.json`` and ``bench_fpe.png`` into 
 
 from __future__ import annotations
 
-import math
 import pathlib
 import time
 from typing import Any
@@ -25,7 +24,7 @@ from typing import Any
 from fpe_harvester import Harvester
 from fpe_harvester.fpe import stationary
 from fpe_harvester.fpe.discretize import Whitening, solve_level
-from fpe_harvester.fpe.mesh import XMesh
+from fpe_harvester.fpe.stationary import default_plan as stationary_plan
 from fpe_harvester.linear import mode_moments
 from validation.report import bench_main, save_benchmark
 
@@ -34,10 +33,9 @@ __all__ = ["run"]
 TARGETS = {"smooth_1e-4_s": 0.5, "smooth_1e-6_s": 5.0, "kink_1e-3_s": 10.0}
 
 
-def _curve(h: Harvester, degrees: list[int], half: int, grading: float) -> list[dict[str, float]]:
+def _curve(h: Harvester, degrees: list[int], half: int) -> list[dict[str, float]]:
     w = Whitening.of(h)
-    mesh = XMesh(w.domain(h, 30.0), half, n=h.n, scale=math.sqrt(w.x2), theta=30.0, wall=0.1,
-                 grading=grading)
+    mesh = stationary_plan(h).mesh(h, w, half)
     out = []
     for M in degrees:
         t0 = time.perf_counter()
@@ -104,7 +102,7 @@ def run(quick: bool = False, out: pathlib.Path | None = None) -> dict:
             best = min(runs, key=lambda r: r["eta_err"])
             ref, ref_err, ref_src = best["eta"], best["eta_err"], f"fpe tol={best['tol']:g}"
         degrees = [2, 4, 6] if quick else ([2, 4, 6, 8, 10, 12] if kink else [2, 4, 6, 8, 10])
-        curve = _curve(h, degrees, 8, 2.5 if kink else 1.0)
+        curve = _curve(h, degrees, 8)
         for pt in [*curve, *runs]:
             pt["rel_error"] = abs(pt["eta"] - ref) / abs(ref)
             pt["resolved"] = pt["rel_error"] > ref_err / abs(ref)

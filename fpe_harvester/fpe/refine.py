@@ -179,6 +179,13 @@ class Plan:
     max_dofs: int = 600_000
     max_seconds: float | None = None
 
+    def mesh(self, h: Harvester, w: Whitening, half_elements: int | None = None) -> XMesh:
+        """The x mesh of this plan for ``h``: domain :math:`U(L) = \\Theta T_{eff}` of the
+        weight ``w``, ``half_elements`` (default the plan's) elements per half."""
+        nh = self.half_elements if half_elements is None else half_elements
+        return XMesh(w.domain(h, self.theta), nh, n=h.n, scale=math.sqrt(w.x2), theta=self.theta,
+                     wall=self.wall, grading=self.grading)
+
 
 @dataclass(frozen=True)
 class RefinementResult:
@@ -212,9 +219,7 @@ def refine(h: Harvester, tol: float, plan: Plan, progress: Callable[[str], None]
     """
     t0 = time.perf_counter()
     w = Whitening.of(h)
-    L = w.domain(h, plan.theta)
-    base = XMesh(L, plan.half_elements, n=h.n, scale=math.sqrt(w.x2), theta=plan.theta,
-                 wall=plan.wall, grading=plan.grading)
+    base = plan.mesh(h, w)
     cache: dict[tuple[int, int], Level] = {}
     failed: dict[tuple[int, int], str] = {}
 

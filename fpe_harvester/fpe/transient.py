@@ -34,7 +34,7 @@ from ..errors import MethodNotAvailableError, NotConvergedError, ParameterError,
 from ..model import Harvester
 from .discretize import Level, Whitening, _moments, assemble_level
 from .hermite import HermiteBasis
-from .mesh import XMesh
+from .stationary import default_plan
 
 __all__ = ["TransientSolution", "transient", "initial_coefficients", "lyapunov_transient"]
 
@@ -241,8 +241,7 @@ def transient(
     interval = t_end / 100 if interval is None else check_real("interval", interval, low=0.0, low_open=True)
 
     w = Whitening.of(h)
-    mesh = XMesh(w.domain(h, theta), half_elements, n=h.n, scale=math.sqrt(w.x2), theta=theta,
-                 wall=0.1, grading=2.5 if h.n < 2 else 1.0)
+    mesh = default_plan(h, theta=theta).mesh(h, w, half_elements)
     hb, F, X, A = assemble_level(h, M, mesh, order, w)
     G = (-(sp.kron(_mass_inverse(X, order + 1), sp.identity(hb.size)) @ A)).tocsr()
 

@@ -10,7 +10,6 @@ from fpe_harvester import Harvester, Status, solve
 from fpe_harvester.fpe import refine as refine_mod
 from fpe_harvester.fpe.discretize import Whitening, solve_level
 from fpe_harvester.fpe.hermite import whitening_covariance
-from fpe_harvester.fpe.mesh import XMesh
 from fpe_harvester.fpe.stationary import default_plan
 
 
@@ -50,8 +49,7 @@ def test_strong_kink_does_not_crash() -> None:
 def _level(h: Harvester, M: int, half: int):
     w = Whitening.of(h)
     plan = default_plan(h)
-    mesh = XMesh(w.domain(h, plan.theta), half, n=h.n, scale=math.sqrt(w.x2), theta=plan.theta,
-                 wall=plan.wall, grading=plan.grading)
+    mesh = plan.mesh(h, w, half)
     return solve_level(h, M, mesh, plan.order, w)
 
 

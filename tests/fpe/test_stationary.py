@@ -10,16 +10,14 @@ import pytest
 from fpe_harvester import Harvester, MethodNotAvailableError, ParameterError, Status, solve
 from fpe_harvester.fpe import FokkerPlanck, stationary
 from fpe_harvester.fpe.discretize import Whitening, solve_level
-from fpe_harvester.fpe.mesh import XMesh
 from fpe_harvester.fpe.refine import mesh_error, tail_error
+from fpe_harvester.fpe.stationary import default_plan
 from fpe_harvester.linear import lyapunov_covariance, mode_moments
 
 
-def _level(h: Harvester, M: int, half: int, order: int = 3, grading: float = 1.0):
+def _level(h: Harvester, M: int, half: int, order: int = 3):
     w = Whitening.of(h)
-    mesh = XMesh(w.domain(h, 30.0), half, n=h.n, scale=math.sqrt(w.x2), theta=30.0, wall=0.1,
-                 grading=grading)
-    return solve_level(h, M, mesh, order, w)
+    return solve_level(h, M, default_plan(h).mesh(h, w, half), order, w)
 
 
 @pytest.mark.parametrize("a", [0.5, 1.0, 2.0])
@@ -80,7 +78,7 @@ def test_kink_reports_1e3_error_consistent_with_refinement() -> None:
     r = FokkerPlanck(M=6, elements=8, tol=0.1).solve(h)
     assert r.status is Status.STABLE
     assert 3e-4 * r.eta < r.eta_err < 1e-2 * r.eta
-    finer = _level(h, 10, 4, grading=2.5).moments["eta"]
+    finer = _level(h, 10, 4).moments["eta"]
     assert abs(finer - r.eta) <= r.eta_err
     assert abs(r.eta - 0.609) < 0.01  # the paper's simulation value
 
@@ -89,7 +87,7 @@ def test_kink_reports_1e3_error_consistent_with_refinement() -> None:
 def test_kink_tol_1e3() -> None:
     r = solve(Harvester.build(a=0.5, n=1), "fpe", tol=1e-3)
     assert r.status is Status.STABLE and r.eta_err <= 1e-3 * r.eta
-    finer = _level(Harvester.build(a=0.5, n=1), r.info["M"] + 4, r.info["elements"] // 2, grading=2.5)
+    finer = _level(Harvester.build(a=0.5, n=1), r.info["M"] + 4, r.info["elements"] // 2)
     assert abs(finer.moments["eta"] - r.eta) <= r.eta_err
 
 
@@ -168,7 +166,7 @@ def test_conditional_and_marginal_weights_agree_for_n3() -> None:
     mo = {}
     for cond in (True, False):
         w = Whitening.of(h, conditional=cond)
-        mesh = XMesh(w.domain(h, 30.0), 8, n=h.n, scale=math.sqrt(w.x2), theta=30.0, wall=0.1)
+        mesh = default_plan(h).mesh(h, w, 8)
         mo[cond] = solve_level(h, 8, mesh, 3, w).moments
     for key in ("eta", "V2", "Pin", "x2"):
         assert mo[True][key] == pytest.approx(mo[False][key], rel=1e-4), key
@@ -223,6 +221,5 @@ def test_converges_for_nonlinear_potentials(n: float, a: float) -> None:
     assert r.eta is not None and r.eta_err is not None, r.message
     if r.status is Status.STABLE:
         assert r.eta_err <= 1e-4 * r.eta
-    finer = _level(h, r.info["M"] + 2, r.info["elements"], order=r.info["order"],
-                   grading=2.5 if n < 2 else 1.0)
+    finer = _level(h, r.info["M"] + 2, r.info["elements"], order=r.info["order"])
     assert abs(finer.moments["eta"] - r.eta) <= r.eta_err

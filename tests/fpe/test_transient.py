@@ -11,7 +11,7 @@ import pytest
 
 from fpe_harvester import Harvester, MethodNotAvailableError, NotConvergedError, ParameterError
 from fpe_harvester.fpe.discretize import Whitening, solve_level
-from fpe_harvester.fpe.mesh import XMesh
+from fpe_harvester.fpe.stationary import default_plan
 from fpe_harvester.fpe.transient import lyapunov_transient, transient
 
 
@@ -40,7 +40,7 @@ def stationary_n3() -> tuple[Harvester, Mapping[str, float]]:
     # A module fixture is set up before the autouse strict-floats fixture of each test.
     with np.errstate(all="raise", under="ignore"):
         w = Whitening.of(h)
-        mesh = XMesh(w.domain(h, 12.0), 8, n=3.0, scale=math.sqrt(w.x2), theta=12.0, wall=0.1)
+        mesh = default_plan(h, theta=12.0).mesh(h, w, 8)
         st = solve_level(h, 4, mesh, 3, w).moments
     return h, MappingProxyType(dict(st))
 
