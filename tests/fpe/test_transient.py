@@ -55,6 +55,19 @@ def test_relaxes_to_stationary_solution(stationary_n3: tuple[Harvester, Mapping[
     assert abs(tr.eta[-1] - st["eta"]) < 5e-3 * st["eta"]
 
 
+def test_steep_wall_relaxes_with_default_mesh() -> None:
+    """n = 8: the default 16 elements per half resolve the wall (8 gave a growing mode);
+    the run approaches the stationary solution of the same discretization."""
+    h = Harvester.build(a=0.5, n=8)
+    w = Whitening.of(h)
+    st = solve_level(h, 4, default_plan(h, theta=12.0).mesh(h, w, 16), 3, w).moments
+    tr = transient(h, 12.0, M=4, interval=4.0, grid=5)
+    assert tr.info["elements"] == 32
+    gap = np.abs(tr.V2 - st["V2"]) / st["V2"]
+    assert np.all(np.diff(gap) < 0)
+    assert gap[-1] < 3e-3
+
+
 def test_unstable_discretization_is_reported() -> None:
     with pytest.raises(NotConvergedError, match="spurious growing mode"):
         transient(Harvester.build(a=0.5, n=8), 5.0, M=4, half_elements=4, interval=0.5, grid=5)
