@@ -43,6 +43,8 @@ class FokkerPlanck:
         Largest Hermite degree the refinement may use (default 24).
     max_seconds : float, optional
         Wall-time budget of the refinement.
+    max_gb : float, optional
+        Memory bound (GB) of one discretization level; default half the physical memory.
     progress : bool or callable
         True prints one line per level; a callable receives the lines.
 
@@ -63,6 +65,7 @@ class FokkerPlanck:
     domain: float = 30.0
     max_M: int = 24
     max_seconds: float | None = None
+    max_gb: float | None = None
     progress: bool | Callable[[str], None] = False
 
     def __post_init__(self) -> None:
@@ -81,6 +84,8 @@ class FokkerPlanck:
         if self.max_seconds is not None:
             object.__setattr__(self, "max_seconds",
                                check_real("max_seconds", self.max_seconds, low=0.0, low_open=True))
+        if self.max_gb is not None:
+            object.__setattr__(self, "max_gb", check_real("max_gb", self.max_gb, low=0.0, low_open=True))
 
     def unsupported_reason(self, h: Harvester) -> str | None:
         """``None`` for a single oscillator, else why not (rings: use mc, or exact if harmonic)."""
@@ -100,7 +105,7 @@ class FokkerPlanck:
             sol = stationary(
                 h, self.tol, M=self.M, half_elements=None if self.elements is None else self.elements // 2,
                 order=self.order, theta=self.domain, max_M=max(self.max_M, self.M or 0),
-                max_seconds=self.max_seconds, grid=3, progress=progress or None,
+                max_seconds=self.max_seconds, max_gb=self.max_gb, grid=3, progress=progress or None,
             )
         except HarvesterError:
             raise

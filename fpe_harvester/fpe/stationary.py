@@ -159,6 +159,7 @@ def stationary(
     max_M: int = 24,
     max_dofs: int = 600_000,
     max_seconds: float | None = None,
+    max_gb: float | None = None,
     grid: int = 401,
     progress: Callable[[str], None] | None = None,
 ) -> FPESolution:
@@ -183,6 +184,8 @@ def stationary(
         Refinement limits; beyond them the result is NOT_CONVERGED.
     max_seconds : float, optional
         Wall-time budget of the refinement.
+    max_gb : float, optional
+        Memory bound (GB) of one level's factorization; default half the physical memory.
     grid : int
         Points of the output grid (>= 3).
     progress : callable, optional
@@ -215,9 +218,12 @@ def stationary(
     max_dofs = check_int("max_dofs", max_dofs, low=1000)
     if max_seconds is not None:
         max_seconds = check_real("max_seconds", max_seconds, low=0.0, low_open=True)
+    if max_gb is not None:
+        max_gb = check_real("max_gb", max_gb, low=0.0, low_open=True)
     grid = check_int("grid", grid, low=3)
     plan = default_plan(h, M, half_elements, order, theta)
-    plan = Plan(**{**plan.__dict__, "max_M": max_M, "max_dofs": max_dofs, "max_seconds": max_seconds})
+    plan = Plan(**{**plan.__dict__, "max_M": max_M, "max_dofs": max_dofs, "max_seconds": max_seconds,
+                    "max_gb": max_gb})
     ref = refine(h, tol, plan, progress)
     stats = _stats(h, ref, tol)
     lv = ref.best

@@ -6,7 +6,7 @@ import math
 
 import pytest
 
-from fpe_harvester import Harvester, Status, solve
+from fpe_harvester import Harvester, ParameterError, Status, solve
 from fpe_harvester.fpe import refine as refine_mod
 from fpe_harvester.fpe.discretize import Whitening, solve_level
 from fpe_harvester.fpe.hermite import whitening_covariance
@@ -93,6 +93,21 @@ def test_budget_stops_before_a_level_predicted_too_costly() -> None:
     assert r.status is Status.NOT_CONVERGED
     assert "max_seconds" in r.message and "next level would need" in r.message
     assert r.eta is not None and r.eta_err > 0.0
+
+
+def test_memory_bound_stops_before_a_level_too_large() -> None:
+    # M = 8 with 16 elements needs ~0.28 GB, M = 10 ~0.45 GB: the bound 0.3 GB stops the
+    # refinement at M = 8 with its estimate.
+    r = solve(Harvester.build(a=0.5, n=4), "fpe", tol=1e-9, max_gb=0.3)
+    assert r.status is Status.NOT_CONVERGED
+    assert "max_gb" in r.message and "GB" in r.message
+    assert r.info["M"] <= 8 and r.eta is not None and r.eta_err > 0.0
+    assert refine_mod.level_gigabytes(8, 8, 3) <= 0.3 < refine_mod.level_gigabytes(10, 8, 3)
+
+
+def test_memory_bound_is_checked() -> None:
+    with pytest.raises(ParameterError, match="max_gb"):
+        solve(Harvester.build(a=0.5, n=4), "fpe", max_gb=-1.0)
 
 
 def test_predicted_cost_scales_with_block_size() -> None:
