@@ -15,7 +15,8 @@ elimination
 
 needs, per element, one dense LU of :math:`S_K` and one solve with only
 :math:`\\mathrm{rank}\\,F^+` right-hand sides; :math:`W_K` is kept, so back substitution
-needs no further solves. This avoids the fill of a general sparse LU (which grows like the
+needs no further solves. The elimination runs from both ends toward the middle block
+(twisted factorization), the two halves in parallel (:class:`BlockTridiagonal`). This avoids the fill of a general sparse LU (which grows like the
 product of all the bandwidths) and runs in dense LAPACK. Cost per element
 :math:`\\approx \\tfrac23 n_b^3`, :math:`n_b = (p+1)\\binom{M+3}{3}`.
 """
@@ -123,8 +124,8 @@ class BlockTridiagonal:
         self.mid = m = N // 2
         b = block
         # Split the entries by block row and column once (scipy's 2-D slicing is slow here).
-        A.sum_duplicates()
         Ac = A.tocoo()
+        Ac.sum_duplicates()  # new arrays: the caller's matrix is left alone
         br, bc = Ac.row // b, Ac.col // b
         if np.any(np.abs(br - bc) > 1):
             raise ValueError("matrix has entries outside the block tridiagonal")
