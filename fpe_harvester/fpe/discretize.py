@@ -11,6 +11,7 @@ rescaled to unit mass.
 from __future__ import annotations
 
 import math
+import threading
 import time
 from dataclasses import dataclass, field
 from typing import Any
@@ -180,19 +181,22 @@ def assemble_level(h: Harvester, M: int, mesh: XMesh, order: int, w: Whitening
 #: several Hermite degrees on one mesh. Small and first-in first-out.
 _X_CACHE: dict[tuple[Any, ...], XMatrices] = {}
 _X_CACHE_SIZE = 16
+_X_LOCK = threading.Lock()  # scenes may solve points in threads
 
 
 def x_matrices(h: Harvester, mesh: XMesh, order: int) -> XMatrices:
     """:func:`~.assemble.assemble_x` for the force :math:`-U'(x)/m` of ``h``, cached (read-only)."""
     nodes = mesh.nodes()
     key = (nodes.tobytes(), order, h.potential, h.params.m)
-    X = _X_CACHE.get(key)
+    with _X_LOCK:
+        X = _X_CACHE.get(key)
     if X is None:
         m, pot = h.params.m, h.potential
         X = assemble_x(nodes, order, lambda x: -pot.dU(x) / m)
-        while len(_X_CACHE) >= _X_CACHE_SIZE:
-            _X_CACHE.pop(next(iter(_X_CACHE)), None)
-        _X_CACHE[key] = X
+        with _X_LOCK:
+            while len(_X_CACHE) >= _X_CACHE_SIZE:
+                _X_CACHE.pop(next(iter(_X_CACHE)))
+            _X_CACHE[key] = X
     return X
 
 
