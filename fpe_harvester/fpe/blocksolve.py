@@ -5,7 +5,7 @@ operator is block tridiagonal: element K couples to K - 1 and K + 1 only through
 upwind flux at the shared node. Each off-diagonal block is nonzero in a few rows and
 columns and has low rank: the trace values of the two elements times :math:`F^\\pm`,
 so its rank is at most :math:`\\mathrm{rank}\\,F^\\pm \\approx \\binom{M+3}{3}/2`. Stored as
-:math:`A_{K,K-1} = U_K V_K^T` and :math:`A_{K-1,K} = P_K Q_K^T` (truncated SVD), forward
+:math:`A_{K,K-1} = U_K V_K^T` and :math:`A_{K-1,K} = P_K Q_K^T` (rank-revealing QR), forward
 elimination
 
 .. math::
@@ -16,9 +16,10 @@ elimination
 needs, per element, one dense LU of :math:`S_K` and one solve with only
 :math:`\\mathrm{rank}\\,F^+` right-hand sides; :math:`W_K` is kept, so back substitution
 needs no further solves. The elimination runs from both ends toward the middle block
-(twisted factorization), the two halves in parallel (:class:`BlockTridiagonal`). This avoids the fill of a general sparse LU (which grows like the
-product of all the bandwidths) and runs in dense LAPACK. Cost per element
-:math:`\\approx \\tfrac23 n_b^3`, :math:`n_b = (p+1)\\binom{M+3}{3}`.
+(twisted factorization), the two halves in parallel (:class:`BlockTridiagonal`). This
+avoids the fill of a general sparse LU (which grows like the product of all the
+bandwidths) and runs in dense LAPACK. Cost per element :math:`\\approx \\tfrac23 n_b^3`,
+:math:`n_b = (p+1)\\binom{M+3}{3}`.
 """
 
 from __future__ import annotations
@@ -54,7 +55,7 @@ class _Coupling:
         dense = np.zeros((len(self.rows), len(self.cols)))
         dense[ri, ci] = v
         # The DG couplings of a uniform reference element repeat from element to element:
-        # one SVD per distinct block.
+        # one factorization per distinct block.
         key = np.array(dense.shape).tobytes() + dense.tobytes()
         if key not in known:
             known[key] = _low_rank(dense)
@@ -63,6 +64,10 @@ class _Coupling:
     @property
     def rank(self) -> int:
         return self.left.shape[1]
+
+    def times(self, x: np.ndarray) -> np.ndarray:
+        """The block times ``x`` (a vector of the column block), on the rows ``rows``."""
+        return self.left @ (self.right.T @ x[self.cols])
 
 
 def _low_rank(dense: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -208,23 +213,19 @@ class BlockTridiagonal:
         for k in range(m):
             rk = r[k].copy()
             if k > 0:
-                lo = self.lower[k - 1]
-                rk[lo.rows] -= lo.left @ (lo.right.T @ y[k - 1][lo.cols])
+                rk[self.lower[k - 1].rows] -= self.lower[k - 1].times(y[k - 1])
             y[k] = sl.lu_solve(self.lu[k], rk, check_finite=False)
         for k in range(N - 1, m, -1):
             rk = r[k].copy()
             if k < N - 1:
-                up = self.upper[k]
-                rk[up.rows] -= up.left @ (up.right.T @ y[k + 1][up.cols])
+                rk[self.upper[k].rows] -= self.upper[k].times(y[k + 1])
             y[k] = sl.lu_solve(self.lu[k], rk, check_finite=False)
         x = np.empty_like(y)
         rm = r[m].copy()
         if m > 0:
-            lo = self.lower[m - 1]
-            rm[lo.rows] -= lo.left @ (lo.right.T @ y[m - 1][lo.cols])
+            rm[self.lower[m - 1].rows] -= self.lower[m - 1].times(y[m - 1])
         if m < N - 1:
-            up = self.upper[m]
-            rm[up.rows] -= up.left @ (up.right.T @ y[m + 1][up.cols])
+            rm[self.upper[m].rows] -= self.upper[m].times(y[m + 1])
         x[m] = sl.lu_solve(self.lu[m], rm, check_finite=False)
         for k in range(m - 1, -1, -1):
             up = self.upper[k]

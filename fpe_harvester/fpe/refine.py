@@ -238,12 +238,12 @@ def refine(h: Harvester, tol: float, plan: Plan, progress: Callable[[str], None]
         key = (M, nh)
         if key in failed:
             raise _LevelFailed(failed[key])
-        if key not in cache and level_gigabytes(M, nh, plan.order) > plan.memory_limit:
-            failed[key] = (f"level M = {M}, {2 * nh} elements would need about "
-                           f"{level_gigabytes(M, nh, plan.order):.3g} GB, more than max_gb = "
-                           f"{plan.memory_limit:.3g} GB")
-            raise _LevelFailed(failed[key])
         if key not in cache:
+            gb = level_gigabytes(M, nh, plan.order)
+            if gb > plan.memory_limit:
+                failed[key] = (f"level M = {M}, {2 * nh} elements would need about {gb:.3g} GB, "
+                               f"more than max_gb = {plan.memory_limit:.3g} GB")
+                raise _LevelFailed(failed[key])
             try:
                 lv = solve_level(h, M, base.with_elements(nh), plan.order, w)
             except (ArithmeticError, ValueError, np.linalg.LinAlgError) as exc:
@@ -255,7 +255,6 @@ def refine(h: Harvester, tol: float, plan: Plan, progress: Callable[[str], None]
                 raise _LevelFailed(failed[key])
             cache[key] = lv
             if progress is not None:
-                lv = cache[key]
                 progress(f"M={M} elements={2 * nh} dofs={lv.dofs} eta={lv.moments['eta']:.10g} "
                          f"({lv.seconds:.2f} s)")
         return cache[key]
@@ -343,9 +342,8 @@ def refine(h: Harvester, tol: float, plan: Plan, progress: Callable[[str], None]
                 limit = f"elements would exceed {2 * plan.max_half_elements}"
             elif dofs > plan.max_dofs:
                 limit = f"unknowns would exceed max_dofs = {plan.max_dofs}"
-            elif level_gigabytes(nxt_M, nxt_nh, plan.order) > plan.memory_limit:
-                limit = (f"memory: the next level would need about "
-                         f"{level_gigabytes(nxt_M, nxt_nh, plan.order):.3g} GB, more than "
+            elif (gb := level_gigabytes(nxt_M, nxt_nh, plan.order)) > plan.memory_limit:
+                limit = (f"memory: the next level would need about {gb:.3g} GB, more than "
                          f"max_gb = {plan.memory_limit:.3g} GB")
             elif plan.max_seconds is not None:
                 # The next step may also need the coarse-mesh level of its error estimate.
