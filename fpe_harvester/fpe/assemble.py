@@ -42,7 +42,7 @@ from skfem import (
     asm,
 )
 
-__all__ = ["XMatrices", "assemble_x", "split_flux", "dg_operator"]
+__all__ = ["XMatrices", "assemble_x", "split_flux", "upwind_parts", "dg_operator"]
 
 
 @dataclass(frozen=True)
@@ -56,6 +56,10 @@ class XMatrices:
         :math:`\\int\\psi_i'\\phi_j`.
     xplus, xminus : sparse
         Face matrices multiplying :math:`F^+` and :math:`F^-` in the upwind flux.
+    xreflect : sparse or None
+        On a half mesh :math:`[0, L]` with a mirror at x = 0 (``reflect=True``), the point
+        matrix :math:`-\\psi_i(0)\\phi_j(0)` multiplying :math:`F^+ S` (inflow at 0 from the
+        mirror image, see :func:`dg_operator`); None on a full mesh.
     integral, x2, x1 : ndarray
         :math:`\\int\\phi_j`, :math:`\\int x^2\\phi_j`, :math:`\\int x\\phi_j`.
     basis : skfem.Basis
@@ -78,6 +82,7 @@ class XMatrices:
     basis: Basis
     order: int
     perm: np.ndarray
+    xreflect: sp.csr_matrix | None = None
 
     @property
     def ndofs(self) -> int:
@@ -99,7 +104,7 @@ def _element_major(basis: Basis) -> np.ndarray:
 
 
 def assemble_x(mesh_nodes: np.ndarray, order: int, u: Callable[[np.ndarray], np.ndarray],
-               intorder: int | None = None) -> XMatrices:
+               intorder: int | None = None, reflect: bool = False) -> XMatrices:
     """Assemble the scalar DG matrices on a 1-D mesh.
 
     Parameters
@@ -112,6 +117,9 @@ def assemble_x(mesh_nodes: np.ndarray, order: int, u: Callable[[np.ndarray], np.
         The nonlinear force per unit mass :math:`u(x) = -U'(x)/m`.
     intorder : int, optional
         Quadrature order (default ``2 p + 6``, enough for smooth u on graded elements).
+    reflect : bool
+        The nodes cover the half :math:`[0, L]` of a mirror-symmetric problem: the left
+        boundary x = 0 gets inflow from the mirror image (``xreflect``) instead of none.
     """
     from skfem import MeshLine
 
@@ -134,17 +142,27 @@ def assemble_x(mesh_nodes: np.ndarray, order: int, u: Callable[[np.ndarray], np.
     # (nF)^+ = F^+ for n = +1 and -F^- for n = -1.
     # A fresh element per facet basis: ElementLinePp caches its reference values by array
     # shape only, so two bases evaluated at different single points must not share one.
-    sides = [InteriorFacetBasis(mesh, _element(order), side=s) for s in (0, 1)]
     pos = BilinearForm(lambda a, b, w: (w.n[0] > 0) * a * b)
     neg = BilinearForm(lambda a, b, w: (w.n[0] < 0) * a * b)
-    P = {(s, t): (asm(pos, sides[t], sides[s]), asm(neg, sides[t], sides[s])) for s in (0, 1) for t in (0, 1)}
-    xplus = P[0, 0][0] - P[1, 0][0] - P[0, 1][1] + P[1, 1][1]
-    xminus = P[0, 1][0] - P[1, 1][0] - P[0, 0][1] + P[1, 0][1]
-    # Boundary: outflow only, (nF)^+ c; inflow from outside the domain is zero.
+    if mesh.t.shape[1] > 1:
+        sides = [InteriorFacetBasis(mesh, _element(order), side=s) for s in (0, 1)]
+        P = {(s, t): (asm(pos, sides[t], sides[s]), asm(neg, sides[t], sides[s]))
+             for s in (0, 1) for t in (0, 1)}
+        xplus = P[0, 0][0] - P[1, 0][0] - P[0, 1][1] + P[1, 1][1]
+        xminus = P[0, 1][0] - P[1, 1][0] - P[0, 0][1] + P[1, 0][1]
+    else:  # one element (the coarsest half mesh): no interior node
+        xplus = xminus = sp.csr_matrix(mass.shape)
+    # Boundary: outflow only, (nF)^+ c; inflow from outside the domain is zero, except at a
+    # mirror (x = 0 of a half mesh), where it comes from the reflected trace.
+    xreflect = None
+    if reflect and abs(mesh_nodes[0]) > 1e-12 * abs(mesh_nodes[-1]):
+        raise ValueError(f"reflect=True needs a half mesh starting at x = 0, got {mesh_nodes[0]!r}")
     for facet in mesh.boundary_facets():
         fb = FacetBasis(mesh, _element(order), facets=np.array([facet]))
         xplus = xplus + asm(pos, fb)
         xminus = xminus - asm(neg, fb)
+        if reflect and mesh.p[0, facet] < 0.5 * mesh_nodes[-1]:
+            xreflect = -asm(neg, fb)
 
     def p2(A: sp.spmatrix) -> sp.csr_matrix:
         A = sp.csr_matrix(A)
@@ -155,6 +173,7 @@ def assemble_x(mesh_nodes: np.ndarray, order: int, u: Callable[[np.ndarray], np.
         mass=p2(mass), mass_u=p2(mass_u), mass_x=p2(mass_x), deriv=p2(deriv), xplus=p2(xplus),
         xminus=p2(xminus),
         integral=integral[perm], x2=x2[perm], x1=x1[perm], basis=basis, order=order, perm=perm,
+        xreflect=None if xreflect is None else p2(xreflect),
     )
 
 
@@ -183,17 +202,30 @@ def split_flux(F: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     return Fp, Fm
 
 
-def dg_operator(X: XMatrices, F: np.ndarray, K0: sp.spmatrix, K1: sp.spmatrix,
-                K2: sp.spmatrix | None = None) -> sp.csr_matrix:
-    """The global DG operator :math:`A` (see module docstring), x outer, alpha inner.
-
-    ``K2`` (optional) multiplies x, from a weight centred on a conditional mean linear in x
-    (:func:`fpe_harvester.fpe.discretize.hierarchy_matrices`): adds :math:`-M_x \\otimes K_2`.
-    """
+def upwind_parts(F: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """:func:`split_flux` with round-off entries (below 1e-14 of max |F|) set to zero: the
+    :math:`F^\\pm` that :func:`dg_operator` multiplies by ``xplus`` and ``xminus``."""
     Fp, Fm = split_flux(F)
     tol = 1e-14 * max(1.0, np.abs(F).max())
     Fp[np.abs(Fp) < tol] = 0.0
     Fm[np.abs(Fm) < tol] = 0.0
+    return Fp, Fm
+
+
+def dg_operator(X: XMatrices, F: np.ndarray, K0: sp.spmatrix, K1: sp.spmatrix,
+                K2: sp.spmatrix | None = None, parity: np.ndarray | None = None) -> sp.csr_matrix:
+    """The global DG operator :math:`A` (see module docstring), x outer, alpha inner.
+
+    ``K2`` (optional) multiplies x, from a weight centred on a conditional mean linear in x
+    (:func:`fpe_harvester.fpe.discretize.hierarchy_matrices`): adds :math:`-M_x \\otimes K_2`.
+
+    On a half mesh (``X.xreflect`` set) the solution is continued to x < 0 by the mirror
+    symmetry :math:`c_\\alpha(-x) = (-1)^{|\\alpha|} c_\\alpha(x)` (``parity`` =
+    :math:`(-1)^{|\\alpha|}`, S = diag(parity)): the upwind flux at 0 is
+    :math:`F^+ c(0^-) + F^- c(0^+) = (F^+ S + F^-)\\,c(0^+)`, which adds
+    :math:`X_{reflect} \\otimes F^+ S`.
+    """
+    Fp, Fm = upwind_parts(F)
     A = (
         sp.kron(X.xplus, sp.csr_matrix(Fp))
         + sp.kron(X.xminus, sp.csr_matrix(Fm))
@@ -203,4 +235,8 @@ def dg_operator(X: XMatrices, F: np.ndarray, K0: sp.spmatrix, K1: sp.spmatrix,
     )
     if K2 is not None and K2.nnz:
         A = A - sp.kron(X.mass_x, K2)
+    if X.xreflect is not None:
+        if parity is None:
+            raise ValueError("a half mesh (X.xreflect) needs the parity (-1)^|alpha| of the Hermite indices")
+        A = A + sp.kron(X.xreflect, sp.csr_matrix(Fp * np.asarray(parity, dtype=float)[None, :]))
     return A.tocsr()

@@ -6,6 +6,16 @@ normalization :math:`\\int c_0\\,dx = 1`. The operator is nonsingular only throu
 (exponentially small) outflow at :math:`\\pm L`, so two steps of inverse iteration from
 :math:`b_{i0} = \\int\\psi_i\\,dx` give the null vector up to that outflow; it is then
 rescaled to unit mass.
+
+The problem is mirror-symmetric: the force :math:`-U'(x)` is odd and everything else is
+linear, so the stationary density is invariant under :math:`(x, y) \\to (-x, -y)`, and with
+a weight centred on :math:`b x` the coefficients obey
+:math:`c_\\alpha(-x) = (-1)^{|\\alpha|} c_\\alpha(x)`. The stationary levels are solved on
+the half mesh :math:`[0, L]` with that reflection as the inflow condition at 0
+(:func:`~.assemble.dg_operator`): half the unknowns, and on a mirror-symmetric mesh the
+same discrete solution as the full mesh (the full discrete problem has the same symmetry
+and a unique solution). The second moments are even, so their half-domain integrals
+normalized by the half-domain mass are the full-domain values.
 """
 
 from __future__ import annotations
@@ -20,7 +30,7 @@ import numpy as np
 import scipy.sparse as sp
 
 from ..model import Harvester
-from .assemble import XMatrices, assemble_x, dg_operator
+from .assemble import XMatrices, assemble_x, dg_operator, upwind_parts
 from .blocksolve import BlockTridiagonal
 from .hermite import HermiteBasis, equivalent_harmonic, linear_drift
 from .mesh import XMesh
@@ -147,6 +157,9 @@ class Level:
         Number of unknowns.
     seconds : float
         Wall time of assembly and solve.
+    half : bool
+        If True, ``coef`` and ``xmat`` live on the half mesh :math:`[0, L]` and the solution
+        on :math:`x < 0` is the mirror image :math:`c_\\alpha(-x) = (-1)^{|\\alpha|}c_\\alpha(x)`.
     """
 
     M: int
@@ -159,6 +172,7 @@ class Level:
     xmat: XMatrices = field(repr=False)
     hermite: HermiteBasis = field(repr=False)
     whitening: Whitening = field(repr=False)
+    half: bool = False
 
     def summary(self) -> dict[str, Any]:
         """JSON-ready description (for the refinement history)."""
@@ -169,12 +183,14 @@ class Level:
         }
 
 
-def assemble_level(h: Harvester, M: int, mesh: XMesh, order: int, w: Whitening
+def assemble_level(h: Harvester, M: int, mesh: XMesh, order: int, w: Whitening, half: bool = False
                    ) -> tuple[HermiteBasis, np.ndarray, XMatrices, sp.csr_matrix]:
-    """Hermite basis, flux matrix F, scalar x-matrices and the global DG operator A of one level."""
+    """Hermite basis, flux matrix F, scalar x-matrices and the global DG operator A of one
+    level, on the whole mesh or (``half``) on :math:`[0, L]` with the mirror condition at 0."""
     hb, F, K0, K1, K2 = hierarchy_matrices(h, M, w)
-    X = x_matrices(h, mesh, order)
-    return hb, F, X, dg_operator(X, F, K0, K1, K2)
+    X = x_matrices(h, mesh, order, half)
+    parity = 1.0 - 2.0 * (hb.degree() % 2) if half else None
+    return hb, F, X, dg_operator(X, F, K0, K1, K2, parity)
 
 
 #: Scalar DG matrices of recently used (mesh, order, potential): the refinement solves
@@ -184,15 +200,16 @@ _X_CACHE_SIZE = 16
 _X_LOCK = threading.Lock()  # scenes may solve points in threads
 
 
-def x_matrices(h: Harvester, mesh: XMesh, order: int) -> XMatrices:
-    """:func:`~.assemble.assemble_x` for the force :math:`-U'(x)/m` of ``h``, cached (read-only)."""
-    nodes = mesh.nodes()
-    key = (nodes.tobytes(), order, h.potential, h.params.m)
+def x_matrices(h: Harvester, mesh: XMesh, order: int, half: bool = False) -> XMatrices:
+    """:func:`~.assemble.assemble_x` for the force :math:`-U'(x)/m` of ``h``, cached (read-only);
+    on the half mesh :math:`[0, L]` with a mirror at 0 if ``half``."""
+    nodes = mesh.half_nodes() if half else mesh.nodes()
+    key = (nodes.tobytes(), order, h.potential, h.params.m, half)
     with _X_LOCK:
         X = _X_CACHE.get(key)
     if X is None:
         m, pot = h.params.m, h.potential
-        X = assemble_x(nodes, order, lambda x: -pot.dU(x) / m)
+        X = assemble_x(nodes, order, lambda x: -pot.dU(x) / m, reflect=half)
         with _X_LOCK:
             while len(_X_CACHE) >= _X_CACHE_SIZE:
                 _X_CACHE.pop(next(iter(_X_CACHE)))
@@ -200,8 +217,11 @@ def x_matrices(h: Harvester, mesh: XMesh, order: int) -> XMatrices:
     return X
 
 
-def _moments(h: Harvester, X: XMatrices, hb: HermiteBasis, C: np.ndarray, w: Whitening) -> dict[str, float]:
+def _moments(h: Harvester, X: XMatrices, hb: HermiteBasis, C: np.ndarray, w: Whitening,
+             copies: float = 1.0) -> dict[str, float]:
+    # copies = 2 on a half mesh: the (even) integrands count once more from the mirror image.
     p = h.params
+    C = copies * C
     # y = y' + b x with y' = L z: <y_i y_j> = <y'_i y'_j> + b_i <x y'_j> + b_j <x y'_i> + b_i b_j <x^2>.
     W = hb.second_moment_weights(w.chol)
     Y = np.einsum("ijm,km->ijk", W, C) @ X.integral
@@ -219,7 +239,7 @@ def _moments(h: Harvester, X: XMatrices, hb: HermiteBasis, C: np.ndarray, w: Whi
     }
 
 
-def solve_level(h: Harvester, M: int, mesh: XMesh, order: int, w: Whitening) -> Level:
+def solve_level(h: Harvester, M: int, mesh: XMesh, order: int, w: Whitening, half: bool = True) -> Level:
     """Assemble and solve one level (block-tridiagonal elimination over the elements).
 
     Parameters
@@ -234,9 +254,12 @@ def solve_level(h: Harvester, M: int, mesh: XMesh, order: int, w: Whitening) -> 
         DG polynomial order p.
     w : Whitening
         The Gaussian weight.
+    half : bool
+        Solve on the half mesh with the mirror condition at 0 (default; the same numbers as
+        the whole mesh, see the module docstring, at half the cost).
     """
     t0 = time.perf_counter()
-    hb, F, X, A = assemble_level(h, M, mesh, order, w)
+    hb, F, X, A = assemble_level(h, M, mesh, order, w, half)
     na = hb.size
     # Inverse iteration for the generalized problem A c = lambda (M_x (x) I) c: A is
     # nonsingular only through the outflow at +-L, whose eigenvalue lambda_0 is exponentially
@@ -250,7 +273,9 @@ def solve_level(h: Harvester, M: int, mesh: XMesh, order: int, w: Whitening) -> 
     # leaves 1e-6 in V2).
     rhs = np.zeros((X.integral.size, na))
     rhs[:, 0] = X.integral
-    solver = BlockTridiagonal(A, (order + 1) * na)
+    # Neighbouring elements couple only through the face terms X_+ (x) F^+ and X_- (x) F^-.
+    Fp, Fm = upwind_parts(F)
+    solver = BlockTridiagonal(A, (order + 1) * na, kron=[(X.xplus, Fp), (X.xminus, Fm)])
     C = solver.solve(rhs.ravel()).reshape(-1, na)
     C /= max(float(np.abs(C).max()), 1e-300)
     C = solver.solve((X.mass @ C).ravel()).reshape(-1, na)
@@ -259,6 +284,8 @@ def solve_level(h: Harvester, M: int, mesh: XMesh, order: int, w: Whitening) -> 
     if not (math.isfinite(mass) and math.isfinite(scale)) or abs(mass) <= 1e-8 * scale:
         raise FloatingPointError(f"degenerate stationary solution at M = {M} (mass {mass}, "
                                  f"integral of |c_0| {scale})")
-    C /= mass
-    moments = _moments(h, X, hb, C, w)
-    return Level(M, order, mesh, C, moments, A.shape[0], time.perf_counter() - t0, X, hb, w)
+    # Unit mass on the whole domain (a half mesh holds half of it).
+    copies = 2.0 if half else 1.0
+    C /= copies * mass
+    moments = _moments(h, X, hb, C, w, copies)
+    return Level(M, order, mesh, C, moments, A.shape[0], time.perf_counter() - t0, X, hb, w, half)

@@ -79,12 +79,17 @@ class XMesh:
 
     def nodes(self) -> np.ndarray:
         """Sorted node coordinates, including -L, 0 and L."""
+        half = self.half_nodes()
+        return np.concatenate([-half[:0:-1], half])
+
+    def half_nodes(self) -> np.ndarray:
+        """The nodes in :math:`[0, L]` (the mesh is their mirror image and themselves)."""
         xf = np.linspace(0.0, self.L, 4001)
         sf = xf / self.scale + self.wall * self.theta * (xf / self.L) ** self.n
         t = np.linspace(0.0, 1.0, self.half_elements + 1) ** self.grading
         half = np.interp(t * sf[-1], sf, xf)
         half[0], half[-1] = 0.0, self.L
-        return np.concatenate([-half[:0:-1], half])
+        return half
 
     def skfem(self) -> MeshLine:
         """The scikit-fem mesh."""

@@ -271,20 +271,29 @@ def refine(h: Harvester, tol: float, plan: Plan, progress: Callable[[str], None]
                     raise
         return out
 
-    def estimates(M: int, nh: int, fixed: bool = False) -> tuple[dict[str, float], float, float]:
+    def estimates(M: int, nh: int, fixed: bool = False, enough: float | None = None
+                  ) -> tuple[dict[str, float], float, float]:
         # Mesh: Richardson from the meshes nh/4, nh/2, nh with the observed order capped at
         # p + 1 (:func:`mesh_error`); the last difference alone if the sequence is not
         # contracting. A coarsest mesh of one element per half is still used; below that the
-        # next finer mesh serves as the comparison.
+        # next finer mesh serves as the comparison. With ``enough`` (an error on eta), the
+        # coarsest mesh is solved only if the two-mesh estimate (never smaller than the
+        # Richardson one) is above it: it can only sharpen the estimate.
         # Hermite: tail estimate from M - 4, M - 2, M; a fixed level M is instead compared
         # with M + 2, whose own tail is added (the error of f(M) is |f(M) - f(M+2)| + tail).
-        meshes = []
+        meshes = [level(M, nh // 2) if nh >= 2 else level(M, 2 * nh)]
+        if nh >= 4 and enough is not None:
+            errs, eM, ex = combine(M, nh, fixed, meshes)
+            if reported_eta_error(level(M, nh).moments, errs)[0] <= enough:
+                return errs, eM, ex
         if nh >= 4:
             try:  # the coarsest mesh only sharpens the estimate; it may fail to solve
-                meshes.append(level(M, nh // 4))
+                meshes.insert(0, level(M, nh // 4))
             except _LevelFailed:
                 pass
-        meshes.append(level(M, nh // 2) if nh >= 2 else level(M, 2 * nh))
+        return combine(M, nh, fixed, meshes)
+
+    def combine(M: int, nh: int, fixed: bool, meshes: list[Level]) -> tuple[dict[str, float], float, float]:
         degs = [m for m in ((M - 2, M, M + 2) if fixed else (M - 4, M - 2, M)) if m >= 2]
         seq_M = usable(degs, nh)
         degs = [lv.M for lv in seq_M]
@@ -325,7 +334,7 @@ def refine(h: Harvester, tol: float, plan: Plan, progress: Callable[[str], None]
             seq_M = usable([m for m in (M - 4, M - 2, M) if m >= 2], nh)
             eM, _ = tail_error([lv.moments["eta"] for lv in seq_M], [lv.M for lv in seq_M])
             if eM <= 0.5 * tol * eta:
-                errs, eM, ex = estimates(M, nh)
+                errs, eM, ex = estimates(M, nh, enough=tol * eta)
                 if reported_eta_error(best.moments, errs)[0] <= tol * eta:
                     return RefinementResult(best, errs, eM, ex, True, "", _history(cache),
                                             time.perf_counter() - t0)

@@ -101,12 +101,17 @@ def default_plan(h: Harvester, M: int | None = None, half_elements: int | None =
 
 def _fields(lv: Level, x: np.ndarray) -> dict[str, np.ndarray]:
     X = lv.xmat
+    x = np.clip(x, -lv.mesh.L, lv.mesh.L)
     # A fresh element: ElementLinePp caches reference values by array shape only.
-    basis = Basis(lv.mesh.skfem(), _element(lv.order), intorder=2 * lv.order + 6)
-    probe = basis.probes(np.atleast_2d(np.clip(x, -lv.mesh.L, lv.mesh.L)))
+    basis = Basis(X.basis.mesh, _element(lv.order), intorder=2 * lv.order + 6)
+    probe = basis.probes(np.atleast_2d(np.abs(x) if lv.half else x))
     u = np.zeros((basis.N, lv.coef.shape[1]))
     u[X.perm] = lv.coef
     vals = probe @ u
+    if lv.half:
+        # Mirror image on x < 0: c_alpha(-x) = (-1)^|alpha| c_alpha(x).
+        parity = 1.0 - 2.0 * (lv.hermite.degree() % 2)
+        vals = np.where((x < 0.0)[:, None], vals * parity, vals)
     w1 = lv.hermite.first_moment_weights(lv.whitening.chol)
     dens = vals[:, 0]
     num = vals @ w1.T

@@ -134,6 +134,32 @@ def test_block_tridiagonal_low_rank_couplings(rng: np.random.Generator, nblocks:
     assert np.allclose(x, spla.spsolve(A.tocsc(), r), rtol=1e-11, atol=1e-12)
 
 
+@pytest.mark.parametrize("nblocks", [1, 2, 5])
+def test_block_tridiagonal_kronecker_couplings(rng: np.random.Generator, nblocks: int) -> None:
+    # A = sum_j X_j (x) H_j with X_j block tridiagonal in 2 x 2 element blocks (rank-1
+    # off-diagonal blocks, like DG traces) and low-rank H_j: the couplings factored term by
+    # term must give the same solution as those factored from A's entries.
+    nx, nh = 2, 5
+    Xs, Hs = [], []
+    for _ in range(2):
+        X = sp.lil_matrix((nblocks * nx, nblocks * nx))
+        for k in range(nblocks):
+            X[k * nx:(k + 1) * nx, k * nx:(k + 1) * nx] = rng.normal(size=(nx, nx))
+            if k:
+                X[k * nx:(k + 1) * nx, (k - 1) * nx:k * nx] = np.outer(rng.normal(size=nx), rng.normal(size=nx))
+                X[(k - 1) * nx:k * nx, k * nx:(k + 1) * nx] = np.outer(rng.normal(size=nx), rng.normal(size=nx))
+        Xs.append(X.tocsr())
+        Hs.append(rng.normal(size=(nh, 2)) @ rng.normal(size=(2, nh)))
+    A = sum(sp.kron(X, H) for X, H in zip(Xs, Hs)) + 10.0 * sp.eye(nblocks * nx * nh)
+    A = sp.csr_matrix(A)
+    r = rng.normal(size=A.shape[0])
+    x = BlockTridiagonal(A, nx * nh, kron=list(zip(Xs, Hs))).solve(r)
+    assert np.allclose(x, BlockTridiagonal(A, nx * nh).solve(r), rtol=1e-11, atol=1e-12)
+    assert np.allclose(A @ x, r, atol=1e-10)
+    with pytest.raises(ValueError, match="does not fit"):
+        BlockTridiagonal(A, nx * nh, kron=[(Xs[0], np.eye(3))])
+
+
 def test_block_tridiagonal_rejects_bad_input() -> None:
     A = sp.eye(6, format="lil")
     A[0, 5] = 1.0
@@ -143,3 +169,13 @@ def test_block_tridiagonal_rejects_bad_input() -> None:
         BlockTridiagonal(sp.eye(7, format="csr"), 2)
     with pytest.raises(ValueError, match="threads"):
         BlockTridiagonal(sp.eye(6, format="csr"), 2, threads=3)
+
+
+def test_mirror_needs_a_half_mesh() -> None:
+    with pytest.raises(ValueError, match="half mesh"):
+        assemble_x(np.linspace(-1.0, 1.0, 5), 3, lambda x: 0.0 * x, reflect=True)
+    X = assemble_x(np.linspace(0.0, 1.0, 3), 3, lambda x: 0.0 * x, reflect=True)
+    # -psi_i(0) phi_j(0): nonzero only on the first element, rank one.
+    dense = X.xreflect.toarray()
+    assert np.all(dense[4:] == 0.0) and np.all(dense[:, 4:] == 0.0)
+    assert np.linalg.matrix_rank(dense) == 1 and dense.trace() < 0.0

@@ -11,13 +11,31 @@ from fpe_harvester import Harvester, MethodNotAvailableError, ParameterError, St
 from fpe_harvester.fpe import FokkerPlanck, stationary
 from fpe_harvester.fpe.discretize import Whitening, solve_level
 from fpe_harvester.fpe.refine import default_memory_gb, level_gigabytes, mesh_error, tail_error
-from fpe_harvester.fpe.stationary import default_plan
+from fpe_harvester.fpe.stationary import _fields, default_plan
 from fpe_harvester.linear import lyapunov_covariance, mode_moments
 
 
 def _level(h: Harvester, M: int, half: int, order: int = 3):
     w = Whitening.of(h)
     return solve_level(h, M, default_plan(h).mesh(h, w, half), order, w)
+
+
+@pytest.mark.parametrize(("n", "M", "half"), [(3.0, 6, 4), (1.0, 6, 4), (8.0, 6, 4), (1.5, 4, 1)])
+def test_half_mesh_with_mirror_equals_whole_mesh(n: float, M: int, half: int) -> None:
+    """The mirror condition at 0 gives the whole-mesh discrete solution (n = 3: conditional
+    weight, n = 1: kink, n = 8: steep walls, one element per half)."""
+    h = Harvester.build(a=0.5, n=n)
+    w = Whitening.of(h)
+    mesh = default_plan(h).mesh(h, w, half)
+    whole, mirror = solve_level(h, M, mesh, 3, w, half=False), solve_level(h, M, mesh, 3, w)
+    assert mirror.half and not whole.half and mirror.dofs * 2 == whole.dofs
+    for key in ("eta", "V2", "Pin", "v2", "vV", "vxi", "x2"):
+        assert mirror.moments[key] == pytest.approx(whole.moments[key], rel=1e-10), key
+    x = np.linspace(-mesh.L, mesh.L, 41)
+    f, g = _fields(whole, x), _fields(mirror, x)
+    assert np.allclose(f["density"], g["density"], rtol=1e-9, atol=1e-12 * f["density"].max())
+    for key in ("v_mean", "V_mean", "xi_mean"):
+        assert np.allclose(f[key], g[key], rtol=1e-8, atol=1e-10), key
 
 
 @pytest.mark.parametrize("a", [0.5, 1.0, 2.0])
