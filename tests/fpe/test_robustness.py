@@ -96,7 +96,7 @@ def test_budget_stops_before_a_level_predicted_too_costly() -> None:
 
 
 def test_memory_bound_stops_before_a_level_too_large() -> None:
-    # M = 8 with 16 elements needs ~0.28 GB, M = 10 ~0.45 GB: the bound 0.3 GB stops the
+    # M = 8 with 16 elements needs ~0.24 GB, M = 10 ~0.33 GB: the bound 0.3 GB stops the
     # refinement at M = 8 with its estimate.
     r = solve(Harvester.build(a=0.5, n=4), "fpe", tol=1e-9, max_gb=0.3)
     assert r.status is Status.NOT_CONVERGED
@@ -127,3 +127,15 @@ def test_predicted_cost_scales_with_block_size() -> None:
     assert refine_mod._predicted_seconds(cache, 8, 8, 3) == pytest.approx((nb[8] / nb[6]) ** 2)
     cache = {(4, 8): _Lv(1e-9), (6, 8): _Lv(1.0)}
     assert refine_mod._predicted_seconds(cache, 8, 8, 3) == pytest.approx((nb[8] / nb[6]) ** 3)
+
+
+def test_stalled_hermite_sequence_is_recognized() -> None:
+    # converging (geometric or algebraic, one sign): keep refining M
+    assert not refine_mod._stalled([1.1, 1.01, 1.001])
+    assert not refine_mod._stalled([0.6108, 0.6106, 0.61052])
+    assert not refine_mod._stalled([1.0, 1.1])
+    # n = 8 on 16 elements at M = 14, 16 (steps -1.5e-6, -5.2e-6) and 16, 18, 20 (sign change)
+    assert refine_mod._stalled([0.4722468805, 0.4722454166, 0.4722402627])
+    assert refine_mod._stalled([0.4722402627, 0.4722339567, 0.4722402847])
+    # a small step of the other sign is still convergence
+    assert not refine_mod._stalled([1.0, 1.01, 1.008])
