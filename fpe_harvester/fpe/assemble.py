@@ -164,16 +164,21 @@ def assemble_x(mesh_nodes: np.ndarray, order: int, u: Callable[[np.ndarray], np.
         if reflect and mesh.p[0, facet] < 0.5 * mesh_nodes[-1]:
             xreflect = -asm(neg, fb)
 
-    def p2(A: sp.spmatrix) -> sp.csr_matrix:
+    def p2(A: sp.spmatrix, clean: bool = False) -> sp.csr_matrix:
         A = sp.csr_matrix(A)
+        if clean:
+            # Face matrices are products of basis values at nodes, O(1) or exactly zero (the
+            # bubbles vanish at the ends); drop the round-off (1e-16) of the latter, which
+            # would double the rows of every element coupling.
+            A.data[np.abs(A.data) < 1e-12 * max(np.abs(A.data).max(initial=0.0), 1.0)] = 0.0
         A.eliminate_zeros()
         return A[perm][:, perm].tocsr()
 
     return XMatrices(
-        mass=p2(mass), mass_u=p2(mass_u), mass_x=p2(mass_x), deriv=p2(deriv), xplus=p2(xplus),
-        xminus=p2(xminus),
+        mass=p2(mass), mass_u=p2(mass_u), mass_x=p2(mass_x), deriv=p2(deriv), xplus=p2(xplus, True),
+        xminus=p2(xminus, True),
         integral=integral[perm], x2=x2[perm], x1=x1[perm], basis=basis, order=order, perm=perm,
-        xreflect=None if xreflect is None else p2(xreflect),
+        xreflect=None if xreflect is None else p2(xreflect, True),
     )
 
 
