@@ -11,7 +11,7 @@ For the single oscillator with a = 0.5 and n = 2, 3, 4, 8 (smooth) and n = 1 (ki
   eta for n = 3, extrapolated to 1e-4 relative (time ~ 1/error^2), for the ratio.
 
 ``python -m validation.bench_fpe [--quick] [--out DIR]`` runs the benchmark (the full one
-takes tens of minutes) and writes ``bench_fpe.json`` and ``bench_fpe.png`` into DIR
+takes about 6 minutes) and writes ``bench_fpe.json`` and ``bench_fpe.png`` into DIR
 (default ``./validation_report``).
 """
 
@@ -21,8 +21,11 @@ import pathlib
 import time
 from typing import Any
 
+import numpy as np
+
 from fpe_harvester import Harvester
 from fpe_harvester.fpe import stationary
+from fpe_harvester.fpe import discretize
 from fpe_harvester.fpe.discretize import Whitening, solve_level
 from fpe_harvester.fpe.stationary import default_plan as stationary_plan
 from fpe_harvester.linear import mode_moments
@@ -46,12 +49,21 @@ def _curve(h: Harvester, degrees: list[int], half: int) -> list[dict[str, float]
 
 
 def _tol_run(h: Harvester, tol: float, max_seconds: float) -> dict[str, Any]:
-    t0 = time.perf_counter()
-    sol = stationary(h, tol=tol, max_seconds=max_seconds, grid=3)
+    """One tolerance-driven solve; runs under 2 s are repeated (3 in all, the scalar DG
+    matrices' cache emptied each time: every run starts cold) and ``seconds`` is the median,
+    ``seconds_all`` the single times (a virtual machine's timings scatter by ~20 %)."""
+    times = []
+    while True:
+        discretize._X_CACHE.clear()
+        t0 = time.perf_counter()
+        sol = stationary(h, tol=tol, max_seconds=max_seconds, grid=3)
+        times.append(time.perf_counter() - t0)
+        if times[0] >= 2.0 or len(times) == 3:
+            break
     s = sol.stats
-    return {"tol": tol, "seconds": time.perf_counter() - t0, "eta": s.eta, "eta_err": s.eta_err,
-            "status": s.status.value, "M": s.info["M"], "elements": s.info["elements"],
-            "dofs": s.info["dofs"]}
+    return {"tol": tol, "seconds": float(np.median(times)), "seconds_all": times, "eta": s.eta,
+            "eta_err": s.eta_err, "status": s.status.value, "M": s.info["M"],
+            "elements": s.info["elements"], "dofs": s.info["dofs"]}
 
 
 def _monte_carlo(h: Harvester, quick: bool) -> dict[str, Any] | None:
