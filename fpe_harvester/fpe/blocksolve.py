@@ -5,7 +5,9 @@ operator is block tridiagonal: element K couples to K - 1 and K + 1 only through
 upwind flux at the shared node. Each off-diagonal block is nonzero in a few rows and
 columns and has low rank: the trace values of the two elements times :math:`F^\\pm`,
 so its rank is at most :math:`\\mathrm{rank}\\,F^\\pm \\approx \\binom{M+3}{3}/2`. Stored as
-:math:`A_{K,K-1} = U_K V_K^T` and :math:`A_{K-1,K} = P_K Q_K^T` (rank-revealing QR), forward
+:math:`A_{K,K-1} = U_K V_K^T` and :math:`A_{K-1,K} = P_K Q_K^T` (rank-revealing QR of the
+block, or, when the caller passes the coupling terms :math:`X_\\pm \\otimes F^\\pm`, Kronecker
+products of the factors of the small trace block and of :math:`F^\\pm`), forward
 elimination
 
 .. math::

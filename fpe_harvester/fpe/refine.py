@@ -43,6 +43,9 @@ __all__ = ["tail_error", "mesh_error", "reported_eta_error", "Plan", "Refinement
 #: still returns its finest level (with the spread as error); beyond it, no estimate.
 BROKEN_SPREAD = 0.1
 
+#: The mesh error is first estimated once the Hermite part is below this share of tol.
+HERMITE_SHARE = 0.5
+
 #: Observables carried through the refinement (each gets its own estimate).
 OBSERVABLES = ("eta", "V2", "Pin", "v2", "vV", "x2")
 
@@ -338,7 +341,7 @@ def refine(h: Harvester, tol: float, plan: Plan, progress: Callable[[str], None]
             # resolves the higher modes (n = 8 at M >= 16 on 16 elements wanders by 1e-5
             # around a value 1e-5 off): then the mesh error is checked too, and the larger
             # part refined.
-            if eM <= 0.5 * tol * eta or _stalled(vals):
+            if eM <= HERMITE_SHARE * tol * eta or _stalled(vals):
                 errs, eM, ex = estimates(M, nh, enough=tol * eta)
                 if reported_eta_error(best.moments, errs)[0] <= tol * eta:
                     return RefinementResult(best, errs, eM, ex, True, "", _history(cache),
