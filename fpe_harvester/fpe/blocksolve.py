@@ -69,9 +69,9 @@ class _Coupling:
         return cls(rows, cols, *known[key])
 
     @classmethod
-    def from_kron(cls, parts: list[tuple[np.ndarray, tuple[np.ndarray, np.ndarray]]], inner: int) -> _Coupling:
+    def from_kron(cls, parts: list[tuple[np.ndarray, tuple[np.ndarray, np.ndarray]]]) -> _Coupling:
         """From Kronecker terms :math:`\\sum_j X_j \\otimes H_j`: ``parts`` holds the small
-        dense blocks :math:`X_j` with the low-rank factors of :math:`H_j` (size ``inner``).
+        dense blocks :math:`X_j` with the low-rank factors of :math:`H_j`.
 
         The factors are Kronecker products of the factors of :math:`X_j` (an SVD of a
         :math:`(p+1)\\times(p+1)` matrix) and of :math:`H_j`: no factorization of the
@@ -83,10 +83,9 @@ class _Coupling:
             for i in np.flatnonzero(sv > RANK_TOL * max(sv[0], 1e-300)):
                 lefts.append(np.kron(u[:, i:i + 1] * sv[i], hl))
                 rights.append(np.kron(vt[i][:, None], hr))
-        nb = inner * (parts[0][0].shape[0] if parts else 0)
-        allrows = np.arange(nb)
         if not lefts:
-            return cls(allrows[:0], allrows[:0], np.zeros((0, 0)), np.zeros((0, 0)))
+            none = np.zeros(0, dtype=int)
+            return cls(none, none, np.zeros((0, 0)), np.zeros((0, 0)))
         left, right = np.hstack(lefts), np.hstack(rights)
         rows = np.flatnonzero(np.any(left != 0.0, axis=1))
         cols = np.flatnonzero(np.any(right != 0.0, axis=1))
@@ -298,6 +297,6 @@ def _kron_couplings(kron: Sequence[tuple[sp.spmatrix, np.ndarray]], N: int, bloc
             xb = X[k * nx:(k + 1) * nx, j * nx:(j + 1) * nx].toarray()
             if np.any(xb != 0.0):
                 parts.append((xb, hf))
-        return _Coupling.from_kron(parts, block // terms[0][2] if terms else block)
+        return _Coupling.from_kron(parts)
 
     return [coupling(k, k - 1) for k in range(1, N)], [coupling(k, k + 1) for k in range(N - 1)]

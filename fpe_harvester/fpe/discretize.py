@@ -189,7 +189,7 @@ def assemble_level(h: Harvester, M: int, mesh: XMesh, order: int, w: Whitening, 
     level, on the whole mesh or (``half``) on :math:`[0, L]` with the mirror condition at 0."""
     hb, F, K0, K1, K2 = hierarchy_matrices(h, M, w)
     X = x_matrices(h, mesh, order, half)
-    parity = 1.0 - 2.0 * (hb.degree() % 2) if half else None
+    parity = hb.parity() if half else None
     return hb, F, X, dg_operator(X, F, K0, K1, K2, parity)
 
 

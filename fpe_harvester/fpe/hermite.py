@@ -95,6 +95,10 @@ class HermiteBasis:
         """Total degree of each index."""
         return self.alphas.sum(axis=1)
 
+    def parity(self) -> np.ndarray:
+        """:math:`(-1)^{|\\alpha|}` of each index: the sign of :math:`h_\\alpha(-z)/h_\\alpha(z)`."""
+        return 1.0 - 2.0 * (self.degree() % 2)
+
     def _shift(self, alpha: tuple[int, ...], i: int, d: int) -> int | None:
         b = list(alpha)
         b[i] += d

@@ -110,8 +110,7 @@ def _fields(lv: Level, x: np.ndarray) -> dict[str, np.ndarray]:
     vals = probe @ u
     if lv.half:
         # Mirror image on x < 0: c_alpha(-x) = (-1)^|alpha| c_alpha(x).
-        parity = 1.0 - 2.0 * (lv.hermite.degree() % 2)
-        vals = np.where((x < 0.0)[:, None], vals * parity, vals)
+        vals = np.where((x < 0.0)[:, None], vals * lv.hermite.parity(), vals)
     w1 = lv.hermite.first_moment_weights(lv.whitening.chol)
     dens = vals[:, 0]
     num = vals @ w1.T
