@@ -24,8 +24,7 @@ from typing import Any
 import numpy as np
 
 from fpe_harvester import Harvester
-from fpe_harvester.fpe import stationary
-from fpe_harvester.fpe import discretize
+from fpe_harvester.fpe import discretize, stationary
 from fpe_harvester.fpe.discretize import Whitening, solve_level
 from fpe_harvester.fpe.stationary import default_plan as stationary_plan
 from fpe_harvester.linear import mode_moments
