@@ -88,6 +88,12 @@ class XMatrices:
     def ndofs(self) -> int:
         return self.mass.shape[0]
 
+    @property
+    def copies(self) -> float:
+        """How often the mesh's integrals count: 2 on a half mesh with a mirror (the image
+        on x < 0 adds the same integral of an even integrand), else 1."""
+        return 1.0 if self.xreflect is None else 2.0
+
 
 def _element(order: int) -> ElementDG:
     if order == 1:
@@ -218,7 +224,8 @@ def upwind_parts(F: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
 
 
 def dg_operator(X: XMatrices, F: np.ndarray, K0: sp.spmatrix, K1: sp.spmatrix,
-                K2: sp.spmatrix | None = None, parity: np.ndarray | None = None) -> sp.csr_matrix:
+                K2: sp.spmatrix | None = None, parity: np.ndarray | None = None,
+                upwind: tuple[np.ndarray, np.ndarray] | None = None) -> sp.csr_matrix:
     """The global DG operator :math:`A` (see module docstring), x outer, alpha inner.
 
     ``K2`` (optional) multiplies x, from a weight centred on a conditional mean linear in x
@@ -229,8 +236,10 @@ def dg_operator(X: XMatrices, F: np.ndarray, K0: sp.spmatrix, K1: sp.spmatrix,
     :math:`(-1)^{|\\alpha|}`, S = diag(parity)): the upwind flux at 0 is
     :math:`F^+ c(0^-) + F^- c(0^+) = (F^+ S + F^-)\\,c(0^+)`, which adds
     :math:`X_{reflect} \\otimes F^+ S`.
+
+    ``upwind`` is :func:`upwind_parts` of F if the caller has it already.
     """
-    Fp, Fm = upwind_parts(F)
+    Fp, Fm = upwind_parts(F) if upwind is None else upwind
     A = (
         sp.kron(X.xplus, sp.csr_matrix(Fp))
         + sp.kron(X.xminus, sp.csr_matrix(Fm))

@@ -26,6 +26,7 @@ bandwidths) and runs in dense LAPACK. Cost per element :math:`\\approx \\tfrac23
 
 from __future__ import annotations
 
+import functools
 from collections.abc import Sequence
 from concurrent.futures import ThreadPoolExecutor
 from typing import Any
@@ -42,15 +43,11 @@ __all__ = ["BlockTridiagonal"]
 RANK_TOL = 1e-14
 
 
-_CONTROLLER: list[ThreadpoolController] = []
-
-
+@functools.cache
 def _blas() -> ThreadpoolController:
     """The thread-pool controller, made once (``threadpool_limits`` rescans the loaded
     libraries on every call: ~2 ms, a few per cent of a low level)."""
-    if not _CONTROLLER:
-        _CONTROLLER.append(ThreadpoolController())
-    return _CONTROLLER[0]
+    return ThreadpoolController()
 
 
 class _Coupling:

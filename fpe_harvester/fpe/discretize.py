@@ -157,9 +157,6 @@ class Level:
         Number of unknowns.
     seconds : float
         Wall time of assembly and solve.
-    half : bool
-        If True, ``coef`` and ``xmat`` live on the half mesh :math:`[0, L]` and the solution
-        on :math:`x < 0` is the mirror image :math:`c_\\alpha(-x) = (-1)^{|\\alpha|}c_\\alpha(x)`.
     """
 
     M: int
@@ -172,7 +169,12 @@ class Level:
     xmat: XMatrices = field(repr=False)
     hermite: HermiteBasis = field(repr=False)
     whitening: Whitening = field(repr=False)
-    half: bool = False
+
+    @property
+    def half(self) -> bool:
+        """True if ``coef`` and ``xmat`` live on the half mesh :math:`[0, L]`; the solution
+        on :math:`x < 0` is then the mirror image :math:`c_\\alpha(-x) = (-1)^{|\\alpha|}c_\\alpha(x)`."""
+        return self.xmat.xreflect is not None
 
     def summary(self) -> dict[str, Any]:
         """JSON-ready description (for the refinement history)."""
@@ -184,13 +186,15 @@ class Level:
 
 
 def assemble_level(h: Harvester, M: int, mesh: XMesh, order: int, w: Whitening, half: bool = False
-                   ) -> tuple[HermiteBasis, np.ndarray, XMatrices, sp.csr_matrix]:
-    """Hermite basis, flux matrix F, scalar x-matrices and the global DG operator A of one
-    level, on the whole mesh or (``half``) on :math:`[0, L]` with the mirror condition at 0."""
+                   ) -> tuple[HermiteBasis, np.ndarray, XMatrices, sp.csr_matrix, tuple[np.ndarray, np.ndarray]]:
+    """Hermite basis, flux matrix F, scalar x-matrices, the global DG operator A and the
+    upwind parts :math:`(F^+, F^-)` of one level, on the whole mesh or (``half``) on
+    :math:`[0, L]` with the mirror condition at 0."""
     hb, F, K0, K1, K2 = hierarchy_matrices(h, M, w)
     X = x_matrices(h, mesh, order, half)
     parity = hb.parity() if half else None
-    return hb, F, X, dg_operator(X, F, K0, K1, K2, parity)
+    upwind = upwind_parts(F)
+    return hb, F, X, dg_operator(X, F, K0, K1, K2, parity, upwind), upwind
 
 
 #: Scalar DG matrices of recently used (mesh, order, potential): the refinement solves
@@ -217,11 +221,10 @@ def x_matrices(h: Harvester, mesh: XMesh, order: int, half: bool = False) -> XMa
     return X
 
 
-def _moments(h: Harvester, X: XMatrices, hb: HermiteBasis, C: np.ndarray, w: Whitening,
-             copies: float = 1.0) -> dict[str, float]:
-    # copies = 2 on a half mesh: the (even) integrands count once more from the mirror image.
+def _moments(h: Harvester, X: XMatrices, hb: HermiteBasis, C: np.ndarray, w: Whitening) -> dict[str, float]:
+    # On a half mesh the (even) integrands count once more from the mirror image.
     p = h.params
-    C = copies * C
+    C = X.copies * C
     # y = y' + b x with y' = L z: <y_i y_j> = <y'_i y'_j> + b_i <x y'_j> + b_j <x y'_i> + b_i b_j <x^2>.
     W = hb.second_moment_weights(w.chol)
     Y = np.einsum("ijm,km->ijk", W, C) @ X.integral
@@ -259,7 +262,7 @@ def solve_level(h: Harvester, M: int, mesh: XMesh, order: int, w: Whitening, hal
         the whole mesh, see the module docstring, at half the cost).
     """
     t0 = time.perf_counter()
-    hb, F, X, A = assemble_level(h, M, mesh, order, w, half)
+    hb, F, X, A, (Fp, Fm) = assemble_level(h, M, mesh, order, w, half)
     na = hb.size
     # Inverse iteration for the generalized problem A c = lambda (M_x (x) I) c: A is
     # nonsingular only through the outflow at +-L, whose eigenvalue lambda_0 is exponentially
@@ -274,7 +277,6 @@ def solve_level(h: Harvester, M: int, mesh: XMesh, order: int, w: Whitening, hal
     rhs = np.zeros((X.integral.size, na))
     rhs[:, 0] = X.integral
     # Neighbouring elements couple only through the face terms X_+ (x) F^+ and X_- (x) F^-.
-    Fp, Fm = upwind_parts(F)
     solver = BlockTridiagonal(A, (order + 1) * na, kron=[(X.xplus, Fp), (X.xminus, Fm)])
     C = solver.solve(rhs.ravel()).reshape(-1, na)
     C /= max(float(np.abs(C).max()), 1e-300)
@@ -285,7 +287,6 @@ def solve_level(h: Harvester, M: int, mesh: XMesh, order: int, w: Whitening, hal
         raise FloatingPointError(f"degenerate stationary solution at M = {M} (mass {mass}, "
                                  f"integral of |c_0| {scale})")
     # Unit mass on the whole domain (a half mesh holds half of it).
-    copies = 2.0 if half else 1.0
-    C /= copies * mass
-    moments = _moments(h, X, hb, C, w, copies)
-    return Level(M, order, mesh, C, moments, A.shape[0], time.perf_counter() - t0, X, hb, w, half)
+    C /= X.copies * mass
+    moments = _moments(h, X, hb, C, w)
+    return Level(M, order, mesh, C, moments, A.shape[0], time.perf_counter() - t0, X, hb, w)

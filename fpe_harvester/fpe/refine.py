@@ -166,7 +166,9 @@ class Plan:
         If True, solve at (M, half_elements) and estimate the error from one refinement
         step of each knob (M + 2, 2 x elements); no adaptation.
     max_M, max_half_elements, max_dofs : int
-        Limits; the solve reports NOT_CONVERGED when tol needs more.
+        Limits; the solve reports NOT_CONVERGED when tol needs more. ``max_dofs`` counts
+        the unknowns of the whole mesh, twice those of the half mesh that is solved (a
+        level's ``dofs``).
     max_seconds : float or None
         Wall-time budget for the adaptation (s); no step starts whose predicted cost
         would exceed it.

@@ -256,7 +256,7 @@ def transient(
     # The start is a centred Gaussian and the dynamics are mirror-symmetric, so the density
     # stays symmetric: the half mesh [0, L] with the mirror condition at 0 (see
     # :mod:`.discretize`) evolves the same discrete density with half the unknowns.
-    hb, F, X, A = assemble_level(h, M, mesh, order, w, half=True)
+    hb, F, X, A, _ = assemble_level(h, M, mesh, order, w, half=True)
     G = (-(sp.kron(_mass_inverse(X, order + 1), sp.identity(hb.size)) @ A)).tocsr()
 
     if P0 is None:
@@ -291,20 +291,20 @@ def transient(
     xs = np.linspace(-mesh.L, mesh.L, grid)
     records: list[tuple[float, dict[str, float], np.ndarray, float]] = []
 
-    mass0 = 2.0 * float(c0.reshape(-1, hb.size)[:, 0] @ X.integral)  # both halves
+    mass0 = X.copies * float(c0.reshape(-1, hb.size)[:, 0] @ X.integral)  # both halves
 
     def record(st: pde.ScalarField, t: float) -> None:
         C = st.data.reshape(-1, hb.size)
-        mass = 2.0 * float(C[:, 0] @ X.integral)
+        mass = X.copies * float(C[:, 0] @ X.integral)
         # Moments of the density still in the domain (the outflow at +-L is a truncation
         # artefact, recorded in ``mass``).
-        mo = _moments(h, X, hb, C / mass if mass > 0 else C, w, copies=2.0)
+        mo = _moments(h, X, hb, C / mass if mass > 0 else C, w)
         if not (np.all(np.isfinite(C)) and abs(mass - mass0) < 1e-3 and mo["V2"] > 0 and mo["x2"] > 0):
             raise NotConvergedError(
                 f"transient run unstable at t = {t:.4g} (mass {mass:.6g}, V2 {mo['V2']:.4g}): the "
                 f"truncated hierarchy has a spurious growing mode at M = {M}, {mesh.elements} elements, "
                 f"theta = {theta:g}; use more elements, a smaller theta or a smaller M")
-        lv = Level(M, order, mesh, C, mo, c0.size, 0.0, X, hb, w, half=True)
+        lv = Level(M, order, mesh, C, mo, c0.size, 0.0, X, hb, w)
         records.append((t, mo, _fields(lv, xs)["density"], mass))
 
     tracker = [pde.CallbackTracker(record, interrupts=interval), *(trackers or [])]
