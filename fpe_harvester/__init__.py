@@ -15,13 +15,21 @@ from .errors import (
     ParameterError,
     UnstableSystemError,
 )
-from .exact import Exact, exact_sweep
+from .exact import (
+    Exact,
+    Threshold,
+    critical_mode,
+    exact_sweep,
+    growth_rate,
+    k_di,
+    ring_spectrum,
+    threshold,
+)
 from .model import Harvester, Params, Potential
 from .result import QUANTITIES, Stats, Status
 from .scene import Axis, FigureSpec, Optimize, Scene, list_scenes, load_scene
 from .scene_run import SceneResult, run_scene
 from .solve import METHODS, choose_method, get_solver, solve
-from .stability import Threshold, critical_mode, growth_rate, k_di, ring_spectrum, threshold
 
 __version__ = "0.1.0"
 

@@ -13,9 +13,9 @@ from collections.abc import Callable, Sequence
 from typing import Any, NoReturn
 
 from .errors import HarvesterError, ParameterError
+from .exact import threshold
 from .model import Harvester, Params
 from .solve import METHODS, choose_method, solve
-from .stability import threshold
 
 __all__ = ["main", "build_parser"]
 

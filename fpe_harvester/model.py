@@ -266,7 +266,7 @@ class Harvester:
 
         For ``n < 2`` any ``k < 0`` makes the coupled potential unbounded below at large
         amplitude (the ring is only metastable); for ``n > 2`` it is always confined.
-        The harmonic case is decided by the mode stiffnesses (:mod:`.stability`).
+        The harmonic case is decided by the mode stiffnesses (:mod:`.exact.stability`).
         """
         if self.is_linear:
             return "linear"

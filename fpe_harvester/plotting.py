@@ -19,8 +19,8 @@ from collections.abc import Sequence
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
+from .exact import k_di
 from .scene import AXIS_NAMES, FigureSpec, Scene
-from .stability import k_di
 
 if TYPE_CHECKING:
     from .scene_run import SceneRow

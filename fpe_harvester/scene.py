@@ -51,8 +51,8 @@ from typing import Any
 import numpy as np
 
 from .errors import ParameterError, check_choice, check_int, check_real
+from .exact import k_di
 from .model import Harvester, Params
-from .stability import k_di
 
 __all__ = [
     "OBSERVABLES",

@@ -25,13 +25,12 @@ import numpy as np
 from scipy.optimize import minimize_scalar
 
 from .errors import HarvesterError, MethodNotAvailableError, ParameterError, check_int
-from .exact import Exact, exact_sweep
+from .exact import Exact, exact_sweep, k_di
 from .model import Harvester
 from .result import Stats, Status
 from .scene import DERIVED, OBSERVABLES, Scene, load_scene
 from .scene_cache import PointCache, point_key, point_seed, stats_from_dict
 from .solve import choose_method, solve
-from .stability import k_di
 
 __all__ = ["SceneRow", "SceneResult", "run_scene"]
 

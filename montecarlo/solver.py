@@ -18,9 +18,9 @@ from typing import Any, ClassVar
 import numpy as np
 
 from fpe_harvester.errors import ParameterError, check_int, check_real
+from fpe_harvester.exact import classify, growth_rate, k_di, max_sin2, mode_eigenvalues
 from fpe_harvester.model import Harvester
 from fpe_harvester.result import Stats, Status
-from fpe_harvester.stability import classify, growth_rate, k_di, max_sin2, mode_eigenvalues
 
 from .estimate import Estimate, estimate
 from .scheme import SCHEME_NAMES, scheme_kind

@@ -24,7 +24,7 @@ from typing import Any
 import numpy as np
 
 from fpe_harvester import Harvester, Params, exact_sweep, solve
-from fpe_harvester.linear import dense_covariance
+from fpe_harvester.exact import dense_covariance
 from validation.report import bench_main, save_benchmark
 
 __all__ = ["run", "rational_eta"]
@@ -42,7 +42,7 @@ def _best_time(fn: Callable[[], Any], repeat: int) -> tuple[float, Any]:
 def rational_eta(kappas: list[Fraction], p: Params | None = None) -> tuple[Fraction, Fraction]:
     """``(V2, eta)`` of a ring in exact rational arithmetic, from rational mode stiffnesses.
 
-    Same closed form as :func:`fpe_harvester.linear.mode_moments`, evaluated with
+    Same closed form as :func:`fpe_harvester.exact.mode_moments`, evaluated with
     :class:`fractions.Fraction` (the default parameters are integers, so no rounding at all).
     """
     p = p or Params()

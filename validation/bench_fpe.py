@@ -24,10 +24,10 @@ from typing import Any
 import numpy as np
 
 from fpe_harvester import Harvester
+from fpe_harvester.exact import mode_moments
 from fpe_harvester.fpe import discretize, stationary
 from fpe_harvester.fpe.discretize import Whitening, solve_level
 from fpe_harvester.fpe.stationary import default_plan as stationary_plan
-from fpe_harvester.linear import mode_moments
 from validation.report import bench_main, save_benchmark
 
 __all__ = ["run"]

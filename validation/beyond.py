@@ -1,7 +1,7 @@
 """Beyond the paper: the exact optimum of harmonic rings, its upper bound, k_di maps, and
 the escape (metastability) time of n < 2 rings from Monte Carlo.
 
-**The bound.** From the closed form of :func:`fpe_harvester.linear.mode_moments`,
+**The bound.** From the closed form of :func:`fpe_harvester.exact.mode_moments`,
 :math:`\\eta = V^2/P_{in}` of one mode of stiffness :math:`\\kappa` is
 
 .. math::
@@ -20,8 +20,8 @@ from __future__ import annotations
 
 import math
 import shutil
-from pathlib import Path
 from collections.abc import Mapping
+from pathlib import Path
 from typing import Any
 
 import numpy as np
@@ -29,11 +29,9 @@ import scipy.integrate
 import scipy.optimize
 
 from fpe_harvester.errors import MethodNotAvailableError
-from fpe_harvester.exact import exact_sweep
-from fpe_harvester.linear import mode_moments
+from fpe_harvester.exact import exact_sweep, k_di, mode_moments
 from fpe_harvester.model import Harvester, Params
 from fpe_harvester.result import Status
-from fpe_harvester.stability import k_di
 
 from .checks import CheckResult, Context, agree, expect, skipped
 from .report import Figure, Section, Table

@@ -22,10 +22,9 @@ import math
 
 import numpy as np
 
-from fpe_harvester.linear import dense_covariance
+from fpe_harvester.exact import dense_covariance, k_di
 from fpe_harvester.model import Harvester
 from fpe_harvester.result import Stats
-from fpe_harvester.stability import k_di
 
 from .checks import CheckResult, Context, agree, expect
 from .report import Section, Table

@@ -21,9 +21,9 @@ from collections.abc import Sequence
 from dataclasses import dataclass
 
 from fpe_harvester.errors import MethodNotAvailableError
+from fpe_harvester.exact import k_di
 from fpe_harvester.model import Harvester
 from fpe_harvester.result import Stats
-from fpe_harvester.stability import k_di
 
 from .checks import Context, agree
 from .report import Section, Table

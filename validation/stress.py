@@ -25,9 +25,9 @@ from typing import Any
 import mpmath
 
 from fpe_harvester.errors import HarvesterError, MethodNotAvailableError
+from fpe_harvester.exact import k_di
 from fpe_harvester.model import Harvester, Params
 from fpe_harvester.result import Stats, Status
-from fpe_harvester.stability import k_di
 
 from .checks import CheckResult, Context, agree, expect, skipped, solver_available
 from .crosscheck import identity_checks
@@ -133,7 +133,7 @@ def _harmonic_cases(ctx: Context) -> list[tuple[str, Callable[[], list[CheckResu
     def beyond() -> list[CheckResult]:
         import numpy as np
 
-        from fpe_harvester.linear import ring_drift_matrix
+        from fpe_harvester.exact import ring_drift_matrix
 
         h = Harvester.build(a=0.5, n=2, N=3, k=kd3 * 1.01)
         r = ctx.solve(h, "exact")
@@ -155,7 +155,7 @@ def _harmonic_cases(ctx: Context) -> list[tuple[str, Callable[[], list[CheckResu
 
         import scipy.integrate
 
-        from fpe_harvester.linear import mode_moments
+        from fpe_harvester.exact import mode_moments
 
         h = Harvester.build(a=0.5, n=2, N=1_000_000, k=-0.2)
         t0 = time.perf_counter()

@@ -247,7 +247,7 @@ def equivalent_harmonic(h: Harvester) -> tuple[float, np.ndarray]:
     """
     from scipy.optimize import brentq
 
-    from ..linear import lyapunov_covariance, mode_moments
+    from ..exact import lyapunov_covariance, mode_moments
 
     a, n = h.a, h.n
     c_n = a * n * 2.0 ** (n / 2) * math.gamma((n + 1) / 2) / math.sqrt(math.pi)

@@ -144,7 +144,7 @@ def lyapunov_transient(h: Harvester, P0: np.ndarray, t: np.ndarray) -> np.ndarra
     """
     from scipy.integrate import solve_ivp
 
-    from ..linear import drift_matrix, noise_matrix
+    from ..exact import drift_matrix, noise_matrix
 
     if not h.is_linear:
         raise MethodNotAvailableError("the Lyapunov reference needs a harmonic potential (n = 2)")

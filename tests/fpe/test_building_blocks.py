@@ -10,11 +10,11 @@ import scipy.sparse as sp
 import scipy.sparse.linalg as spla
 
 from fpe_harvester import Harvester, ParameterError
+from fpe_harvester.exact import lyapunov_covariance
 from fpe_harvester.fpe import HermiteBasis, XMesh
 from fpe_harvester.fpe.assemble import assemble_x, split_flux
 from fpe_harvester.fpe.blocksolve import BlockTridiagonal
 from fpe_harvester.fpe.hermite import whitening_covariance
-from fpe_harvester.linear import lyapunov_covariance
 
 
 def test_hermite_index_set_size_and_symmetry() -> None:

@@ -8,11 +8,11 @@ import numpy as np
 import pytest
 
 from fpe_harvester import Harvester, MethodNotAvailableError, ParameterError, Status, solve
+from fpe_harvester.exact import lyapunov_covariance, mode_moments
 from fpe_harvester.fpe import FokkerPlanck, stationary
 from fpe_harvester.fpe.discretize import Whitening, solve_level
 from fpe_harvester.fpe.refine import default_memory_gb, level_gigabytes, mesh_error, tail_error
 from fpe_harvester.fpe.stationary import _fields, default_plan
-from fpe_harvester.linear import lyapunov_covariance, mode_moments
 
 
 def _level(h: Harvester, M: int, half: int, order: int = 3):

@@ -29,7 +29,7 @@ def test_stable_ring_does_not_escape() -> None:
 
 def test_growth_beyond_k_di_escapes_at_the_predicted_pace() -> None:
     # far beyond k_di the critical mode grows like exp(lambda t): escape takes ~ log(threshold)/lambda
-    from fpe_harvester.stability import growth_rate
+    from fpe_harvester.exact import growth_rate
 
     h = Harvester.build(a=0.5, n=2, N=2, k=-1.0)
     lam = growth_rate(h)

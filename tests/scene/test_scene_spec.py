@@ -9,8 +9,8 @@ import numpy as np
 import pytest
 
 from fpe_harvester.errors import ParameterError
+from fpe_harvester.exact import k_di
 from fpe_harvester.scene import Axis, FigureSpec, Optimize, Scene, list_scenes, load_scene
-from fpe_harvester.stability import k_di
 
 GOOD = """
 name = "tiny"

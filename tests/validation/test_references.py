@@ -8,7 +8,7 @@ from fractions import Fraction
 import pytest
 
 from fpe_harvester import Harvester, Params, solve
-from fpe_harvester.stability import k_di
+from fpe_harvester.exact import k_di
 from validation.benchmarks import error_time_pairs
 from validation.beyond import eta_bound, eta_mode, optimum, plateau
 from validation.stress import mp_mode_moments, mp_ring_moments

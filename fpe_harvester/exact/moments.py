@@ -31,9 +31,8 @@ and ring averages are the means over modes of the single-unit moments.
 from __future__ import annotations
 
 import numpy as np
-import scipy.linalg
 
-from .model import Harvester, Params
+from ..model import Harvester, Params
 
 __all__ = [
     "drift_matrix",
@@ -113,6 +112,8 @@ def mode_moments(kappa: np.ndarray | float, params: Params) -> dict[str, np.ndar
 
 def lyapunov_covariance(kappa: float, params: Params) -> np.ndarray:
     """Stationary covariance of one unit by a numerical Lyapunov solve (cross-check)."""
+    import scipy.linalg
+
     A = drift_matrix(kappa, params)
     return scipy.linalg.solve_continuous_lyapunov(A, -noise_matrix(params))
 
@@ -129,6 +130,8 @@ def ring_drift_matrix(h: Harvester) -> np.ndarray:
 
 def dense_covariance(h: Harvester) -> np.ndarray:
     """Dense 4N x 4N stationary covariance (scipy Lyapunov solve); a cross-check for small N."""
+    import scipy.linalg
+
     A = ring_drift_matrix(h)
     Q = np.kron(np.eye(h.N), noise_matrix(h.params))
     return scipy.linalg.solve_continuous_lyapunov(A, -Q)

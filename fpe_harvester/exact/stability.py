@@ -23,8 +23,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .errors import ParameterError, check_int, check_real
-from .model import Harvester, Params
+from ..errors import ParameterError, check_int, check_real
+from ..model import Harvester, Params
 
 __all__ = [
     "Threshold",

@@ -7,10 +7,10 @@ from typing import ClassVar
 
 import numpy as np
 
-from .errors import MethodNotAvailableError, ParameterError, check_int
-from .linear import ring_moments
-from .model import Harvester, Params, mode_sin2
-from .result import Stats, Status
+from ..errors import MethodNotAvailableError, ParameterError, check_int
+from ..model import Harvester, Params, mode_sin2
+from ..result import Stats, Status
+from .moments import ring_moments
 from .stability import MARGINAL_RTOL, classify, growth_rate, k_di
 
 __all__ = ["Exact", "exact_sweep"]

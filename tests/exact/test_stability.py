@@ -6,8 +6,7 @@ import numpy as np
 import pytest
 
 from fpe_harvester import Harvester, ParameterError, Params, critical_mode, growth_rate, k_di, threshold
-from fpe_harvester.linear import ring_drift_matrix
-from fpe_harvester.stability import classify, ring_spectrum
+from fpe_harvester.exact import classify, ring_drift_matrix, ring_spectrum
 
 
 def test_known_thresholds():

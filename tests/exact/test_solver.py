@@ -18,7 +18,7 @@ from fpe_harvester import (
     k_di,
     solve,
 )
-from fpe_harvester.linear import dense_covariance, lyapunov_covariance, mode_moments
+from fpe_harvester.exact import dense_covariance, lyapunov_covariance, mode_moments
 
 
 def test_single_unit_reference_values():
