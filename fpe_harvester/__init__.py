@@ -27,8 +27,7 @@ from .exact import (
 )
 from .model import Harvester, Params, Potential
 from .result import QUANTITIES, Stats, Status
-from .scene import Axis, FigureSpec, Optimize, Scene, list_scenes, load_scene
-from .scene_run import SceneResult, run_scene
+from .scenes import Axis, FigureSpec, Optimize, Scene, SceneResult, list_scenes, load_scene, run_scene
 from .solve import METHODS, choose_method, get_solver, solve
 
 __version__ = "0.1.0"

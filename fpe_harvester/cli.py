@@ -127,8 +127,7 @@ def cmd_validate(args: argparse.Namespace) -> int:
 
 def cmd_scene(args: argparse.Namespace) -> int:
     """List the shipped scenes, or run one and print its table and output paths."""
-    from .scene import list_scenes, load_scene
-    from .scene_run import run_scene
+    from .scenes import list_scenes, load_scene, run_scene
 
     if args.action == "list":
         scenes = [load_scene(name) for name in list_scenes()]

@@ -175,8 +175,7 @@ def _plot_optimum(ctx: Context, Ns: list[int], As: tuple[float, ...], data: Mapp
 
 
 def _kdi_map(ctx: Context, sec: Section) -> list[CheckResult]:
-    from fpe_harvester.scene import list_scenes, load_scene
-    from fpe_harvester.scene_run import run_scene
+    from fpe_harvester.scenes import list_scenes, load_scene, run_scene
 
     names = [s for s in list_scenes() if "kdi" in s.replace("_", "").lower()]
     if not names:

@@ -1,4 +1,4 @@
-"""The paper's figures: run every shipped scene (:mod:`fpe_harvester.scene`) and embed its
+"""The paper's figures: run every shipped scene (:mod:`fpe_harvester.scenes`) and embed its
 figures and data in the report.
 
 Scenes choose the cheapest adequate solver per point (exact, Fokker--Planck, Monte Carlo)
@@ -31,8 +31,7 @@ def _fmt(v: object) -> str:
 
 
 def _run_one(ctx: Context, name: str, sec: Section) -> list[CheckResult]:
-    from fpe_harvester.scene import load_scene
-    from fpe_harvester.scene_run import run_scene
+    from fpe_harvester.scenes import load_scene, run_scene
 
     scene = load_scene(name)
     folder = ctx.out / "scenes" / name
@@ -70,7 +69,7 @@ def _run_one(ctx: Context, name: str, sec: Section) -> list[CheckResult]:
 
 def _is_exact(name: str) -> bool:
     """True for a scene whose every point is harmonic (exact solver, about a second)."""
-    from fpe_harvester.scene import load_scene
+    from fpe_harvester.scenes import load_scene
 
     scene = load_scene(name)
     return scene.system.is_linear and all(ax.name != "n" for ax in scene.axes)
@@ -94,9 +93,9 @@ def run_solvers(ctx: Context) -> Section:
 def _run(ctx: Context, key: str, title: str, exact: bool | None) -> Section:
     sec = Section(key, title)
     try:
-        from fpe_harvester.scene import list_scenes
+        from fpe_harvester.scenes import list_scenes
     except ImportError as exc:
-        sec.checks.append(skipped("paper figures (scenes)", title, f"fpe_harvester.scene not available ({exc})"))
+        sec.checks.append(skipped("paper figures (scenes)", title, f"fpe_harvester.scenes not available ({exc})"))
         return sec
     names = [n for n in list_scenes() if "kdi" not in n.replace("_", "").lower()
              and (exact is None or _is_exact(n) == exact)]

@@ -19,7 +19,6 @@ from datetime import datetime, timezone
 from pathlib import Path
 
 from fpe_harvester.errors import check_int
-
 from fpe_harvester.result import Status
 
 from .checks import Context, SolveCache, guarded, skipped

@@ -1,47 +1,43 @@
 """Running a scene: cheapest adequate solver per point, cache/resume, outputs and figures.
 
-Per point the method is ``scene.method`` or, for ``"auto"``, :func:`.solve.choose_method`
+Per point the method is ``scene.method`` or, for ``"auto"``, :func:`~fpe_harvester.solve.choose_method`
 (harmonic -> exact, single nonlinear unit -> Fokker--Planck with ``tol = rtol``, coupled
 nonlinear ring -> Monte Carlo with ``tol = rtol`` and a seed derived from the scene and the
-point). Harmonic points are computed together with :func:`.exact.exact_sweep` (one
+point). Harmonic points are computed together with :func:`~fpe_harvester.exact.exact_sweep` (one
 vectorized call per ring size and parameter set); the rest one by one. Each finished point
-is appended to ``points.jsonl`` in the output folder (see :mod:`.scene_cache`), so reruns
+is appended to ``points.jsonl`` in the output folder (see :mod:`.cache`), so reruns
 reuse it and an interrupted run resumes. A point whose solver fails or is not available is
 reported with its status and message; the scene goes on.
 """
 
 from __future__ import annotations
 
-import csv
 import json
 import time
 from collections.abc import Mapping, Sequence
-from dataclasses import dataclass, field, replace
+from dataclasses import dataclass, replace
 from pathlib import Path
 from types import MappingProxyType
 from typing import Any
 
 import numpy as np
-from scipy.optimize import minimize_scalar
 
-from .errors import HarvesterError, MethodNotAvailableError, ParameterError, check_int
-from .exact import Exact, exact_sweep, k_di
-from .model import Harvester
-from .result import Stats, Status
-from .scene import DERIVED, OBSERVABLES, Scene, load_scene
-from .scene_cache import PointCache, point_key, point_seed, stats_from_dict
-from .solve import choose_method, solve
+from ..errors import HarvesterError, MethodNotAvailableError, ParameterError, check_int
+from ..exact import Exact, exact_sweep, k_di
+from ..model import Harvester
+from ..result import Stats, Status
+from ..solve import choose_method, solve
+from .cache import PointCache, point_key, point_seed, stats_from_dict
+from .result import ERROR, NOT_AVAILABLE, SceneResult, SceneRow, write_csv
+from .spec import OBSERVABLES, Scene, load_scene
 
-__all__ = ["SceneRow", "SceneResult", "run_scene"]
+__all__ = ["run_scene"]
 
 #: Methods worth a process pool: single-threaded and slow (Monte Carlo runs its own threads,
 #: exact points cost microseconds).
 _POOLED: tuple[str, ...] = ("fpe",)
 #: Solver details copied onto rows (escapes decide how a metastable point is drawn).
 _CARRIED_INFO = ("seed", "escape_fraction", "escape_time_median")
-#: Row statuses besides :class:`Status` values.
-NOT_AVAILABLE = "not_available"
-ERROR = "error"
 
 
 @dataclass(frozen=True)
@@ -49,131 +45,6 @@ class _Failure:
     status: str
     message: str
     method: str
-
-
-@dataclass(frozen=True)
-class SceneRow:
-    """One point of a scene run.
-
-    Attributes
-    ----------
-    index : int
-        Position in the sweep.
-    point : Mapping
-        Values of the varied fields (sweep axes and, with ``optimize``, the optimum found).
-    status : str
-        A :class:`Status` value, or ``"not_available"`` (solver missing or unable) or
-        ``"error"`` (solver failed); ``message`` says what happened.
-    method : str
-        Solver used (``"exact"``, ``"fpe"``, ``"mc"``; ``""`` when no solver was needed).
-    values : Mapping
-        Requested observables and their errors (``name`` and ``name_err``); ``None`` where
-        the point has no value.
-    info : Mapping
-        Bookkeeping: cache key, seed, whether the point was reused, optimization details.
-    """
-
-    index: int
-    point: Mapping[str, float]
-    status: str
-    method: str
-    message: str
-    values: Mapping[str, float | None]
-    info: Mapping[str, Any] = field(default_factory=dict)
-
-    @property
-    def ok(self) -> bool:
-        """True when the values describe a stationary state (stable or marginal)."""
-        return self.status in (Status.STABLE.value, Status.MARGINAL.value)
-
-    def get(self, name: str) -> float | None:
-        """Value of a varied field or an observable."""
-        if name in self.point:
-            return self.point[name]
-        return self.values.get(name)
-
-    def to_dict(self) -> dict[str, Any]:
-        """Flat JSON-ready dict (point, values, status, method, message, info)."""
-        return {"index": self.index, **self.point, **self.values, "status": self.status,
-                "method": self.method, "message": self.message, "info": dict(self.info)}
-
-
-@dataclass(frozen=True)
-class SceneResult:
-    """What :func:`run_scene` produced.
-
-    Attributes
-    ----------
-    scene : Scene
-        The scene actually run (the quick variant in quick mode).
-    rows : tuple of SceneRow
-    out_dir : Path
-    figures : Mapping of figure name to PNG path
-    csv_path, json_path, table_path : Path or None
-        Written outputs (``None`` when not requested).
-    computed, reused : int
-        Solver results computed in this run / taken from the cache.
-    elapsed : float
-        Wall time in seconds.
-    """
-
-    scene: Scene
-    rows: tuple[SceneRow, ...]
-    out_dir: Path
-    figures: Mapping[str, Path]
-    csv_path: Path | None
-    json_path: Path | None
-    table_path: Path | None
-    computed: int
-    reused: int
-    elapsed: float
-
-    @property
-    def columns(self) -> list[str]:
-        varied = list(dict.fromkeys(key for row in self.rows for key in row.point))
-        return varied + list(self.scene.observables)
-
-    def table(self) -> str:
-        """Readable fixed-width table of the points (value ± error, status, method)."""
-        header = [*self.columns, "status", "method"]
-        lines = []
-        for row in self.rows:
-            cells = [_fmt(row.point.get(c)) for c in self.columns if c in row.point]
-            for obs in self.scene.observables:
-                val, err = row.values.get(obs), row.values.get(obs + "_err")
-                cells.append(_fmt(val) + (f" ± {err:.2g}" if val is not None and err else ""))
-            lines.append([*cells, row.status, row.method or "-"])
-        widths = [max(len(r[i]) for r in (header, *lines)) for i in range(len(header))]
-        out = ["  ".join(h.ljust(w) for h, w in zip(header, widths)),
-               "  ".join("-" * w for w in widths)]
-        out += ["  ".join(c.ljust(w) for c, w in zip(r, widths)) for r in lines]
-        by_message: dict[tuple[str, str], list[str]] = {}
-        for row in self.rows:
-            if not row.ok:
-                by_message.setdefault((row.status, row.message), []).append(str(row.index))
-        notes = [f"points {', '.join(idx)}: " + (msg if msg.startswith(status) else f"{status}: {msg}")
-                 for (status, msg), idx in by_message.items()]
-        return "\n".join(out + (["", "notes:", *notes] if notes else []))
-
-    def to_dict(self) -> dict[str, Any]:
-        """JSON-ready summary with every row."""
-        return {
-            "scene": self.scene.name, "title": self.scene.title,
-            "description": self.scene.description, "rtol": self.scene.rtol,
-            "method": self.scene.method, "observables": list(self.scene.observables),
-            "system": self.scene.system.to_dict(), "spec": self.scene.to_dict(),
-            "computed": self.computed, "reused": self.reused, "elapsed_s": self.elapsed,
-            "figures": {k: str(v) for k, v in self.figures.items()},
-            "rows": [row.to_dict() for row in self.rows],
-        }
-
-
-def _fmt(value: Any) -> str:
-    if value is None:
-        return "-"
-    if isinstance(value, (int, np.integer)):
-        return str(value)
-    return f"{value:.6g}"
 
 
 class _Runner:
@@ -400,6 +271,8 @@ def _optimize_rows(scene: Scene, runner: _Runner, points: list[dict[str, float]]
                 value = Exact().solve(h0.replace(**{opt.over: x})).value(opt.maximize)[0]
                 return np.inf if value is None else -value
 
+            from scipy.optimize import minimize_scalar
+
             found = minimize_scalar(loss, bounds=bracket, method="bounded",
                                     options={"xatol": 1e-10 * max(1.0, abs(x_opt))})
             x_opt, bracket = float(found.x), [float(found.x), float(found.x)]
@@ -428,7 +301,7 @@ def run_scene(
     Parameters
     ----------
     scene : Scene, str or Path
-        The study, or a shipped scene name or TOML path (see :func:`.scene.load_scene`).
+        The study, or a shipped scene name or TOML path (see :func:`.spec.load_scene`).
     out_dir : str or Path
         Output folder (created). Holds ``points.jsonl`` (cache and run log; reruns reuse it),
         ``<name>.csv``, ``<name>.json``, ``<name>.txt`` and ``<name>_<figure>.png``.
@@ -483,7 +356,7 @@ def run_scene(
     result = SceneResult(sc, tuple(rows), out, MappingProxyType({}), None, None, None,
                          runner.computed, runner.reused, 0.0)
     if "csv" in sc.outputs:
-        result = replace(result, csv_path=_write_csv(result, out / f"{sc.name}.csv"))
+        result = replace(result, csv_path=write_csv(result, out / f"{sc.name}.csv"))
     if "table" in sc.outputs:
         table_path = out / f"{sc.name}.txt"
         table_path.write_text(result.table() + "\n", encoding="utf-8")
@@ -501,19 +374,3 @@ def run_scene(
         result.json_path.write_text(json.dumps({**result.to_dict(), "quick": quick}, indent=1,
                                                default=str), encoding="utf-8")
     return result
-
-
-def _write_csv(result: SceneResult, path: Path) -> Path:
-    cols = result.columns
-    obs = [c for c in cols if c in result.scene.observables]
-    header = [c for c in cols if c not in obs]
-    for o in obs:
-        header += [o] if o in DERIVED else [o, o + "_err"]
-    header += ["status", "method", "message"]
-    with path.open("w", newline="", encoding="utf-8") as fh:
-        writer = csv.writer(fh)
-        writer.writerow(header)
-        for row in result.rows:
-            d = row.to_dict()
-            writer.writerow(["" if d.get(c) is None else d.get(c) for c in header])
-    return path

@@ -17,13 +17,11 @@ from __future__ import annotations
 import math
 from collections.abc import Sequence
 from pathlib import Path
-from typing import TYPE_CHECKING, Any
+from typing import Any
 
-from .exact import k_di
-from .scene import AXIS_NAMES, FigureSpec, Scene
-
-if TYPE_CHECKING:
-    from .scene_run import SceneRow
+from ..exact import k_di
+from .result import SceneRow
+from .spec import AXIS_NAMES, FigureSpec, Scene
 
 __all__ = ["draw_figure", "LABELS"]
 

@@ -9,12 +9,12 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from fpe_harvester import scene_run
 from fpe_harvester.errors import MethodNotAvailableError, NotConvergedError
 from fpe_harvester.exact import exact_sweep, k_di
 from fpe_harvester.model import Harvester, Params
-from fpe_harvester.scene import Axis, FigureSpec, Optimize, Ref, Scene, load_scene
-from fpe_harvester.scene_cache import CACHE_NAME, point_seed
+from fpe_harvester.scenes import Axis, FigureSpec, Optimize, Ref, Scene, load_scene
+from fpe_harvester.scenes import run as scene_run
+from fpe_harvester.scenes.cache import CACHE_NAME, point_seed
 from fpe_harvester.solve import solve
 
 

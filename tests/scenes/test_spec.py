@@ -10,7 +10,7 @@ import pytest
 
 from fpe_harvester.errors import ParameterError
 from fpe_harvester.exact import k_di
-from fpe_harvester.scene import Axis, FigureSpec, Optimize, Scene, list_scenes, load_scene
+from fpe_harvester.scenes import Axis, FigureSpec, Optimize, Scene, list_scenes, load_scene
 
 GOOD = """
 name = "tiny"

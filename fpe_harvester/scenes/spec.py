@@ -1,6 +1,6 @@
 """Scenes: declarative studies (systems, sweep axes, observables, accuracy, outputs).
 
-A scene says *what* to compute and draw; :mod:`.scene_run` decides *how* (cheapest
+A scene says *what* to compute and draw; :mod:`.run` decides *how* (cheapest
 adequate solver per point, cache, resume). Scenes come from TOML files or are built in
 Python from the frozen dataclasses below. A minimal TOML scene::
 
@@ -50,9 +50,9 @@ from typing import Any
 
 import numpy as np
 
-from .errors import ParameterError, check_choice, check_int, check_real
-from .exact import k_di
-from .model import Harvester, Params
+from ..errors import ParameterError, check_choice, check_int, check_real
+from ..exact import k_di
+from ..model import Harvester, Params
 
 __all__ = [
     "OBSERVABLES",
@@ -79,7 +79,7 @@ AXIS_NAMES = ("a", "n", "N", "k", *_PARAMS)
 METHODS = ("auto", "exact", "fpe", "mc")
 OUTPUTS = ("table", "csv", "json")
 #: Folder of the shipped scene files.
-SCENE_DIR = Path(__file__).with_name("scenes")
+SCENE_DIR = Path(__file__).with_name("data")
 
 _SPACINGS = ("values", "linspace", "logspace", "integers")
 

@@ -8,7 +8,7 @@ from pathlib import Path
 import pytest
 
 from fpe_harvester.cli import main
-from fpe_harvester.scene import list_scenes
+from fpe_harvester.scenes import list_scenes
 
 TINY = """
 name = "tiny_cli"

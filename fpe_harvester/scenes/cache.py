@@ -16,8 +16,8 @@ from collections.abc import Mapping
 from pathlib import Path
 from typing import Any
 
-from .model import Harvester
-from .result import Stats, Status
+from ..model import Harvester
+from ..result import Stats, Status
 
 __all__ = ["PointCache", "point_key", "point_seed"]
 
