@@ -15,6 +15,7 @@ from typing import Any, NoReturn
 from .errors import HarvesterError, ParameterError
 from .exact import threshold
 from .model import Harvester, Params
+from .result import QUANTITIES
 from .solve import METHODS, choose_method, solve
 
 __all__ = ["main", "build_parser"]
@@ -97,7 +98,7 @@ def cmd_stats(args: argparse.Namespace) -> int:
     )
     if result.message and result.message != "stable":
         print(result.message)
-    rows = [(name, *_fmt(*result.value(name))) for name in ("eta", "V2", "Vrms", "Pin", "v2", "vV", "x2")]
+    rows = [(name, *_fmt(*result.value(name))) for name in QUANTITIES]
     _print_table(rows, ("quantity", "value", "error"))
     if result.growth_rate is not None:
         print(f"largest growth rate of the drift: {result.growth_rate:.6g}")

@@ -5,7 +5,7 @@ from __future__ import annotations
 import enum
 import math
 from collections.abc import Mapping
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, fields
 from types import MappingProxyType
 from typing import Any
 
@@ -13,8 +13,9 @@ from .errors import UnstableSystemError
 
 __all__ = ["Status", "Stats", "QUANTITIES"]
 
-#: Names of the stationary observables, the SPEC's spelling.
-QUANTITIES = ("V2", "Vrms", "Pin", "eta", "v2", "vV", "x2")
+#: Names of the stationary observables every solver reports, each with its error ``<name>_err``
+#: (the one list of them: scenes, the point cache and the command line use it too).
+QUANTITIES = ("eta", "V2", "Vrms", "Pin", "v2", "vV", "x2")
 
 
 class Status(str, enum.Enum):
@@ -31,8 +32,6 @@ class Status(str, enum.Enum):
     NOT_CONVERGED = "not_converged"
     """Requested accuracy not reached; numbers are the best estimate with their error."""
 
-
-_FIELDS = ("V2", "Pin", "eta", "Vrms", "v2", "vV", "x2")
 
 
 @dataclass(frozen=True)
@@ -91,7 +90,7 @@ class Stats:
 
     def __post_init__(self) -> None:
         object.__setattr__(self, "status", Status(self.status))
-        for name in _FIELDS:
+        for name in QUANTITIES:
             for key in (name, name + "_err"):
                 value = getattr(self, key)
                 if value is None:
@@ -144,8 +143,8 @@ class Stats:
 
     def value(self, name: str) -> tuple[float | None, float | None]:
         """``(value, error)`` of an observable by name (one of :data:`QUANTITIES`)."""
-        if name not in _FIELDS:
-            raise KeyError(f"unknown observable {name!r}; valid: {', '.join(_FIELDS)}")
+        if name not in QUANTITIES:
+            raise KeyError(f"unknown observable {name!r}; valid: {', '.join(QUANTITIES)}")
         return getattr(self, name), getattr(self, name + "_err")
 
     def raise_for_status(self) -> Stats:
@@ -157,9 +156,10 @@ class Stats:
     def to_dict(self) -> dict[str, Any]:
         """JSON-ready dict (``None`` for quantities that do not exist)."""
         out: dict[str, Any] = {}
-        for name in _FIELDS:
-            out[name] = getattr(self, name)
-            out[name + "_err"] = getattr(self, name + "_err")
+        for f in fields(self):  # declaration order: V2, Pin, eta, Vrms, ...
+            if f.name in QUANTITIES:
+                out[f.name] = getattr(self, f.name)
+                out[f.name + "_err"] = getattr(self, f.name + "_err")
         out.update(
             status=self.status.value,
             message=self.message,

@@ -20,6 +20,7 @@ from pathlib import Path
 
 from fpe_harvester.errors import check_int
 from fpe_harvester.result import Status
+from fpe_harvester.solve import METHODS
 
 from .checks import Context, SolveCache, guarded, skipped
 from .report import Report, Section, summary_text, write_html, write_markdown
@@ -74,7 +75,7 @@ def _identities(ctx: Context) -> Section:
     sec.tables.append(results_table(ctx))
     methods = {m for _, m, _ in ctx.cache.results()}
     sec.checks += [skipped(f"identities [{m}]", sec.title, f"no {m!r} result was computed in this run "
-                           "(solver not available)") for m in ("exact", "fpe", "mc") if m not in methods]
+                           "(solver not available)") for m in METHODS if m not in methods]
     return sec
 
 

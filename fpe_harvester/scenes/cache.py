@@ -17,7 +17,7 @@ from pathlib import Path
 from typing import Any
 
 from ..model import Harvester
-from ..result import Stats, Status
+from ..result import QUANTITIES, Stats, Status
 
 __all__ = ["PointCache", "point_key", "point_seed"]
 
@@ -25,7 +25,6 @@ CACHE_NAME = "points.jsonl"
 #: Solver settings that do not change the result's meaning: not part of the cache key
 #: (Monte Carlo results do not depend on the thread count; the seed is derived from the point).
 _NOT_IN_KEY = ("seed", "progress", "threads")
-_STATS_FIELDS = ("V2", "Pin", "eta", "Vrms", "v2", "vV", "x2")
 
 
 def _canonical(h: Harvester, method: str, rtol: float | None, options: Mapping[str, Any]) -> str:
@@ -50,7 +49,7 @@ def point_seed(scene_name: str, h: Harvester) -> int:
 def stats_from_dict(d: Mapping[str, Any]) -> Stats:
     """Inverse of :meth:`Stats.to_dict`."""
     kwargs: dict[str, Any] = {}
-    for name in _STATS_FIELDS:
+    for name in QUANTITIES:
         kwargs[name] = d.get(name)
         kwargs[name + "_err"] = d.get(name + "_err")
     return Stats(

@@ -25,11 +25,11 @@ import numpy as np
 from ..errors import HarvesterError, MethodNotAvailableError, ParameterError, check_int
 from ..exact import Exact, exact_sweep, k_di
 from ..model import Harvester
-from ..result import Stats, Status
+from ..result import QUANTITIES, Stats, Status
 from ..solve import choose_method, solve
 from .cache import PointCache, point_key, point_seed, stats_from_dict
 from .result import ERROR, NOT_AVAILABLE, SceneResult, SceneRow, write_csv
-from .spec import OBSERVABLES, Scene, load_scene
+from .spec import Scene, load_scene
 
 __all__ = ["run_scene"]
 
@@ -53,7 +53,7 @@ class _Runner:
     def __init__(self, scene: Scene, cache: PointCache, bar: Any, workers: int = 1) -> None:
         self.scene, self.cache, self.bar, self.workers = scene, cache, bar, workers
         self.computed = self.reused = 0
-        self.needs_solver = any(o in OBSERVABLES for o in scene.observables)
+        self.needs_solver = any(o in QUANTITIES for o in scene.observables)
 
     def method_of(self, h: Harvester, method: str | None = None) -> tuple[str, dict[str, Any]]:
         if method is None:

@@ -53,9 +53,10 @@ import numpy as np
 from ..errors import ParameterError, check_choice, check_int, check_real
 from ..exact import k_di
 from ..model import Harvester, Params
+from ..result import QUANTITIES
+from ..solve import METHODS
 
 __all__ = [
-    "OBSERVABLES",
     "DERIVED",
     "AXIS_NAMES",
     "Axis",
@@ -69,14 +70,11 @@ __all__ = [
     "SCENE_DIR",
 ]
 
-#: Observables a solver provides, the SPEC's spelling.
-OBSERVABLES = ("eta", "V2", "Vrms", "Pin", "v2", "vV", "x2")
 #: Quantities computed in closed form without a solver.
 DERIVED = ("k_di",)
 _PARAMS = tuple(f.name for f in dataclasses.fields(Params))
 #: Names a sweep axis (or the optimization variable) may vary.
 AXIS_NAMES = ("a", "n", "N", "k", *_PARAMS)
-METHODS = ("auto", "exact", "fpe", "mc")
 OUTPUTS = ("table", "csv", "json")
 #: Folder of the shipped scene files.
 SCENE_DIR = Path(__file__).with_name("data")
@@ -187,7 +185,7 @@ class Optimize:
     Parameters
     ----------
     maximize : str
-        Observable to maximize (one of :data:`OBSERVABLES`).
+        Observable to maximize (one of :data:`~fpe_harvester.result.QUANTITIES`).
     over : str
         Field varied (one of :data:`AXIS_NAMES` except ``N``); must not also be a sweep axis.
     bounds : (float or "k_di", float or "k_di")
@@ -207,7 +205,7 @@ class Optimize:
     points: int = 41
 
     def __post_init__(self) -> None:
-        check_choice("optimize.maximize", self.maximize, OBSERVABLES)
+        check_choice("optimize.maximize", self.maximize, QUANTITIES)
         check_choice("optimize.over", self.over, tuple(n for n in AXIS_NAMES if n != "N"))
         if not isinstance(self.bounds, (tuple, list)) or len(self.bounds) != 2:
             raise _bad("optimize.bounds", self.bounds, "expected [low, high]")
@@ -261,7 +259,7 @@ class Ref:
         if self.kind in ("hline", "point"):
             object.__setattr__(self, "y", check_real(f"refs.{self.kind} y", self.y))
         if self.panel is not None:
-            check_choice("refs.panel", self.panel, (*OBSERVABLES, *DERIVED))
+            check_choice("refs.panel", self.panel, (*QUANTITIES, *DERIVED))
 
     @classmethod
     def from_spec(cls, spec: Any, where: str) -> Ref:
@@ -317,7 +315,7 @@ class FigureSpec:
         if not ys:
             raise _bad(f"figures.{self.name}.y", self.y, "expected at least one observable")
         for y in ys:
-            check_choice(f"figures.{self.name}.y", y, (*OBSERVABLES, *DERIVED, *AXIS_NAMES))
+            check_choice(f"figures.{self.name}.y", y, (*QUANTITIES, *DERIVED, *AXIS_NAMES))
         object.__setattr__(self, "y", ys)
         if self.series is not None:
             check_choice(f"figures.{self.name}.series", self.series, AXIS_NAMES)
@@ -346,7 +344,7 @@ class Scene:
     axes : tuple of Axis
         Sweep axes, outer product in order (first outermost). Empty: one point.
     observables : tuple of str
-        Subset of :data:`OBSERVABLES` and :data:`DERIVED` to report.
+        Subset of :data:`~fpe_harvester.result.QUANTITIES` and :data:`DERIVED` to report.
     rtol : float
         Wanted relative accuracy on eta, in (0, 1). Passed as ``tol`` to the
         Fokker--Planck and Monte Carlo solvers; ignored by the exact solver.
@@ -385,13 +383,13 @@ class Scene:
             raise _bad("system", self.system, "expected a Harvester")
         obs = (self.observables,) if isinstance(self.observables, str) else tuple(self.observables)
         if not obs:
-            raise _bad("observables", self.observables, f"choose from {', '.join(OBSERVABLES + DERIVED)}")
+            raise _bad("observables", self.observables, f"choose from {', '.join(QUANTITIES + DERIVED)}")
         for name in obs:
-            check_choice("observables", name, (*OBSERVABLES, *DERIVED))
+            check_choice("observables", name, (*QUANTITIES, *DERIVED))
         object.__setattr__(self, "observables", tuple(dict.fromkeys(obs)))
         object.__setattr__(self, "rtol", check_real("rtol", self.rtol, low=0.0, high=1.0,
                                                     low_open=True, high_open=True))
-        check_choice("method", self.method, METHODS)
+        check_choice("method", self.method, ("auto", *METHODS))
         names = [ax.name for ax in self.axes]
         if len(set(names)) != len(names):
             raise ParameterError(f"axes: an axis appears twice in {names}")
@@ -400,7 +398,7 @@ class Scene:
                 f"optimize.over: {self.optimize.over!r} is also a sweep axis; remove one of them"
             )
         for key, opts in self.options.items():
-            check_choice("options", key, ("exact", "fpe", "mc"))
+            check_choice("options", key, tuple(METHODS))
             if not isinstance(opts, Mapping):
                 raise _bad(f"options.{key}", opts, "expected a table of solver settings")
         object.__setattr__(self, "options", MappingProxyType({k: MappingProxyType(dict(v))
@@ -534,7 +532,7 @@ def scene_from_dict(data: Mapping[str, Any], name: str | None = None) -> Scene:
         observables=_as_tuple(data.get("observables", ("eta",)), "observables"),
         rtol=data.get("rtol", 1e-3),
         method=data.get("method", "auto"),
-        options=_keys("options", data.get("options", {}), ("exact", "fpe", "mc")),
+        options=_keys("options", data.get("options", {}), tuple(METHODS)),
         optimize=optimize,
         figures=tuple(figures),
         outputs=_as_tuple(data.get("outputs", OUTPUTS), "outputs"),
