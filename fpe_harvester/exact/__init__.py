@@ -4,7 +4,8 @@ A harmonic ring's Fourier modes decouple into single units of stiffness
 :math:`\\kappa_q = 2a + 4k\\sin^2(\\pi q/N)`, whose stationary moments are closed-form
 (:mod:`.moments`). :mod:`.stability` gives the diffusive-instability threshold ``k_di``, the
 critical mode and the growth rate beyond it; :mod:`.solver` holds the solver object
-:class:`Exact` (``method="exact"``) and the vectorized :func:`exact_sweep`. The dense
+:class:`Exact` (``method="exact"``), the vectorized :func:`exact_sweep` and
+:func:`exact_stats`, the one path from the closed form to results. The dense
 4N x 4N Lyapunov solves in :mod:`.moments` are cross-checks only (scipy is imported
 when they are called).
 """
@@ -20,7 +21,7 @@ from .moments import (
     ring_drift_matrix,
     ring_moments,
 )
-from .solver import Exact, exact_sweep
+from .solver import Exact, exact_stats, exact_sweep
 from .stability import (
     MARGINAL_RTOL,
     Threshold,
@@ -30,6 +31,7 @@ from .stability import (
     k_di,
     max_sin2,
     mode_eigenvalues,
+    mode_growth_rate,
     ring_spectrum,
     threshold,
 )
@@ -42,12 +44,14 @@ __all__ = [
     "critical_mode",
     "dense_covariance",
     "drift_matrix",
+    "exact_stats",
     "exact_sweep",
     "growth_rate",
     "k_di",
     "lyapunov_covariance",
     "max_sin2",
     "mode_eigenvalues",
+    "mode_growth_rate",
     "mode_moments",
     "noise_matrix",
     "ring_drift_matrix",

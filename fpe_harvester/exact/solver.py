@@ -2,8 +2,9 @@
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from dataclasses import dataclass
-from typing import ClassVar
+from typing import Any, ClassVar
 
 import numpy as np
 
@@ -11,9 +12,9 @@ from ..errors import MethodNotAvailableError, ParameterError, check_int
 from ..model import Harvester, Params, mode_sin2
 from ..result import Stats, Status
 from .moments import ring_moments
-from .stability import MARGINAL_RTOL, classify, growth_rate, k_di
+from .stability import MARGINAL_RTOL, k_di, mode_growth_rate
 
-__all__ = ["Exact", "exact_sweep"]
+__all__ = ["Exact", "exact_stats", "exact_sweep"]
 
 
 @dataclass(frozen=True)
@@ -42,50 +43,7 @@ class Exact:
 
     def solve(self, h: Harvester) -> Stats:
         """Stationary statistics of ``h``; unstable rings come back with status and growth rate."""
-        reason = self.unsupported_reason(h)
-        if reason:
-            raise MethodNotAvailableError(reason + "; use method='fpe' (N = 1) or 'mc'")
-        kap = h.mode_stiffness()
-        scale = 2.0 * h.a + 4.0 * abs(h.k)
-        status, kmin = classify(h, kappa=kap)
-        rate = growth_rate(h, kappa=kap)
-        kd = k_di(h.N, h.a)
-        info = {"N": h.N, "kappa_min": kmin, "k_di": kd}
-        if status == "unstable":
-            q = int(np.argmin(kap))
-            return Stats(
-                status=Status.UNSTABLE,
-                method=self.name,
-                growth_rate=rate,
-                info=info,
-                message=(
-                    f"unstable: k = {h.k:g} is beyond k_di = {kd:.10g}; mode q = {q} has stiffness "
-                    f"{kmin:.4g} < 0 and grows like exp({rate:.4g} t). Choose k > k_di."
-                ),
-            )
-        message = "stable"
-        if status == "marginal":
-            kap = _clip_marginal(kap, scale)
-            message = (
-                f"marginal: k = k_di = {kd:.10g}; the critical mode has zero stiffness, so its x "
-                "diffuses (x2 is unbounded) while V2, Pin and eta are the finite limits"
-            )
-        mom, err = _moments_with_roundoff(kap, scale, h.params)
-        marginal = status == "marginal"
-        return Stats.from_moments(
-            V2=float(mom["V2"]), V2_err=float(err["V2"]),
-            Pin=float(mom["Pin"]), Pin_err=float(err["Pin"]),
-            R=h.params.R,
-            v2=float(mom["v2"]), v2_err=float(err["v2"]),
-            vV=float(mom["vV"]), vV_err=float(err["vV"]),
-            x2=None if marginal else float(mom["x2"]),
-            x2_err=None if marginal else float(err["x2"]),
-            status=Status(status),
-            message=message,
-            method=self.name,
-            growth_rate=rate,
-            info=info,
-        )
+        return exact_stats([h])[0]
 
 
 def _clip_marginal(kap: np.ndarray, scale: np.ndarray | float) -> np.ndarray:
@@ -133,9 +91,10 @@ def exact_sweep(
     Returns
     -------
     dict of numpy.ma.MaskedArray
-        ``V2``, ``Vrms``, ``Pin``, ``eta``, ``v2``, ``vV`` and the round-off errors
-        ``V2_err``, ``Pin_err``, ``eta_err``, ``v2_err``, ``vV_err``; points with no stationary
-        state (``k < k_di``) are masked, never NaN. Also plain arrays ``"stable"`` (bool,
+        ``V2``, ``Vrms``, ``Pin``, ``eta``, ``v2``, ``vV``, ``x2`` and the round-off errors
+        ``V2_err``, ``Pin_err``, ``eta_err``, ``v2_err``, ``vV_err``, ``x2_err``; points with no
+        stationary state (``k < k_di``) are masked, never NaN, and so is ``x2`` at marginal
+        points (``k = k_di``), where it diverges. Also plain arrays ``"stable"`` (bool,
         marginal included), ``"marginal"`` (bool) and ``"kappa_min"`` (smallest mode stiffness).
 
     Notes
@@ -160,9 +119,10 @@ def exact_sweep(
     stable = (kmin > 0) | marginal
     mom, err = _moments_with_roundoff(np.where(stable[..., None], kap, 1.0), scale, params)
     out: dict[str, np.ma.MaskedArray] = {}
-    for key in ("V2", "Pin", "v2", "vV"):
-        out[key] = np.ma.masked_array(mom[key], mask=~stable)
-        out[key + "_err"] = np.ma.masked_array(err[key], mask=~stable)
+    for key in ("V2", "Pin", "v2", "vV", "x2"):
+        mask = ~stable | marginal if key == "x2" else ~stable
+        out[key] = np.ma.masked_array(mom[key], mask=mask)
+        out[key + "_err"] = np.ma.masked_array(err[key], mask=mask)
     out["eta"] = out["V2"] / (params.R * out["Pin"])
     out["eta_err"] = out["eta"] * np.ma.hypot(out["V2_err"] / out["V2"], out["Pin_err"] / out["Pin"])
     out["Vrms"] = np.ma.sqrt(out["V2"])
@@ -170,3 +130,70 @@ def exact_sweep(
     out["marginal"] = marginal
     out["stable"] = stable
     return out
+
+
+def exact_stats(hs: Sequence[Harvester]) -> list[Stats]:
+    """Exact results of harmonic harvesters, one :func:`exact_sweep` per ring size and parameters.
+
+    The single path from the closed form to :class:`Stats`: :meth:`Exact.solve` calls it with one
+    harvester, a scene with all its harmonic points. Marginal points (``k = k_di``) get their
+    finite limits and ``x2 = None``; unstable ones no numbers, a message and the growth rate.
+
+    Raises
+    ------
+    MethodNotAvailableError
+        A harvester is not harmonic (n != 2).
+    """
+    groups: dict[tuple[int, Params], list[int]] = {}
+    for i, h in enumerate(hs):
+        reason = Exact().unsupported_reason(h)
+        if reason:
+            raise MethodNotAvailableError(reason + "; use method='fpe' (N = 1) or 'mc'")
+        groups.setdefault((h.N, h.params), []).append(i)
+    results: dict[int, Stats] = {}
+    for (N, params), idx in groups.items():
+        sweep = exact_sweep(np.array([hs[i].a for i in idx]), np.array([hs[i].k for i in idx]), N, params)
+        for j, i in enumerate(idx):
+            results[i] = _point_stats(hs[i], {key: val[j] for key, val in sweep.items()})
+    return [results[i] for i in range(len(hs))]
+
+
+def _point_stats(h: Harvester, point: dict[str, Any]) -> Stats:
+    """:class:`Stats` of ``h`` from its entries of :func:`exact_sweep`."""
+    kmin = float(point["kappa_min"])
+    kd = k_di(h.N, h.a)
+    rate = mode_growth_rate(kmin, h.params)
+    info = {"N": h.N, "kappa_min": kmin, "k_di": kd}
+    if not point["stable"]:
+        q = int(np.argmin(h.mode_stiffness()))
+        return Stats(
+            status=Status.UNSTABLE,
+            method=Exact.name,
+            growth_rate=rate,
+            info=info,
+            message=(
+                f"unstable: k = {h.k:g} is beyond k_di = {kd:.10g}; mode q = {q} has stiffness "
+                f"{kmin:.4g} < 0 and grows like exp({rate:.4g} t). Choose k > k_di."
+            ),
+        )
+    marginal = bool(point["marginal"])
+    message = "stable"
+    if marginal:
+        message = (
+            f"marginal: k = k_di = {kd:.10g}; the critical mode has zero stiffness, so its x "
+            "diffuses (x2 is unbounded) while V2, Pin and eta are the finite limits"
+        )
+    return Stats.from_moments(
+        V2=float(point["V2"]), V2_err=float(point["V2_err"]),
+        Pin=float(point["Pin"]), Pin_err=float(point["Pin_err"]),
+        R=h.params.R,
+        v2=float(point["v2"]), v2_err=float(point["v2_err"]),
+        vV=float(point["vV"]), vV_err=float(point["vV_err"]),
+        x2=None if marginal else float(point["x2"]),
+        x2_err=None if marginal else float(point["x2_err"]),
+        status=Status.MARGINAL if marginal else Status.STABLE,
+        message=message,
+        method=Exact.name,
+        growth_rate=rate,
+        info=info,
+    )

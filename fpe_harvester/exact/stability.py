@@ -23,7 +23,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..errors import ParameterError, check_int, check_real
+from ..errors import check_int, check_real
 from ..model import Harvester, Params
 
 __all__ = [
@@ -35,6 +35,7 @@ __all__ = [
     "mode_eigenvalues",
     "ring_spectrum",
     "growth_rate",
+    "mode_growth_rate",
     "classify",
     "MARGINAL_RTOL",
 ]
@@ -106,39 +107,23 @@ def ring_spectrum(h: Harvester) -> np.ndarray:
     return np.array([mode_eigenvalues(kap, h.params) for kap in h.mode_stiffness()])
 
 
-def _stiffness(h: Harvester, kappa: np.ndarray | None) -> np.ndarray:
-    """``h.mode_stiffness()``, or ``kappa`` when the caller has computed it already."""
-    if kappa is None:
-        return h.mode_stiffness()
-    arr = np.asarray(kappa, dtype=float)
-    if arr.shape != (h.N,):
-        raise ParameterError(f"kappa must hold the N = {h.N} mode stiffnesses of the ring, "
-                             f"got shape {arr.shape} ({type(kappa).__name__})")
-    return arr
+def mode_growth_rate(kappa: float, params: Params) -> float:
+    """Largest real part of the spectrum of one mode of stiffness ``kappa`` (> 0: it grows)."""
+    return float(mode_eigenvalues(kappa, params).real.max())
 
 
-def growth_rate(h: Harvester, kappa: np.ndarray | None = None) -> float:
-    """Largest real part of the ring's drift spectrum (> 0 means unstable).
-
-    Parameters
-    ----------
-    h : Harvester
-        A harmonic ring.
-    kappa : numpy.ndarray, optional
-        Its mode stiffnesses ``h.mode_stiffness()`` (shape (N,)), if already computed.
-    """
-    kmin = float(_stiffness(h, kappa).min())
-    return float(mode_eigenvalues(kmin, h.params).real.max())
+def growth_rate(h: Harvester) -> float:
+    """Largest real part of the ring's drift spectrum (> 0 means unstable)."""
+    return mode_growth_rate(float(h.mode_stiffness().min()), h.params)
 
 
-def classify(h: Harvester, kappa: np.ndarray | None = None) -> tuple[str, float]:
+def classify(h: Harvester) -> tuple[str, float]:
     """``("stable" | "marginal" | "unstable", smallest mode stiffness)`` of a harmonic ring.
 
     A ring whose smallest stiffness is within :data:`MARGINAL_RTOL` of zero (relative to
     ``2a + 4|k|``) counts as marginal, so that ``k = k_di`` typed in floating point lands there.
-    ``kappa`` takes the mode stiffnesses ``h.mode_stiffness()`` (shape (N,)) if already computed.
     """
-    kmin = float(_stiffness(h, kappa).min())
+    kmin = float(h.mode_stiffness().min())
     scale = 2.0 * h.a + 4.0 * abs(h.k)
     if abs(kmin) <= MARGINAL_RTOL * scale:
         return "marginal", kmin

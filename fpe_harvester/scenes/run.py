@@ -3,7 +3,7 @@
 Per point the method is ``scene.method`` or, for ``"auto"``, :func:`~fpe_harvester.solve.choose_method`
 (harmonic -> exact, single nonlinear unit -> Fokker--Planck with ``tol = rtol``, coupled
 nonlinear ring -> Monte Carlo with ``tol = rtol`` and a seed derived from the scene and the
-point). Harmonic points are computed together with :func:`~fpe_harvester.exact.exact_sweep` (one
+point). Harmonic points are computed together with :func:`~fpe_harvester.exact.exact_stats` (one
 vectorized call per ring size and parameter set); the rest one by one. Each finished point
 is appended to ``points.jsonl`` in the output folder (see :mod:`.cache`), so reruns
 reuse it and an interrupted run resumes. A point whose solver fails or is not available is
@@ -23,7 +23,7 @@ from typing import Any
 import numpy as np
 
 from ..errors import HarvesterError, MethodNotAvailableError, ParameterError, check_int
-from ..exact import Exact, exact_sweep, k_di
+from ..exact import Exact, exact_stats, k_di
 from ..model import Harvester
 from ..result import QUANTITIES, Stats, Status
 from ..solve import choose_method, solve
@@ -74,6 +74,7 @@ class _Runner:
 
     def _cached(self, key: str) -> Stats | None:
         stats = self.cache.get(key)
+        # caches written before exact batches reported x2 hold stable points without it
         if stats is not None and "x2" in self.scene.observables and stats.x2 is None and stats.ok \
                 and stats.status is not Status.MARGINAL:
             return None
@@ -95,10 +96,9 @@ class _Runner:
                 self.bar.update(1)
             else:
                 todo.append((i, key, method, opts))
-        batch = [t for t in todo if t[2] == "exact" and hs[t[0]].is_linear
-                 and "x2" not in self.scene.observables]
+        batch = [t for t in todo if t[2] == "exact" and hs[t[0]].is_linear]
         if batch:
-            for (i, key, _, opts), stats in zip(batch, _exact_batch([hs[t[0]] for t in batch])):
+            for (i, key, _, opts), stats in zip(batch, exact_stats([hs[t[0]] for t in batch])):
                 out[i] = self._store(hs[i], key, opts, stats)
         in_batch = {t[0] for t in batch}
         rest = [t for t in todo if t[0] not in in_batch]
@@ -171,38 +171,6 @@ def _attempt_portable(h: Harvester, method: str, opts: dict[str, Any]) -> dict[s
     """:func:`_attempt` for a worker process: Stats travel as dicts (their info is read-only)."""
     res = _attempt(h, method, opts)
     return res.to_dict() if isinstance(res, Stats) else res
-
-
-def _exact_batch(hs: Sequence[Harvester]) -> list[Stats]:
-    """Exact results of harmonic points, vectorized per (N, params) with exact_sweep.
-
-    Strictly stable points come from :func:`exact_sweep`; marginal and unstable points (few)
-    go through the pointwise :class:`Exact` solver, which reports growth rates and messages.
-    """
-    results: list[Stats | None] = [None] * len(hs)
-    groups: dict[tuple[int, Any], list[int]] = {}
-    for i, h in enumerate(hs):
-        groups.setdefault((h.N, h.params), []).append(i)
-    for (N, params), idx in groups.items():
-        a = np.array([hs[i].a for i in idx])
-        k = np.array([hs[i].k for i in idx])
-        sweep = exact_sweep(a, k, N, params)
-        kmin = sweep["kappa_min"]
-        strict = sweep["stable"] & ~sweep["marginal"]
-        for j, i in enumerate(idx):
-            if not strict[j]:
-                results[i] = Exact().solve(hs[i])
-                continue
-            results[i] = Stats.from_moments(
-                V2=float(sweep["V2"][j]), V2_err=float(sweep["V2_err"][j]),
-                Pin=float(sweep["Pin"][j]), Pin_err=float(sweep["Pin_err"][j]), R=params.R,
-                v2=float(sweep["v2"][j]), v2_err=float(sweep["v2_err"][j]),
-                vV=float(sweep["vV"][j]), vV_err=float(sweep["vV_err"][j]),
-                status=Status.STABLE, message="stable", method="exact",
-                info={"N": N, "kappa_min": float(kmin[j]), "k_di": k_di(N, float(a[j])),
-                      "vectorized": True},
-            )
-    return results  # type: ignore[return-value]
 
 
 def _row(scene: Scene, index: int, point: Mapping[str, float], h: Harvester,

@@ -50,23 +50,6 @@ def test_classify():
     assert classify(Harvester.build(N=3, k=k_di(3, 0.5) * (1 - 1e-12)))[0] == "stable"
 
 
-@pytest.mark.parametrize("k", [-0.2, k_di(3, 0.5), -0.34])
-def test_precomputed_stiffness_gives_same_answer(k):
-    h = Harvester.build(N=3, k=k)
-    kap = h.mode_stiffness()
-    assert classify(h, kappa=kap) == classify(h)
-    assert growth_rate(h, kappa=kap) == growth_rate(h)
-    assert classify(h, kappa=list(kap)) == classify(h)
-
-
-def test_precomputed_stiffness_must_match_ring_size():
-    h = Harvester.build(N=3, k=-0.2)
-    with pytest.raises(ParameterError, match=r"N = 3 mode stiffnesses.*shape \(4,\) \(ndarray\)"):
-        classify(h, kappa=np.ones(4))
-    with pytest.raises(ParameterError, match=r"N = 3 mode stiffnesses.*shape \(\) \(float\)"):
-        growth_rate(h, kappa=1.0)
-
-
 def test_threshold_object():
     th = threshold(3, 0.5)
     d = th.to_dict()

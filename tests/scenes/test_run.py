@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 
 from fpe_harvester.errors import MethodNotAvailableError, NotConvergedError
-from fpe_harvester.exact import exact_sweep, k_di
+from fpe_harvester.exact import exact_stats, exact_sweep, k_di
 from fpe_harvester.model import Harvester, Params
 from fpe_harvester.scenes import Axis, FigureSpec, Optimize, Ref, Scene, load_scene
 from fpe_harvester.scenes import run as scene_run
@@ -47,11 +47,11 @@ class Counter:
 
 
 def test_vectorized_exact_matches_pointwise_solve(tmp_path: Path, monkeypatch) -> None:
-    sweep = Counter(exact_sweep)
-    monkeypatch.setattr(scene_run, "exact_sweep", sweep)
-    sc = harmonic_scene(figures=())
+    batch = Counter(exact_stats)
+    monkeypatch.setattr(scene_run, "exact_stats", batch)
+    sc = harmonic_scene(observables=("eta", "V2", "Vrms", "Pin", "v2", "vV", "x2"), figures=())
     res = scene_run.run_scene(sc, tmp_path, progress=False)
-    assert sweep.calls == 1  # one vectorized call for the whole (N = 3) sweep
+    assert batch.calls == 1  # one vectorized call for the whole (N = 3) sweep
     assert len(res.rows) == 10 and res.computed == 10
     for row in res.rows:
         h = sc.harvester(row.point)
@@ -69,21 +69,26 @@ def test_vectorized_exact_matches_pointwise_solve(tmp_path: Path, monkeypatch) -
     assert all(row.status == "stable" for row in res.rows[5:])
 
 
+def as_harmonic(h: Harvester, method: str, **opts: object):
+    """Stand-in for a slow pointwise solver: the exact result of the harmonic counterpart."""
+    return solve(h.replace(n=2.0), "exact")
+
+
 def test_resume_after_interruption_recomputes_nothing(tmp_path: Path, monkeypatch) -> None:
-    # x2 is not in exact_sweep, so each point goes through solve(): one call per point.
-    sc = harmonic_scene(observables=("eta", "x2"), axes=(Axis("k", tuple(np.linspace(0.2, -0.3, 6))),),
-                        figures=())
-    interrupted = Counter(solve, stop_after=4)
+    # a nonlinear ring is solved point by point (here by a stand-in), each point cached when done
+    sc = Scene("nl", system=Harvester.build(a=0.5, n=3, N=3), observables=("eta", "x2"),
+               axes=(Axis("k", tuple(np.linspace(0.2, -0.3, 6))),))
+    interrupted = Counter(as_harmonic, stop_after=4)
     monkeypatch.setattr(scene_run, "solve", interrupted)
     with pytest.raises(KeyboardInterrupt):
         scene_run.run_scene(sc, tmp_path, progress=False)
     lines = (tmp_path / CACHE_NAME).read_text().splitlines()
     assert len(lines) == 4  # every finished point was written before the interruption
-    second = Counter(solve)
+    second = Counter(as_harmonic)
     monkeypatch.setattr(scene_run, "solve", second)
     res = scene_run.run_scene(sc, tmp_path, progress=False)
     assert second.calls == 2 and res.computed == 2 and res.reused == 4
-    third = Counter(solve)
+    third = Counter(as_harmonic)
     monkeypatch.setattr(scene_run, "solve", third)
     again = scene_run.run_scene(sc, tmp_path, progress=False)
     assert third.calls == 0 and again.reused == 6
@@ -95,10 +100,10 @@ def test_cache_survives_a_partial_last_line_and_keys_on_accuracy(tmp_path: Path,
     scene_run.run_scene(sc, tmp_path, progress=False)
     with (tmp_path / CACHE_NAME).open("a") as fh:
         fh.write('{"key": "abc", "stats": {"V2": 0.1')  # run killed mid-write
-    sweep = Counter(exact_sweep)
-    monkeypatch.setattr(scene_run, "exact_sweep", sweep)
+    batch = Counter(exact_stats)
+    monkeypatch.setattr(scene_run, "exact_stats", batch)
     res = scene_run.run_scene(sc, tmp_path, progress=False)
-    assert sweep.calls == 0 and res.reused == 10
+    assert batch.calls == 0 and res.reused == 10
     # the exact solver ignores rtol, so a different accuracy still reuses exact points
     res = scene_run.run_scene(harmonic_scene(rtol=1e-2, figures=()), tmp_path, progress=False)
     assert res.reused == 10
@@ -211,10 +216,13 @@ def test_shipped_scene_quick_runs(tmp_path: Path, name: str) -> None:
 
 
 def test_parallel_workers_match_serial(tmp_path: Path, monkeypatch) -> None:
-    # x2 forces pointwise solves; pooling them (normally only "fpe" is) exercises the pool cheaply
-    sc = harmonic_scene(observables=("eta", "x2"), figures=())
+    # pooling the pointwise stand-in (normally only "fpe" points are pooled) exercises the pool
+    # cheaply; the forked workers inherit the patched solve
+    sc = Scene("nl", system=Harvester.build(a=0.5, n=3, N=3), observables=("eta", "x2"),
+               axes=(Axis("a", (0.5, 1.0)), Axis("k", (0.2, 0.0, -0.2, -0.3, -0.1))))
+    monkeypatch.setattr(scene_run, "solve", as_harmonic)
     serial = scene_run.run_scene(sc, tmp_path / "serial", progress=False, workers=1)
-    monkeypatch.setattr(scene_run, "_POOLED", ("exact",))
+    monkeypatch.setattr(scene_run, "_POOLED", ("mc",))
     parallel = scene_run.run_scene(sc, tmp_path / "parallel", progress=False, workers=2)
     assert parallel.computed == 10
     assert [r.values for r in parallel.rows] == [r.values for r in serial.rows]
