@@ -11,7 +11,7 @@ from typing import Any
 
 from .errors import UnstableSystemError
 
-__all__ = ["Status", "Stats", "QUANTITIES"]
+__all__ = ["QUANTITIES", "Stats", "Status", "propagated_eta_error"]
 
 #: Names of the stationary observables every solver reports, each with its error ``<name>_err``
 #: (the one list of them: scenes, the point cache and the command line use it too).
@@ -114,21 +114,19 @@ class Stats:
         V2_err: float = 0.0,
         Pin_err: float = 0.0,
         cov_V2_Pin: float = 0.0,
+        eta_err: float | None = None,
         **kwargs: Any,
     ) -> Stats:
         """Build from :math:`\\langle V^2\\rangle` and :math:`P_{in}`, deriving eta and Vrms.
 
-        Errors are propagated to first order; ``cov_V2_Pin`` is the covariance of the two
-        estimates (Monte Carlo replicas give it; it reduces the error on eta).
-
-        .. math::
-
-            \\left(\\frac{\\delta\\eta}{\\eta}\\right)^2 = \\left(\\frac{\\delta V^2}{V^2}\\right)^2
-            + \\left(\\frac{\\delta P}{P}\\right)^2 - \\frac{2\\,\\mathrm{cov}}{V^2 P}
+        Errors are propagated to first order (:func:`propagated_eta_error`); ``cov_V2_Pin`` is
+        the covariance of the two estimates (Monte Carlo replicas give it; it reduces the error
+        on eta). A solver with its own estimate of eta's error (from a refinement sequence of
+        eta itself, or including a time-step bias of eta) passes it as ``eta_err`` instead.
         """
         eta = V2 / (R * Pin)
-        rel2 = (V2_err / V2) ** 2 + (Pin_err / Pin) ** 2 - 2.0 * cov_V2_Pin / (V2 * Pin)
-        eta_err = abs(eta) * math.sqrt(max(rel2, 0.0))
+        if eta_err is None:
+            eta_err = propagated_eta_error(eta, V2, V2_err, Pin, Pin_err, cov_V2_Pin)
         Vrms = math.sqrt(V2)
         Vrms_err = 0.5 * V2_err / Vrms
         return cls(
@@ -168,6 +166,24 @@ class Stats:
             info=_jsonable(dict(self.info)),
         )
         return out
+
+
+def propagated_eta_error(eta: float, V2: float, V2_err: float, Pin: float, Pin_err: float,
+                         cov_V2_Pin: float = 0.0) -> float:
+    """First-order error of :math:`\\eta \\propto V^2/P_{in}` from the errors of its two factors.
+
+    .. math::
+
+        \\left(\\frac{\\delta\\eta}{\\eta}\\right)^2 = \\left(\\frac{\\delta V^2}{V^2}\\right)^2
+        + \\left(\\frac{\\delta P}{P}\\right)^2 - \\frac{2\\,\\mathrm{cov}}{V^2 P}
+
+    Examples
+    --------
+    >>> round(propagated_eta_error(0.5, 1.0, 0.03, 2.0, 0.08), 12)
+    0.025
+    """
+    rel2 = (V2_err / V2) ** 2 + (Pin_err / Pin) ** 2 - 2.0 * cov_V2_Pin / (V2 * Pin)
+    return abs(eta) * math.sqrt(max(rel2, 0.0))
 
 
 def _jsonable(obj: Any) -> Any:

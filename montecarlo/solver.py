@@ -20,7 +20,7 @@ import numpy as np
 from fpe_harvester.errors import ParameterError, check_int, check_real
 from fpe_harvester.exact import classify, growth_rate, k_di, max_sin2, mode_eigenvalues
 from fpe_harvester.model import Harvester
-from fpe_harvester.result import Stats, Status
+from fpe_harvester.result import Stats, Status, propagated_eta_error
 
 from .estimate import Estimate, estimate
 from .scheme import SCHEME_NAMES, scheme_kind
@@ -237,18 +237,14 @@ class MonteCarlo:
     def _stats(self, h: Harvester, est: Estimate, info: dict[str, Any]) -> Stats:
         mean, se = est.mean, est.se
         tot = est.total_error
-        rel2 = ((se["V2"] / mean["V2"]) ** 2 + (se["Pin"] / mean["Pin"]) ** 2
-                - 2.0 * est.cov_V2_Pin / (mean["V2"] * mean["Pin"]))
-        eta_stat = abs(mean["eta"]) * math.sqrt(max(rel2, 0.0))
+        eta_stat = propagated_eta_error(mean["eta"], mean["V2"], se["V2"], mean["Pin"], se["Pin"],
+                                        est.cov_V2_Pin)
         info["eta_standard_error"] = eta_stat
-        base = Stats.from_moments(
+        return Stats.from_moments(
             V2=mean["V2"], Pin=mean["Pin"], R=h.params.R, V2_err=tot("V2"), Pin_err=tot("Pin"),
-            cov_V2_Pin=est.cov_V2_Pin, v2=mean["v2"], v2_err=tot("v2"), vV=mean["vV"],
-            vV_err=tot("vV"), x2=mean["x2"], x2_err=tot("x2"), method=self.name, info=info)
-        eta = base.V2 / (h.params.R * base.Pin)
-        eta_err = math.hypot(eta_stat, est.bias["eta"])
-        return Stats(**{**{f: getattr(base, f) for f in base.__dataclass_fields__},
-                        "eta": eta, "eta_err": eta_err})
+            cov_V2_Pin=est.cov_V2_Pin, eta_err=math.hypot(eta_stat, est.bias["eta"]), v2=mean["v2"],
+            v2_err=tot("v2"), vV=mean["vV"], vV_err=tot("vV"), x2=mean["x2"], x2_err=tot("x2"),
+            method=self.name, info=info)
 
     def _label(self, h: Harvester, s: Stats, est: Estimate, esc: float, met: bool,
                kd: float | None, harmonic_status: str | None) -> Stats:

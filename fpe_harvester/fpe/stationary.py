@@ -143,13 +143,12 @@ def _stats(h: Harvester, ref: RefinementResult, tol: float) -> Stats:
         "eta_err_direct": er["eta"], "residual_V2": mo["res_V2"], "residual_power": mo["res_power"],
         "kappa_eq": lv.whitening.kappa, "seconds": ref.seconds, "history": ref.history,
     }
-    stats = Stats.from_moments(
-        V2=V2, Pin=Pin, R=h.params.R, V2_err=er["V2"], Pin_err=er["Pin"], cov_V2_Pin=cov,
+    # eta_err: eta's own refinement estimate, not the bound propagated from V2 and Pin.
+    return Stats.from_moments(
+        V2=V2, Pin=Pin, R=h.params.R, V2_err=er["V2"], Pin_err=er["Pin"], cov_V2_Pin=cov, eta_err=eta_err,
         v2=mo["v2"], v2_err=er["v2"], vV=mo["vV"], vV_err=er["vV"], x2=mo["x2"], x2_err=er["x2"],
         status=status, message=message, method="fpe", info=info,
     )
-    # eta's own refinement estimate, not the bound propagated from V2 and Pin.
-    return dataclasses.replace(stats, eta_err=eta_err)
 
 
 def stationary(
