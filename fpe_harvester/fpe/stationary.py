@@ -21,7 +21,6 @@ on a grid, and the residuals of the exact stationary identities (SPEC section 1)
 
 from __future__ import annotations
 
-import dataclasses
 from collections.abc import Callable
 from dataclasses import dataclass, field
 
