@@ -3,7 +3,15 @@
 For a ring with no stationary state (harmonic beyond k_di) or only a metastable one
 (n < 2, k < 0) the useful numbers are the fraction of paths that have crossed
 ``|x_j| > threshold`` by time t, :math:`F(t)`, and the first-escape times. For a
-metastable state with escape rate r, :math:`1 - F(t) \\approx e^{-r t}` after a transient.
+metastable state with escape rate r, :math:`1 - F(t) \\approx e^{-r t}` after a transient,
+and the maximum-likelihood estimates from paths censored at :math:`T` are
+
+.. math::
+
+    \\hat r = \\frac{n_{esc}}{E},\\qquad \\hat\\tau = \\frac{E}{n_{esc}} \\pm \\frac{\\hat\\tau}{\\sqrt{n_{esc}}},
+    \\qquad E = \\sum_i \\min(t_i, T)
+
+(:math:`E` the exposure, the total time at risk); with no escape, :math:`\\tau > E/3` (95 %).
 """
 
 from __future__ import annotations
@@ -39,11 +47,12 @@ class EscapeCurve:
         Number of paths.
     t_max : float
         Simulated time per path.
-    rate : float or None
-        Escape rate from the maximum-likelihood exponential fit (escaped / total time at risk),
-        None when nothing escaped.
+    exposure : float
+        Total time at risk: the sum over paths of their escape time, or ``t_max`` for the
+        paths that did not escape.
     mean_escape_time : float or None
-        Mean first-escape time among escaped paths (biased low if many paths survive).
+        Mean first-escape time among escaped paths (biased low if many paths survive; see
+        :attr:`escape_time` for the censored estimate).
     """
 
     times: np.ndarray
@@ -52,14 +61,38 @@ class EscapeCurve:
     escape_times: np.ndarray
     paths: int
     t_max: float
-    rate: float | None
+    exposure: float
     mean_escape_time: float | None
+
+    @property
+    def rate(self) -> float | None:
+        """Escape rate of the maximum-likelihood exponential fit (escaped / exposure), None
+        when nothing escaped."""
+        n = self.escape_times.size
+        return n / self.exposure if n and self.exposure > 0 else None
+
+    @property
+    def escape_time(self) -> float | None:
+        """Maximum-likelihood mean escape time (exposure / escaped), None when nothing escaped."""
+        n = self.escape_times.size
+        return self.exposure / n if n else None
+
+    @property
+    def escape_time_err(self) -> float | None:
+        """Standard error of :attr:`escape_time`, relative :math:`1/\\sqrt{n_{esc}}`."""
+        tau = self.escape_time
+        return None if tau is None else tau / math.sqrt(self.escape_times.size)
+
+    @property
+    def escape_time_lower(self) -> float | None:
+        """95 % lower bound exposure / 3 of the mean escape time when nothing escaped, else None."""
+        return None if self.escape_times.size else self.exposure / 3.0
 
     def to_dict(self) -> dict[str, object]:
         return {
             "times": self.times.tolist(), "fraction": self.fraction.tolist(),
             "fraction_err": self.fraction_err.tolist(), "escape_times": self.escape_times.tolist(),
-            "paths": self.paths, "t_max": self.t_max, "rate": self.rate,
+            "paths": self.paths, "t_max": self.t_max, "exposure": self.exposure, "rate": self.rate,
             "mean_escape_time": self.mean_escape_time,
         }
 
@@ -109,8 +142,7 @@ def escape_study(
     frac = (esc[None, :] <= times[:, None]).mean(axis=1)
     err = np.sqrt(frac * (1.0 - frac) / paths)
     escaped = np.sort(esc[np.isfinite(esc)])
-    at_risk = float(np.where(np.isfinite(esc), esc, e.t_run).sum())
-    rate = escaped.size / at_risk if escaped.size and at_risk > 0 else None
+    exposure = float(np.where(np.isfinite(esc), esc, e.t_run).sum())
     mean = float(escaped.mean()) if escaped.size else None
-    return EscapeCurve(times, frac, err, escaped, paths, e.t_run, rate,
+    return EscapeCurve(times, frac, err, escaped, paths, e.t_run, exposure,
                        None if mean is None or not math.isfinite(mean) else mean)

@@ -17,6 +17,8 @@ def test_escape_curve_of_a_metastable_ring() -> None:
     assert c.fraction[0] == 0.0
     assert 0.0 < c.fraction[-1] <= 1.0
     assert c.rate is not None and c.rate > 0
+    assert c.escape_time == pytest.approx(1.0 / c.rate, rel=1e-12) and c.escape_time_lower is None
+    assert c.escape_time_err == pytest.approx(c.escape_time / np.sqrt(c.escape_times.size))
     assert np.all((c.escape_times > 0) & (c.escape_times <= c.t_max))
     assert np.all(c.fraction_err <= 0.5 / np.sqrt(c.paths) + 1e-12)
     assert c.to_dict()["paths"] == 32
@@ -25,6 +27,8 @@ def test_escape_curve_of_a_metastable_ring() -> None:
 def test_stable_ring_does_not_escape() -> None:
     c = escape_study(Harvester.build(a=0.5, n=2, N=3, k=-0.2), t_max=20.0, paths=16, seed=1)
     assert c.fraction[-1] == 0.0 and c.rate is None and c.mean_escape_time is None
+    assert c.escape_time is None and c.escape_time_err is None
+    assert c.exposure == pytest.approx(16 * c.t_max) and c.escape_time_lower == pytest.approx(c.exposure / 3)
 
 
 def test_growth_beyond_k_di_escapes_at_the_predicted_pace() -> None:
