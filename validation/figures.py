@@ -15,7 +15,7 @@ from pathlib import Path
 from .checks import CheckResult, Context, expect, skipped
 from .report import Figure, Section, Table
 
-__all__ = ["run", "run_exact", "run_solvers", "MAX_ROWS"]
+__all__ = ["MAX_ROWS", "run_exact", "run_solvers"]
 
 _SECTION = "The paper's figures (scenes)"
 #: Rows of each scene's data shown in the report (the CSV has them all).
@@ -75,11 +75,6 @@ def _is_exact(name: str) -> bool:
     return scene.system.is_linear and all(ax.name != "n" for ax in scene.axes)
 
 
-def run(ctx: Context) -> Section:
-    """Every shipped scene except the k_di map (run in 'Beyond the paper')."""
-    return _run(ctx, "figures", _SECTION, None)
-
-
 def run_exact(ctx: Context) -> Section:
     """The harmonic scenes (exact solver; cheap)."""
     return _run(ctx, "figures_exact", f"{_SECTION}: harmonic (exact)", True)
@@ -90,7 +85,7 @@ def run_solvers(ctx: Context) -> Section:
     return _run(ctx, "figures_solvers", f"{_SECTION}: nonlinear (Fokker-Planck, Monte Carlo)", False)
 
 
-def _run(ctx: Context, key: str, title: str, exact: bool | None) -> Section:
+def _run(ctx: Context, key: str, title: str, exact: bool) -> Section:
     sec = Section(key, title)
     try:
         from fpe_harvester.scenes import list_scenes
@@ -98,7 +93,7 @@ def _run(ctx: Context, key: str, title: str, exact: bool | None) -> Section:
         sec.checks.append(skipped("paper figures (scenes)", title, f"fpe_harvester.scenes not available ({exc})"))
         return sec
     names = [n for n in list_scenes() if "kdi" not in n.replace("_", "").lower()
-             and (exact is None or _is_exact(n) == exact)]
+             and _is_exact(n) == exact]
     sec.text.append(
         f"Scenes run{' in quick mode (reduced grids, looser accuracy)' if ctx.quick else ''}: {', '.join(names)}. "
         "Each point uses the cheapest adequate solver; error bars where the method has them."

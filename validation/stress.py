@@ -33,7 +33,7 @@ from .checks import CheckResult, Context, agree, expect, skipped, solver_availab
 from .crosscheck import identity_checks
 from .report import Section, Table
 
-__all__ = ["mp_mode_moments", "mp_ring_moments", "run", "run_exact", "run_solvers"]
+__all__ = ["mp_mode_moments", "mp_ring_moments", "run_exact", "run_solvers"]
 
 _SECTION = "Stress tests"
 #: Relative round-off floor allowed on top of the exact solver's stated error of 0.
@@ -276,11 +276,6 @@ def run_exact(ctx: Context) -> Section:
 def run_solvers(ctx: Context) -> Section:
     """The nonlinear stress cases (Fokker--Planck and Monte Carlo)."""
     return _run(ctx, "stress_solvers", f"{_SECTION}: Fokker-Planck and Monte Carlo", _nonlinear_cases(ctx))
-
-
-def run(ctx: Context) -> Section:
-    """Every stress case in one section."""
-    return _run(ctx, "stress", _SECTION, _harmonic_cases(ctx) + _nonlinear_cases(ctx))
 
 
 def _run(ctx: Context, key: str, title: str, cases: list[tuple[str, Callable[[], list[CheckResult]]]]) -> Section:

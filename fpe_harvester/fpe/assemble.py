@@ -85,10 +85,6 @@ class XMatrices:
     xreflect: sp.csr_matrix | None = None
 
     @property
-    def ndofs(self) -> int:
-        return self.mass.shape[0]
-
-    @property
     def copies(self) -> float:
         """How often the mesh's integrals count: 2 on a half mesh with a mirror (the image
         on x < 0 adds the same integral of an even integrand), else 1."""

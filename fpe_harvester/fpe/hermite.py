@@ -33,7 +33,7 @@ import scipy.sparse as sp
 
 from ..model import Harvester
 
-__all__ = ["HermiteBasis", "linear_drift", "equivalent_harmonic", "whitening_covariance"]
+__all__ = ["HermiteBasis", "linear_drift", "equivalent_harmonic"]
 
 
 def linear_drift(h: Harvester) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -201,13 +201,6 @@ class HermiteBasis:
             a[k] = 1
             wz[k, self.index[tuple(a)]] = 1.0
         return Lchol @ wz
-
-
-def whitening_covariance(h: Harvester) -> tuple[np.ndarray, float, float]:
-    """Gaussian weight for the Hermite expansion: ``(Sigma, kappa, x2)`` of the equivalent
-    harmonic unit (:func:`equivalent_harmonic`), Sigma the covariance of (v, V, xi)."""
-    kappa, P = equivalent_harmonic(h)
-    return P[1:, 1:].copy(), kappa, float(P[0, 0])
 
 
 def equivalent_harmonic(h: Harvester) -> tuple[float, np.ndarray]:

@@ -14,7 +14,7 @@ from fpe_harvester.exact import lyapunov_covariance
 from fpe_harvester.fpe import HermiteBasis, XMesh
 from fpe_harvester.fpe.assemble import assemble_x, split_flux
 from fpe_harvester.fpe.blocksolve import BlockTridiagonal
-from fpe_harvester.fpe.hermite import whitening_covariance
+from fpe_harvester.fpe.hermite import equivalent_harmonic
 
 
 def test_hermite_index_set_size_and_symmetry() -> None:
@@ -56,9 +56,9 @@ def test_generator_reproduces_gaussian_stationary_moments() -> None:
 
 def test_whitening_is_lyapunov_for_harmonic() -> None:
     h = Harvester.build(a=0.5, n=2)
-    Sigma, kappa, x2 = whitening_covariance(h)
+    kappa, P = equivalent_harmonic(h)
     assert kappa == 1.0
-    assert np.allclose(Sigma, lyapunov_covariance(1.0, h.params)[1:, 1:])
+    assert np.allclose(P, lyapunov_covariance(1.0, h.params))
 
 
 def test_mesh_has_node_at_zero_and_is_symmetric() -> None:

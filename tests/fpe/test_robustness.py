@@ -9,20 +9,20 @@ import pytest
 from fpe_harvester import Harvester, ParameterError, Status, solve
 from fpe_harvester.fpe import refine as refine_mod
 from fpe_harvester.fpe.discretize import Whitening, solve_level
-from fpe_harvester.fpe.hermite import whitening_covariance
+from fpe_harvester.fpe.hermite import equivalent_harmonic
 from fpe_harvester.fpe.stationary import default_plan
 
 
 @pytest.mark.parametrize("a", [1e-6, 0.5, 1.7, 1.77, 2.0, 100.0, 1e6])
 def test_equivalent_stiffness_is_finite_for_kink(a: float) -> None:
     # n = 1: no root of the linearization mismatch above a ~ 1.77 (used to overflow).
-    Sigma, kappa, x2 = whitening_covariance(Harvester.build(a=a, n=1))
-    assert math.isfinite(kappa) and kappa > 0.0 and x2 > 0.0
-    assert all(Sigma[i, i] > 0.0 for i in range(3))
+    kappa, P = equivalent_harmonic(Harvester.build(a=a, n=1))
+    assert math.isfinite(kappa) and kappa > 0.0 and P[0, 0] > 0.0
+    assert all(P[i, i] > 0.0 for i in range(1, 4))
 
 
 def test_equivalent_stiffness_is_continuous_across_no_root_threshold() -> None:
-    ks = [whitening_covariance(Harvester.build(a=a, n=1))[1] for a in (1.76, 1.77, 1.78, 2.0)]
+    ks = [equivalent_harmonic(Harvester.build(a=a, n=1))[0] for a in (1.76, 1.77, 1.78, 2.0)]
     assert max(ks) / min(ks) < 20.0
     # beyond the threshold kappa no longer depends on a (the mismatch is flat)
     assert ks[2] == pytest.approx(ks[3], rel=1e-6)
@@ -31,7 +31,8 @@ def test_equivalent_stiffness_is_continuous_across_no_root_threshold() -> None:
 def test_root_found_for_other_exponents() -> None:
     # the fixed point kappa <x^2> = <x U'> holds where a root exists
     h = Harvester.build(a=0.5, n=3)
-    _, kappa, x2 = whitening_covariance(h)
+    kappa, P = equivalent_harmonic(h)
+    x2 = P[0, 0]
     s = math.sqrt(x2)
     xu = 0.5 * 3 * s**3 * 2**1.5 * math.gamma(2.0) / math.sqrt(math.pi)
     assert kappa * x2 == pytest.approx(xu, rel=1e-9)
