@@ -19,7 +19,7 @@ __all__ = ["Estimate", "estimate", "BIAS_ORDER"]
 
 #: Weak order assumed when the coarse/fine difference is turned into a bias estimate of the
 #: fine level, bias = (coarse - fine) / (2^p - 1) (so fine - bias is the extrapolation).
-#: p = 2 is measured (validation/bench_montecarlo.py) for the harmonic scheme (2.03), the
+#: p = 2 is measured (validation/bench/montecarlo.py) for the harmonic scheme (2.03), the
 #: steep n = 1.1 potential (1.94) and rings (n = 4, N = 3 test); for the kink n = 1 the order
 #: is not resolved by the measurements, so p = 1 is assumed (a larger, conservative estimate).
 BIAS_ORDER = {"smooth": 2.0, "nonsmooth": 1.0}

@@ -5,65 +5,17 @@ base64 PNG), plus the plain-text pass/fail summary printed on the terminal.
 
 from __future__ import annotations
 
-import argparse
 import base64
 import html
-import json
 import re
 from collections import Counter
-from collections.abc import Callable, Sequence
+from collections.abc import Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 
 from .checks import CheckResult, Outcome
 
-__all__ = [
-    "Table", "Figure", "Section", "Report", "write_markdown", "write_html", "summary_text",
-    "save_benchmark", "bench_main",
-]
-
-
-def save_benchmark(res: dict, out: Path | str | None, stem: str, plot: Callable[[dict, Path], None]) -> None:
-    """Write a benchmark's ``{stem}.json`` and ``{stem}.png`` into ``out`` (nothing if None)."""
-    if out is None:
-        return
-    out = Path(out)
-    out.mkdir(parents=True, exist_ok=True)
-    (out / f"{stem}.json").write_text(json.dumps(res, indent=2))
-    plot(res, out / f"{stem}.png")
-
-
-def bench_main(run: Callable[..., dict], doc: str | None, drop: Sequence[str] = (),
-               argv: Sequence[str] | None = None) -> dict:
-    """Command line of a benchmark module: ``python -m validation.bench_X [--quick] [--out DIR]``.
-
-    Parses the arguments, calls ``run(quick=..., out=...)`` and prints the result as JSON
-    without the keys in ``drop`` (bulky tables that are in the written JSON file anyway).
-
-    Parameters
-    ----------
-    run : callable
-        The benchmark's ``run(quick: bool, out: Path | None) -> dict``.
-    doc : str or None
-        The module docstring; its first line is the ``--help`` description.
-    drop : sequence of str, optional
-        Top-level keys of the result left out of the printed JSON (default: none).
-    argv : sequence of str, optional
-        Arguments to parse instead of ``sys.argv[1:]``.
-
-    Returns
-    -------
-    dict
-        The full result of ``run``.
-    """
-    ap = argparse.ArgumentParser(description=doc.splitlines()[0] if doc else None)
-    ap.add_argument("--quick", action="store_true", help="small subset, well under a minute")
-    ap.add_argument("--out", type=Path, default=Path("validation_report"), metavar="DIR",
-                    help="folder for the JSON and PNG (default ./validation_report)")
-    args = ap.parse_args(argv)
-    res = run(quick=args.quick, out=args.out)
-    print(json.dumps({k: v for k, v in res.items() if k not in drop}, indent=2))
-    return res
+__all__ = ["Table", "Figure", "Section", "Report", "write_markdown", "write_html", "summary_text"]
 
 
 @dataclass

@@ -44,7 +44,7 @@ STEPS: tuple[tuple[str, str], ...] = (
     ("validation.stress:run_solvers", "Stress tests: Fokker-Planck and Monte Carlo"),
     ("validation.figures:run_exact", "The paper's figures: harmonic scenes (exact)"),
     ("validation.figures:run_solvers", "The paper's figures: nonlinear scenes (Fokker-Planck, Monte Carlo)"),
-    ("validation.benchmarks", "Benchmarks: error versus wall time"),
+    ("validation.bench.combined", "Benchmarks: error versus wall time"),
 )
 
 

@@ -20,78 +20,22 @@ from __future__ import annotations
 import math
 from collections.abc import Callable
 from dataclasses import replace
-from typing import Any
-
-import mpmath
 
 from fpe_harvester.errors import HarvesterError, MethodNotAvailableError
 from fpe_harvester.exact import k_di
-from fpe_harvester.model import Harvester, Params
+from fpe_harvester.model import Harvester
 from fpe_harvester.result import Stats, Status
 
 from .checks import CheckResult, Context, agree, expect, skipped, solver_available
 from .crosscheck import identity_checks
+from .references import mp_ring_moments
 from .report import Section, Table
 
-__all__ = ["mp_mode_moments", "mp_ring_moments", "run_exact", "run_solvers"]
+__all__ = ["run_exact", "run_solvers"]
 
 _SECTION = "Stress tests"
 #: Relative round-off floor allowed on top of the exact solver's stated error of 0.
 EXACT_FLOOR = 1e-9
-
-
-def mp_mode_moments(kappa: Any, p: Params, dps: int = 40) -> dict[str, Any]:
-    """Stationary moments of one mode of stiffness ``kappa`` >= 0 by a high-precision Lyapunov solve.
-
-    Solves :math:`(I\\otimes A + A\\otimes I)\\,\\mathrm{vec}\\,P = -\\mathrm{vec}\\,Q` with mpmath at ``dps``
-    digits. For ``kappa == 0`` x decouples and the (v, V, xi) block is solved (x2 is infinite).
-    """
-    with mpmath.workdps(dps):
-        m, g, Kv, Kc, s, tau, D, tp = (mpmath.mpf(getattr(p, n)) for n in
-                                       ("m", "gamma", "Kv", "Kc", "sigma", "tau", "D", "tau_p"))
-        kappa = mpmath.mpf(kappa)
-        rows = [[-g, -Kv / m, s / m], [Kc, -1 / tp, 0], [0, 0, -1 / tau]]
-        if kappa != 0:
-            rows = [[0, 1, 0, 0]] + [[-kappa / m if i == 0 else 0] + r for i, r in enumerate(rows)]
-        A = mpmath.matrix(rows)
-        n = A.rows
-        M = mpmath.zeros(n * n, n * n)
-        for i in range(n):
-            for j in range(n):
-                for l in range(n):
-                    M[i * n + j, l * n + j] += A[i, l]
-                    M[i * n + j, i * n + l] += A[j, l]
-        rhs = mpmath.zeros(n * n, 1)
-        rhs[n * n - 1] = -2 * D / tau**2
-        x = mpmath.lu_solve(M, rhs)
-        o = n - 3
-        P = lambda i, j: x[(o + i) * n + (o + j)]  # noqa: E731
-        return {"v2": P(0, 0), "V2": P(1, 1), "vV": P(0, 1), "Pin": s * P(0, 2),
-                "x2": x[0] if kappa != 0 else mpmath.inf}
-
-
-def mp_ring_moments(h: Harvester, dps: int = 40, zero_below: float = 0.0) -> dict[str, Any]:
-    """Ring averages over modes with :math:`\\kappa_q = 2a + 4k\\sin^2(\\pi q/N)` in high precision.
-
-    Mode stiffnesses with :math:`|\\kappa_q| \\le` ``zero_below`` :math:`\\cdot 2a` are set to 0 (the
-    marginal limit at k = k_di, whose float input is only within round-off of the threshold).
-    """
-    with mpmath.workdps(dps):
-        a, k = mpmath.mpf(h.a), mpmath.mpf(h.k)
-        cache: dict[int, dict[str, Any]] = {}
-        acc = {key: mpmath.mpf(0) for key in ("v2", "V2", "vV", "Pin", "x2")}
-        for q in range(h.N):
-            qq = min(q, h.N - q)  # mirror modes are identical
-            if qq not in cache:
-                kap = 2 * a + 4 * k * mpmath.sin(mpmath.pi * qq / h.N) ** 2
-                if abs(kap) <= zero_below * 2 * a:
-                    kap = mpmath.mpf(0)
-                cache[qq] = mp_mode_moments(kap, h.params, dps)
-            for key in acc:
-                acc[key] += cache[qq][key]
-        out = {key: val / h.N for key, val in acc.items()}
-        out["eta"] = out["V2"] / (h.params.R * out["Pin"])
-        return out
 
 
 def _vs_mp(label: str, r: Stats, h: Harvester, names: tuple[str, ...] = ("eta", "V2", "Pin"),

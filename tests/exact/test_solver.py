@@ -153,18 +153,6 @@ def test_sweep_bad_input():
         exact_sweep(0.5, [0.1], N=1)
 
 
-def test_rational_closed_form_reference():
-    from fractions import Fraction
-
-    from validation.bench_exact import rational_eta
-
-    assert rational_eta([Fraction(1)]) == (Fraction(20, 143), Fraction(20, 39))
-    V2, eta = rational_eta([Fraction(1), Fraction(7, 8), Fraction(3, 4), Fraction(7, 8)])
-    r = solve(Harvester.build(a=0.5, N=4, k=-1 / 16))
-    assert r.eta == pytest.approx(float(eta), rel=1e-14)
-    assert r.V2 == pytest.approx(float(V2), rel=1e-14)
-
-
 def test_roundoff_error_covers_ill_conditioned_x2_near_threshold():
     from fractions import Fraction
 

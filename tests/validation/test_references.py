@@ -1,5 +1,6 @@
 """The independent references the validation relies on: the high-precision Lyapunov solve,
-the closed-form bound, the benchmark-data parser and the paper row of the exact solver."""
+rational arithmetic, the closed-form bound, the benchmark-data parser and the paper row of
+the exact solver."""
 
 from __future__ import annotations
 
@@ -9,9 +10,9 @@ import pytest
 
 from fpe_harvester import Harvester, Params, solve
 from fpe_harvester.exact import k_di
-from validation.benchmarks import error_time_pairs
+from validation.bench.combined import error_time_pairs
 from validation.beyond import eta_bound, eta_mode, optimum, plateau
-from validation.stress import mp_mode_moments, mp_ring_moments
+from validation.references import mp_mode_moments, mp_ring_moments, rational_eta
 
 
 def test_mp_lyapunov_reproduces_the_known_rationals():
@@ -29,6 +30,14 @@ def test_mp_zero_stiffness_limit_has_infinite_x2_and_finite_rest():
 def test_mp_ring_matches_exact_solver():
     h = Harvester.build(a=0.5, n=2, N=3, k=-0.33)
     assert float(mp_ring_moments(h)["eta"]) == pytest.approx(0.6773938564, rel=1e-9)
+
+
+def test_rational_closed_form_matches_exact_solver():
+    assert rational_eta([Fraction(1)]) == (Fraction(20, 143), Fraction(20, 39))
+    V2, eta = rational_eta([Fraction(1), Fraction(7, 8), Fraction(3, 4), Fraction(7, 8)])
+    r = solve(Harvester.build(a=0.5, N=4, k=-1 / 16))
+    assert r.eta == pytest.approx(float(eta), rel=1e-14)
+    assert r.V2 == pytest.approx(float(V2), rel=1e-14)
 
 
 def test_bound_and_closed_form():
@@ -57,8 +66,8 @@ def test_exact_result_used_for_the_paper_row():
 def test_doctests_of_the_validation_package():
     import doctest
 
-    import validation.benchmarks
+    import validation.bench.combined
     import validation.checks
 
-    for mod in (validation.checks, validation.benchmarks):
+    for mod in (validation.checks, validation.bench.combined):
         assert doctest.testmod(mod).failed == 0

@@ -17,7 +17,7 @@ Measured in one run:
 * time-step bias: coupled (common-noise) differences eta(dt/2) - eta(dt) for the harmonic unit,
   the kink at a = 2 and the steep n = 1.1 potential, and the naive scheme's error at a = 2.
 
-``python -m validation.bench_montecarlo [--quick] [--out DIR]`` writes ``bench_montecarlo.json``
+``python -m validation.bench.montecarlo [--quick] [--out DIR]`` writes ``bench_montecarlo.json``
 and ``bench_montecarlo.png``.
 """
 
@@ -35,9 +35,12 @@ from numba import njit, prange
 from fpe_harvester import Harvester
 from montecarlo import estimate, simulate, simulate_naive
 from montecarlo.simulate import default_threads
-from validation.report import bench_main, save_benchmark
+from validation.bench.cli import bench_main, save_benchmark
 
-__all__ = ["run"]
+__all__ = ["STEM", "run"]
+
+#: Name of the written ``.json`` and ``.png``.
+STEM = "bench_montecarlo"
 
 TARGET = 1e-3
 
@@ -258,7 +261,7 @@ def run(quick: bool = False, out: Path | None = None) -> dict[str, Any]:
     }
     res["equal_error"] = _equal_error(quick)
     res["bias"] = _bias_study(quick)
-    save_benchmark(res, out, "bench_montecarlo", _plot)
+    save_benchmark(res, out, STEM, _plot)
     return res
 
 

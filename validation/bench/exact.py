@@ -7,9 +7,9 @@ Measured in one run:
 * a vectorized sweep of 10,000 (k, a) points for N = 3 (target: under 1 s);
 * scipy's dense 4N x 4N Lyapunov solve (``solve_continuous_lyapunov``) for N = 2..128, its
   wall time and its error against the Fourier closed form, which is itself checked against
-  exact rational arithmetic (``fractions.Fraction``) where the mode stiffnesses are rational.
+  exact rational arithmetic (:func:`validation.references.rational_eta`) where the mode stiffnesses are rational.
 
-``python -m validation.bench_exact [--quick] [--out DIR]`` writes ``bench_exact.json`` and
+``python -m validation.bench.exact [--quick] [--out DIR]`` writes ``bench_exact.json`` and
 ``bench_exact.png``.
 """
 
@@ -23,11 +23,15 @@ from typing import Any
 
 import numpy as np
 
-from fpe_harvester import Harvester, Params, exact_sweep, solve
+from fpe_harvester import Harvester, exact_sweep, solve
 from fpe_harvester.exact import dense_covariance
-from validation.report import bench_main, save_benchmark
+from validation.bench.cli import bench_main, save_benchmark
+from validation.references import rational_eta
 
-__all__ = ["run", "rational_eta"]
+__all__ = ["STEM", "run"]
+
+#: Name of the written ``.json`` and ``.png``.
+STEM = "bench_exact"
 
 
 def _best_time(fn: Callable[[], Any], repeat: int) -> tuple[float, Any]:
@@ -37,28 +41,6 @@ def _best_time(fn: Callable[[], Any], repeat: int) -> tuple[float, Any]:
         out = fn()
         best = min(best, time.perf_counter() - t0)
     return best, out
-
-
-def rational_eta(kappas: list[Fraction], p: Params | None = None) -> tuple[Fraction, Fraction]:
-    """``(V2, eta)`` of a ring in exact rational arithmetic, from rational mode stiffnesses.
-
-    Same closed form as :func:`fpe_harvester.exact.mode_moments`, evaluated with
-    :class:`fractions.Fraction` (the default parameters are integers, so no rounding at all).
-    """
-    p = p or Params()
-    m, g, Kv, Kc, s, tau, D, tp, R = (Fraction(x) for x in (p.m, p.gamma, p.Kv, p.Kc, p.sigma,
-                                                               p.tau, p.D, p.tau_p, p.R))
-    V2 = Pin = Fraction(0)
-    for kap in kappas:
-        d1 = m * tau + m * tp + g * m * tau**2 + g * m * tau * tp + Kc * Kv * tau**2 * tp
-        d1 += kap * tau**2 * (tau + tp)
-        d2 = g * m + g**2 * m * tp + Kc * Kv * tp + Kc * Kv * g * tp**2 + g * kap * tp**2
-        c = g * tau * tp + tau + tp
-        V2 += D * Kc**2 * s**2 * tp**2 * c / (d1 * d2)
-        Pin += D * s**2 * (tau + tp) / d1
-    n = len(kappas)
-    V2, Pin = V2 / n, Pin / n
-    return V2, V2 / (R * Pin)
 
 
 def run(quick: bool = False, out: Path | None = None) -> dict[str, Any]:
@@ -104,7 +86,7 @@ def run(quick: bool = False, out: Path | None = None) -> dict[str, Any]:
         })
     res["fourier_vs_dense"] = rows
 
-    save_benchmark(res, out, "bench_exact", _plot)
+    save_benchmark(res, out, STEM, _plot)
     return res
 
 

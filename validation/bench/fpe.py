@@ -10,7 +10,7 @@ For the single oscillator with a = 0.5 and n = 2, 3, 4, 8 (smooth) and n = 1 (ki
 * when the Monte Carlo package is importable, the cost of one Monte Carlo estimate of
   eta for n = 3, extrapolated to 1e-4 relative (time ~ 1/error^2), for the ratio.
 
-``python -m validation.bench_fpe [--quick] [--out DIR]`` runs the benchmark (the full one
+``python -m validation.bench.fpe [--quick] [--out DIR]`` runs the benchmark (the full one
 takes about 6 minutes) and writes ``bench_fpe.json`` and ``bench_fpe.png`` into DIR
 (default ``./validation_report``).
 """
@@ -28,9 +28,12 @@ from fpe_harvester.exact import mode_moments
 from fpe_harvester.fpe import discretize, stationary
 from fpe_harvester.fpe.discretize import Whitening, solve_level
 from fpe_harvester.fpe.stationary import default_plan as stationary_plan
-from validation.report import bench_main, save_benchmark
+from validation.bench.cli import bench_main, save_benchmark
 
-__all__ = ["run"]
+__all__ = ["STEM", "run"]
+
+#: Name of the written ``.json`` and ``.png``.
+STEM = "bench_fpe"
 
 TARGETS = {"smooth_1e-4_s": 0.5, "smooth_1e-6_s": 5.0, "kink_1e-3_s": 10.0}
 
@@ -121,7 +124,7 @@ def run(quick: bool = False, out: pathlib.Path | None = None) -> dict:
                              "reference_source": ref_src, "curve": curve, "tol_runs": runs}
     mc = None if quick else _monte_carlo(Harvester.build(a=0.5, n=3.0), quick)
     result = {"quick": quick, "cases": cases, "targets": TARGETS, "monte_carlo_n3": mc}
-    save_benchmark(result, out, "bench_fpe", _plot)
+    save_benchmark(result, out, STEM, _plot)
     return result
 
 

@@ -1,8 +1,8 @@
 """Benchmarks: run each solver's benchmark module and combine their error-versus-wall-time data.
 
-The modules ``validation.bench_exact``, ``validation.bench_fpe`` and
-``validation.bench_montecarlo`` each provide ``run(quick, out) -> dict`` and write their own
-JSON and PNG. Their dicts differ in layout, so (time, error) pairs are found by key names:
+The modules :mod:`validation.bench.exact`, :mod:`validation.bench.fpe` and
+:mod:`validation.bench.montecarlo` each provide ``run(quick, out) -> dict`` and write their own
+JSON and PNG (named by their ``STEM``). Their dicts differ in layout, so (time, error) pairs are found by key names:
 in every dict (nested ones and rows of lists included) an error key (name contains ``err`` or
 the word ``se``)
 is paired with the time key (name ends in ``_s`` or contains ``time``/``seconds``) that shares
@@ -17,18 +17,17 @@ import importlib
 import json
 import math
 from collections.abc import Iterator, Mapping
-from pathlib import Path
 from typing import Any
 
-from .checks import CheckResult, Context, expect, skipped
-from .report import Figure, Section, Table
+from ..checks import CheckResult, Context, expect, skipped
+from ..report import Figure, Section, Table
 
 __all__ = ["BENCH_MODULES", "error_time_pairs", "run"]
 
 _SECTION = "Benchmarks: error versus wall time"
 #: Benchmark modules and the solver each measures.
-BENCH_MODULES = (("validation.bench_exact", "exact"), ("validation.bench_fpe", "fpe"),
-                 ("validation.bench_montecarlo", "mc"))
+BENCH_MODULES = (("validation.bench.exact", "exact"), ("validation.bench.fpe", "fpe"),
+                 ("validation.bench.montecarlo", "mc"))
 
 
 def _is_time(key: str) -> bool:
@@ -145,7 +144,7 @@ def _run_one(ctx: Context, module: str, solver: str, sec: Section,
     out = ctx.out / "bench"
     out.mkdir(parents=True, exist_ok=True)
     data = mod.run(quick=ctx.quick, out=out)
-    name = module.rsplit(".", 1)[-1]
+    name = mod.STEM
     pairs = list(error_time_pairs(data))
     for label, t, e in pairs:
         curves.setdefault(f"{solver}: {_series_name(label)}", []).append((t, e))
