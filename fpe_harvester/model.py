@@ -262,7 +262,7 @@ class Harvester:
 
     @property
     def confinement(self) -> str:
-        """``"confined"``, ``"metastable"`` or ``"linear"`` (see SPEC section 2).
+        """``"confined"``, ``"metastable"`` or ``"linear"`` (see docs/model.md §3).
 
         For ``n < 2`` any ``k < 0`` makes the coupled potential unbounded below at large
         amplitude (the ring is only metastable); for ``n > 2`` it is always confined.

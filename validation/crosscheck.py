@@ -4,7 +4,7 @@
 * Fokker--Planck vs Monte Carlo on single nonlinear units (n x a grid);
 * Fokker--Planck vs exact on the harmonic unit (n = 2);
 * the Fourier-mode exact solution vs a dense 4N x 4N Lyapunov solve (scipy) for small N;
-* the identities of SPEC section 1 for every result computed in this run:
+* the stationary identities (docs/model.md §2) for every result computed in this run:
 
 .. math::
 
@@ -50,7 +50,7 @@ def _compare(label: str, r1: Stats, r2: Stats, *, floor: float = 0.0, rel_floor:
 
 
 def identity_checks(label: str, r: Stats, h: Harvester, section: str = _SECTION) -> list[CheckResult]:
-    """The two stationary identities of SPEC section 1 on one result, within its errors.
+    """The two stationary identities (docs/model.md §2) on one result, within its errors.
 
     A result that lacks ``vV`` or ``v2`` fails: the identities are every solver's self-check.
     """

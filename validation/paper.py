@@ -1,4 +1,4 @@
-"""Every number the paper prints (SPEC section 3), next to ours.
+"""Every number the paper prints (docs/model.md §4), next to ours.
 
 Peña Rosselló, Wio, Deza and Hänggi print η and Vrms for five systems and two thresholds.
 We recompute each with the cheapest solver that handles it (exact for harmonic rings,
@@ -41,7 +41,7 @@ class PaperRow:
     Attributes
     ----------
     case : str
-        Description as in SPEC section 3.
+        Description as in the table of docs/model.md §4.
     n, a : float
         Potential exponent (>= 1) and strength (> 0).
     N : int
@@ -113,9 +113,9 @@ def run(ctx: Context) -> Section:
     sec = Section("paper", _SECTION)
     sec.text.append(
         f"Rings have N = {RING_N} units (the paper does not state N for its n = 1, 3, 4 rings; three units is "
-        "its optimum and the natural reading). Defaults of SPEC section 1 throughout. 'Maximum' rows scan k "
+        "its optimum and the natural reading). Defaults of docs/model.md §1 throughout. 'Maximum' rows scan k "
         "and report the best point" + (" (quick mode: k = -0.5 only)." if ctx.quick else ".")
-        + " Our Vrms is sqrt(<V^2>) by the definition of SPEC section 1."
+        + " Our Vrms is sqrt(<V^2>) by the definition of docs/model.md §1."
     )
     table = Table("The paper's numbers and ours",
                   ("case", "k used", "method", "status", "paper eta", "our eta", "eta diff",

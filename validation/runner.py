@@ -2,7 +2,8 @@
 
 Steps, in order (each a module with ``run(ctx) -> Section``): the cross-checks, the paper
 comparison, beyond the paper, the stress tests, the paper's figures (scenes), the
-benchmarks, and last the identities of SPEC section 1 on every result computed in the run.
+benchmarks, and last the stationary identities (docs/model.md §2) on every result computed in
+the run.
 A step that crashes becomes a failed check; the run always ends with a report.
 """
 
@@ -51,7 +52,7 @@ STEPS: tuple[tuple[str, str], ...] = (
 def _identities(ctx: Context) -> Section:
     from .crosscheck import describe, identity_checks, results_table
 
-    sec = Section("identities", "Identities of SPEC section 1 (every solver, every result of this run)")
+    sec = Section("identities", "Stationary identities, docs/model.md §2 (every solver, every result of this run)")
     sec.text.append(
         "For every result computed in this run that describes a stationary state (stable, marginal, "
         "not converged with its best estimate and error, or metastable with no escaped path): V2 = Kc tau_p vV (d<V^2>/dt = 0) and "

@@ -5,14 +5,15 @@ refuses or flags it clearly (a :class:`ParameterError`, an unsupported-case mess
 status ``unstable`` / ``not_converged`` / ``metastable`` with a message). NaN or inf
 cannot reach the user (:class:`Stats` rejects them); a hang is caught by a wall-time budget.
 
-References: harmonic cases are compared with a 40-digit Lyapunov solve (mpmath, 16 x 16
-vectorized system per mode, 3 x 3 for a zero-stiffness mode), built from the exact binary
+References: harmonic cases are compared with a 40-digit Lyapunov solve
+(:func:`.references.mp_ring_moments`: mpmath, 16 x 16 vectorized system per mode, 3 x 3 for
+a zero-stiffness mode), built from the exact binary
 values of the inputs, so it is independent of the closed form and of its round-off. The
 N = 10^6 ring is compared with the N -> inf integral over modes. Nonlinear cases are
 compared with an exactly equivalent rescaled problem where one exists
 (:math:`x, v, V, \\xi \\to s\\,(\\cdot)` maps :math:`(a, D)` to :math:`(a s^{n-2}, D/s^2)`,
 multiplies V2 and Pin by :math:`s^2` and leaves η unchanged), otherwise checked against the
-SPEC identities within their stated errors.
+stationary identities (docs/model.md §2) within their stated errors.
 """
 
 from __future__ import annotations
@@ -230,7 +231,7 @@ def _run(ctx: Context, key: str, title: str, cases: list[tuple[str, Callable[[],
         "PASS means: accurate to the stated error (exact: stated error 0 plus a relative round-off floor "
         f"of {EXACT_FLOOR:g} against a 40-digit Lyapunov solve; Fokker-Planck and Monte Carlo: 4 combined "
         "error bars against an equivalent rescaled problem where one exists (full run: against Monte Carlo "
-        "otherwise), and the SPEC identities within 4 error bars), or clearly "
+        "otherwise), and the stationary identities of docs/model.md §2 within 4 error bars), or clearly "
         "refused or flagged (error naming the problem, or status unstable / not_converged / metastable "
         f"with a message). Each case runs under a {budget:g} s wall-time budget; exceeding it is a hang (FAIL)."
     )

@@ -10,7 +10,7 @@ the statistics (a :class:`~fpe_harvester.result.Stats`), the x-marginal density
     \\langle y_i | x\\rangle = \\frac{\\sum_\\alpha w_{i\\alpha}\\,c_\\alpha(x)}{c_0(x)},
     \\qquad y = (v, V, \\xi),
 
-on a grid, and the residuals of the exact stationary identities (SPEC section 1)
+on a grid, and the residuals of the exact stationary identities (docs/model.md §2)
 
 .. math::
 
