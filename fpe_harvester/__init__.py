@@ -4,6 +4,11 @@ Public API: the model (:class:`Params`, :class:`Potential`, :class:`Harvester`),
 entry point :func:`solve` with its result :class:`Stats`, the exact harmonic solver
 (:class:`Exact`, :func:`exact_sweep`), stability thresholds (:func:`k_di`,
 :func:`threshold`) and declarative studies (:class:`Scene`, :func:`run_scene`).
+
+The solvers are the subpackages :mod:`.exact` (harmonic rings, closed form),
+:mod:`.fpe` (Fokker--Planck, one nonlinear unit) and ``montecarlo`` (a top-level package:
+everything); :mod:`.scenes` runs studies over them. The model, its conventions and the
+results known exactly are in ``docs/model.md``.
 """
 
 from __future__ import annotations
