@@ -1,24 +1,30 @@
-"""Error estimates from refinement and the tolerance-driven choice of M and the mesh.
+"""Tolerance-driven choice of the Hermite degree M and the mesh, with error estimates.
 
-The discretization has two knobs: the Hermite degree M (steps of 2) and the number of
-elements (doubling). For a sequence :math:`f_0, f_1, f_2` of one observable on three
-successive levels of one knob (the other fixed), with differences
-:math:`e_1 = f_1 - f_0`, :math:`e_2 = f_2 - f_1` and ratio :math:`r = |e_2/e_1|`, the
-error of :math:`f_2` is estimated by the tail of a geometric series,
+The refinement raises M (steps of 2) on a mesh of ``half_elements`` elements per half
+(:func:`_hermite`) until the Hermite error (:func:`~.estimate.tail_error` of the last three
+levels; for n < 2 at least the relative tail of V2 and of Pin, see :mod:`.estimate`) is below
+:math:`(1 - s)\\,tol` (s = :data:`MESH_SHARE`). Then the mesh is checked
+(:func:`_mesh_check`) at the cheaper degree M - 4 against a mesh twice as fine; if the
+mesh error is above the rest of tol, the elements double and the Hermite sequence is
+redone on the finer mesh from the same M (its lower degrees are cheap). A Hermite sequence
+that stops contracting triggers the mesh check early: unresolved high modes are a mesh
+problem.
 
-.. math::
+The previous design certified a level by its neighbours M + 2 and half or a quarter of the
+elements at the same M. That cost 3-10 times the level itself, and for steep potentials
+the coarse meshes at high M were numerically meaningless (n = 8, a = 1: its 4- and
+8-element levels at M = 14-18 sent it to M = 18 on a mesh that cannot carry those modes,
+NOT_CONVERGED after 49 s with eta wrong by 5e-4). Choosing the mesh at a low degree first
+(M = 6, a ladder of meshes) was measured and dropped: the mesh error at M = 6 is not that
+at M = 12 (n = 6, a = 1: 16 elements are 1.4e-4 off at M = 6 and 1.7e-5 at M = 12), so it
+chose meshes 1.5 times finer than needed. The numbers of the alternatives are in
+:mod:`validation.bench.fpe`.
 
-    \\varepsilon = |e_2|\\,\\max\\Big(1, \\frac{r}{1 - r}\\Big),
-
-never less than the last difference (conservative when convergence is fast). In M the
-convergence may be algebraic (the kink of n = 1 makes the density non-smooth), where the
-geometric tail underestimates: with :math:`f(M) = f_\\infty + C M^{-q}` and steps of 2,
-:math:`r = ((M-2)/M)^{q+1}` gives q and the tail :math:`|e_2| M / (2q)`; the larger of the
-two estimates is used, and never less than :math:`\\sqrt{|e_1 e_2|}` when the two steps
-have opposite signs (steep potentials converge irregularly in M). When the sequence is not
-yet contracting (:math:`r \\ge 0.9`) the estimate is :math:`10|e_2|` and the level is
-flagged as pre-asymptotic. The mesh error is a Richardson estimate from three meshes
-(:func:`mesh_error`).
+A level that fails or gives unphysical moments (V2, Pin, v2, x2 <= 0) is dropped when it
+only feeds an estimate; when the level that would carry the result fails, the refinement
+stops. At a stop or a limit (max_M, elements, memory, max_seconds) the result is
+NOT_CONVERGED with the best estimate computed so far, the one with the smallest estimated
+error (not the finest), or none when no estimate is smaller than its value.
 """
 
 from __future__ import annotations
@@ -34,128 +40,40 @@ import numpy as np
 
 from ..model import Harvester
 from .discretize import Level, Whitening, solve_level
+from .estimate import mesh_order, tail_error
 from .mesh import XMesh
 
-__all__ = ["tail_error", "mesh_error", "reported_eta_error", "Plan", "RefinementResult", "refine",
-           "level_gigabytes", "default_memory_gb"]
-
-#: Largest relative spread of eta over the good levels for which a broken-down refinement
-#: still returns its finest level (with the spread as error); beyond it, no estimate.
-BROKEN_SPREAD = 0.1
-
-#: The mesh error is first estimated once the Hermite part is below this share of tol.
-HERMITE_SHARE = 0.5
+__all__ = ["Plan", "Estimate", "RefinementResult", "refine", "level_gigabytes", "default_memory_gb",
+           "MESH_SHARE"]
 
 #: Observables carried through the refinement (each gets its own estimate).
 OBSERVABLES = ("eta", "V2", "Pin", "v2", "vV", "x2")
 
+#: Share of tol given to the mesh error; the Hermite error gets the rest.
+MESH_SHARE = 0.25
 
-def tail_error(values: Sequence[float], degrees: Sequence[int] | None = None) -> tuple[float, bool]:
-    """Error estimate of the last of up to three successive refinements.
+#: Lowest Hermite degree of a mesh check (lower levels say little about the mesh).
+M_CHECK = 6
 
-    Parameters
-    ----------
-    values : sequence of float
-        The observable on successive levels (coarse to fine).
-    degrees : sequence of int, optional
-        The Hermite degrees of the levels (steps of 2); enables the algebraic tail.
-
-    Returns
-    -------
-    (error, asymptotic)
-        With two values the last difference and ``False``; with one value ``inf``.
-
-    Examples
-    --------
-    >>> err, ok = tail_error([1.1, 1.01, 1.001])
-    >>> round(err, 6), ok
-    (0.009, True)
-    """
-    if len(values) < 2:
-        return math.inf, False
-    e2 = abs(values[-1] - values[-2])
-    if len(values) < 3:
-        return e2, False
-    e1 = abs(values[-2] - values[-3])
-    if e1 == 0.0:
-        return e2, e2 == 0.0
-    r = e2 / e1
-    if r >= 0.9:
-        return 10.0 * e2, False
-    err = e2 * max(1.0, r / (1.0 - r))
-    if degrees is not None and (values[-1] - values[-2]) * (values[-2] - values[-3]) < 0.0:
-        # Hermite sequences of steep potentials (n = 8) converge irregularly, with steps of
-        # alternating sign: a small last step can follow a large one by chance, so there the
-        # geometric mean of the two steps is a floor.
-        err = max(err, math.sqrt(e1 * e2))
-    if degrees is not None and r > 0.0:
-        M = degrees[-1]
-        q = math.log(r) / math.log((M - 2.0) / M) - 1.0
-        if q > 0.0:
-            err = max(err, e2 * M / (2.0 * q))
-        else:
-            err = max(err, 10.0 * e2)
-    return err, True
-
-
-def mesh_error(values: Sequence[float], order: int) -> float:
-    """Error of the finest of up to three meshes, each twice as fine as the previous.
-
-    With two meshes the last difference :math:`e_2 = |f_N - f_{N/2}|` (a bound for any
-    convergence order >= 1). With three, the observed order
-    :math:`q_{obs} = \\log_2(e_1/e_2)` (:math:`e_1 = |f_{N/2} - f_{N/4}|`) is used in the
-    Richardson estimate :math:`e_2/(2^q - 1)` with :math:`q = \\min(q_{obs}, p + 1)`: never
-    faster than the L2 order p + 1 of the DG discretization (functionals often converge
-    faster; the cap keeps the estimate conservative). If the sequence is not contracting at
-    least at first order (:math:`q_{obs} < 1`) the estimate stays :math:`e_2`.
-
-    Examples
-    --------
-    >>> round(mesh_error([1.1, 1.01], 3), 6)
-    0.09
-    >>> round(mesh_error([1.0017, 1.0001, 1.0], 3), 8)  # observed order 4 = p + 1
-    6.67e-06
-    """
-    if len(values) < 2:
-        return math.inf
-    e2 = abs(values[-1] - values[-2])
-    if len(values) < 3 or e2 == 0.0:
-        return e2
-    e1 = abs(values[-2] - values[-3])
-    if e1 == 0.0 or e2 > 0.5 * e1:
-        return e2
-    q = min(math.log2(e1 / e2), order + 1.0)
-    return e2 / (2.0**q - 1.0)
-
-
-def reported_eta_error(moments: dict[str, float], errors: dict[str, float]) -> tuple[float, float]:
-    """Error on eta to report, and the covariance of the V2 and Pin errors to go with it.
-
-    The error of eta is estimated directly from its own refinement sequence: the
-    truncation errors of V2 and Pin are strongly correlated and partly cancel in the
-    ratio. The returned covariance (:math:`|\\rho| \\le 1`) makes first-order propagation
-    from V2 and Pin as close to that estimate as it can be.
-    """
-    V2, Pin, eta = moments["V2"], moments["Pin"], abs(moments["eta"])
-    a, b = errors["V2"] / V2, errors["Pin"] / Pin
-    rel = errors["eta"] / eta
-    rel_cov = min(max(rel, abs(a - b)), a + b)
-    cov = (a * a + b * b - rel_cov**2) / 2.0 * V2 * Pin
-    return errors["eta"], cov
+#: Highest Hermite degree per element of the half mesh. Beyond it the levels are not
+#: resolved and may be wrong while looking physical: M = 18 on 8 elements per half gives
+#: eta 0.2002 for 0.2069 (n = 1.5, a = 2) and 0.4463 for 0.44656 (n = 8, a = 1), while
+#: M = 16 on 8 and M = 18 on 16 are fine.
+DEGREES_PER_ELEMENT = 2
 
 
 @dataclass(frozen=True)
 class Plan:
-    """Starting point and limits of the refinement.
+    """Discretization settings and limits of the refinement.
 
     Attributes
     ----------
     M : int
-        Starting (or fixed) Hermite degree, >= 2.
+        Hermite degree to start from (fixed with ``fixed``), >= 2.
     half_elements : int
-        Starting (or fixed) elements per half-domain.
+        Elements per half-domain of the first mesh (fixed with ``fixed``).
     order : int
-        DG polynomial order.
+        DG polynomial order p.
     theta : float
         Domain factor :math:`U(L)/T_{eff}`.
     grading : float
@@ -164,17 +82,15 @@ class Plan:
         Wall weight of the mesh monitor.
     fixed : bool
         If True, solve at (M, half_elements) and estimate the error from one refinement
-        step of each knob (M + 2, 2 x elements); no adaptation.
+        step of each knob (M + 2, twice the elements); no adaptation.
     max_M, max_half_elements, max_dofs : int
         Limits; the solve reports NOT_CONVERGED when tol needs more. ``max_dofs`` counts
-        the unknowns of the whole mesh, twice those of the half mesh that is solved (a
-        level's ``dofs``).
+        the unknowns of the whole mesh, twice those of the half mesh that is solved.
     max_seconds : float or None
-        Wall-time budget for the adaptation (s); no step starts whose predicted cost
-        would exceed it.
+        Wall-time budget (s); no level starts whose predicted cost would exceed it.
     max_gb : float or None
-        Memory bound of one level's factorization in GB (:func:`level_gigabytes`); no
-        level beyond it is attempted. Default (None): half the physical memory.
+        Memory bound of one level's factorization in GB (:func:`level_gigabytes`); default
+        (None): half the physical memory.
     """
 
     M: int
@@ -204,187 +120,202 @@ class Plan:
 
 
 @dataclass(frozen=True)
-class RefinementResult:
-    """Best level, its error estimates and the history of levels computed."""
+class Estimate:
+    """Values of the observables with their error estimates.
 
-    best: Level | None
-    errors: dict[str, float]
-    error_M: float
-    error_x: float
+    ``moments`` are the level's; ``hermite`` and ``mesh`` the two parts of the error of each observable;
+    ``level`` the level the fields (density, conditional means) come from;
+    ``mesh_checked`` says whether the mesh part was measured for this estimate or carried
+    over from the last check (infinite before any).
+    """
+
+    moments: dict[str, float]
+    hermite: dict[str, float]
+    mesh: dict[str, float]
+    level: Level
+    mesh_checked: bool = False
+
+    @property
+    def errors(self) -> dict[str, float]:
+        """Total error estimate of each observable (Hermite part + mesh part)."""
+        return {name: self.hermite[name] + self.mesh[name] for name in self.hermite}
+
+    @property
+    def error_M(self) -> float:
+        """Hermite part of the error on eta."""
+        return self.hermite["eta"]
+
+    @property
+    def error_x(self) -> float:
+        """Mesh part of the error on eta."""
+        return self.mesh["eta"]
+
+    @property
+    def relative(self) -> float:
+        """Estimated relative error on eta."""
+        return (self.hermite["eta"] + self.mesh["eta"]) / abs(self.moments["eta"])
+
+
+@dataclass(frozen=True)
+class RefinementResult:
+    """Best estimate, whether it meets tol, why not, and the history of levels computed."""
+
+    best: Estimate | None
     converged: bool
     reason: str
     history: list[dict[str, Any]] = field(default_factory=list)
     seconds: float = 0.0
 
 
+class _Stop(Exception):
+    """A limit of the plan, or the failure of a level that would carry the result."""
+
+
+class _Levels:
+    """Solved levels of one refinement, keyed by (M, half_elements), with the plan's limits."""
+
+    def __init__(self, h: Harvester, plan: Plan, progress: Callable[[str], None] | None) -> None:
+        self.h, self.plan, self.progress = h, plan, progress
+        self.w = Whitening.of(h)
+        self.base = plan.mesh(h, self.w)
+        self.cache: dict[tuple[int, int], Level] = {}
+        self.failed: dict[tuple[int, int], str] = {}
+        self.t0 = time.perf_counter()
+
+    @property
+    def elapsed(self) -> float:
+        return time.perf_counter() - self.t0
+
+    def limit(self, M: int, nh: int) -> str:
+        """Why level (M, nh) may not be computed ('' if it may)."""
+        plan = self.plan
+        if M > plan.max_M:
+            return f"Hermite degree M = {M} would exceed max_M = {plan.max_M}"
+        if nh > plan.max_half_elements:
+            return f"{2 * nh} elements would exceed {2 * plan.max_half_elements}"
+        if 2 * nh * _block_size(M, plan.order) > plan.max_dofs:
+            return f"unknowns would exceed max_dofs = {plan.max_dofs}"
+        gb = level_gigabytes(M, nh, plan.order)
+        if gb > plan.memory_limit:
+            return (f"memory: level M = {M}, {2 * nh} elements would need about {gb:.3g} GB, more "
+                    f"than max_gb = {plan.memory_limit:.3g} GB")
+        if plan.max_seconds is not None:
+            need = _predicted_seconds(self.cache, M, nh, plan.order)
+            if self.elapsed + need > plan.max_seconds:
+                return (f"time budget max_seconds = {plan.max_seconds:g} s: {self.elapsed:.3g} s used, "
+                        f"the next level (M = {M}, {2 * nh} elements) would need about {need:.3g} s more")
+        return ""
+
+    def get(self, M: int, nh: int) -> Level:
+        """Level (M, nh); raises :class:`_Stop` at a limit or if it fails."""
+        key = (M, nh)
+        if key in self.cache:
+            return self.cache[key]
+        if key in self.failed:
+            raise _Stop(self.failed[key])
+        why = self.limit(M, nh)
+        if why:
+            raise _Stop(why)
+        try:
+            lv = solve_level(self.h, M, self.base.with_elements(nh), self.plan.order, self.w)
+        except (ArithmeticError, ValueError, np.linalg.LinAlgError) as exc:
+            self.failed[key] = f"level M = {M}, {2 * nh} elements failed ({exc})"
+            raise _Stop(self.failed[key]) from exc
+        bad = _unphysical(lv)
+        if bad:
+            self.failed[key] = f"level M = {M}, {2 * nh} elements is unphysical ({bad})"
+            raise _Stop(self.failed[key])
+        self.cache[key] = lv
+        if self.progress is not None:
+            self.progress(f"M={M} elements={2 * nh} dofs={lv.dofs} eta={lv.moments['eta']:.10g} "
+                          f"({lv.seconds:.2f} s)")
+        return lv
+
+    def get_or_none(self, M: int, nh: int) -> Level | None:
+        """Level (M, nh), or None if it fails (limits still raise)."""
+        if (M, nh) not in self.cache and (M, nh) not in self.failed:
+            why = self.limit(M, nh)
+            if why:
+                raise _Stop(why)
+        try:
+            return self.get(M, nh)
+        except _Stop:
+            if (M, nh) in self.failed:
+                return None
+            raise
+
+    def history(self) -> list[dict[str, Any]]:
+        return [lv.summary() for _, lv in sorted(self.cache.items())]
+
+
 def refine(h: Harvester, tol: float, plan: Plan, progress: Callable[[str], None] | None = None
            ) -> RefinementResult:
     """Refine M and the mesh until the estimated relative error on eta is below ``tol``.
 
-    M grows in steps of 2 on the current mesh until its error estimate (levels M - 4,
-    M - 2, M, :func:`tail_error`) is below ``tol * |eta| / 2``; then the mesh error
-    (last doubling) is computed at that M, and the larger part is refined (M + 2 or twice
-    the elements) until the sum is below ``tol * |eta|`` or a limit of ``plan`` is hit.
-
-    The time budget is checked before each step against the elapsed time plus the
-    predicted cost of the levels the step needs (:func:`_predicted_seconds`). A level that
-    fails or gives unphysical moments (V2, Pin, v2, x2 <= 0) ends the refinement with
-    ``converged=False``, the finest good level and the spread of the good levels as error
-    (``best`` is None if no level worked); a failed lower degree that only feeds the tail
-    estimate is dropped instead.
+    See the module docstring. Returns the best estimate (the one that meets tol, or at a
+    limit the one with the smallest estimated error) and the history of the levels.
     """
-    t0 = time.perf_counter()
-    w = Whitening.of(h)
-    base = plan.mesh(h, w)
-    cache: dict[tuple[int, int], Level] = {}
-    failed: dict[tuple[int, int], str] = {}
-
-    def level(M: int, nh: int) -> Level:
-        key = (M, nh)
-        if key in failed:
-            raise _LevelFailed(failed[key])
-        if key not in cache:
-            gb = level_gigabytes(M, nh, plan.order)
-            if gb > plan.memory_limit:
-                failed[key] = (f"level M = {M}, {2 * nh} elements would need about {gb:.3g} GB, "
-                               f"more than max_gb = {plan.memory_limit:.3g} GB")
-                raise _LevelFailed(failed[key])
-            try:
-                lv = solve_level(h, M, base.with_elements(nh), plan.order, w)
-            except (ArithmeticError, ValueError, np.linalg.LinAlgError) as exc:
-                failed[key] = f"level M = {M}, {2 * nh} elements failed ({exc})"
-                raise _LevelFailed(failed[key]) from exc
-            bad = _unphysical(lv)
-            if bad:
-                failed[key] = f"level M = {M}, {2 * nh} elements is unphysical ({bad})"
-                raise _LevelFailed(failed[key])
-            cache[key] = lv
-            if progress is not None:
-                progress(f"M={M} elements={2 * nh} dofs={lv.dofs} eta={lv.moments['eta']:.10g} "
-                         f"({lv.seconds:.2f} s)")
-        return cache[key]
-
-    def usable(ms: Sequence[int], nh: int) -> list[Level]:
-        # Lower degrees only feed the tail estimate: one that fails (a low-order Hermite
-        # truncation can lose positivity) is dropped from the sequence, not fatal.
-        out = []
-        for m in ms:
-            try:
-                out.append(level(m, nh))
-            except _LevelFailed:
-                if m == ms[-1]:
-                    raise
-        return out
-
-    def estimates(M: int, nh: int, fixed: bool = False, enough: float | None = None
-                  ) -> tuple[dict[str, float], float, float]:
-        # Mesh: Richardson from the meshes nh/4, nh/2, nh with the observed order capped at
-        # p + 1 (:func:`mesh_error`); the last difference alone if the sequence is not
-        # contracting. A coarsest mesh of one element per half is still used; below that the
-        # next finer mesh serves as the comparison. With ``enough`` (an error on eta), the
-        # coarsest mesh is solved only if the two-mesh estimate (never smaller than the
-        # Richardson one) is above it: it can only sharpen the estimate.
-        # Hermite: tail estimate from M - 4, M - 2, M; a fixed level M is instead compared
-        # with M + 2, whose own tail is added (the error of f(M) is |f(M) - f(M+2)| + tail).
-        meshes = [level(M, nh // 2) if nh >= 2 else level(M, 2 * nh)]
-        if nh >= 4 and enough is not None:
-            errs, eM, ex = combine(M, nh, fixed, meshes)
-            if reported_eta_error(level(M, nh).moments, errs)[0] <= enough:
-                return errs, eM, ex
-        if nh >= 4:
-            try:  # the coarsest mesh only sharpens the estimate; it may fail to solve
-                meshes.insert(0, level(M, nh // 4))
-            except _LevelFailed:
-                pass
-        return combine(M, nh, fixed, meshes)
-
-    def combine(M: int, nh: int, fixed: bool, meshes: list[Level]) -> tuple[dict[str, float], float, float]:
-        degs = [m for m in ((M - 2, M, M + 2) if fixed else (M - 4, M - 2, M)) if m >= 2]
-        seq_M = usable(degs, nh)
-        degs = [lv.M for lv in seq_M]
-        errs: dict[str, float] = {}
-        eM = ex = 0.0
-        for name in OBSERVABLES:
-            vals = [lv.moments[name] for lv in seq_M]
-            em, _ = tail_error(vals, degs)
-            if fixed:
-                em += abs(vals[-1] - level(M, nh).moments[name])
-            if meshes[-1].mesh.half_elements > nh:
-                ey = abs(level(M, nh).moments[name] - meshes[-1].moments[name])
-            else:
-                seq = [lv.moments[name] for lv in meshes] + [level(M, nh).moments[name]]
-                ey = mesh_error(seq, plan.order)
-            errs[name] = em + ey
-            if name == "eta":
-                eM, ex = em, ey
-        return errs, eM, ex
-
+    levels = _Levels(h, plan, progress)
+    found: list[Estimate] = []
     try:
         if plan.fixed:
-            M, nh = plan.M, plan.half_elements
-            errs, eM, ex = estimates(M, nh, fixed=True)
-            best = level(M, nh)
-            rel = reported_eta_error(best.moments, errs)[0] / abs(best.moments["eta"])
-            ok = rel <= tol
-            reason = "" if ok else (f"fixed M = {M}, {2 * nh} elements: estimated relative error "
-                                    f"{rel:.2g} > tol = {tol:.2g}")
-            return RefinementResult(best, errs, eM, ex, ok, reason, _history(cache), time.perf_counter() - t0)
-
-        M, nh = plan.M, plan.half_elements
+            est = _fixed(levels, plan.M, plan.half_elements)
+            ok = est.relative <= tol
+            reason = "" if ok else (f"fixed M = {plan.M}, {2 * plan.half_elements} elements: estimated "
+                                    f"relative error {est.relative:.2g} > tol = {tol:.2g}")
+            return RefinementResult(est, ok, reason, levels.history(), levels.elapsed)
+        M, nh, mesh = plan.M, plan.half_elements, math.inf
         while True:
-            best = level(M, nh)
-            eta = abs(best.moments["eta"])
-            # Refine M first on the current mesh (lower degrees are cheap and cached); the mesh
-            # sequence at the current M is computed only once the Hermite part is small.
-            seq_M = usable([m for m in (M - 4, M - 2, M) if m >= 2], nh)
-            vals = [lv.moments["eta"] for lv in seq_M]
-            eM, _ = tail_error(vals, [lv.M for lv in seq_M])
-            # A Hermite sequence that stops contracting usually means the mesh no longer
-            # resolves the higher modes (n = 8 at M >= 16 on 16 elements wanders by 1e-5
-            # around a value 1e-5 off): then the mesh error is checked too, and the larger
-            # part refined.
-            if eM <= HERMITE_SHARE * tol * eta or _stalled(vals):
-                errs, eM, ex = estimates(M, nh, enough=tol * eta)
-                if reported_eta_error(best.moments, errs)[0] <= tol * eta:
-                    return RefinementResult(best, errs, eM, ex, True, "", _history(cache),
-                                            time.perf_counter() - t0)
-                grow_M = eM >= ex
+            est, why = _hermite(levels, nh, M, tol, mesh, found)
+            if why == "resolution":
+                nh *= 2  # M is at the most this mesh carries: twice the elements, same M
+                M = est.level.M if est is not None else M
+                continue
+            M = est.level.M
+            est = _mesh_check(levels, est, nh)
+            found.append(est)
+            if est.relative <= tol:
+                return RefinementResult(est, True, "", levels.history(), levels.elapsed)
+            if est.error_x <= MESH_SHARE * tol * abs(est.moments["eta"]):
+                M += 2  # the Hermite part is what is left (a stalled sequence came here early)
             else:
-                grow_M = True
-            nxt_M, nxt_nh = (M + 2, nh) if grow_M else (M, 2 * nh)
-            dofs = 2 * nxt_nh * _block_size(nxt_M, plan.order)
-            elapsed = time.perf_counter() - t0
-            limit = None
-            if nxt_M > plan.max_M:
-                limit = f"Hermite degree M would exceed max_M = {plan.max_M}"
-            elif nxt_nh > plan.max_half_elements:
-                limit = f"elements would exceed {2 * plan.max_half_elements}"
-            elif dofs > plan.max_dofs:
-                limit = f"unknowns would exceed max_dofs = {plan.max_dofs}"
-            elif (gb := level_gigabytes(nxt_M, nxt_nh, plan.order)) > plan.memory_limit:
-                limit = (f"memory: the next level would need about {gb:.3g} GB, more than "
-                         f"max_gb = {plan.memory_limit:.3g} GB")
-            elif plan.max_seconds is not None:
-                # The next step may also need the coarse-mesh level of its error estimate.
-                need = [(m, k) for m, k in ((nxt_M - 4, nxt_nh), (nxt_M - 2, nxt_nh),
-                                            (nxt_M, nxt_nh), (nxt_M, max(nxt_nh // 2, 1)),
-                                            (nxt_M, max(nxt_nh // 4, 1)))
-                        if m >= 2 and (m, k) not in cache]
-                predicted = sum(_predicted_seconds(cache, m, k, plan.order) for m, k in need)
-                if elapsed + predicted > plan.max_seconds:
-                    limit = (f"time budget max_seconds = {plan.max_seconds:g} s: {elapsed:.3g} s used, "
-                             f"the next level would need about {predicted:.3g} s more")
-            if limit is not None:
-                errs, eM, ex = estimates(M, nh)
-                rel = reported_eta_error(best.moments, errs)[0] / eta
-                reason = (f"tol = {tol:.2g} not reached: estimated relative error on eta {rel:.2g} "
-                          f"(Hermite part {eM / eta:.2g}, mesh part {ex / eta:.2g}) at M = {M}, "
-                          f"{2 * nh} elements; {limit}")
-                return RefinementResult(best, errs, eM, ex, False, reason, _history(cache),
-                                        time.perf_counter() - t0)
-            M, nh = nxt_M, nxt_nh
-    except _LevelFailed as exc:
-        return _broken(str(exc), cache, tol, time.perf_counter() - t0)
+                nh *= 2
+            mesh = est.error_x / abs(est.moments["eta"])
+    except _Stop as stop:
+        return _stopped(str(stop), found, levels, tol)
+
+
+def _hermite(levels: _Levels, nh: int, M: int, tol: float, mesh: float, found: list[Estimate]
+             ) -> tuple[Estimate | None, str]:
+    """Raise M (steps of 2) on ``nh`` elements per half until the Hermite error is below
+    ``(1 - MESH_SHARE) * tol`` (returns ``"converged"``), the sequence stops contracting at
+    M >= 10 (``"stalled"``: the mesh is suspect), or M would exceed what the mesh carries,
+    :data:`DEGREES_PER_ELEMENT` times the elements per half (``"resolution"``). Every
+    estimate on the way is appended to ``found``, its mesh part the last relative mesh
+    error ``mesh``.
+
+    The first estimate at M >= M_CHECK + 2 on a mesh not yet checked gets a mesh check at
+    M_CHECK while that is cheap, so that every later estimate (and a stop at a limit)
+    carries a measured mesh error. It does not refine the mesh: for steep potentials the
+    mesh error at a low degree overestimates that at high M (n = 6, a = 1: 16 elements
+    are 1.4e-4 off at M = 6 and 1.7e-5 at M = 12; n = 8, a = 2: 2e-4 and 3e-5).
+    """
+    algebraic = levels.h.n < 2.0
+    est = None
+    while True:
+        if M > DEGREES_PER_ELEMENT * nh:
+            return est, "resolution"
+        est = _hermite_estimate(levels, nh, M, algebraic, mesh)
+        if est is not None and M >= M_CHECK + 2 and not math.isfinite(mesh):
+            est = _mesh_check(levels, est, nh)
+            mesh = est.error_x / abs(est.moments["eta"])
+        if est is not None:
+            found.append(est)
+            if est.error_M <= (1.0 - MESH_SHARE) * tol * abs(est.moments["eta"]):
+                return est, "converged"
+            if M >= 10 and _stalled([lv.moments["eta"] for lv in _sequence(levels, nh, M)][-3:]):
+                return est, "stalled"
+        M += 2
 
 
 def _stalled(values: Sequence[float]) -> bool:
@@ -396,12 +327,117 @@ def _stalled(values: Sequence[float]) -> bool:
     return abs(e2) >= abs(e1) or (e1 * e2 < 0.0 and abs(e2) >= 0.5 * abs(e1))
 
 
-def _history(cache: dict[tuple[int, int], Level]) -> list[dict[str, Any]]:
-    return [lv.summary() for _, lv in sorted(cache.items())]
+def _sequence(levels: _Levels, nh: int, M: int) -> list[Level]:
+    """The levels M - 6, M - 4, M - 2, M on ``nh`` (lower ones solved as needed); a failed
+    lower level ends the sequence (a low Hermite truncation may lose positivity)."""
+    seq = [levels.get(M, nh)]
+    for m in range(M - 2, max(M - 8, 1), -2):
+        lv = levels.get_or_none(m, nh)
+        if lv is None:
+            break
+        seq.insert(0, lv)
+    return seq
 
 
-class _LevelFailed(Exception):
-    """A level could not be solved or gave unphysical moments (refinement breaks down)."""
+def _hermite_estimate(levels: _Levels, nh: int, M: int, algebraic: bool, mesh_guess: float
+                      ) -> Estimate | None:
+    """Estimate at degree M on ``nh``: the Hermite part from the levels M - 6 .. M (steps
+    of 2; a failed lower level ends the sequence), the mesh part ``mesh_guess`` (relative,
+    from the last mesh check; infinite before the first). None while fewer than three
+    levels are available."""
+    seq = _sequence(levels, nh, M)
+    if len(seq) < 3:
+        return None
+    top = seq[-1]
+    degs = [lv.M for lv in seq]
+    values = {name: [lv.moments[name] for lv in seq] for name in OBSERVABLES}
+    moments = dict(top.moments)
+    hermite = {name: tail_error(v[-3:], degs[-3:])[0] for name, v in values.items()}
+    if algebraic:
+        # eta mixes a fast moment (V2 ~ <vV>) with a slow one (Pin ~ <v^2>, from the
+        # concentration of the density at x = 0), so its own sequence shows a
+        # pre-asymptotic exponent that underestimates its tail (see :mod:`.estimate`): its
+        # error is at least the larger relative tail of V2 and Pin.
+        rel = max(hermite["V2"] / abs(moments["V2"]), hermite["Pin"] / abs(moments["Pin"]))
+        hermite["eta"] = max(hermite["eta"], rel * abs(moments["eta"]))
+    mesh = {name: mesh_guess * abs(moments[name]) if math.isfinite(mesh_guess) else math.inf
+            for name in OBSERVABLES}
+    return Estimate(moments, hermite, mesh, top)
+
+
+def _mesh_check(levels: _Levels, est: Estimate, nh: int) -> Estimate:
+    """The mesh error of ``nh`` elements per half, measured at M - 4 (at least
+    :data:`M_CHECK`) against twice the elements.
+
+    With the difference d of the two meshes and an error :math:`\\propto N^{-q}`, the
+    error of the coarser is :math:`d/(1 - 2^{-q})`; q is the observed order when a third
+    mesh (half the elements, solved when the degree is low) contracts, capped to [1, p + 1],
+    else 1 (the bound 2d for any order >= 1).
+    """
+    M = est.level.M
+    Mc = min(M, max(M - 4, M_CHECK))
+    a, b = levels.get(Mc, nh), levels.get(Mc, 2 * nh)
+    # A third, coarser mesh gives the observed order, but only at a low degree: at high M
+    # a coarse mesh is numerically meaningless for steep potentials.
+    coarse = None
+    if Mc <= M_CHECK + 2 and nh >= 8 and nh % 2 == 0:
+        coarse = levels.get_or_none(Mc, nh // 2)
+    mesh = {}
+    for name in OBSERVABLES:
+        q = 1.0
+        if coarse is not None:
+            seq = [coarse.moments[name], a.moments[name], b.moments[name]]
+            q = mesh_order([nh // 2, nh, 2 * nh], seq, levels.plan.order) or 1.0
+        mesh[name] = abs(a.moments[name] - b.moments[name]) / (1.0 - 2.0**-q)
+    return Estimate(est.moments, est.hermite, mesh, est.level, True)
+
+
+def _fixed(levels: _Levels, M: int, nh: int) -> Estimate:
+    """A fixed level with the error of one refinement step of each knob: the Hermite part
+    :math:`|f(M) - f(M+2)|` plus the tail of M - 2, M, M + 2, the mesh part the difference
+    to twice the elements."""
+    top = levels.get(M, nh)
+    nxt = levels.get(M + 2, nh)
+    seq = [lv for m in (M - 2, M) if m >= 2 and (lv := levels.get_or_none(m, nh)) is not None] + [nxt]
+    fine = levels.get(M, 2 * nh)
+    hermite, mesh = {}, {}
+    for name in OBSERVABLES:
+        vals = [lv.moments[name] for lv in seq]
+        hermite[name] = abs(nxt.moments[name] - top.moments[name]) + tail_error(vals, [lv.M for lv in seq])[0]
+        mesh[name] = abs(fine.moments[name] - top.moments[name])
+    return Estimate(dict(top.moments), hermite, mesh, top, True)
+
+
+def _stopped(why: str, found: list[Estimate], levels: _Levels, tol: float) -> RefinementResult:
+    """NOT_CONVERGED: the estimate with the smallest error found so far, if it means anything.
+
+    If no estimate has a measured mesh error yet, the one with the smallest Hermite error
+    gets a mesh check (unless that too hits a limit or fails). An estimate whose error is
+    not smaller than its value (or none at all) is no estimate: then ``best`` is None and
+    the reason says what to do.
+    """
+    good = [e for e in found if math.isfinite(e.relative) and e.relative < 1.0]
+    hermite_only = [e for e in found if math.isfinite(e.error_M)]
+    if not good and hermite_only:
+        est = min(hermite_only, key=lambda e: e.error_M / abs(e.moments["eta"]))
+        try:
+            est = _mesh_check(levels, est, est.level.mesh.half_elements)
+        except _Stop:
+            pass
+        else:
+            good = [est] if est.relative < 1.0 else []
+    advice = ("the Hermite expansion around the equivalent harmonic unit does not resolve this "
+              "density; use method='mc', or fix M and elements to inspect the levels")
+    if not good:
+        reason = f"tol = {tol:.2g} not reached and no error estimate: {why}; {advice}"
+        return RefinementResult(None, False, reason, levels.history(), levels.elapsed)
+    best = min(good, key=lambda e: e.relative)
+    checked = "" if best.mesh_checked else " (mesh part from the last mesh check)"
+    reason = (f"tol = {tol:.2g} not reached: estimated relative error on eta {best.relative:.2g} "
+              f"(Hermite part {best.error_M / abs(best.moments['eta']):.2g}, mesh part "
+              f"{best.error_x / abs(best.moments['eta']):.2g}{checked}) at M = {best.level.M}, "
+              f"{best.level.mesh.elements} elements; stopped: {why}")
+    return RefinementResult(best, False, reason, levels.history(), levels.elapsed)
 
 
 def _unphysical(lv: Level) -> str:
@@ -436,11 +472,6 @@ def _block_size(M: int, order: int) -> int:
     return (order + 1) * math.comb(M + 3, 3)
 
 
-def _cost_unit(M: int, order: int) -> float:
-    # Dense LU per element: n_b^3.
-    return float(_block_size(M, order)) ** 3
-
-
 def _predicted_seconds(cache: dict[tuple[int, int], Level], M: int, nh: int, order: int) -> float:
     """Predicted wall time (s) of level (M, nh) from the costliest measured level.
 
@@ -461,38 +492,3 @@ def _predicted_seconds(cache: dict[tuple[int, int], Level], M: int, nh: int, ord
         if lv1.seconds > 0.0:
             q = min(max(math.log(lv0.seconds / lv1.seconds) / math.log(unit(m0) / unit(m1)), 2.0), 3.0)
     return lv0.seconds * (nh / k0) * (unit(M) / unit(m0)) ** q
-
-
-def _broken(why: str, cache: dict[tuple[int, int], Level], tol: float, seconds: float
-            ) -> RefinementResult:
-    """NOT_CONVERGED result when a level fails: the finest good level, errors from the spread.
-
-    With the refinement broken there is no asymptotic estimate: the error of each observable
-    is the largest difference between the kept level and the other good levels (its own
-    magnitude if there is only one). ``best`` is None when no level worked, or when the
-    levels disagree in eta by more than ``BROKEN_SPREAD`` (a wild sequence, e.g. the kink
-    with a = 2: 0.008, 0.020, 0.019, 0.076 at M = 2..8 while Monte Carlo gives 0.15, whose
-    spread would be a false error bar).
-    """
-    advice = ("the Hermite expansion around the equivalent harmonic unit does not resolve this "
-              "density (strongly non-Gaussian, e.g. a quasi-static drive or a kink force larger "
-              "than the drive); use method='mc', or fix M and elements to inspect the levels")
-    if not cache:
-        return RefinementResult(None, {}, math.inf, math.inf, False, f"{why}; {advice}", [], seconds)
-    key = max(cache, key=lambda k: (k[1] * _cost_unit(k[0], 3), k))
-    best = cache[key]
-    errs = {}
-    for name in OBSERVABLES:
-        others = [abs(lv.moments[name] - best.moments[name]) for k, lv in cache.items() if k != key]
-        errs[name] = max(others) if others else abs(best.moments[name])
-    spread = errs["eta"] / abs(best.moments["eta"])
-    if spread > BROKEN_SPREAD:
-        # Levels this far apart are not a converging sequence: their spread is no error bar.
-        why = (f"{why}; " + (f"the good levels disagree by {spread:.0%} in eta (more than "
-                             f"{BROKEN_SPREAD:.0%})" if len(cache) > 1 else "only one level worked")
-               + ", so no estimate is given")
-        return RefinementResult(None, {}, math.inf, math.inf, False, f"tol = {tol:.2g} not reached: "
-                                f"refinement broke down, {why}; {advice}", _history(cache), seconds)
-    reason = (f"tol = {tol:.2g} not reached: refinement broke down, {why}; kept M = {best.M}, "
-              f"{best.mesh.elements} elements, error = spread over the good levels; {advice}")
-    return RefinementResult(best, errs, errs["eta"], 0.0, False, reason, _history(cache), seconds)

@@ -11,7 +11,8 @@ from fpe_harvester import Harvester, MethodNotAvailableError, ParameterError, St
 from fpe_harvester.exact import lyapunov_covariance, mode_moments
 from fpe_harvester.fpe import FokkerPlanck, stationary
 from fpe_harvester.fpe.discretize import Whitening, solve_level
-from fpe_harvester.fpe.refine import default_memory_gb, level_gigabytes, mesh_error, tail_error
+from fpe_harvester.fpe.estimate import mesh_error, tail_error
+from fpe_harvester.fpe.refine import default_memory_gb, level_gigabytes
 from fpe_harvester.fpe.stationary import _fields, default_plan
 
 
@@ -161,11 +162,17 @@ def test_tail_error_floor_only_for_alternating_steps() -> None:
 
 def test_mesh_error_uses_capped_observed_order() -> None:
     # order-8 convergence observed, capped at p + 1 = 4: last difference / 15
-    assert mesh_error([1.0 + 256e-6, 1.0 + 1e-6, 1.0], 3) == pytest.approx(1e-6 / 15)
+    assert mesh_error([4, 8, 16], [1.0 + 256e-6, 1.0 + 1e-6, 1.0], 3) == pytest.approx(1e-6 / 15)
     # first-order or worse: the last difference itself
-    assert mesh_error([1.0 + 1.5e-3, 1.0 + 1e-3, 1.0], 3) == pytest.approx(1e-3)
-    assert mesh_error([1.0 + 1e-3, 1.0], 3) == pytest.approx(1e-3)
-    assert mesh_error([1.0], 3) == math.inf
+    assert mesh_error([4, 8, 16], [1.0 + 1.5e-3, 1.0 + 1e-3, 1.0], 3) == pytest.approx(1e-3)
+    assert mesh_error([8, 16], [1.0 + 1e-3, 1.0], 3) == pytest.approx(1e-3)
+    assert mesh_error([8], [1.0], 3) == math.inf
+
+
+def test_mesh_error_with_other_size_ratios() -> None:
+    # second-order error C/N^2 on 4, 6, 9 elements: the estimate is the exact error of 9
+    f = [1.0 + 0.5 / s**2 for s in (4, 6, 9)]
+    assert mesh_error([4, 6, 9], f, 3) == pytest.approx(0.5 / 81, rel=1e-9)
 
 
 def test_conditional_weight_makes_harmonic_density_exact_at_low_M() -> None:
