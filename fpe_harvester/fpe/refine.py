@@ -294,11 +294,12 @@ def _hermite(levels: _Levels, nh: int, M: int, tol: float, mesh: float, found: l
     estimate on the way is appended to ``found``, its mesh part the last relative mesh
     error ``mesh``.
 
-    The first estimate at M >= M_CHECK + 2 on a mesh not yet checked gets a mesh check at
-    M_CHECK while that is cheap, so that every later estimate (and a stop at a limit)
+    The first estimate at M >= M_CHECK + 4 on a mesh not yet checked gets a mesh check at
+    M - 2 while that is cheap, so that every later estimate (and a stop at a limit)
     carries a measured mesh error. It does not refine the mesh: for steep potentials the
     mesh error at a low degree overestimates that at high M (n = 6, a = 1: 16 elements
-    are 1.4e-4 off at M = 6 and 1.7e-5 at M = 12; n = 8, a = 2: 2e-4 and 3e-5).
+    are 1.4e-4 off at M = 6 and 1.7e-5 at M = 12; n = 8, a = 2: 2e-4 and 3e-5), hence the
+    check at M - 2 >= 8 (n = 8, a = 0.5: 9.2e-6 at M = 8, 1.1e-5 at M = 12).
     """
     algebraic = levels.h.n < 2.0
     est = None
@@ -306,8 +307,8 @@ def _hermite(levels: _Levels, nh: int, M: int, tol: float, mesh: float, found: l
         if M > DEGREES_PER_ELEMENT * nh:
             return est, "resolution"
         est = _hermite_estimate(levels, nh, M, algebraic, mesh)
-        if est is not None and M >= M_CHECK + 2 and not math.isfinite(mesh):
-            est = _mesh_check(levels, est, nh)
+        if est is not None and M >= M_CHECK + 4 and not math.isfinite(mesh):
+            est = _mesh_check(levels, est, nh, M - 2)
             mesh = est.error_x / abs(est.moments["eta"])
         if est is not None:
             found.append(est)
@@ -365,9 +366,9 @@ def _hermite_estimate(levels: _Levels, nh: int, M: int, algebraic: bool, mesh_gu
     return Estimate(moments, hermite, mesh, top)
 
 
-def _mesh_check(levels: _Levels, est: Estimate, nh: int) -> Estimate:
+def _mesh_check(levels: _Levels, est: Estimate, nh: int, Mc: int | None = None) -> Estimate:
     """The mesh error of ``nh`` elements per half, measured at M - 4 (at least
-    :data:`M_CHECK`) against twice the elements.
+    :data:`M_CHECK`; or at ``Mc``) against twice the elements.
 
     With the difference d of the two meshes and an error :math:`\\propto N^{-q}`, the
     error of the coarser is :math:`d/(1 - 2^{-q})`; q is the observed order when a third
@@ -375,7 +376,8 @@ def _mesh_check(levels: _Levels, est: Estimate, nh: int) -> Estimate:
     else 1 (the bound 2d for any order >= 1).
     """
     M = est.level.M
-    Mc = min(M, max(M - 4, M_CHECK))
+    if Mc is None:
+        Mc = min(M, max(M - 4, M_CHECK))
     a, b = levels.get(Mc, nh), levels.get(Mc, 2 * nh)
     # A third, coarser mesh gives the observed order, but only at a low degree: at high M
     # a coarse mesh is numerically meaningless for steep potentials.

@@ -90,11 +90,12 @@ def test_no_solvable_level_gives_empty_stats(monkeypatch: pytest.MonkeyPatch) ->
 
 
 def test_budget_stops_before_a_level_predicted_too_costly() -> None:
+    # How far 1.5 s gets depends on the machine's load: only the stop itself is checked
+    # (the estimate kept at a stop is checked with the deterministic memory bound below).
     r = solve(Harvester.build(a=0.5, n=4), "fpe", tol=1e-9, max_seconds=1.5)
     assert r.status is Status.NOT_CONVERGED
     assert "max_seconds" in r.message and "the next level" in r.message and "would need" in r.message
     assert r.info["seconds"] <= 1.5
-    assert r.eta is not None and r.eta_err > 0.0
 
 
 def test_memory_bound_stops_before_a_level_too_large() -> None:
