@@ -1,12 +1,20 @@
-"""Benchmarks: run each solver's benchmark module and combine their error-versus-wall-time data.
+"""Benchmarks: run each solver's benchmark module and combine their error-versus-wall-time curves.
 
 The modules :mod:`validation.bench.exact`, :mod:`validation.bench.fpe` and
 :mod:`validation.bench.montecarlo` each provide ``run(quick, out) -> dict`` and write their own
-JSON and PNG (named by their ``STEM``). Their dicts differ in layout, so (time, error) pairs are found by key names:
-in every dict (nested ones and rows of lists included) an error key (name contains ``err`` or
-the word ``se``)
-is paired with the time key (name ends in ``_s`` or contains ``time``/``seconds``) that shares
-the longest name prefix with it. The pairs of all modules go on one log-log plot.
+JSON and PNG (named by their ``STEM``). Each may also return ``"series"``: a list of curves
+
+``{"problem": key of PROBLEMS, "method": str, "points": [{"seconds": float, "error": float}
+or {"seconds": float, "eta": float}, ...], "reference": str, "reference_eta": float (optional),
+"reference_err": float (optional, relative)}``,
+
+where ``error`` is the *actual* relative error of eta against the best reference (not a
+reported one). Points given as ``eta`` get their error against the problem's reference: the
+``reference_eta`` with the smallest ``reference_err`` among the series of that problem. The
+combined figure has one panel per problem of :data:`PROBLEMS`, wall time on x, actual error on
+y, one line per method; a problem whose reference has an uncertainty shows it as a dotted line
+(errors below it are not resolved).
+
 Speed targets (``X_target_s`` next to ``X_s``) are tabulated, not failed: timings belong to
 the machine, correctness to the checks.
 """
@@ -22,7 +30,7 @@ from typing import Any
 from ..checks import CheckResult, Context, expect, skipped
 from ..report import Figure, Section, Table
 
-__all__ = ["BENCH_MODULES", "error_time_pairs", "run"]
+__all__ = ["BENCH_MODULES", "PROBLEMS", "error_time_pairs", "resolve_series", "run"]
 
 _SECTION = "Benchmarks: error versus wall time"
 #: Benchmark modules and the solver each measures.
@@ -82,13 +90,6 @@ def error_time_pairs(data: Any, path: str = "") -> Iterator[tuple[str, float, fl
             yield from error_time_pairs(val, f"{path}[{i}]")
 
 
-def _series_name(label: str) -> str:
-    """Group pairs into curves: the label with list indices removed."""
-    import re
-
-    return re.sub(r"\.\d+(\.\d+)?(?= )", "", re.sub(r"\[\d+\]", "", label))
-
-
 def _targets(data: Any, prefix: str = "") -> Iterator[tuple[str, float, float]]:
     if isinstance(data, Mapping):
         for key, val in data.items():
@@ -102,41 +103,101 @@ def _targets(data: Any, prefix: str = "") -> Iterator[tuple[str, float, float]]:
                 yield from _targets(val, f"{prefix}{k}.")
 
 
-def _plot(ctx: Context, curves: dict[str, list[tuple[float, float]]]) -> Figure:
+#: The problems of the combined figure, one panel each: key -> title.
+PROBLEMS = {
+    "harmonic_ring": "harmonic ring: N = 3, a = 0.5, k = -0.33",
+    "n3_single": "single unit: n = 3, a = 0.5",
+    "n1_single": "single unit: n = 1 (kink), a = 0.5",
+    "n3_ring": "ring: n = 3, N = 3, a = 0.5, k = -0.5",
+}
+
+#: Line style per method (anything else: grey).
+METHOD_STYLE = {
+    "exact": ("tab:blue", "o", "-"),
+    "Fokker-Planck": ("tab:green", "s", "-"),
+    "Fokker-Planck (previous design)": ("tab:olive", "D", ":"),
+    "Monte Carlo": ("tab:red", "^", "-"),
+    "Monte Carlo + control variates": ("tab:purple", "v", "-"),
+    "numpy Euler-Maruyama": ("black", "x", "--"),
+}
+
+
+def resolve_series(series: list[dict[str, Any]]) -> dict[str, list[dict[str, Any]]]:
+    """Group curves by problem and give every point its actual error.
+
+    Returns ``{problem: [curve, ...]}`` with each point carrying ``error``; the curves of a
+    problem get ``reference_used`` (eta, relative uncertainty, source). Points given as eta
+    on a problem without a reference are dropped.
+
+    Examples
+    --------
+    >>> out = resolve_series([
+    ...     {"problem": "p", "method": "exact", "points": [{"seconds": 1e-4, "error": 0.0}],
+    ...      "reference": "closed form", "reference_eta": 0.5, "reference_err": 0.0},
+    ...     {"problem": "p", "method": "Monte Carlo", "points": [{"seconds": 2.0, "eta": 0.501}]}])
+    >>> round(out["p"][1]["points"][0]["error"], 6)
+    0.002
+    """
+    by: dict[str, list[dict[str, Any]]] = {}
+    for cur in series:
+        by.setdefault(cur["problem"], []).append(dict(cur, points=[dict(p) for p in cur["points"]]))
+    for curves in by.values():
+        refs = [c for c in curves if _number(c.get("reference_eta")) is not None]
+        ref = min(refs, key=lambda c: _number(c.get("reference_err")) or 0.0) if refs else None
+        for c in curves:
+            if ref is not None:
+                c["reference_used"] = (ref["reference_eta"], _number(ref.get("reference_err")) or 0.0,
+                                       ref.get("reference", ref["method"]))
+            kept = []
+            for p in c["points"]:
+                if _number(p.get("error")) is None and ref is not None and _number(p.get("eta")) is not None:
+                    p["error"] = abs(p["eta"] - ref["reference_eta"]) / abs(ref["reference_eta"])
+                if _number(p.get("error")) is not None and _number(p.get("seconds")):
+                    kept.append(p)
+            c["points"] = kept
+    return by
+
+
+def _plot(ctx: Context, series: list[dict[str, Any]]) -> Figure:
     import matplotlib
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    fig, ax = plt.subplots(figsize=(9, 5.5))
-    colors = {"exact": "tab:blue", "fpe": "tab:green", "mc": "tab:red"}
-    markers = "os^vDP*Xph<>"
-    used: dict[str, int] = {}
-    for label, pts in sorted(curves.items()):
-        pts = sorted(pts)
-        solver = label.split(":")[0]
-        baseline = "numpy_em" in label or "dense" in label
-        i = used[solver] = used.get(solver, -1) + 1
-        style = dict(color="black" if baseline else colors.get(solver, "gray"), marker=markers[i % len(markers)],
-                     ls="--" if baseline else "-", lw=1, ms=4)
-        # An error of exactly 0 (exact arithmetic agreed to the last bit) is drawn at 1e-17.
-        ax.loglog([p[0] for p in pts], [max(p[1], 1e-17) for p in pts], label=label + (" (baseline)" if baseline else ""),
-                  **(style if len(pts) > 1 else {**style, "ls": "none"}))
-    ax.set_xlabel("wall time [s]")
-    ax.set_ylabel("error (as reported by each benchmark)")
-    ax.grid(True, which="both", alpha=0.3)
-    ax.legend(fontsize=6, loc="best")
+    by = resolve_series(series)
+    fig, axes = plt.subplots(2, 2, figsize=(10, 7.5))
+    for ax, (key, title) in zip(axes.ravel(), PROBLEMS.items()):
+        curves = by.get(key, [])
+        for c in curves:
+            pts = sorted((p["seconds"], p["error"]) for p in c["points"])
+            if not pts:
+                continue
+            color, marker, ls = METHOD_STYLE.get(c["method"], ("0.5", ".", "-"))
+            # an error of exactly 0 (agreement to the last bit) is drawn at 1e-17
+            ax.loglog([t for t, _ in pts], [max(e, 1e-17) for _, e in pts], color=color, marker=marker,
+                      ls=ls if len(pts) > 1 else "none", lw=1, ms=5, label=c["method"])
+        ref = next((c["reference_used"] for c in curves if "reference_used" in c), None)
+        if ref is not None and ref[1] > 0:
+            ax.axhline(ref[1], color="0.5", ls=":", lw=0.8)
+        ax.set_title(title + ("" if curves else " (no data in this run)"), fontsize=9)
+        ax.set_xlabel("wall time [s]")
+        ax.set_ylabel("actual relative error of eta")
+        ax.grid(True, which="both", alpha=0.3)
+        if curves:
+            ax.legend(fontsize=7, loc="best")
     fig.tight_layout()
     path = ctx.out / "bench_error_vs_time.png"
     fig.savefig(path, dpi=110)
     plt.close(fig)
-    return Figure(path, "Error versus wall time of every solver (blue exact, green Fokker-Planck, red Monte Carlo) "
-                        "and baseline (black dashed: numpy Euler-Maruyama, scipy dense Lyapunov), measured in "
-                        "this run (log-log; an error of exactly 0 is drawn at 1e-17).")
+    refs = "; ".join(f"{PROBLEMS[k]}: {next((c['reference_used'][2] for c in v if 'reference_used' in c), 'none')}"
+                     for k, v in by.items() if k in PROBLEMS)
+    return Figure(path, "Actual relative error of eta versus wall time, measured in this run, one panel per "
+                        "problem and one line per method (dotted: the uncertainty of the reference; an error of "
+                        f"exactly 0 is drawn at 1e-17). References: {refs}.")
 
 
 def _run_one(ctx: Context, module: str, solver: str, sec: Section,
-             curves: dict[str, list[tuple[float, float]]], targets: Table) -> list[CheckResult]:
+             curves: list[dict[str, Any]], targets: Table) -> list[CheckResult]:
     try:
         mod = importlib.import_module(module)
     except ImportError as exc:
@@ -146,8 +207,7 @@ def _run_one(ctx: Context, module: str, solver: str, sec: Section,
     data = mod.run(quick=ctx.quick, out=out)
     name = mod.STEM
     pairs = list(error_time_pairs(data))
-    for label, t, e in pairs:
-        curves.setdefault(f"{solver}: {_series_name(label)}", []).append((t, e))
+    curves.extend(data.get("series", []))
     for label, t, target in _targets(data):
         targets.rows.append((name, label, f"{t:.4g}", f"{target:.4g}", "yes" if t <= target else "NO"))
     for png in sorted(out.glob(f"{name}*.png")):
@@ -164,7 +224,7 @@ def _run_one(ctx: Context, module: str, solver: str, sec: Section,
 def run(ctx: Context) -> Section:
     """Run every benchmark module (quick mode in CI) and draw the combined plot."""
     sec = Section("benchmarks", _SECTION)
-    curves: dict[str, list[tuple[float, float]]] = {}
+    curves: list[dict[str, Any]] = []
     targets = Table("Speed targets (reported, not failed)", ("benchmark", "measurement", "time [s]", "target [s]",
                                                              "met"))
     for module, solver in BENCH_MODULES:
@@ -176,8 +236,8 @@ def run(ctx: Context) -> Section:
         sec.tables.insert(0, targets)
     sec.text.append(
         "Each benchmark module measures its own solver and baselines (numpy Euler-Maruyama loop, scipy dense "
-        "Lyapunov) on the same problems in this run; the combined plot puts every error/time pair they report "
-        "on one log-log chart. Errors are as each benchmark defines them (relative error of eta against a "
-        "reference, or a reported standard error); see each module's table."
+        "Lyapunov) in this run. The combined figure shows, for four problems, the actual error of eta (against "
+        "the best reference of that problem) versus wall time, one line per method; each module's own table "
+        "lists every error/time pair it reports (reported errors included)."
     )
     return sec
