@@ -56,10 +56,11 @@ MESH_SHARE = 0.25
 M_CHECK = 6
 
 #: Highest Hermite degree per element of the half mesh. Beyond it the levels are not
-#: resolved and may be wrong while looking physical: M = 18 on 8 elements per half gives
-#: eta 0.2002 for 0.2069 (n = 1.5, a = 2) and 0.4463 for 0.44656 (n = 8, a = 1), while
-#: M = 16 on 8 and M = 18 on 16 are fine.
-DEGREES_PER_ELEMENT = 2
+#: resolved and may be wrong while looking physical. Measured on 8 elements per half: M = 16
+#: gives eta 0.4004351 for 0.4003794 (n = 6, a = 2; M = 14 there: 0.4003764) and 0.4722403
+#: for 0.4722554 (n = 8, a = 0.5), M = 18 gives 0.2002 for 0.2069 (n = 1.5, a = 2) and
+#: 0.4463 for 0.44656 (n = 8, a = 1); M = 12 is within the mesh error in every case.
+DEGREES_PER_ELEMENT = 1.5
 
 
 @dataclass(frozen=True)
@@ -382,7 +383,7 @@ def _mesh_check(levels: _Levels, est: Estimate, nh: int, Mc: int | None = None) 
     # A third, coarser mesh gives the observed order, but only at a low degree: at high M
     # a coarse mesh is numerically meaningless for steep potentials.
     coarse = None
-    if Mc <= M_CHECK + 2 and nh >= 8 and nh % 2 == 0:
+    if Mc <= M_CHECK + 2 and nh % 2 == 0 and Mc <= DEGREES_PER_ELEMENT * (nh // 2):
         coarse = levels.get_or_none(Mc, nh // 2)
     mesh = {}
     for name in OBSERVABLES:
