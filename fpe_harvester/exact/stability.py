@@ -24,7 +24,8 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..errors import check_int, check_real
-from ..model import Harvester, Params
+from ..model import Harvester, Params, mode_sin2
+from ..wide import Wide
 
 __all__ = [
     "Threshold",
@@ -33,10 +34,14 @@ __all__ = [
     "critical_mode",
     "max_sin2",
     "mode_eigenvalues",
-    "ring_spectrum",
     "growth_rate",
     "mode_growth_rate",
     "classify",
+    "classify_modes",
+    "kappa_min",
+    "ring_spectrum",
+    "wide_mode_stiffness",
+    "wide_growth_rate",
     "MARGINAL_RTOL",
 ]
 
@@ -75,7 +80,7 @@ def k_di(N: int, a: float) -> float | None:
     s2 = max_sin2(N)
     if s2 == 0.0:
         return None
-    return -2.0 * a / (4.0 * s2)
+    return float((-2.0 * Wide.of(a) / (4.0 * s2)).to_float())
 
 
 def critical_mode(N: int) -> tuple[int, ...]:
@@ -87,6 +92,69 @@ def critical_mode(N: int) -> tuple[int, ...]:
     return (q,) if N % 2 == 0 else (q, N - q)
 
 
+def wide_mode_stiffness(a: np.ndarray | float, k: np.ndarray | float, N: int) -> tuple[Wide, Wide]:
+    """Mode stiffnesses :math:`\\kappa_q = 2a + 4k\\sin^2(\\pi q/N)` and their round-off scales.
+
+    Parameters
+    ----------
+    a, k : array_like
+        Potential strengths and couplings (broadcast); the modes go along a new last axis.
+    N : int
+        Ring size, >= 1.
+
+    Returns
+    -------
+    kappa, scale : Wide
+        :math:`\\kappa_q` rounded as float arithmetic rounds it (never overflowing), and
+        :math:`2a + 4|k|\\sin^2(\\pi q/N)`, the size of the terms whose cancellation can leave
+        round-off in :math:`\\kappa_q` (at most a few ulps of it).
+    """
+    a_w = Wide.of(np.asarray(a, dtype=float)[..., None])
+    k_arr = np.asarray(k, dtype=float)[..., None]
+    s2 = Wide.of(mode_sin2(N))
+    return 2.0 * a_w + 4.0 * Wide.of(k_arr) * s2, 2.0 * a_w + 4.0 * Wide.of(np.abs(k_arr)) * s2
+
+
+def classify_modes(kappa: Wide, scale: Wide) -> tuple[np.ndarray, np.ndarray]:
+    """Per mode: ``(marginal, unstable)`` boolean arrays.
+
+    A mode is marginal when :math:`|\\kappa_q| \\le` :data:`MARGINAL_RTOL` times its own round-off
+    scale :math:`2a + 4|k|\\sin^2(\\pi q/N)`, so that ``k = k_di`` typed in floating point lands there
+    while a mode whose stiffness is an exact ``2a`` (``q = 0``, or any mode for ``k >= 0``) never
+    does, however small ``a`` or large ``k``; it is unstable when :math:`\\kappa_q < 0` beyond that.
+    """
+    marginal = (abs(kappa) / scale).to_float() <= MARGINAL_RTOL
+    return marginal, (kappa.sign() < 0) & ~marginal
+
+
+def _cubic(kappa: Wide, p: Params) -> tuple[Wide, Wide, Wide]:
+    """Coefficients :math:`(b_2, b_1, b_0)` of the monic (x, v, V) cubic of a mode."""
+    m, g, tp = Wide.of(p.m), Wide.of(p.gamma), Wide.of(p.tau_p)
+    return g + 1.0 / tp, kappa / m + g / tp + Wide.of(p.Kv) * Wide.of(p.Kc) / m, kappa / (m * tp)
+
+
+def _scaled_roots(kappa: Wide, p: Params) -> tuple[np.ndarray, int]:
+    """Roots of the (x, v, V) cubic as ``(lam, j)``: the roots are ``lam * 2**j``.
+
+    With every coefficient a normal float in [2^-300, 2^300] this is ``numpy.roots`` of the
+    coefficients themselves (``j = 0``); otherwise :math:`s = 2^j\\lambda` with ``j`` chosen so
+    that the scaled coefficients are at most 1 in size, and a slow root lost below their
+    round-off is restored from its first-order value :math:`-b_0/b_1`.
+    """
+    b = _cubic(kappa, p)
+    plain = [float(c.to_float()) for c in b]
+    if all(c == 0.0 or 2.0**-300 <= abs(c) <= 2.0**300 for c in plain):
+        return np.roots([1.0, *plain]), 0
+    j = max(int(math.ceil(int(c.exp) / power)) for c, power in zip(b, (1, 2, 3)) if c.mant != 0)
+    scaled = [float((c / Wide(1.0, j * power)).to_float()) for c, power in zip(b, (1, 2, 3))]
+    lam = np.roots([1.0, *scaled])
+    if scaled[2] == 0.0 and b[2].mant != 0:
+        # the slow root is below the others' round-off: -b0/b1 to first order in b0 b2/b1^2
+        slow = float((-b[2] / b[1] / Wide(1.0, j)).to_float())
+        lam[np.argmin(np.abs(lam))] = slow
+    return lam, j
+
+
 def mode_eigenvalues(kappa: float, params: Params) -> np.ndarray:
     """The four eigenvalues of one mode's drift: -1/tau and the roots of the (x, v, V) cubic.
 
@@ -94,40 +162,62 @@ def mode_eigenvalues(kappa: float, params: Params) -> np.ndarray:
 
         s^3 + (\\gamma + 1/\\tau_p) s^2 + (\\kappa/m + \\gamma/\\tau_p + K_vK_c/m) s
         + \\kappa/(m\\tau_p) = 0
+
+    Eigenvalues beyond the double range come back as complex infinities (or 0 below it);
+    :func:`mode_growth_rate` gives the largest real part without that limitation.
     """
-    p = params
-    cubic = [1.0, p.gamma + 1.0 / p.tau_p, kappa / p.m + p.gamma / p.tau_p + p.Kv * p.Kc / p.m,
-             kappa / (p.m * p.tau_p)]
-    roots = np.roots(cubic)
-    return np.concatenate([roots, [-1.0 / p.tau]])
+    lam, j = _scaled_roots(Wide.of(kappa), params)
+    with np.errstate(over="ignore", under="ignore", invalid="ignore"):
+        roots = np.ldexp(lam.real, j) + 1j * np.ldexp(lam.imag, j)
+    return np.concatenate([roots, [-(Wide.of(1.0) / Wide.of(params.tau)).to_float()]])
+
+
+def wide_growth_rate(kappa: float | Wide, params: Params) -> Wide:
+    """Largest real part of the spectrum of a mode of stiffness ``kappa``, as a :class:`Wide`."""
+    lam, j = _scaled_roots(Wide.of(kappa), params)
+    rate = Wide(float(lam.real.max()), j)
+    decay = -(Wide.of(1.0) / Wide.of(params.tau))
+    return rate if (rate - decay).sign() >= 0 else decay
 
 
 def ring_spectrum(h: Harvester) -> np.ndarray:
     """All 4N eigenvalues of the ring's drift, mode by mode (shape (N, 4))."""
-    return np.array([mode_eigenvalues(kap, h.params) for kap in h.mode_stiffness()])
+    kappa, _ = wide_mode_stiffness(h.a, h.k, h.N)
+    return np.array([mode_eigenvalues(kappa[q], h.params) for q in range(h.N)])
 
 
 def mode_growth_rate(kappa: float, params: Params) -> float:
-    """Largest real part of the spectrum of one mode of stiffness ``kappa`` (> 0: it grows)."""
-    return float(mode_eigenvalues(kappa, params).real.max())
+    """Largest real part of the spectrum of one mode of stiffness ``kappa`` (> 0: it grows).
+
+    ``inf`` (or a value below the normal range) when the rate itself is beyond the double range.
+    """
+    return float(wide_growth_rate(kappa, params).to_float())
+
+
+def kappa_min(h: Harvester) -> Wide:
+    """Smallest mode stiffness: mode 0 for ``k >= 0``, the critical mode ``N // 2`` for ``k < 0``."""
+    kappa, _ = wide_mode_stiffness(h.a, h.k, h.N)
+    return kappa[..., h.N // 2 if h.k < 0 else 0]
 
 
 def growth_rate(h: Harvester) -> float:
     """Largest real part of the ring's drift spectrum (> 0 means unstable)."""
-    return mode_growth_rate(float(h.mode_stiffness().min()), h.params)
+    return float(wide_growth_rate(kappa_min(h), h.params).to_float())
 
 
 def classify(h: Harvester) -> tuple[str, float]:
     """``("stable" | "marginal" | "unstable", smallest mode stiffness)`` of a harmonic ring.
 
-    A ring whose smallest stiffness is within :data:`MARGINAL_RTOL` of zero (relative to
-    ``2a + 4|k|``) counts as marginal, so that ``k = k_di`` typed in floating point lands there.
+    Each mode is judged against its own round-off scale (:func:`classify_modes`), so that
+    ``k = k_di`` typed in floating point is marginal while e.g. ``k = 1e14`` or ``a = 1e-14`` with
+    ``k = 1`` stays stable. The stiffness is returned as a float (``inf`` past the double range).
     """
-    kmin = float(h.mode_stiffness().min())
-    scale = 2.0 * h.a + 4.0 * abs(h.k)
-    if abs(kmin) <= MARGINAL_RTOL * scale:
-        return "marginal", kmin
-    return ("stable" if kmin > 0 else "unstable"), kmin
+    kappa, scale = wide_mode_stiffness(h.a, h.k, h.N)
+    marginal, unstable = classify_modes(kappa, scale)
+    kmin = float(kappa_min(h).to_float())
+    if unstable.any():
+        return "unstable", kmin
+    return ("marginal" if marginal.any() else "stable"), kmin
 
 
 @dataclass(frozen=True)
