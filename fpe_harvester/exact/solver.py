@@ -65,16 +65,18 @@ _BLOCK = 2**20
 _REQUIRED = ("V2", "Pin", "eta")
 
 
-def _wide_ring(kappa: Wide, scale: Wide, params: Params) -> tuple[dict[str, Wide], dict[str, Wide]]:
+def _wide_ring(kappa: Wide, scale: Wide, marginal: np.ndarray,
+               params: Params) -> tuple[dict[str, Wide], dict[str, Wide]]:
     """Ring moments (means over the last axis) and their floating-point error, as :class:`Wide`.
 
     The error is the change of each moment when every stiffness moves by its own round-off
     :math:`\\delta_q = 4\\epsilon(2a + 4|k|\\sin^2(\\pi q/N))`, plus a few ulps of the result. It is
     ~1e-16 relative for well-conditioned rings and grows like :math:`\\delta/\\kappa_{min}` for
-    ``x2`` close to the threshold, where ``x2`` diverges.
+    ``x2`` close to the threshold, where ``x2`` diverges. Modes set to zero stiffness
+    (``marginal``) are not moved: the result there is by definition the limit at zero stiffness.
     """
     mom = {key: val.mean() for key, val in wide_mode_moments(kappa, params).items()}
-    moved = wide_mode_moments(kappa + _KAPPA_ROUNDOFF * scale, params)
+    moved = wide_mode_moments(kappa + Wide.where(marginal, 0.0, _KAPPA_ROUNDOFF * scale), params)
     err = {key: abs(moved[key].mean() - mom[key]) + _KAPPA_ROUNDOFF * abs(mom[key]) for key in mom}
     return mom, err
 
@@ -87,7 +89,7 @@ def _sweep_block(a: np.ndarray, k: np.ndarray, N: int, params: Params) -> dict[s
     stable = ~unstable_q.any(axis=-1)
     marginal = stable & marginal_q.any(axis=-1)
     kappa = Wide.where(marginal_q, 0.0, Wide.where(stable[:, None], kappa, 1.0))
-    mom, err = _wide_ring(kappa, scale, params)
+    mom, err = _wide_ring(kappa, scale, marginal_q & stable[:, None], params)
     mom["eta"] = mom["V2"] / (params.R * mom["Pin"])
     rel = [(err[q] / mom[q]).to_float() for q in ("V2", "Pin")]
     err["eta"] = mom["eta"] * np.hypot(*rel)
@@ -210,9 +212,11 @@ def _point_stats(h: Harvester, point: dict[str, Any]) -> Stats:
     kmin_w = kappa_min(h)
     kd = k_di(h.N, h.a)
     rate_w = wide_growth_rate(kmin_w, h.params)
-    rate = float(rate_w.to_float()) if rate_w.representable() else None
+    rate = float(rate_w.to_float()) if rate_w is not None and rate_w.representable() else None
     info = {"N": h.N, "kappa_min": kmin, "k_di": kd}
-    grows = f"exp({rate:.4g} t)" if rate is not None else f"exp(lambda t), lambda = {_sci(rate_w)} (beyond double range)"
+    grows = (f"exp({rate:.4g} t)" if rate is not None else
+             f"exp(lambda t), lambda = {_sci(rate_w)} (beyond double range)" if rate_w is not None else
+             "exp(lambda t)")
     if not point["stable"]:
         return Stats(
             status=Status.UNSTABLE,
@@ -295,7 +299,7 @@ def out_of_range_message(h: Harvester) -> str:
     defaults = {"a": 0.5, **Params().to_dict()}
     values = {"a": h.a, **h.params.to_dict()}
     order = sorted((name for name in defaults if values[name] > 0),
-                   key=lambda name: -abs(math.log2(values[name] / defaults[name])))
+                   key=lambda name: -abs(math.log2(values[name]) - math.log2(defaults[name])))
     for name in order[:3] if h.N <= _SEARCH_MAX_N else ():
         if values[name] == defaults[name] or not _in_range(h.replace(**{name: defaults[name]})):
             continue

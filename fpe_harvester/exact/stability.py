@@ -20,6 +20,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 
@@ -133,26 +134,93 @@ def _cubic(kappa: Wide, p: Params) -> tuple[Wide, Wide, Wide]:
     return g + 1.0 / tp, kappa / m + g / tp + Wide.of(p.Kv) * Wide.of(p.Kc) / m, kappa / (m * tp)
 
 
-def _scaled_roots(kappa: Wide, p: Params) -> tuple[np.ndarray, int]:
-    """Roots of the (x, v, V) cubic as ``(lam, j)``: the roots are ``lam * 2**j``.
+def _numpy_roots(c: tuple[Wide, Wide, Wide]) -> tuple[np.ndarray, int]:
+    """``numpy.roots`` of :math:`s^3 + c_2 s^2 + c_1 s + c_0` as ``(lam, j)``, roots ``lam * 2**j``.
 
-    With every coefficient a normal float in [2^-300, 2^300] this is ``numpy.roots`` of the
-    coefficients themselves (``j = 0``); otherwise :math:`s = 2^j\\lambda` with ``j`` chosen so
-    that the scaled coefficients are at most 1 in size, and a slow root lost below their
-    round-off is restored from its first-order value :math:`-b_0/b_1`.
+    ``j = 0`` when every coefficient is a normal float in [2^-300, 2^300]; otherwise ``j`` makes
+    the coefficients of :math:`\\lambda = s/2^j` at most 1 in size. Roots at 0 (a zero
+    coefficient, or one below the scaled range) are kept, so there are always three.
     """
+    coeffs = [float(x.to_float()) for x in c]
+    j = 0
+    if not all(x == 0.0 or 2.0**-300 <= abs(x) <= 2.0**300 for x in coeffs):
+        j = max(int(math.ceil(int(x.exp) / power)) for x, power in zip(c, (1, 2, 3)) if x.mant != 0)
+        coeffs = [float((x / Wide(1.0, j * power)).to_float()) for x, power in zip(c, (1, 2, 3))]
+    lam = np.roots([1.0, *coeffs]).astype(complex)
+    return np.append(lam, np.zeros(3 - lam.size, dtype=complex)), j
+
+
+def _roots(kappa: Wide, p: Params) -> tuple[np.ndarray, int, list | None]:
+    """Roots of a mode's (x, v, V) cubic: ``(lam, j, precise)``.
+
+    ``lam * 2**j`` are the ``numpy.roots`` values (:func:`_numpy_roots`). Those are known only
+    to about :math:`\\epsilon` times the largest root: not enough for a root far smaller than the
+    others (the slow decay of a stiff unit, e.g. -4e-22 next to roots of size 3e10) nor for a
+    real part far smaller than its root (a unit damped only by a weak electrical coupling).
+    When some root is below 1e-8 of the largest, or has such a real part, ``precise`` holds the
+    three roots as mpmath numbers: the largest from ``numpy.roots``, the smallest from the
+    reversed cubic (whose largest roots they are), the third from :math:`s_1 s_2 s_3 = -b_0`,
+    all polished by Newton's method on the exact coefficients at 40, then 160, then 640 digits
+    until their real parts are resolved (a real part still below that precision is NaN).
+    Otherwise ``precise`` is None.
+    """
+    import mpmath
+
     b = _cubic(kappa, p)
-    plain = [float(c.to_float()) for c in b]
-    if all(c == 0.0 or 2.0**-300 <= abs(c) <= 2.0**300 for c in plain):
-        return np.roots([1.0, *plain]), 0
-    j = max(int(math.ceil(int(c.exp) / power)) for c, power in zip(b, (1, 2, 3)) if c.mant != 0)
-    scaled = [float((c / Wide(1.0, j * power)).to_float()) for c, power in zip(b, (1, 2, 3))]
-    lam = np.roots([1.0, *scaled])
-    if scaled[2] == 0.0 and b[2].mant != 0:
-        # the slow root is below the others' round-off: -b0/b1 to first order in b0 b2/b1^2
-        slow = float((-b[2] / b[1] / Wide(1.0, j)).to_float())
-        lam[np.argmin(np.abs(lam))] = slow
-    return lam, j
+    lam, j = _numpy_roots(b)
+    big = float(np.abs(lam).max())
+    unresolved = (np.abs(lam) < 1e-8 * big) | (np.abs(lam.real) < 1e-8 * big)
+    if b[2].mant == 0 or not unresolved.any():
+        return lam, j, None
+    b2, b1, b0 = b
+    mu, jr = _numpy_roots((b1 / b0, b2 / b0, 1.0 / b0))
+    with mpmath.workdps(40):
+        large = sorted((_mpc(z, j) for z in lam), key=lambda z: -abs(z))
+        small = sorted((1 / _mpc(z, jr) for z in mu if z != 0), key=abs)
+        c0 = _mp(b0)
+        if large[0].imag != 0:
+            guess = [large[0], large[1], -c0 / (large[0] * large[1])]
+        elif len(small) > 1 and small[0].imag != 0:
+            guess = [large[0], small[0], small[1]]
+        else:
+            guess = [large[0], small[0], -c0 / (large[0] * small[0])]
+    return lam, j, _polish(guess, [_mp(x) for x in b])
+
+
+def _mp(x: Wide) -> Any:
+    """A (0-d) :class:`Wide` as an mpmath number, exactly."""
+    import mpmath
+
+    return mpmath.ldexp(mpmath.mpf(float(x.mant)), int(x.exp))
+
+
+def _mpc(z: complex, j: int) -> Any:
+    """``z * 2**j`` as an mpmath complex, exactly."""
+    import mpmath
+
+    return mpmath.mpc(mpmath.ldexp(z.real, j), mpmath.ldexp(z.imag, j))
+
+
+def _polish(guess: list, c: list) -> list:
+    """Newton's method on :math:`s^3 + c_2 s^2 + c_1 s + c_0` (mpmath coefficients) from ``guess``."""
+    import mpmath
+
+    c2, c1, c0 = c
+    for dps in (40, 160, 640):
+        with mpmath.workdps(dps):
+            zs = []
+            for z in guess:
+                z = mpmath.mpc(z)
+                for _ in range(8 + dps // 20):
+                    slope = (3 * z + 2 * c2) * z + c1
+                    if slope == 0:
+                        break
+                    z = z - (((z + c2) * z + c1) * z + c0) / slope
+                zs.append(z)
+            resolved = [abs(z.real) > mpmath.mpf(10) ** (10 - dps) * abs(z) for z in zs]
+            if all(resolved):
+                return zs
+    return [z if ok else mpmath.mpc(mpmath.nan, z.imag) for z, ok in zip(zs, resolved)]
 
 
 def mode_eigenvalues(kappa: float, params: Params) -> np.ndarray:
@@ -163,19 +231,35 @@ def mode_eigenvalues(kappa: float, params: Params) -> np.ndarray:
         s^3 + (\\gamma + 1/\\tau_p) s^2 + (\\kappa/m + \\gamma/\\tau_p + K_vK_c/m) s
         + \\kappa/(m\\tau_p) = 0
 
-    Eigenvalues beyond the double range come back as complex infinities (or 0 below it);
-    :func:`mode_growth_rate` gives the largest real part without that limitation.
+    Eigenvalues beyond the double range come back as complex infinities (or 0 below it), a
+    real part that cannot be resolved as NaN; :func:`wide_growth_rate` gives the largest real
+    part without the range limitation.
     """
-    lam, j = _scaled_roots(Wide.of(kappa), params)
-    with np.errstate(over="ignore", under="ignore", invalid="ignore"):
-        roots = np.ldexp(lam.real, j) + 1j * np.ldexp(lam.imag, j)
+    lam, j, precise = _roots(Wide.of(kappa), params)
+    if precise is not None:
+        roots = np.array([complex(z) for z in precise])
+    else:
+        with np.errstate(over="ignore", under="ignore", invalid="ignore"):
+            roots = np.ldexp(lam.real, j) + 1j * np.ldexp(lam.imag, j)
     return np.concatenate([roots, [-(Wide.of(1.0) / Wide.of(params.tau)).to_float()]])
 
 
-def wide_growth_rate(kappa: float | Wide, params: Params) -> Wide:
-    """Largest real part of the spectrum of a mode of stiffness ``kappa``, as a :class:`Wide`."""
-    lam, j = _scaled_roots(Wide.of(kappa), params)
-    rate = Wide(float(lam.real.max()), j)
+def wide_growth_rate(kappa: float | Wide, params: Params) -> Wide | None:
+    """Largest real part of the spectrum of a mode of stiffness ``kappa``, as a :class:`Wide`.
+
+    ``None`` when it is not resolved even at 640 digits (a real part below 1e-630 of its root).
+    """
+    import mpmath
+
+    lam, j, precise = _roots(Wide.of(kappa), params)
+    if precise is None:
+        rate = Wide(float(lam.real.max()), j)
+    else:
+        known = [z.real for z in precise if not mpmath.isnan(z.real)]
+        if len(known) < len(precise) and not (known and max(known) > 0):
+            return None
+        mant, exp = mpmath.frexp(max(known))
+        rate = Wide(float(mant), int(exp))
     decay = -(Wide.of(1.0) / Wide.of(params.tau))
     return rate if (rate - decay).sign() >= 0 else decay
 
@@ -189,9 +273,11 @@ def ring_spectrum(h: Harvester) -> np.ndarray:
 def mode_growth_rate(kappa: float, params: Params) -> float:
     """Largest real part of the spectrum of one mode of stiffness ``kappa`` (> 0: it grows).
 
-    ``inf`` (or a value below the normal range) when the rate itself is beyond the double range.
+    ``inf`` (or a value below the normal range) when the rate itself is beyond the double range,
+    NaN when it is not resolved (:func:`wide_growth_rate`).
     """
-    return float(wide_growth_rate(kappa, params).to_float())
+    rate = wide_growth_rate(kappa, params)
+    return math.nan if rate is None else float(rate.to_float())
 
 
 def kappa_min(h: Harvester) -> Wide:
@@ -201,8 +287,9 @@ def kappa_min(h: Harvester) -> Wide:
 
 
 def growth_rate(h: Harvester) -> float:
-    """Largest real part of the ring's drift spectrum (> 0 means unstable)."""
-    return float(wide_growth_rate(kappa_min(h), h.params).to_float())
+    """Largest real part of the ring's drift spectrum (> 0 means unstable; see :func:`mode_growth_rate`)."""
+    rate = wide_growth_rate(kappa_min(h), h.params)
+    return math.nan if rate is None else float(rate.to_float())
 
 
 def classify(h: Harvester) -> tuple[str, float]:
