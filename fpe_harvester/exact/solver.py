@@ -285,6 +285,14 @@ def _in_range(h: Harvester) -> bool:
 _SEARCH_MAX_N = 2**16
 
 
+def _inward(x: float, upper: bool) -> str:
+    """``x`` to two significant digits, rounded toward the inside of the range it bounds."""
+    e = math.floor(math.log10(x))
+    digits = x / 10.0**e * 10
+    digits = math.floor(digits * (1 - 1e-12)) if upper else math.ceil(digits * (1 + 1e-12))
+    return f"{digits / 10:.1f}e{e:+d}"
+
+
 def out_of_range_message(h: Harvester) -> str:
     """Why a stable harmonic ``h`` has no representable answer, and which parameter to change.
 
@@ -310,10 +318,10 @@ def out_of_range_message(h: Harvester) -> str:
                 good = mid
             else:
                 bad_end = mid
-        side = "<=" if values[name] > defaults[name] else ">="
+        upper = values[name] > defaults[name]
         return (f"{name} = {values[name]:g} is out of range for the exact solver here: {what} "
-                f"({limits}); with the other parameters as given, {name} {side} {2.0**good:.2g} keeps "
-                "them representable (or rescale the problem: docs/model.md §5)")
+                f"({limits}); with the other parameters as given, {name} {'<=' if upper else '>='} "
+                f"{_inward(2.0**good, upper)} keeps them representable (or rescale the problem: docs/model.md §5)")
     given = ", ".join(f"{name} = {values[name]:g}" for name in order[:3])
     return (f"the parameters ({given}, ...) put {what} outside double precision ({limits}); "
             "rescale the problem (docs/model.md §5)")

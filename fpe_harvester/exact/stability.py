@@ -184,7 +184,7 @@ def _roots(kappa: Wide, p: Params) -> tuple[np.ndarray, int, list | None]:
             guess = [large[0], small[0], small[1]]
         else:
             guess = [large[0], small[0], -c0 / (large[0] * small[0])]
-    return lam, j, _polish(guess, [_mp(x) for x in b])
+    return lam, j, _polish(guess, _mp(kappa), p)
 
 
 def _mp(x: Wide) -> Any:
@@ -201,13 +201,18 @@ def _mpc(z: complex, j: int) -> Any:
     return mpmath.mpc(mpmath.ldexp(z.real, j), mpmath.ldexp(z.imag, j))
 
 
-def _polish(guess: list, c: list) -> list:
-    """Newton's method on :math:`s^3 + c_2 s^2 + c_1 s + c_0` (mpmath coefficients) from ``guess``."""
+def _polish(guess: list, kappa: Any, p: Params) -> list:
+    """Newton's method on a mode's cubic from ``guess``, its coefficients exact at each precision.
+
+    The coefficients are formed in mpmath from the exact binary parameters (a float
+    :math:`\\kappa/m + K_vK_c/m` would drop the weak coupling that decides the damping).
+    """
     import mpmath
 
-    c2, c1, c0 = c
     for dps in (40, 160, 640):
         with mpmath.workdps(dps):
+            m, g, tp, Kv, Kc = (mpmath.mpf(x) for x in (p.m, p.gamma, p.tau_p, p.Kv, p.Kc))
+            c2, c1, c0 = g + 1 / tp, kappa / m + g / tp + Kv * Kc / m, kappa / (m * tp)
             zs = []
             for z in guess:
                 z = mpmath.mpc(z)

@@ -125,3 +125,47 @@ PROFILES = [pytest.param(150, id="ci"), pytest.param(5000, id="long", marks=pyte
 @pytest.mark.parametrize("examples", PROFILES)
 def test_exact_over_the_whole_double_range(examples: int) -> None:
     fuzz(examples, check_exact, h=harmonic())
+
+
+@pytest.mark.parametrize(("N", "a", "k"), [(3, 0.5, 1e14), (2, 0.5, 1e50), (5, 0.5, 1e300)])
+def test_huge_positive_coupling_is_stable_with_the_single_unit_limit(N: int, a: float, k: float) -> None:
+    """Every mode but q = 0 is infinitely stiff and silent: eta -> 20/39 (it was "marginal", 0.7407)."""
+    r = solve(Harvester.build(a=a, N=N, k=k))
+    assert r.status is Status.STABLE and "marginal" not in r.message
+    assert r.eta == pytest.approx(20 / 39, rel=1e-12)
+    assert r.eta_err < 1e-14
+    assert r.V2 == pytest.approx(20 / 143 / N, rel=1e-12)
+
+
+def test_tiny_a_with_unit_coupling_is_stable_and_keeps_x2() -> None:
+    """a = 1e-14, k = 1, N = 3: the q = 0 mode has stiffness 2e-14 exactly, so x2 ~ 5.6e12 (was dropped)."""
+    h = Harvester.build(a=1e-14, N=3, k=1.0)
+    r = solve(h)
+    ref = mp_closed_form(h)
+    assert r.status is Status.STABLE
+    assert r.x2 == pytest.approx(float(ref["x2"]), rel=1e-12) and 5e12 < r.x2 < 6e12
+    assert r.eta == pytest.approx(float(ref["eta"]), rel=1e-14)
+
+
+@pytest.mark.parametrize(("changes", "name", "side"), [
+    ({"a": 1e308}, "a", "<="), ({"a": 1e300}, "a", "<="), ({"m": 1e300}, "m", "<="),
+    ({"tau": 1e300}, "tau", "<="), ({"D": 1e-320}, "D", ">="), ({"sigma": 1e-200}, "sigma", ">="),
+])
+def test_out_of_range_is_refused_naming_the_parameter_and_its_range(changes, name, side) -> None:
+    h = Harvester.build(a=changes.pop("a", 0.5), **changes)
+    with pytest.raises(ParameterError, match=rf"^{name} = \S+ is out of range .*double.* {name} {side} \S+ keeps") as exc:
+        solve(h)
+    bound = float(str(exc.value).split(f"{name} {side} ")[1].split()[0])
+    assert solve(h.replace(**{name: bound})).ok  # the stated bound is inside the range
+
+
+@pytest.mark.parametrize("changes", [{"tau": 1e100}, {"D": 1e-300}, {"m": 1e-300}, {"Kc": 1e200},
+                                     {"tau_p": 1e-100}, {"a": 1e150}])
+def test_extreme_but_representable_parameters_are_solved(changes) -> None:
+    """Answers within double range are computed, whatever the intermediate products (were tracebacks)."""
+    h = Harvester.build(a=changes.pop("a", 0.5), **changes)
+    r = solve(h)
+    ref = mp_closed_form(h)
+    assert r.status is Status.STABLE
+    for q in ("eta", "V2", "Pin"):
+        assert abs(r.value(q)[0] - ref[q]) <= r.value(q)[1] > 0 or r.value(q)[0] == float(ref[q])
