@@ -122,6 +122,7 @@ class Stats:
         Pin_err: float = 0.0,
         cov_V2_Pin: float = 0.0,
         eta_err: float | None = None,
+        Vrms_err: float | None = None,
         **kwargs: Any,
     ) -> Stats:
         """Build from :math:`\\langle V^2\\rangle` and :math:`P_{in}`, deriving eta and Vrms.
@@ -129,7 +130,9 @@ class Stats:
         Errors are propagated to first order (:func:`propagated_eta_error`); ``cov_V2_Pin`` is
         the covariance of the two estimates (Monte Carlo replicas give it; it reduces the error
         on eta). A solver with its own estimate of eta's error (from a refinement sequence of
-        eta itself, or including a time-step bias of eta) passes it as ``eta_err`` instead.
+        eta itself, or including a time-step bias of eta) passes it as ``eta_err`` instead, and
+        one whose error on :math:`\\sqrt{V^2}` includes more than the propagated part (the
+        rounding of the square root, for exact numbers) passes ``Vrms_err``.
         The derived numbers are computed without intermediate overflow
         (:class:`~fpe_harvester.wide.Wide`), so they are the float results wherever those exist.
 
@@ -151,7 +154,9 @@ class Stats:
             else:
                 eta_err = propagated_eta_error(eta, V2, V2_err, Pin, Pin_err, cov_V2_Pin)
         Vrms = math.sqrt(V2)
-        if Vrms > 0.0:
+        if Vrms_err is not None:
+            pass
+        elif Vrms > 0.0:
             Vrms_err = _float_or_refuse(where, "Vrms_err", 0.5 * Wide.of(V2_err) / Wide.of(Vrms))
         else:
             Vrms_err = math.sqrt(V2_err)

@@ -78,7 +78,7 @@ def get_solver(method: str | Solver = "auto", h: Harvester | None = None, **opti
     unknown = sorted(set(options) - set(valid)) if valid is not None else []
     if unknown:
         raise ParameterError(
-            f"method {method!r} has no option {', '.join(map(repr, unknown))}; valid options: "
+            f"invalid option for method {method!r}: no option {', '.join(map(repr, unknown))}; valid options: "
             + (", ".join(valid) if valid else "none (the exact solver needs no settings: its results are "
                "exact to round-off)"))
     try:

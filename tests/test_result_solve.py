@@ -125,7 +125,7 @@ def test_growth_rate_must_be_finite():
 
 
 def test_unknown_solver_options_list_the_valid_ones():
-    with pytest.raises(ParameterError, match="method 'exact' has no option 'tol'; valid options: none"):
+    with pytest.raises(ParameterError, match="invalid option for method 'exact': no option 'tol'; valid options: none"):
         solve(Harvester.build(), "exact", tol=1e-3)
-    with pytest.raises(ParameterError, match="method 'fpe' has no option 'seed'; valid options: tol, M,"):
+    with pytest.raises(ParameterError, match="invalid option for method 'fpe': no option 'seed'; valid options: tol, M,"):
         get_solver("fpe", seed=1)

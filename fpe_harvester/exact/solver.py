@@ -94,7 +94,8 @@ def _sweep_block(a: np.ndarray, k: np.ndarray, N: int, params: Params) -> dict[s
     rel = [(err[q] / mom[q]).to_float() for q in ("V2", "Pin")]
     err["eta"] = mom["eta"] * np.hypot(*rel)
     mom["Vrms"] = mom["V2"].sqrt()
-    err["Vrms"] = 0.5 * err["V2"] / mom["Vrms"]
+    # propagated from V2, plus the square root's own rounding (found by tests/exact/test_range.py)
+    err["Vrms"] = 0.5 * err["V2"] / mom["Vrms"] + _KAPPA_ROUNDOFF * mom["Vrms"]
     in_range = stable & np.logical_and.reduce([mom[q].representable() for q in _REQUIRED])
     out: dict[str, np.ndarray] = {}
     for key in ("V2", "Pin", "eta", "Vrms", "v2", "vV", "x2"):
@@ -254,6 +255,7 @@ def _point_stats(h: Harvester, point: dict[str, Any]) -> Stats:
         V2=float(point["V2"]), V2_err=float(point["V2_err"]),
         Pin=float(point["Pin"]), Pin_err=float(point["Pin_err"]),
         R=h.params.R,
+        Vrms_err=float(point["Vrms_err"]),
         **secondary,
         status=Status.MARGINAL if marginal else Status.STABLE,
         message=message,

@@ -169,3 +169,11 @@ def test_extreme_but_representable_parameters_are_solved(changes) -> None:
     assert r.status is Status.STABLE
     for q in ("eta", "V2", "Pin"):
         assert abs(r.value(q)[0] - ref[q]) <= r.value(q)[1] > 0 or r.value(q)[0] == float(ref[q])
+
+
+def test_vrms_error_covers_the_square_root_rounding() -> None:
+    """Found by the long fuzz profile: Vrms was off by 1.8e-15 with a stated error of 1.6e-15
+    (only V2's error was propagated, not the rounding of the square root)."""
+    h = Harvester.build(a=0.5, N=46, k=0.25, m=0.5, gamma=6.875, Kv=0.94921875, Kc=1152.0, tau=0.15625,
+                        tau_p=369.2989518558326)
+    check_exact(h)
