@@ -16,7 +16,7 @@ import shutil
 from pathlib import Path
 from typing import Any
 
-from fpe_harvester import solve
+from fpe_harvester import Params, solve
 
 from .checks import CheckResult, Context, expect, skipped
 from .report import Figure, Section, Table
@@ -89,11 +89,12 @@ def row_checks(label: str, scene: Any, rows: list[Any]) -> list[CheckResult]:
 
     from .references import mp_closed_form
 
-    axes = {ax.name for ax in scene.axes}
+    # the sweep axes and an optimized coupling: every field of the point that defines the system
+    fields = {"a", "n", "N", "k", *Params().to_dict()}
     false_status, inaccurate, wrong = [], [], []
     n_exact = 0
     for row in rows:
-        h = scene.harvester({key: v for key, v in row.point.items() if key in axes})
+        h = scene.harvester({key: v for key, v in row.point.items() if key in fields})
         where = ", ".join(f"{key} = {v:g}" for key, v in row.point.items())
         truth = solve(h, "exact").status.value if h.is_linear else h.confinement
         if (row.status == "unstable" and truth != "unstable") or (row.status == "marginal" and truth != "marginal") \
