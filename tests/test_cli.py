@@ -212,11 +212,7 @@ def _check_cli(argv: list[str]) -> None:
     assert re.search(r"(\b|--)(" + "|".join(_NAMES) + r")\b", lines[0]), lines[0]
 
 
-@pytest.mark.parametrize("examples", [pytest.param(60, id="ci"), pytest.param(3000, id="long", marks=pytest.mark.slow)])
-def test_stats_fuzz_numbers_or_one_line_error(examples):
+def test_stats_fuzz_numbers_or_one_line_error(fuzz):
     """``harvester stats`` on arbitrary numbers (any notation, any size, nan/inf, negative, subnormal):
     exit 0 with finite numbers and errors below their values, or exit 2 with one line naming the argument."""
-    from hypothesis import HealthCheck, given, settings
-
-    settings(max_examples=examples, deadline=None, derandomize=examples <= 60,
-             suppress_health_check=[HealthCheck.too_slow])(given(argv=_argv())(_check_cli))()
+    fuzz(_check_cli, {"ci": 40, "long": 3000}, argv=_argv())

@@ -23,7 +23,7 @@ from __future__ import annotations
 import math
 
 import pytest
-from hypothesis import HealthCheck, given, settings
+from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from fpe_harvester import Harvester, HarvesterError, Params, Status, solve
@@ -84,11 +84,6 @@ def check(h: Harvester, method: str) -> None:
         pytest.fail(f"{method}: status unstable for a {h.confinement} nonlinear system: {r.message}")
 
 
-def fuzz(examples: int, prop, **strategies) -> None:
-    settings(max_examples=examples, deadline=None, derandomize=examples <= 50,
-             suppress_health_check=[HealthCheck.too_slow])(given(**strategies)(prop))()
-
-
 def _fpe(h: Harvester) -> None:
     check(h, "fpe")
 
@@ -97,21 +92,22 @@ def _mc(h: Harvester) -> None:
     check(h, "mc")
 
 
-@pytest.mark.parametrize("examples", [pytest.param(8, id="ci"), pytest.param(300, id="long", marks=pytest.mark.slow)])
-def test_fokker_planck_fuzz(examples: int) -> None:
-    fuzz(examples, _fpe, h=harvester(st.just(1), EXPONENTS))
+def test_fokker_planck_fuzz(fuzz) -> None:
+    fuzz(_fpe, {"ci": 8, "long": 300}, h=harvester(st.just(1), EXPONENTS))
 
 
-@pytest.mark.parametrize("examples", [pytest.param(10, id="ci"), pytest.param(300, id="long", marks=pytest.mark.slow)])
-def test_monte_carlo_fuzz_single_units_and_harmonic_rings(examples: int) -> None:
-    fuzz(examples, _mc, h=st.one_of(harvester(st.just(1), EXPONENTS), harvester(st.integers(2, 4), st.just(2.0))))
+def test_monte_carlo_fuzz_single_units_and_harmonic_rings(fuzz) -> None:
+    fuzz(_mc, {"ci": 10, "long": 300},
+         h=st.one_of(harvester(st.just(1), EXPONENTS), harvester(st.integers(2, 4), st.just(2.0))))
 
 
+@pytest.mark.slow
 @pytest.mark.xfail(reason="issue 15, Monte Carlo item (not this branch): a confined ring whose paths blow up "
                           "numerically is labelled unstable instead of not_converged", strict=False)
-@pytest.mark.parametrize("examples", [pytest.param(10, id="ci"), pytest.param(300, id="long", marks=pytest.mark.slow)])
-def test_monte_carlo_fuzz_nonlinear_rings(examples: int) -> None:
-    fuzz(examples, _mc, h=harvester(st.integers(2, 4), EXPONENTS.filter(lambda n: n != 2.0)))
+def test_monte_carlo_fuzz_nonlinear_rings() -> None:
+    """Long profile only until the blow-up status is fixed (the strict xfail below pins one case)."""
+    settings(settings.get_profile("long"), max_examples=300)(
+        given(h=harvester(st.integers(2, 4), EXPONENTS.filter(lambda n: n != 2.0)))(_mc))()
 
 
 @pytest.mark.xfail(reason="issue 15, Monte Carlo item (not this branch): blow-up labelled unstable", strict=True)
@@ -122,17 +118,17 @@ def test_confined_ring_that_blows_up_numerically_is_not_called_unstable() -> Non
     check(h, "mc")
 
 
-@pytest.mark.parametrize("examples", [pytest.param(4, id="ci"), pytest.param(100, id="long", marks=pytest.mark.slow)])
-def test_fokker_planck_amplitude_symmetry(examples: int) -> None:
-    def prop(h: Harvester) -> None:
-        s = 2.0
-        h2 = h.replace(a=h.a * s ** (h.n - 2.0), D=h.params.D / s**2)
-        r1, r2 = (solve(x, "fpe", **FAST["fpe"]) for x in (h, h2))
-        assert r1.status is r2.status or Status.NOT_CONVERGED in (r1.status, r2.status)
-        for q in ("eta", "V2", "Pin"):
-            f = 1.0 if q == "eta" else s**-2
-            (v1, e1), (v2, e2) = r1.value(q), r2.value(q)
-            if v1 is not None and v2 is not None:
-                assert abs(v2 - f * v1) <= 4 * math.hypot(e2, f * e1) + 1e-12 * abs(v2), (q, v1 * f, v2, e1 * f, e2)
+def _fpe_amplitude_symmetry(h: Harvester) -> None:
+    s = 2.0
+    h2 = h.replace(a=h.a * s ** (h.n - 2.0), D=h.params.D / s**2)
+    r1, r2 = (solve(x, "fpe", **FAST["fpe"]) for x in (h, h2))
+    assert r1.status is r2.status or Status.NOT_CONVERGED in (r1.status, r2.status)
+    for q in ("eta", "V2", "Pin"):
+        f = 1.0 if q == "eta" else s**-2
+        (v1, e1), (v2, e2) = r1.value(q), r2.value(q)
+        if v1 is not None and v2 is not None:
+            assert abs(v2 - f * v1) <= 4 * math.hypot(e2, f * e1) + 1e-12 * abs(v2), (q, v1 * f, v2, e1 * f, e2)
 
-    fuzz(examples, prop, h=harvester(st.just(1), EXPONENTS))
+
+def test_fokker_planck_amplitude_symmetry(fuzz) -> None:
+    fuzz(_fpe_amplitude_symmetry, {"ci": 4, "long": 100}, h=harvester(st.just(1), EXPONENTS))

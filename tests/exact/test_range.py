@@ -13,7 +13,6 @@ import math
 import mpmath
 import numpy as np
 import pytest
-from hypothesis import assume, given, settings
 from hypothesis import strategies as st
 
 from fpe_harvester import Harvester, ParameterError, Params, Status, solve
@@ -113,18 +112,8 @@ def check_exact(h: Harvester) -> None:
     assert r.growth_rate is None or r.growth_rate < 0 or r.status is Status.MARGINAL
 
 
-def fuzz(examples: int, prop, **strategies) -> None:
-    """Run ``prop`` under hypothesis: fixed examples in CI, random ones in the long profile."""
-    settings(max_examples=examples, deadline=None, derandomize=examples <= 200,
-             suppress_health_check=list(__import__("hypothesis").HealthCheck))(given(**strategies)(prop))()
-
-
-PROFILES = [pytest.param(150, id="ci"), pytest.param(5000, id="long", marks=pytest.mark.slow)]
-
-
-@pytest.mark.parametrize("examples", PROFILES)
-def test_exact_over_the_whole_double_range(examples: int) -> None:
-    fuzz(examples, check_exact, h=harmonic())
+def test_exact_over_the_whole_double_range(fuzz) -> None:
+    fuzz(check_exact, {"ci": 60, "long": 5000}, h=harmonic())
 
 
 @pytest.mark.parametrize(("N", "a", "k"), [(3, 0.5, 1e14), (2, 0.5, 1e50), (5, 0.5, 1e300)])

@@ -42,7 +42,7 @@ import math
 
 import numpy as np
 import pytest
-from hypothesis import assume, given, settings
+from hypothesis import assume
 from hypothesis import strategies as st
 
 from fpe_harvester import Harvester, ParameterError, Params, solve
@@ -154,22 +154,13 @@ def check_general_factors(h: Harvester, factors: list[float]) -> None:
         assert abs(v2 - v1 * f) <= e2 + e1 * f + 50 * EPS * abs(v2), (q, v1 * f, v2, e1 * f, e2)
 
 
-PROFILES = [pytest.param(120, id="ci"), pytest.param(4000, id="long", marks=pytest.mark.slow)]
+def test_power_of_two_symmetries_are_exact(fuzz) -> None:
+    fuzz(check_powers_of_two, {"ci": 50, "long": 4000}, h=base(),
+         exps=st.lists(st.integers(-300, 300), min_size=5, max_size=5))
 
 
-def fuzz(examples: int, prop, **strategies) -> None:
-    """Run ``prop`` under hypothesis: fixed examples in CI, random ones in the long profile."""
-    settings(max_examples=examples, deadline=None, derandomize=examples <= 200)(given(**strategies)(prop))()
-
-
-@pytest.mark.parametrize("examples", PROFILES)
-def test_power_of_two_symmetries_are_exact(examples: int) -> None:
-    fuzz(examples, check_powers_of_two, h=base(), exps=st.lists(st.integers(-300, 300), min_size=5, max_size=5))
-
-
-@pytest.mark.parametrize("examples", PROFILES)
-def test_general_symmetries_hold_to_round_off(examples: int) -> None:
-    fuzz(examples, check_general_factors, h=base(),
+def test_general_symmetries_hold_to_round_off(fuzz) -> None:
+    fuzz(check_general_factors, {"ci": 40, "long": 4000}, h=base(),
          factors=st.lists(moderate(-60, 60), min_size=5, max_size=5))
 
 
