@@ -226,4 +226,10 @@ def main(argv: Sequence[str] | None = None) -> int:
     if args.seed < 0:
         print(f"python -m validation: error: --seed must be >= 0, got {args.seed}", file=sys.stderr)
         return 2
+    try:
+        Path(args.out).mkdir(parents=True, exist_ok=True)
+    except OSError as exc:
+        print(f"python -m validation: error: --out {args.out!r}: cannot create the output folder "
+              f"({exc.strerror or exc})", file=sys.stderr)
+        return 2
     return run_cli(quick=args.quick, out=args.out, seed=args.seed, progress=not args.no_progress)

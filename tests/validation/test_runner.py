@@ -111,3 +111,9 @@ def test_module_steps_are_imported_and_a_missing_one_fails(tmp_path):
 def test_report_keeps_the_plan_order(tmp_path):
     rep = runner.validate(out=tmp_path, steps=[(_failing, "Failing step"), (_passing, "Passing step")])
     assert [s.title for s in rep.sections][:2] == ["Failing step", "Passing step"]
+
+
+def test_python_m_validation_unwritable_out_is_a_one_line_error(capsys):
+    assert runner.main(["--out", "/dev/null/x", "--no-progress"]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and "--out '/dev/null/x': cannot create the output folder" in err
