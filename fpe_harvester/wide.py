@@ -25,7 +25,7 @@ from typing import Any, Union
 
 import numpy as np
 
-__all__ = ["Wide", "SMALLEST_NORMAL", "LARGEST"]
+__all__ = ["Wide", "Float", "SMALLEST_NORMAL", "LARGEST"]
 
 #: Smallest positive normal double; below it a float loses relative precision.
 SMALLEST_NORMAL = float(np.finfo(float).tiny)
@@ -108,7 +108,16 @@ class Wide:
         """Small positive integer powers, rounded once like the float power ``x ** power``."""
         if isinstance(power, bool) or not isinstance(power, int) or not 1 <= power <= 8:
             raise ValueError(f"Wide supports integer powers 1 to 8, got {power!r}")
-        # a float scalar's ** is C pow(); an array's is numpy's power: mirror each exactly
+        # a float scalar's ** is C pow(), which is not correctly rounded: pow(m, p) 2^(e p) can
+        # differ in the last bit from pow(m 2^e, p). Use the float power itself wherever it and its
+        # operand are normal doubles, so that the result is bit-for-bit the float one.
+        if self.mant.ndim == 0 and self.representable():
+            try:
+                value = float(self.to_float()) ** power
+            except OverflowError:
+                value = math.inf
+            if (value == 0.0 and self.mant == 0) or SMALLEST_NORMAL <= abs(value) < math.inf:
+                return Wide(value)
         mant = float(self.mant) ** power if self.mant.ndim == 0 else np.power(self.mant, power)
         return Wide(mant, self.exp * power)
 
@@ -164,3 +173,91 @@ class Wide:
 
     def __repr__(self) -> str:
         return f"Wide(log10|x| = {self.log10()!r}, sign = {self.sign()!r})"
+
+
+class Float:
+    """The :class:`Wide` interface on plain float arrays: the exact solver's fast path.
+
+    Operations round exactly as :class:`Wide` does (same operations, same powers), so within the
+    normal range the two give bit-identical results. Evaluated under
+    ``numpy.errstate(all="raise")``, any overflow, underflow or invalid operation raises
+    :class:`FloatingPointError`, and the caller repeats the evaluation with :class:`Wide`.
+    """
+
+    __slots__ = ("mant",)
+    __array_priority__ = 100.0
+
+    def __init__(self, value: Any) -> None:
+        self.mant = np.asarray(value, dtype=float)
+
+    @classmethod
+    def of(cls, x: Any) -> Float:
+        return x if isinstance(x, Float) else cls(x)
+
+    def __neg__(self) -> Float:
+        return Float(-self.mant)
+
+    def __abs__(self) -> Float:
+        return Float(np.abs(self.mant))
+
+    def __add__(self, other: Any) -> Float:
+        return Float(self.mant + Float.of(other).mant)
+
+    __radd__ = __add__
+
+    def __sub__(self, other: Any) -> Float:
+        return Float(self.mant - Float.of(other).mant)
+
+    def __rsub__(self, other: Any) -> Float:
+        return Float(Float.of(other).mant - self.mant)
+
+    def __mul__(self, other: Any) -> Float:
+        return Float(self.mant * Float.of(other).mant)
+
+    __rmul__ = __mul__
+
+    def __truediv__(self, other: Any) -> Float:
+        return Float(self.mant / Float.of(other).mant)
+
+    def __rtruediv__(self, other: Any) -> Float:
+        return Float(Float.of(other).mant / self.mant)
+
+    def __pow__(self, power: int) -> Float:
+        if self.mant.ndim:
+            return Float(np.power(self.mant, power))
+        # C pow() on a Python float, as Wide does; its range errors do not go through numpy's
+        # error state, so they are raised here
+        base = float(self.mant)
+        try:
+            value = base ** power
+        except OverflowError:
+            raise FloatingPointError(f"overflow in {base!r} ** {power}") from None
+        if base != 0.0 and abs(value) < SMALLEST_NORMAL:
+            raise FloatingPointError(f"underflow in {base!r} ** {power}")
+        return Float(value)
+
+    def sqrt(self) -> Float:
+        return Float(np.sqrt(self.mant))
+
+    @staticmethod
+    def where(cond: Any, x: Any, y: Any) -> Float:
+        return Float(np.where(cond, Float.of(x).mant, Float.of(y).mant))
+
+    def __getitem__(self, index: Any) -> Float:
+        return Float(self.mant[index])
+
+    def mean(self, axis: int = -1) -> Float:
+        return Float(self.mant.mean(axis=axis))
+
+    def to_float(self) -> np.ndarray:
+        return self.mant
+
+    def representable(self) -> np.ndarray:
+        return (self.mant == 0) | ((np.abs(self.mant) >= SMALLEST_NORMAL) & np.isfinite(self.mant))
+
+    def log10(self) -> np.ndarray:
+        with np.errstate(divide="ignore"):
+            return np.log10(np.abs(self.mant))
+
+    def sign(self) -> np.ndarray:
+        return np.sign(self.mant)

@@ -33,7 +33,7 @@ from __future__ import annotations
 import numpy as np
 
 from ..model import Harvester, Params
-from ..wide import Wide
+from ..wide import Float, Wide
 
 __all__ = [
     "drift_matrix",
@@ -67,8 +67,9 @@ def noise_matrix(params: Params) -> np.ndarray:
     return Q
 
 
-def wide_mode_moments(kappa: Wide, params: Params) -> dict[str, Wide]:
-    """The closed form of :func:`mode_moments` in :class:`~fpe_harvester.wide.Wide` arithmetic.
+def wide_mode_moments(kappa: Wide | Float, params: Params) -> dict[str, Wide | Float]:
+    """The closed form of :func:`mode_moments` in :class:`~fpe_harvester.wide.Wide` arithmetic
+    (or, given a :class:`~fpe_harvester.wide.Float` ``kappa``, in plain floats, the fast path).
 
     Bit-for-bit the float result wherever that stays in the normal range, and the correctly
     scaled value where a float intermediate would overflow or underflow, so only the moments
@@ -76,8 +77,9 @@ def wide_mode_moments(kappa: Wide, params: Params) -> dict[str, Wide]:
     returned as 0 where ``kappa == 0`` (it is infinite there: the caller masks it).
     """
     p = params
-    m, g, Kv, Kc, s, tau, D, tp = (Wide.of(x) for x in (p.m, p.gamma, p.Kv, p.Kc, p.sigma, p.tau, p.D, p.tau_p))
-    kap = Wide.of(kappa)
+    num = type(kappa) if isinstance(kappa, (Wide, Float)) else Wide
+    m, g, Kv, Kc, s, tau, D, tp = (num.of(x) for x in (p.m, p.gamma, p.Kv, p.Kc, p.sigma, p.tau, p.D, p.tau_p))
+    kap = num.of(kappa)
     KK = Kc * Kv
     d1 = m * tau + m * tp + g * m * tau**2 + g * m * tau * tp + KK * tau**2 * tp
     d1 = d1 + kap * tau**2 * (tau + tp)
@@ -92,8 +94,8 @@ def wide_mode_moments(kappa: Wide, params: Params) -> dict[str, Wide]:
         KK * g * tau**2 * tp**2 + KK * tau**2 * tp + g**2 * m * tau**2 * tp + g**2 * m * tau * tp**2
         + g * m * (tau + tp) ** 2 + m * (tau + tp) + (g * tau + 1.0) * kap * tp**2 * (tau + tp)
     )
-    soft = kap.mant == 0
-    x2 = Wide.where(soft, 0.0, D * s**2 * x2_num / (Wide.where(soft, 1.0, kap) * d1 * d2))
+    soft = kap.sign() == 0
+    x2 = num.where(soft, 0.0, D * s**2 * x2_num / (num.where(soft, 1.0, kap) * d1 * d2))
     return {"V2": V2, "vV": vV, "v2": v2, "vxi": vxi, "x2": x2, "Pin": s * vxi}
 
 

@@ -26,7 +26,7 @@ import numpy as np
 
 from ..errors import check_int, check_real
 from ..model import Harvester, Params, mode_sin2
-from ..wide import Wide
+from ..wide import Float, Wide
 
 __all__ = [
     "Threshold",
@@ -93,7 +93,8 @@ def critical_mode(N: int) -> tuple[int, ...]:
     return (q,) if N % 2 == 0 else (q, N - q)
 
 
-def wide_mode_stiffness(a: np.ndarray | float, k: np.ndarray | float, N: int) -> tuple[Wide, Wide]:
+def wide_mode_stiffness(a: np.ndarray | float, k: np.ndarray | float, N: int,
+                        num: type = Wide) -> tuple[Wide, Wide]:
     """Mode stiffnesses :math:`\\kappa_q = 2a + 4k\\sin^2(\\pi q/N)` and their round-off scales.
 
     Parameters
@@ -105,18 +106,23 @@ def wide_mode_stiffness(a: np.ndarray | float, k: np.ndarray | float, N: int) ->
 
     Returns
     -------
+    num : type
+        :class:`~fpe_harvester.wide.Wide` (default) or :class:`~fpe_harvester.wide.Float` (fast path).
+
+    Returns
+    -------
     kappa, scale : Wide
         :math:`\\kappa_q` rounded as float arithmetic rounds it (never overflowing), and
         :math:`2a + 4|k|\\sin^2(\\pi q/N)`, the size of the terms whose cancellation can leave
         round-off in :math:`\\kappa_q` (at most a few ulps of it).
     """
-    a_w = Wide.of(np.asarray(a, dtype=float)[..., None])
+    a_w = num.of(np.asarray(a, dtype=float)[..., None])
     k_arr = np.asarray(k, dtype=float)[..., None]
-    s2 = Wide.of(mode_sin2(N))
-    return 2.0 * a_w + 4.0 * Wide.of(k_arr) * s2, 2.0 * a_w + 4.0 * Wide.of(np.abs(k_arr)) * s2
+    s2 = num.of(mode_sin2(N))
+    return 2.0 * a_w + 4.0 * num.of(k_arr) * s2, 2.0 * a_w + 4.0 * num.of(np.abs(k_arr)) * s2
 
 
-def classify_modes(kappa: Wide, scale: Wide) -> tuple[np.ndarray, np.ndarray]:
+def classify_modes(kappa: Wide | Float, scale: Wide | Float) -> tuple[np.ndarray, np.ndarray]:
     """Per mode: ``(marginal, unstable)`` boolean arrays.
 
     A mode is marginal when :math:`|\\kappa_q| \\le` :data:`MARGINAL_RTOL` times its own round-off
@@ -286,9 +292,13 @@ def mode_growth_rate(kappa: float, params: Params) -> float:
 
 
 def kappa_min(h: Harvester) -> Wide:
-    """Smallest mode stiffness: mode 0 for ``k >= 0``, the critical mode ``N // 2`` for ``k < 0``."""
-    kappa, _ = wide_mode_stiffness(h.a, h.k, h.N)
-    return kappa[..., h.N // 2 if h.k < 0 else 0]
+    """Smallest mode stiffness: mode 0 for ``k >= 0``, the critical mode ``N // 2`` for ``k < 0``.
+
+    Computed for that mode alone, with the same operations as :func:`wide_mode_stiffness`.
+    """
+    q = np.array([h.N // 2 if h.k < 0 else 0])
+    s2 = np.sin(math.pi * np.minimum(q, h.N - q) / h.N) ** 2  # as in mode_sin2
+    return (2.0 * Wide.of(h.a) + 4.0 * Wide.of(h.k) * Wide.of(s2))[0]
 
 
 def growth_rate(h: Harvester) -> float:
