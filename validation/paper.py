@@ -110,15 +110,17 @@ MAX_REL_TOL = 0.03
 def _row_check(row: PaperRow, k: float, r: Stats, rounding: float) -> CheckResult:
     """Our eta against the paper's printed one, within 4 of our error bars plus its rounding.
 
-    Our result must describe a (quasi-)stationary state: stable, or metastable for the ring the
-    paper itself simulated before escapes; a result that missed its accuracy fails.
+    Our result must describe a (quasi-)stationary state: stable, not converged with a best
+    estimate and its error, or metastable for the ring the paper itself simulated before escapes;
+    the error bar must be small enough to test the paper's digits (:data:`MAX_REL_TOL`).
     """
     name = f"paper: {row.case}: eta"
     h = Harvester.build(a=row.a, n=row.n, N=row.N, k=k)
-    allowed = {Status.STABLE} | ({Status.METASTABLE} if h.confinement == "metastable" else set())
+    allowed = {Status.STABLE, Status.NOT_CONVERGED} | ({Status.METASTABLE} if h.confinement == "metastable"
+                                                       else set())
     if r.status not in allowed or r.eta is None:
         return expect(name, _SECTION, False, f"our {r.method} result is {r.status.value} ({r.message}): "
-                                             "no number that met its accuracy to compare")
+                                             "no stationary number to compare")
     what = "exact value" if r.method == "exact" else f"{r.method} ({r.status.value}) at k = {k:g}"
     return agree(name, _SECTION, r.eta, r.eta_err, row.eta, 0.0, floor=rounding, max_rel_tol=MAX_REL_TOL,
                  note=f"{what} vs the paper's printed digits (rounding {rounding:g})")

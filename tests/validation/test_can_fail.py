@@ -36,7 +36,11 @@ def test_cross_check_needs_converged_results_and_fails_on_a_wrong_one():
     wrong = _compare("wrong", _mc_like(ex, scale=1.02), ex, quick=True)
     assert not wrong[0].passed  # eta off by 2 % with 0.1 % errors
     unconverged = _compare("nc", _mc_like(ex, rel_err=0.5, status=Status.NOT_CONVERGED), ex, quick=True)
-    assert not any(c.passed for c in unconverged) and "met their accuracy" in unconverged[0].detail
+    assert not any(c.passed for c in unconverged) and "exceeds the cap" in unconverged[0].detail
+    honest = _compare("nc", _mc_like(ex, rel_err=1e-3, status=Status.NOT_CONVERGED), ex, quick=True)
+    assert all(c.passed for c in honest)  # a best estimate is tested by its error bar
+    none = _compare("unstable", Stats(status=Status.UNSTABLE, method="mc", message="grows"), ex, quick=True)
+    assert not any(c.passed for c in none) and "no stationary number" in none[0].detail
 
 
 def test_paper_row_check_fails_on_a_wrong_number_and_on_a_missing_one():
@@ -47,6 +51,7 @@ def test_paper_row_check_fails_on_a_wrong_number_and_on_a_missing_one():
     assert not _row_check(row, -0.33, replace(r, eta_err=0.05), 0.0005).passed  # cap: cannot test 3 digits
     nc = Stats(status=Status.NOT_CONVERGED, method="fpe", message="budget")
     assert not _row_check(row, -0.33, nc, 0.0005).passed
+    assert not _row_check(row, -0.33, replace(r, status=Status.UNSTABLE), 0.0005).passed
 
 
 def test_vrms_paragraph_follows_the_numbers():
