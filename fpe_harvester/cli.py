@@ -1,20 +1,25 @@
 """Command-line interface: ``harvester stats``, ``harvester threshold``, ``harvester scene``.
 
-Every command prints a readable table, or one JSON object with ``--json``. Bad arguments
-give a one-line error naming the argument and exit code 2, without a traceback.
+Every command prints a readable table, or one JSON object with ``--json``. Never a traceback:
+bad input (an argument out of range, a parameter set whose answer is beyond double precision,
+an output folder that cannot be created) gives a one-line error naming the argument and exit
+code 2; an interrupt exits 130; anything else is a one-line internal error with exit code 1
+(set ``HARVESTER_DEBUG=1`` for the traceback).
 """
 
 from __future__ import annotations
 
 import argparse
 import json
+import os
+import re
 import sys
 from collections.abc import Callable, Sequence
 from typing import Any, NoReturn
 
 from .errors import HarvesterError, ParameterError
 from .exact import threshold
-from .model import Harvester, Params
+from .model import MAX_EXPONENT, Harvester, Params
 from .result import QUANTITIES
 from .solve import METHODS, choose_method, solve
 
@@ -22,6 +27,12 @@ __all__ = ["main", "build_parser"]
 
 
 class _Parser(argparse.ArgumentParser):
+    def __init__(self, *args: Any, **kwargs: Any) -> None:
+        super().__init__(*args, **kwargs)
+        # argparse takes "-1e-3" or "-inf" for an option: let numbers in any notation be values
+        self._negative_number_matcher = re.compile(r"^-(\d+\.?\d*|\.\d+)([eE][+-]?\d+)?$|^-(inf|nan)$",
+                                                   re.IGNORECASE)
+
     def error(self, message: str) -> NoReturn:
         self.exit(2, f"{self.prog}: error: {message}\n")
 
@@ -77,16 +88,56 @@ def _fmt(value: float | None, err: float | None = None) -> tuple[str, str]:
     return f"{value:.10g}", ("-" if err is None else f"{err:.3g}")
 
 
+#: What --tol and --seed mean to each solver (None: the solver has no such setting).
+_TOL = {"exact": None, "fpe": "(0, 0.1]", "mc": "(0, 1)"}
+
+
+def _solver_options(args: argparse.Namespace, method: str) -> dict[str, Any]:
+    """``--opt``, ``--tol``, ``--seed`` and ``--no-progress`` as settings of ``method``'s solver."""
+    options = {key: _parse_value(val) for key, val in args.opt}
+    if args.tol is not None:
+        if _TOL[method] is None:
+            raise ParameterError(
+                f"--tol {args.tol:g}: the exact solver (harmonic n = 2) takes no tolerance, its results are "
+                f"exact to round-off; drop --tol, or choose --method fpe (tol in {_TOL['fpe']}) or "
+                f"--method mc (tol in {_TOL['mc']})")
+        options["tol"] = args.tol
+    if args.seed is not None:
+        if method != "mc":
+            raise ParameterError(f"--seed {args.seed}: only Monte Carlo (--method mc) is random; the {method} "
+                                 "solver is deterministic and takes no seed")
+        options["seed"] = args.seed
+    if args.no_progress and method in ("fpe", "mc"):
+        options["progress"] = False
+    return options
+
+
+def _fpe_bar(h: Harvester) -> Any:
+    """A tqdm bar on stderr fed by the Fokker-Planck solver's one line per refinement level."""
+    from tqdm import tqdm
+
+    bar = tqdm(desc=f"fpe n={h.n:g} a={h.a:g}", unit="level", file=sys.stderr, delay=1.0)
+
+    def level(line: str) -> None:
+        bar.set_postfix_str(line[:70], refresh=False)
+        bar.update(1)
+
+    return bar, level
+
+
 def cmd_stats(args: argparse.Namespace) -> int:
     h = Harvester.build(a=args.a, n=args.n, N=args.N, k=args.k)
     h = h.replace(params=_params(args.param))
-    options = {key: _parse_value(val) for key, val in args.opt}
-    if args.tol is not None:
-        options["tol"] = args.tol
-    if args.seed is not None:
-        options["seed"] = args.seed
     method = args.method if args.method != "auto" else choose_method(h)
-    result = solve(h, method, **options)
+    options = _solver_options(args, method)
+    bar = None
+    if method == "fpe" and "progress" not in options:
+        bar, options["progress"] = _fpe_bar(h)
+    try:
+        result = solve(h, method, **options)
+    finally:
+        if bar is not None:
+            bar.close()
     if args.json:
         out = result.to_dict()
         out["harvester"] = h.to_dict()
@@ -119,11 +170,23 @@ def cmd_threshold(args: argparse.Namespace) -> int:
     return 0
 
 
+def _writable_folder(flag: str, path: str) -> str:
+    """``path`` after creating it, or a :class:`ParameterError` naming ``flag`` if that fails."""
+    try:
+        os.makedirs(path, exist_ok=True)
+    except OSError as exc:
+        raise ParameterError(f"{flag} {path!r}: cannot create the output folder ({exc.strerror or exc})") from None
+    if not os.access(path, os.W_OK):
+        raise ParameterError(f"{flag} {path!r}: the output folder is not writable")
+    return path
+
+
 def cmd_validate(args: argparse.Namespace) -> int:
     """Run the validation suite; its runner prints the summary and writes the report."""
     from validation.runner import run_cli
 
-    return run_cli(quick=args.quick, out=args.out, seed=args.seed, progress=not args.no_progress)
+    return run_cli(quick=args.quick, out=_writable_folder("--out", args.out), seed=args.seed,
+                   progress=not args.no_progress)
 
 
 def cmd_scene(args: argparse.Namespace) -> int:
@@ -139,7 +202,7 @@ def cmd_scene(args: argparse.Namespace) -> int:
         _print_table([(s.name, f"{s.n_points}/{s.variant(True).n_points}", s.title) for s in scenes],
                      ("scene", "points (full/quick)", "title"))
         return 0
-    result = run_scene(load_scene(args.scene), args.out, quick=args.quick,
+    result = run_scene(load_scene(args.scene), _writable_folder("--out", args.out), quick=args.quick,
                        progress=False if args.no_progress or args.json else None, workers=args.workers)
     if args.json:
         print(json.dumps(result.to_dict(), indent=2, default=str))
@@ -169,7 +232,7 @@ def build_parser() -> argparse.ArgumentParser:
     sub = parser.add_subparsers(dest="command", required=True, parser_class=_Parser)
 
     p = sub.add_parser("stats", help="stationary statistics (eta, V2, Vrms, Pin) of one harvester")
-    p.add_argument("--n", type=_number, default=2.0, help="potential exponent n >= 1 (default 2)")
+    p.add_argument("--n", type=_number, default=2.0, help=f"potential exponent n in [1, {MAX_EXPONENT:g}] (default 2)")
     p.add_argument("--a", type=_number, default=0.5, help="potential strength a > 0 (default 0.5)")
     p.add_argument("--N", type=int, default=1, help="number of units in the ring (default 1)")
     p.add_argument("--k", type=_number, default=0.0, help="coupling k (default 0)")
@@ -177,11 +240,13 @@ def build_parser() -> argparse.ArgumentParser:
                    help="physical parameter (m, gamma, Kv, Kc, sigma, tau, D, tau_p, R); repeatable")
     p.add_argument("--method", choices=("auto", *METHODS), default="auto",
                    help="solver (default auto: exact for n = 2, fpe for one nonlinear unit, else mc)")
-    p.add_argument("--tol", type=_number, default=None, help="requested relative error on eta")
-    p.add_argument("--seed", type=int, default=None, help="random seed (Monte Carlo)")
+    p.add_argument("--tol", type=_number, default=None,
+                   help="requested relative error on eta: fpe (0, 0.1], mc (0, 1); exact needs none")
+    p.add_argument("--seed", type=int, default=None, help="random seed, >= 0 (Monte Carlo only)")
     p.add_argument("--opt", type=_key_value, action="append", default=[], metavar="NAME=VALUE",
                    help="solver setting passed to the solver; repeatable")
     p.add_argument("--json", action="store_true", help="print one JSON object")
+    p.add_argument("--no-progress", action="store_true", help="no progress bar (fpe, mc)")
 
     p = sub.add_parser("threshold", help="diffusive-instability threshold k_di of a harmonic ring")
     p.add_argument("--N", type=int, default=3, help="number of units (default 3)")
@@ -212,18 +277,37 @@ def build_parser() -> argparse.ArgumentParser:
 
 
 def main(argv: Sequence[str] | None = None) -> int:
-    """Entry point of the ``harvester`` command; returns the exit code."""
+    """Entry point of the ``harvester`` command; returns the exit code.
+
+    0 on success (``validate``: 1 if a check failed), 2 for bad input, 130 when interrupted,
+    1 for an internal error; every error is one line on stderr, never a traceback (unless the
+    environment variable ``HARVESTER_DEBUG`` is set, for bug reports).
+    """
     parser = build_parser()
     args = parser.parse_args(argv)
+    prefix = f"harvester {args.command}"
     try:
         return COMMANDS[args.command](args)
     except HarvesterError as exc:
-        print(f"harvester {args.command}: error: {exc}", file=sys.stderr)
+        print(f"{prefix}: error: {_one_line(exc)}", file=sys.stderr)
         return 2
     except BrokenPipeError:
         # output piped into e.g. `head`: stop quietly, as Unix tools do
         sys.stderr.close()
         return 0
+    except KeyboardInterrupt:
+        print(f"{prefix}: interrupted", file=sys.stderr)
+        return 130
+    except Exception as exc:  # noqa: BLE001 - the promise is one line, never a traceback
+        if os.environ.get("HARVESTER_DEBUG"):
+            raise
+        print(f"{prefix}: internal error: {type(exc).__name__}: {_one_line(exc)} (a bug: please report it; "
+              "HARVESTER_DEBUG=1 shows the traceback)", file=sys.stderr)
+        return 1
+
+
+def _one_line(exc: BaseException) -> str:
+    return " ".join(str(exc).split()) or type(exc).__name__
 
 
 if __name__ == "__main__":

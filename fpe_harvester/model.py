@@ -27,8 +27,15 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from .errors import ParameterError, check_int, check_real
+from .wide import Wide
 
-__all__ = ["Params", "Potential", "Harvester", "mode_sin2"]
+__all__ = ["Params", "Potential", "Harvester", "mode_sin2", "MAX_EXPONENT"]
+
+#: Largest potential exponent n. Beyond it a|x|^n is a hard wall at |x| = a^(-1/n) (U rises a
+#: hundredfold over a 7 % change of |x| at n = 64) that none of the solvers is built for, and
+#: |x|^n would overflow double precision well inside the amplitudes the solvers visit
+#: (|x| <= 100: 100^64 = 1e128, but 100^155 > 1.8e308). The paper uses 1 <= n <= 8.
+MAX_EXPONENT = 64.0
 
 
 def mode_sin2(N: int) -> np.ndarray:
@@ -121,9 +128,9 @@ class Potential:
     a : float
         Strength :math:`a`, > 0.
     n : float
-        Exponent :math:`n`, real, >= 1. ``n = 1`` is the piecewise-linear potential
-        with a kink at 0 (force :math:`-a\\,\\mathrm{sign}(x)`); ``n = 2`` is harmonic
-        with stiffness :math:`U'' = 2a`.
+        Exponent :math:`n`, real, in [1, :data:`MAX_EXPONENT`] = [1, 64]. ``n = 1`` is the
+        piecewise-linear potential with a kink at 0 (force :math:`-a\\,\\mathrm{sign}(x)`);
+        ``n = 2`` is harmonic with stiffness :math:`U'' = 2a`.
 
     Examples
     --------
@@ -138,7 +145,7 @@ class Potential:
 
     def __post_init__(self) -> None:
         object.__setattr__(self, "a", check_real("a", self.a, low=0.0, low_open=True))
-        object.__setattr__(self, "n", check_real("n", self.n, low=1.0))
+        object.__setattr__(self, "n", check_real("n", self.n, low=1.0, high=MAX_EXPONENT))
 
     @classmethod
     def from_U0_x0(cls, U0: float, x0: float, n: float) -> Potential:
@@ -151,14 +158,26 @@ class Potential:
         x0 : float
             Length scale, nonzero.
         n : float
-            Exponent, >= 1.
+            Exponent, in [1, :data:`MAX_EXPONENT`].
+
+        Raises
+        ------
+        ParameterError
+            A value out of range, or :math:`U_0/|x_0|^n` beyond double precision.
         """
         U0 = check_real("U0", U0, low=0.0, low_open=True)
         x0 = check_real("x0", x0)
         if x0 == 0.0:
             raise ParameterError("x0 must be a nonzero finite real number, got 0.0")
-        n = check_real("n", n, low=1.0)
-        return cls(a=U0 / abs(x0) ** n, n=n)
+        n = check_real("n", n, low=1.0, high=MAX_EXPONENT)
+        try:
+            a = U0 / abs(x0) ** n
+        except (OverflowError, ZeroDivisionError):
+            a = 0.0
+        if not (0.0 < a < math.inf):
+            raise ParameterError(f"a = U0/|x0|^n = {U0:g}/|{x0:g}|^{n:g} is beyond double precision; "
+                                 "choose U0 and x0 closer to 1")
+        return cls(a=a, n=n)
 
     @property
     def is_harmonic(self) -> bool:
@@ -182,7 +201,13 @@ class Potential:
         x0 = check_real("x0", x0)
         if x0 == 0.0:
             raise ParameterError("x0 must be a nonzero finite real number, got 0.0")
-        return self.a * abs(x0) ** self.n, x0
+        try:
+            U0 = self.a * abs(x0) ** self.n
+        except OverflowError:
+            U0 = math.inf
+        if not math.isfinite(U0) or U0 == 0.0:
+            raise ParameterError(f"x0 = {x0:g}: U0 = a|x0|^n is beyond double precision; choose |x0| closer to 1")
+        return U0, x0
 
 
 @dataclass(frozen=True)
@@ -278,9 +303,10 @@ class Harvester:
         """Harmonic mode stiffnesses :math:`\\kappa_q = 2a + 4k\\sin^2(\\pi q/N)`, q = 0..N-1.
 
         Meaningful for ``n = 2`` only (for other n, it is the stiffness the coupling adds
-        to a unit stiffness ``2a``).
+        to a unit stiffness ``2a``). Values beyond the double range are ``inf`` or ``-inf``
+        (:func:`fpe_harvester.exact.wide_mode_stiffness` keeps them exactly).
         """
-        return 2.0 * self.a + 4.0 * self.k * mode_sin2(self.N)
+        return (2.0 * Wide.of(self.a) + 4.0 * Wide.of(self.k) * Wide.of(mode_sin2(self.N))).to_float()
 
     def to_dict(self) -> dict[str, object]:
         """Plain-dict description (for JSON)."""

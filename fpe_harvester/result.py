@@ -9,7 +9,8 @@ from dataclasses import dataclass, field, fields
 from types import MappingProxyType
 from typing import Any
 
-from .errors import UnstableSystemError
+from .errors import NotConvergedError, ParameterError, UnstableSystemError
+from .wide import LARGEST, Wide
 
 __all__ = ["QUANTITIES", "Stats", "Status", "propagated_eta_error"]
 
@@ -102,6 +103,12 @@ class Stats:
                         "non-finite numbers must be reported through the status"
                     )
                 object.__setattr__(self, key, value)
+        if self.growth_rate is not None:
+            rate = float(self.growth_rate)
+            if not math.isfinite(rate):
+                raise ValueError(f"internal error: {self.method or 'solver'} produced growth_rate = {rate}; "
+                                 "a rate beyond the double range must be None")
+            object.__setattr__(self, "growth_rate", rate)
         object.__setattr__(self, "info", MappingProxyType(dict(self.info)))
 
     @classmethod
@@ -115,6 +122,7 @@ class Stats:
         Pin_err: float = 0.0,
         cov_V2_Pin: float = 0.0,
         eta_err: float | None = None,
+        Vrms_err: float | None = None,
         **kwargs: Any,
     ) -> Stats:
         """Build from :math:`\\langle V^2\\rangle` and :math:`P_{in}`, deriving eta and Vrms.
@@ -122,13 +130,36 @@ class Stats:
         Errors are propagated to first order (:func:`propagated_eta_error`); ``cov_V2_Pin`` is
         the covariance of the two estimates (Monte Carlo replicas give it; it reduces the error
         on eta). A solver with its own estimate of eta's error (from a refinement sequence of
-        eta itself, or including a time-step bias of eta) passes it as ``eta_err`` instead.
+        eta itself, or including a time-step bias of eta) passes it as ``eta_err`` instead, and
+        one whose error on :math:`\\sqrt{V^2}` includes more than the propagated part (the
+        rounding of the square root, for exact numbers) passes ``Vrms_err``.
+        The derived numbers are computed without intermediate overflow
+        (:class:`~fpe_harvester.wide.Wide`), so they are the float results wherever those exist.
+
+        Raises
+        ------
+        ParameterError
+            ``V2`` is negative or not finite, ``Pin`` is 0 or not finite, or ``eta``, ``Vrms``
+            or one of their errors falls outside the double range (the message gives its size).
         """
-        eta = V2 / (R * Pin)
+        where = kwargs.get("method") or "solver"
+        if not (math.isfinite(V2) and V2 >= 0.0 and math.isfinite(Pin) and Pin != 0.0):
+            raise ParameterError(f"{where}: eta = V2/(R Pin) needs a finite V2 >= 0 and a finite Pin != 0, "
+                                 f"got V2 = {V2!r}, Pin = {Pin!r}")
+        eta_w = Wide.of(V2) / (Wide.of(R) * Wide.of(Pin))
+        eta = _float_or_refuse(where, "eta = V2/(R Pin)", eta_w)
         if eta_err is None:
-            eta_err = propagated_eta_error(eta, V2, V2_err, Pin, Pin_err, cov_V2_Pin)
+            if V2 == 0.0:
+                eta_err = _float_or_refuse(where, "eta_err", Wide.of(V2_err) / abs(Wide.of(R) * Wide.of(Pin)))
+            else:
+                eta_err = propagated_eta_error(eta, V2, V2_err, Pin, Pin_err, cov_V2_Pin)
         Vrms = math.sqrt(V2)
-        Vrms_err = 0.5 * V2_err / Vrms
+        if Vrms_err is not None:
+            pass
+        elif Vrms > 0.0:
+            Vrms_err = _float_or_refuse(where, "Vrms_err", 0.5 * Wide.of(V2_err) / Wide.of(Vrms))
+        else:
+            Vrms_err = math.sqrt(V2_err)
         return cls(
             V2=V2, V2_err=V2_err, Pin=Pin, Pin_err=Pin_err, eta=eta, eta_err=eta_err,
             Vrms=Vrms, Vrms_err=Vrms_err, **kwargs,
@@ -146,9 +177,19 @@ class Stats:
         return getattr(self, name), getattr(self, name + "_err")
 
     def raise_for_status(self) -> Stats:
-        """Return self if stable or marginal, else raise :class:`UnstableSystemError`."""
-        if self.status is Status.UNSTABLE:
-            raise UnstableSystemError(self.message or "the system has no stationary state")
+        """Return self if stable or marginal (the numbers describe a stationary state), else raise.
+
+        Raises
+        ------
+        UnstableSystemError
+            Status unstable (no stationary state) or metastable (paths eventually escape).
+        NotConvergedError
+            Status not converged (the numbers, if any, miss the requested accuracy).
+        """
+        if self.status in (Status.UNSTABLE, Status.METASTABLE):
+            raise UnstableSystemError(self.message or f"the system is {self.status.value}: no stationary state")
+        if self.status is Status.NOT_CONVERGED:
+            raise NotConvergedError(self.message or "the requested accuracy was not reached")
         return self
 
     def to_dict(self) -> dict[str, Any]:
@@ -177,13 +218,35 @@ def propagated_eta_error(eta: float, V2: float, V2_err: float, Pin: float, Pin_e
         \\left(\\frac{\\delta\\eta}{\\eta}\\right)^2 = \\left(\\frac{\\delta V^2}{V^2}\\right)^2
         + \\left(\\frac{\\delta P}{P}\\right)^2 - \\frac{2\\,\\mathrm{cov}}{V^2 P}
 
+    Evaluated without intermediate overflow or underflow (:class:`~fpe_harvester.wide.Wide`),
+    with the float result wherever that exists.
+
+    Raises
+    ------
+    ParameterError
+        ``V2`` or ``Pin`` is 0 (the relative errors do not exist), or the error is beyond the
+        double range.
+
     Examples
     --------
     >>> round(propagated_eta_error(0.5, 1.0, 0.03, 2.0, 0.08), 12)
     0.025
     """
-    rel2 = (V2_err / V2) ** 2 + (Pin_err / Pin) ** 2 - 2.0 * cov_V2_Pin / (V2 * Pin)
-    return abs(eta) * math.sqrt(max(rel2, 0.0))
+    if V2 == 0.0 or Pin == 0.0:
+        raise ParameterError(f"relative errors need V2 != 0 and Pin != 0, got V2 = {V2!r}, Pin = {Pin!r}")
+    V2w, Pw = Wide.of(V2), Wide.of(Pin)
+    rel2 = (Wide.of(V2_err) / V2w) ** 2 + (Wide.of(Pin_err) / Pw) ** 2 - 2.0 * Wide.of(cov_V2_Pin) / (V2w * Pw)
+    rel = rel2.sqrt() if rel2.sign() > 0 else Wide.of(0.0)
+    return _float_or_refuse("propagated_eta_error", "eta_err", abs(Wide.of(eta)) * rel)
+
+
+def _float_or_refuse(where: str, what: str, value: Wide) -> float:
+    """``value`` as a float, or a :class:`ParameterError` saying it is beyond the double range."""
+    x = float(value.to_float())
+    if not math.isfinite(x):
+        raise ParameterError(f"{where}: {what} ~ 10^{float(value.log10()):.1f} exceeds the largest double "
+                             f"({LARGEST:.3g}); rescale the problem (docs/model.md §5)")
+    return x
 
 
 def _jsonable(obj: Any) -> Any:

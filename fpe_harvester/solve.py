@@ -9,6 +9,7 @@ Monte Carlo and Fokker--Planck stacks load only when asked for).
 
 from __future__ import annotations
 
+import dataclasses
 import importlib
 from typing import Any, Protocol
 
@@ -73,6 +74,13 @@ def get_solver(method: str | Solver = "auto", h: Harvester | None = None, **opti
             raise ParameterError("method='auto' needs the harvester to choose a solver")
         method = choose_method(h)
     cls = _solver_class(method)
+    valid = [f.name for f in dataclasses.fields(cls)] if dataclasses.is_dataclass(cls) else None
+    unknown = sorted(set(options) - set(valid)) if valid is not None else []
+    if unknown:
+        raise ParameterError(
+            f"invalid option for method {method!r}: no option {', '.join(map(repr, unknown))}; valid options: "
+            + (", ".join(valid) if valid else "none (the exact solver needs no settings: its results are "
+               "exact to round-off)"))
     try:
         return cls(**options)
     except TypeError as exc:

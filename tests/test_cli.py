@@ -68,3 +68,151 @@ def test_bad_arguments_exit_2_one_line(capsys, argv, match):
     assert exc.value.code == 2
     assert match in err
     assert len(err.strip().splitlines()) == 1 and "Traceback" not in err
+
+
+@pytest.mark.parametrize(
+    ("argv", "match"),
+    [
+        (["stats", "--a", "1e308"], r"a = 1e\+308 is out of range .* a <= 4.\de\+153 keeps"),
+        (["stats", "--a", "1e300"], r"a = 1e\+300 is out of range"),
+        (["stats", "--param", "m=1e300"], r"m = 1e\+300 is out of range .* m <= "),
+        (["stats", "--param", "tau=1e300"], r"tau = 1e\+300 is out of range"),
+        (["stats", "--param", "D=1e-320"], r"D = 9.99989e-321 is out of range .* D >= "),
+        (["stats", "--tol", "0"], "--tol 0: the exact solver .* takes no tolerance"),
+        (["stats", "--tol", "2"], "--tol 2: the exact solver"),
+        (["stats", "--seed", "1"], "--seed 1: only Monte Carlo"),
+        (["stats", "--n", "3", "--seed", "1"], "--seed 1: only Monte Carlo .* the fpe solver"),
+        (["stats", "--n", "3", "--tol", "2"], r"tol must be in \(0, 0.1\]"),
+        (["stats", "--n", "3", "--method", "mc", "--tol", "0"], r"tol must be in \(0, 1\)"),
+        (["stats", "--n", "1e6"], r"n must be in \[1, 64\], got 1000000.0"),
+        (["stats", "--n", "0.5"], r"n must be in \[1, 64\]"),
+        (["stats", "--opt", "foo=1"], "invalid option for method 'exact': no option 'foo'"),
+        (["stats", "--n", "3", "--opt", "foo=1"], "invalid option for method 'fpe': no option 'foo'; valid options: tol"),
+        (["stats", "--N", "3", "--k", "-inf"], "k must be finite"),
+        (["stats", "--N", "5000000"], r"N must be in \[1, 4194304\]"),
+        (["validate", "--out", "/dev/null/x"], "--out '/dev/null/x': cannot create the output folder"),
+        (["scene", "run", "fig4_eta_vs_k_harmonic", "--out", "/dev/null/x"], "--out '/dev/null/x': cannot create"),
+    ],
+)
+def test_extreme_and_misplaced_arguments_are_one_line_errors(capsys, argv, match):
+    """The inputs of issue 15: each a one-line error naming the argument, exit code 2, no traceback."""
+    code = main(argv)
+    err = capsys.readouterr().err
+    assert code == 2, err
+    assert len(err.strip().splitlines()) == 1 and "Traceback" not in err
+    assert __import__("re").search(match, err), err
+
+
+@pytest.mark.parametrize(("argv", "eta"), [
+    (["stats", "--N", "3", "--k", "1e14"], 20 / 39),  # was "marginal" with eta = 0.7407
+    (["stats", "--N", "2", "--k", "1e50"], 20 / 39),
+    (["stats", "--N", "3", "--k", "-1e-3"], None),  # a negative number in e-notation is a value
+    (["stats", "--param", "tau=1e100"], 12 / 13),  # were tracebacks
+    (["stats", "--param", "D=1e-300"], 20 / 39),
+])
+def test_extreme_but_valid_inputs_give_numbers(capsys, argv, eta):
+    code = main([*argv, "--json"])
+    out = capsys.readouterr()
+    assert code == 0, out.err
+    d = json.loads(out.out)
+    assert d["status"] == "stable" and d["eta"] is not None and d["eta_err"] < d["eta"]
+    if eta is not None:
+        assert d["eta"] == pytest.approx(eta, rel=1e-12)
+
+
+def test_unexpected_failures_are_one_line_internal_errors(capsys, monkeypatch):
+    from fpe_harvester import cli
+
+    def boom(args):
+        raise ZeroDivisionError("float division by zero")
+
+    monkeypatch.setitem(cli.COMMANDS, "stats", boom)
+    assert main(["stats"]) == 1
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and "internal error: ZeroDivisionError: float division by zero" in err
+    monkeypatch.setenv("HARVESTER_DEBUG", "1")
+    with pytest.raises(ZeroDivisionError):
+        main(["stats"])
+    monkeypatch.delenv("HARVESTER_DEBUG")
+
+    def interrupted(args):
+        raise KeyboardInterrupt
+
+    monkeypatch.setitem(cli.COMMANDS, "stats", interrupted)
+    assert main(["stats"]) == 130
+    assert capsys.readouterr().err == "harvester stats: interrupted\n"
+
+
+def test_fokker_planck_progress_bar_counts_levels(capsys):
+    from fpe_harvester.cli import _fpe_bar
+    from fpe_harvester.model import Harvester
+
+    bar, level = _fpe_bar(Harvester.build(n=3))
+    for i in range(3):
+        level(f"M={4 + 2 * i} elements=8 dofs=100 eta=0.5")
+    assert bar.n == 3 and "M=8" in bar.postfix
+    bar.close()
+
+
+def _number_text() -> "st.SearchStrategy[str]":
+    from hypothesis import strategies as st
+
+    finite = st.floats(allow_nan=False, allow_infinity=False)
+    wide = st.builds(lambda m, e, s: f"{s}{m:.6g}e{e}", st.floats(1.0, 9.99), st.integers(-330, 310),
+                     st.sampled_from(["", "", "", "-"]))
+    return st.one_of(wide, finite.map(repr), st.sampled_from(["0", "-0", "inf", "-inf", "nan", "1e-320", "5e-324"]))
+
+
+_NAMES = ("a", "n", "N", "k", "m", "gamma", "Kv", "Kc", "sigma", "tau", "D", "tau_p", "R", "tol", "seed")
+
+
+def _argv():
+    from hypothesis import strategies as st
+
+    num = _number_text()
+    params = st.lists(st.tuples(st.sampled_from(_NAMES[4:13]), num), max_size=4)
+    return st.builds(
+        lambda a, n, N, k, ps, method: ["stats", "--a", a, "--n", n, "--N", N, "--k", k,
+                                        *[x for p, v in ps for x in ("--param", f"{p}={v}")], *method, "--json"],
+        num, st.one_of(st.just("2"), st.just("2"), num), st.one_of(st.sampled_from(["1", "2", "3", "7"]),
+                                                                    st.integers(-2, 10**7).map(str)),
+        st.one_of(st.just("0"), num), params,
+        st.sampled_from([[], [], [], ["--method", "fpe", "--opt", "max_seconds=0.2", "--tol", "0.05"],
+                         ["--method", "mc", "--seed", "0", "--opt", "max_time=0.2", "--opt", "paths=16",
+                          "--opt", "t_run=5", "--opt", "min_replicas=2"]]))
+
+
+def _check_cli(argv: list[str]) -> None:
+    import contextlib
+    import io
+    import math
+    import re
+
+    out, err = io.StringIO(), io.StringIO()
+    with contextlib.redirect_stdout(out), contextlib.redirect_stderr(err):
+        try:
+            code = main(argv)
+        except SystemExit as exc:  # argparse: unparsable argument
+            code = exc.code
+    text = err.getvalue().strip()
+    if code == 0:
+        d = json.loads(out.getvalue(), parse_constant=lambda c: pytest.fail(f"non-finite {c} in the JSON"))
+        assert d["status"] in ("stable", "marginal", "unstable", "metastable", "not_converged")
+        for q in ("eta", "V2", "Vrms", "Pin", "v2", "vV", "x2"):
+            v, e = d[q], d[q + "_err"]
+            assert (v is None) == (e is None)
+            if v is not None:
+                assert math.isfinite(v) and math.isfinite(e) and e >= 0
+                if d["status"] in ("stable", "marginal") and q in ("eta", "V2", "Pin"):
+                    assert e < abs(v), (q, v, e, d["message"])
+        return
+    assert code == 2, (code, text)
+    lines = [ln for ln in text.splitlines() if not ln.startswith(("fpe ", "mc "))]  # progress bars
+    assert len(lines) == 1 and "Traceback" not in text, text
+    assert re.search(r"(\b|--)(" + "|".join(_NAMES) + r")\b", lines[0]), lines[0]
+
+
+def test_stats_fuzz_numbers_or_one_line_error(fuzz):
+    """``harvester stats`` on arbitrary numbers (any notation, any size, nan/inf, negative, subnormal):
+    exit 0 with finite numbers and errors below their values, or exit 2 with one line naming the argument."""
+    fuzz(_check_cli, {"ci": 40, "long": 3000}, argv=_argv())

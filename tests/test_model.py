@@ -56,8 +56,14 @@ def test_params_frozen_and_replace():
 
 
 def test_potential_validation():
-    with pytest.raises(ParameterError, match=r"n must be in \[1, inf\), got 0.5"):
+    with pytest.raises(ParameterError, match=r"n must be in \[1, 64\], got 0.5"):
         Potential(0.5, 0.5)
+    with pytest.raises(ParameterError, match=r"n must be in \[1, 64\], got 1000000.0"):
+        Potential(0.5, 1e6)
+    with pytest.raises(ParameterError, match="beyond double precision"):
+        Potential.from_U0_x0(U0=1.0, x0=1e-300, n=4)
+    with pytest.raises(ParameterError, match="beyond double precision"):
+        Potential(1e300, 64).U0_x0(1e10)
     with pytest.raises(ParameterError, match=r"a must be in \(0, inf\), got 0"):
         Potential(0, 2)
     with pytest.raises(ParameterError, match="a must be finite"):

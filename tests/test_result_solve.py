@@ -58,8 +58,6 @@ def test_solve_errors():
         solve(Harvester.build(), "magic")
     with pytest.raises(ParameterError, match="h must be a Harvester"):
         solve({"a": 0.5})  # type: ignore[arg-type]
-    with pytest.raises(ParameterError, match="invalid option for method 'exact'"):
-        solve(Harvester.build(), "exact", tol=1e-3)
     with pytest.raises(ParameterError, match="cannot be combined with a solver object"):
         get_solver(Exact(), tol=1)
     with pytest.raises(MethodNotAvailableError, match="n = 2"):
@@ -77,3 +75,57 @@ def test_validators():
         check_int("M", True)
     with pytest.raises(ParameterError, match="observable must be one of 'eta', 'V2'; got 'P'"):
         check_choice("observable", "P", ["eta", "V2"])
+
+
+@pytest.mark.parametrize(("status", "error"), [
+    (Status.UNSTABLE, "UnstableSystemError"), (Status.METASTABLE, "UnstableSystemError"),
+    (Status.NOT_CONVERGED, "NotConvergedError"),
+])
+def test_raise_for_status_raises_unless_the_numbers_describe_a_stationary_state(status, error):
+    """Its docstring's promise: stable or marginal pass, everything else raises (not_converged did not)."""
+    import fpe_harvester
+
+    r = Stats(status=status, message="what happened")
+    with pytest.raises(getattr(fpe_harvester, error), match="what happened"):
+        r.raise_for_status()
+    with pytest.raises(getattr(fpe_harvester, error)):
+        Stats(status=status).raise_for_status()  # no message: a default one
+    for ok in (Status.STABLE, Status.MARGINAL):
+        s = Stats(V2=1.0, status=ok)
+        assert s.raise_for_status() is s
+
+
+def test_from_moments_without_overflow_or_division_by_zero():
+    """eta = V2/(R Pin) with R Pin beyond double range, V2 = 0, and the errors of tiny values."""
+    r = Stats.from_moments(V2=1e300, Pin=1e300, R=1e300, V2_err=1e284, Pin_err=1e284)
+    assert r.eta == pytest.approx(1e-300) and r.eta_err == pytest.approx(math.sqrt(2) * 1e-316)
+    tiny = Stats.from_moments(V2=1e-300, Pin=1e-300, R=1.0, V2_err=1e-310, Pin_err=1e-310)
+    assert tiny.eta == 1.0 and tiny.eta_err == pytest.approx(math.sqrt(2) * 1e-10)
+    zero = Stats.from_moments(V2=0.0, Pin=2.0, R=0.5, V2_err=0.04)
+    assert zero.eta == 0.0 and zero.eta_err == pytest.approx(0.04) and zero.Vrms == 0.0
+    assert zero.Vrms_err == pytest.approx(0.2)
+
+
+@pytest.mark.parametrize(("kwargs", "match"), [
+    ({"V2": 1.0, "Pin": 0.0}, "Pin != 0"),
+    ({"V2": -1.0, "Pin": 1.0}, "V2 >= 0"),
+    ({"V2": math.nan, "Pin": 1.0}, "finite V2"),
+    ({"V2": 1e300, "Pin": 1e-300}, r"eta = V2/\(R Pin\) ~ 10\^600.0 exceeds the largest double"),
+    ({"V2": 1.0, "Pin": 1.0, "V2_err": 1e300, "Pin_err": 1e-300, "cov_V2_Pin": 0.0, "R": 1e-300},
+     "exceeds the largest double"),
+])
+def test_from_moments_refuses_clearly(kwargs, match):
+    with pytest.raises(ParameterError, match=match):
+        Stats.from_moments(**{"R": 1.0, **kwargs})
+
+
+def test_growth_rate_must_be_finite():
+    with pytest.raises(ValueError, match="growth_rate = inf"):
+        Stats(status=Status.UNSTABLE, growth_rate=math.inf, method="exact")
+
+
+def test_unknown_solver_options_list_the_valid_ones():
+    with pytest.raises(ParameterError, match="invalid option for method 'exact': no option 'tol'; valid options: none"):
+        solve(Harvester.build(), "exact", tol=1e-3)
+    with pytest.raises(ParameterError, match="invalid option for method 'fpe': no option 'seed'; valid options: tol, M,"):
+        get_solver("fpe", seed=1)

@@ -115,6 +115,7 @@ def agree(
     n_sigma: float = 4.0,
     floor: float = 0.0,
     rel_floor: float = 0.0,
+    max_rel_tol: float | None = None,
     note: str = "",
 ) -> CheckResult:
     """Compare ``a +- err_a`` with ``b +- err_b``.
@@ -132,19 +133,26 @@ def agree(
         Error bars allowed, > 0 (default 4).
     floor, rel_floor : float
         Absolute and relative (to ``|b|``) floors added to the tolerance, >= 0.
+    max_rel_tol : float, optional
+        Cap on the tolerance relative to ``|b|``, > 0: a comparison whose error bars allow more
+        cannot tell right from wrong, so it fails whatever the difference (e.g. a result that
+        did not converge and reports a 100 % error).
     note : str
         Extra context appended to the detail.
 
     Returns
     -------
     CheckResult
-        PASS iff :math:`|a-b| \\le n_\\sigma\\sqrt{\\delta_a^2+\\delta_b^2} + f + f_{rel}|b|`.
+        PASS iff :math:`|a-b| \\le n_\\sigma\\sqrt{\\delta_a^2+\\delta_b^2} + f + f_{rel}|b|` (and that
+        tolerance is within ``max_rel_tol * |b|``).
 
     Examples
     --------
     >>> agree("x", "s", 1.0, 0.1, 1.3, 0.0).outcome.value
     'PASS'
     >>> agree("x", "s", 1.0, 0.01, 1.3, 0.0).outcome.value
+    'FAIL'
+    >>> agree("x", "s", 1.0, 0.1, 1.3, 0.0, max_rel_tol=0.05).outcome.value
     'FAIL'
     """
     n_sigma = check_real("n_sigma", n_sigma, low=0.0, low_open=True)
@@ -162,12 +170,17 @@ def agree(
                            value=a, reference=b)
     diff = abs(float(a) - float(b))
     tol = n_sigma * math.hypot(ea, eb) + floor + rel_floor * abs(float(b))
-    ok = diff <= tol
+    capped = max_rel_tol is not None and tol > check_real("max_rel_tol", max_rel_tol, low=0.0,
+                                                          low_open=True) * abs(float(b))
+    ok = diff <= tol and not capped
     detail = (
         f"{a:.8g} +- {ea:.2g} vs {b:.8g} +- {eb:.2g}: |diff| = {diff:.3g} "
-        f"{'<=' if ok else '>'} tol = {n_sigma:g}*sqrt(err_a^2+err_b^2)"
+        f"{'<=' if diff <= tol else '>'} tol = {n_sigma:g}*sqrt(err_a^2+err_b^2)"
         f"{f' + {floor:.1g}' if floor else ''}{f' + {rel_floor:.1g}*|b|' if rel_floor else ''} = {tol:.3g}"
     )
+    if capped:
+        detail += (f"; FAIL: the tolerance exceeds the cap {max_rel_tol:g}*|b| = {max_rel_tol * abs(float(b)):.3g}, "
+                   "so these error bars cannot tell right from wrong")
     if missing:
         detail += f" (no error reported for {', '.join(missing)}: taken as 0)"
     return CheckResult(name, section, Outcome.PASS if ok else Outcome.FAIL, detail + suffix,

@@ -24,12 +24,13 @@ import numpy as np
 
 from fpe_harvester.exact import dense_covariance, k_di
 from fpe_harvester.model import Harvester
-from fpe_harvester.result import Stats
+from fpe_harvester.result import Stats, Status
 
 from .checks import CheckResult, Context, agree, expect
 from .report import Section, Table
 
-__all__ = ["run", "identity_checks", "describe", "results_table", "HARMONIC_RINGS", "NONLINEAR_GRID", "QUICK_NONLINEAR"]
+__all__ = ["run", "identity_checks", "describe", "results_table", "HARMONIC_RINGS", "NONLINEAR_GRID",
+           "QUICK_NONLINEAR", "MAX_REL_TOL"]
 
 #: (N, k) of the harmonic rings compared with Monte Carlo (a = 0.5; all inside the stable range).
 HARMONIC_RINGS = ((1, 0.0), (2, -0.15), (3, -0.25), (5, -0.2))
@@ -42,11 +43,25 @@ _SECTION = "Cross-checks"
 _COMPARED = ("eta", "V2", "Pin")
 
 
-def _compare(label: str, r1: Stats, r2: Stats, *, floor: float = 0.0, rel_floor: float = 0.0,
+#: Largest tolerance of a cross-check relative to the reference value (quick, full): error bars
+#: wider than this cannot tell a right answer from a wrong one, so such a comparison fails.
+MAX_REL_TOL = {True: 0.1, False: 0.03}
+
+
+def _compare(label: str, r1: Stats, r2: Stats, *, quick: bool, floor: float = 0.0, rel_floor: float = 0.0,
              names: tuple[str, ...] = _COMPARED) -> list[CheckResult]:
+    """Compare two results quantity by quantity within their error bars, the tolerance capped
+    (:data:`MAX_REL_TOL`). Both must describe the stationary state: stable or marginal, or not
+    converged with a best estimate and its error (then the comparison tests that error bar);
+    any other status, or no number, fails."""
     note = f"{r1.method}: {r1.status.value}; {r2.method}: {r2.status.value}"
+    bad = [r for r in (r1, r2) if not (r.ok or (r.status is Status.NOT_CONVERGED and r.eta is not None))]
+    if bad:
+        return [expect(f"{label}: {q}", _SECTION, False,
+                       "; ".join(f"{r.method} is {r.status.value} ({r.message})" for r in bad)
+                       + ": no stationary number to cross-check") for q in names]
     return [agree(f"{label}: {q}", _SECTION, *r1.value(q), *r2.value(q), floor=floor,
-                  rel_floor=rel_floor, note=note) for q in names]
+                  rel_floor=rel_floor, max_rel_tol=MAX_REL_TOL[quick], note=note) for q in names]
 
 
 def identity_checks(label: str, r: Stats, h: Harvester, section: str = _SECTION) -> list[CheckResult]:
@@ -78,7 +93,7 @@ def _exact_vs_mc(ctx: Context, N: int, k: float) -> list[CheckResult]:
     h = Harvester.build(a=0.5, n=2, N=N, k=k)
     ex = ctx.solve(h, "exact")
     mc = ctx.solve(h, "mc")
-    return _compare(f"exact vs mc: N = {N}, k = {k:g}", mc, ex)
+    return _compare(f"exact vs mc: N = {N}, k = {k:g}", mc, ex, quick=ctx.quick)
 
 
 def _fpe_vs_mc(ctx: Context, n: float, a: float) -> list[CheckResult]:
@@ -86,7 +101,7 @@ def _fpe_vs_mc(ctx: Context, n: float, a: float) -> list[CheckResult]:
     h = Harvester.build(a=a, n=n)
     fp = ctx.solve(h, "fpe")
     mc = ctx.solve(h, "mc")
-    return _compare(f"fpe vs mc: n = {n:g}, a = {a:g}", fp, mc)
+    return _compare(f"fpe vs mc: n = {n:g}, a = {a:g}", fp, mc, quick=ctx.quick)
 
 
 def _fpe_vs_exact(ctx: Context, a: float) -> list[CheckResult]:
@@ -94,7 +109,7 @@ def _fpe_vs_exact(ctx: Context, a: float) -> list[CheckResult]:
     fp = ctx.solve(h, "fpe", tol=1e-4 if ctx.quick else 1e-8)
     ex = ctx.solve(h, "exact")
     return _compare(f"fpe vs exact: n = 2, a = {a:g}", fp, ex, names=("eta", "V2", "Pin", "v2", "vV"),
-                    rel_floor=1e-12)
+                    rel_floor=1e-12, quick=ctx.quick)
 
 
 def _fourier_vs_dense(ctx: Context, rng: np.random.Generator, N: int) -> list[CheckResult]:
@@ -136,8 +151,11 @@ def run(ctx: Context) -> Section:
     dense_N = (1, 2, 3) if ctx.quick else (1, 2, 3, 4, 5, 6)
     fpe_a = (0.5, 2.0) if ctx.quick else (0.5, 1.0, 2.0)
     sec.text.append(
-        "Each comparison passes when |a - b| <= 4 sqrt(err_a^2 + err_b^2) + floor, with the errors the "
-        "solvers report (Monte Carlo: standard error from replicas, time-step bias folded in; "
+        "Each comparison passes when both results describe the stationary state (stable, or not converged "
+        "with a best estimate and its error, whose error bar is then what is tested) and |a - b| <= "
+        "4 sqrt(err_a^2 + err_b^2) + floor, that tolerance being at most "
+        f"{MAX_REL_TOL[ctx.quick]:.0%} of the reference value (wider error bars cannot tell right from wrong), "
+        "with the errors the solvers report (Monte Carlo: standard error from replicas, time-step bias folded in; "
         "Fokker-Planck: truncation and mesh error; exact: 0, with a relative round-off floor of 1e-12, "
         "1e-10 for the dense Lyapunov solve). "
         f"Monte Carlo settings: {ctx.mc_options}; Fokker-Planck settings: {ctx.fpe_options}."

@@ -2,20 +2,26 @@
 figures and data in the report.
 
 Scenes choose the cheapest adequate solver per point (exact, Fokker--Planck, Monte Carlo)
-and write CSV/JSON next to each PNG. A scene passes when every point was computed (stable,
-marginal, metastable, unstable and not-converged points are results with a status); a
-point whose solver is not installed makes the scene *skipped*; a solver error fails it.
+and write CSV/JSON next to each PNG. Each scene is checked on what it promises
+(:func:`row_checks`): every status true for its system, the accuracy asked for met by every
+stable or marginal row, harmonic rows equal to the closed form in 60-digit arithmetic, and every
+figure asked for drawn. A point whose solver is not installed makes the scene *skipped*; a
+solver error fails it.
 """
 
 from __future__ import annotations
 
+import math
 import shutil
 from pathlib import Path
+from typing import Any
+
+from fpe_harvester import Params, solve
 
 from .checks import CheckResult, Context, expect, skipped
 from .report import Figure, Section, Table
 
-__all__ = ["MAX_ROWS", "run_exact", "run_solvers"]
+__all__ = ["MAX_ROWS", "row_checks", "run_exact", "run_solvers"]
 
 _SECTION = "The paper's figures (scenes)"
 #: Rows of each scene's data shown in the report (the CSV has them all).
@@ -62,9 +68,61 @@ def _run_one(ctx: Context, name: str, sec: Section) -> list[CheckResult]:
         return [skipped(label, _SECTION, f"{len(missing)} of {len(res.rows)} points have no solver available "
                         f"({missing[0].message}); figure drawn from the rest")]
     statuses = sorted({r.status for r in res.rows})
-    return [expect(label, _SECTION, bool(res.figures) or not res.scene.figures,
+    return [expect(f"{label}: figures", _SECTION, len(res.figures) == len(res.scene.figures),
                    f"{len(res.rows)} points ({res.computed} computed, {res.reused} reused), statuses {statuses}, "
-                   f"figures {sorted(res.figures)}")]
+                   f"figures drawn {sorted(res.figures)} of {[f.name for f in res.scene.figures]}"),
+            *row_checks(label, res.scene, res.rows)]
+
+
+def row_checks(label: str, scene: Any, rows: list[Any]) -> list[CheckResult]:
+    """What a scene's rows promise, checked: true statuses, the accuracy asked for, exact values.
+
+    * every status is true for its system: ``unstable`` only where the exact solver finds no
+      stationary state (harmonic beyond k_di), ``marginal`` only for a harmonic ring,
+      ``metastable`` only for an n < 2 ring with k < 0;
+    * a stable or marginal row has finite values with errors below them and meets the scene's
+      relative accuracy ``rtol`` on eta (a row that does not is a failure, whatever its status);
+    * harmonic rows agree with the closed form evaluated in 60-digit arithmetic
+      (:func:`validation.references.mp_closed_form`) within their stated errors.
+    """
+    from fpe_harvester.exact import MARGINAL_RTOL
+
+    from .references import mp_closed_form
+
+    # the sweep axes and an optimized coupling: every field of the point that defines the system
+    fields = {"a", "n", "N", "k", *Params().to_dict()}
+    false_status, inaccurate, wrong = [], [], []
+    n_exact = 0
+    for row in rows:
+        h = scene.harvester({key: v for key, v in row.point.items() if key in fields})
+        where = ", ".join(f"{key} = {v:g}" for key, v in row.point.items())
+        truth = solve(h, "exact").status.value if h.is_linear else h.confinement
+        if (row.status == "unstable" and truth != "unstable") or (row.status == "marginal" and truth != "marginal") \
+                or (row.status == "metastable" and truth != "metastable"):
+            false_status.append(f"({where}) {row.status}, truly {truth}")
+        if not row.ok:
+            continue
+        eta, err = row.values.get("eta"), row.values.get("eta_err")
+        if eta is not None and not (err is not None and math.isfinite(eta) and 0 <= err <= scene.rtol * abs(eta)):
+            inaccurate.append(f"({where}) eta = {eta} +- {err}")
+        if row.method == "exact":
+            n_exact += 1
+            ref = mp_closed_form(h, marginal=MARGINAL_RTOL if row.status == "marginal" else 0.0)
+            ref["Vrms"] = ref["V2"] ** 0.5
+            for q in scene.observables:
+                v, e = row.values.get(q), row.values.get(q + "_err")
+                if q in ref and v is not None and not abs(v - ref[q]) <= (e or 0.0) + 1e-13 * abs(ref[q]):
+                    wrong.append(f"({where}) {q} = {v!r} +- {e}, 60 digits: {float(ref[q])!r}")
+    return [
+        expect(f"{label}: statuses", _SECTION, not false_status,
+               f"{len(rows)} rows; false statuses: {'; '.join(false_status[:5]) or 'none'}"),
+        expect(f"{label}: accuracy rtol = {scene.rtol:g} on eta", _SECTION, not inaccurate,
+               f"{sum(r.ok for r in rows)} stable/marginal rows; missing the accuracy: "
+               f"{'; '.join(inaccurate[:5]) or 'none'}"),
+        *([expect(f"{label}: harmonic rows vs the 60-digit closed form", _SECTION, not wrong,
+                  f"{n_exact} exact rows; off by more than their errors: {'; '.join(wrong[:3]) or 'none'}")]
+          if n_exact else []),
+    ]
 
 
 def _is_exact(name: str) -> bool:

@@ -3,7 +3,11 @@
 * :func:`mp_mode_moments`, :func:`mp_ring_moments`: a 40-digit Lyapunov solve (mpmath) of each
   mode, built from the exact binary values of the inputs;
 * :func:`rational_eta`: the closed form evaluated in exact rational arithmetic
-  (:class:`fractions.Fraction`) where the mode stiffnesses are rational.
+  (:class:`fractions.Fraction`) where the mode stiffnesses are rational;
+* :func:`mp_closed_form`: the closed form in mpmath (many digits, no exponent limit), the
+  reference for the exact solver over the whole double range (the formula itself is checked
+  against :func:`mp_mode_moments` at moderate parameters: an identity between rational
+  functions that holds there holds everywhere).
 """
 
 from __future__ import annotations
@@ -15,7 +19,7 @@ import mpmath
 
 from fpe_harvester.model import Harvester, Params
 
-__all__ = ["mp_mode_moments", "mp_ring_moments", "rational_eta"]
+__all__ = ["mp_closed_form", "mp_mode_moments", "mp_ring_moments", "rational_eta"]
 
 
 def mp_mode_moments(kappa: Any, p: Params, dps: int = 40) -> dict[str, Any]:
@@ -92,3 +96,55 @@ def rational_eta(kappas: list[Fraction], p: Params | None = None) -> tuple[Fract
     n = len(kappas)
     V2, Pin = V2 / n, Pin / n
     return V2, V2 / (R * Pin)
+
+
+def mp_closed_form(h: Harvester, dps: int = 60, marginal: float = 0.0) -> dict[str, Any]:
+    """Ring averages of a harmonic ring from the closed form in mpmath (``dps`` digits).
+
+    Parameters
+    ----------
+    h : Harvester
+        A harmonic ring; its float inputs are taken at their exact binary values.
+    dps : int
+        Decimal digits of the evaluation (mpmath exponents are unbounded, so nothing
+        overflows: the values are the true ones, however far beyond double precision).
+    marginal : float
+        Mode stiffnesses with :math:`|\\kappa_q| \\le` ``marginal`` times
+        :math:`2a + 4|k|\\sin^2(\\pi q/N)` are taken as 0 (the limit at ``k = k_di``).
+
+    Returns
+    -------
+    dict
+        ``V2``, ``Pin``, ``eta``, ``v2``, ``vV``, ``x2`` (``inf`` when a mode has zero
+        stiffness) as mpf, ``kappa`` and ``scale``: the exact mode stiffnesses and
+        :math:`2a + 4|k|\\sin^2(\\pi q/N)`, lists of mpf. Meaningful only when every
+        ``kappa`` is >= 0.
+    """
+    p = h.params
+    with mpmath.workdps(dps):
+        m, g, Kv, Kc, s, tau, D, tp, R = (mpmath.mpf(x) for x in (p.m, p.gamma, p.Kv, p.Kc, p.sigma, p.tau,
+                                                                    p.D, p.tau_p, p.R))
+        a, k = mpmath.mpf(h.a), mpmath.mpf(h.k)
+        s2 = [mpmath.sin(mpmath.pi * min(q, h.N - q) / h.N) ** 2 for q in range(h.N)]
+        kappa = [2 * a + 4 * k * x for x in s2]
+        scale = [2 * a + 4 * abs(k) * x for x in s2]
+        KK = Kc * Kv
+        acc = {key: mpmath.mpf(0) for key in ("V2", "Pin", "v2", "vV", "x2")}
+        for kap, sc in zip(kappa, scale):
+            if abs(kap) <= marginal * sc:
+                kap = mpmath.mpf(0)
+            d1 = (tau + tp) * (m + g * m * tau + kap * tau**2) + KK * tau**2 * tp
+            d2 = (1 + g * tp) * (g * m + KK * tp) + g * kap * tp**2
+            vV = D * Kc * s**2 * tp * (g * tau * tp + tau + tp) / (d1 * d2)
+            acc["vV"] += vV
+            acc["V2"] += Kc * tp * vV
+            acc["Pin"] += D * s**2 * (tau + tp) / d1
+            acc["v2"] += D * s**2 * (KK * tp**3 + m * (tau + tp) * (1 + g * tp) + kap * tp**2 * (tau + tp)) / (
+                m * d1 * d2)
+            x2_num = (KK * g * tau**2 * tp**2 + KK * tau**2 * tp + g**2 * m * tau**2 * tp + g**2 * m * tau * tp**2
+                      + g * m * (tau + tp) ** 2 + m * (tau + tp) + (g * tau + 1) * kap * tp**2 * (tau + tp))
+            acc["x2"] += D * s**2 * x2_num / (kap * d1 * d2) if kap != 0 else mpmath.inf
+        out: dict[str, Any] = {key: val / h.N for key, val in acc.items()}
+        out["eta"] = out["V2"] / (R * out["Pin"])
+        out["kappa"], out["scale"] = kappa, scale
+        return out

@@ -76,7 +76,13 @@ class Report:
 
     @property
     def failed(self) -> bool:
+        """True if any check failed (skips are not failures here; see ``skipped``)."""
         return any(c.outcome is Outcome.FAIL for c in self.checks)
+
+    @property
+    def skipped(self) -> list[CheckResult]:
+        """The checks that did not run (a full validation run fails on any)."""
+        return [c for c in self.checks if c.outcome is Outcome.SKIP]
 
 
 def _md_table(header: Sequence[str], rows: Sequence[Sequence[str]]) -> list[str]:
@@ -218,5 +224,6 @@ def summary_text(report: Report, width: int = 110, show_passed: bool = False) ->
     lines.append("")
     lines.append(f"{counts.get('PASS', 0)} passed, {counts.get('FAIL', 0)} failed, {counts.get('SKIP', 0)} skipped")
     if counts.get("SKIP", 0):
-        lines.append("SKIPPED checks did not run (solver or module not available): they are NOT passes.")
+        lines.append("SKIPPED checks did not run (time budget, solver or module not available, or no number to "
+                     "check): they are NOT passes.")
     return "\n".join(lines)

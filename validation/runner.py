@@ -26,7 +26,7 @@ from fpe_harvester.solve import METHODS
 from .checks import Context, SolveCache, guarded, skipped
 from .report import Report, Section, summary_text, write_html, write_markdown
 
-__all__ = ["STEPS", "QUICK_BUDGET", "validate", "run_cli", "main", "build_parser"]
+__all__ = ["STEPS", "QUICK_BUDGET", "validate", "exit_code", "run_cli", "main", "build_parser"]
 
 #: Steps run before the others (cheapest per check first); unlisted steps follow in plan order.
 RUN_FIRST = ("validation.stress:run_exact", "validation.figures:run_exact", "validation.crosscheck",
@@ -165,11 +165,18 @@ def validate(
     return report
 
 
+def exit_code(report: Report, quick: bool) -> int:
+    """1 if a check failed, or if a full run skipped any check (nothing may go unchecked there);
+    a quick run may skip checks (its time budget), and says how many and which."""
+    return 1 if report.failed or (report.skipped and not quick) else 0
+
+
 def run_cli(quick: bool = False, out: Path | str = "validation_report", seed: int = 2017,
             progress: bool = True) -> int:
     """Run :func:`validate` over :data:`STEPS`, print the pass/fail summary.
 
-    Returns the exit code: 1 if any check failed, else 0 (skipped checks do not fail).
+    Returns the exit code (:func:`exit_code`): 1 if any check failed or, in a full run, was
+    skipped; else 0.
     """
     steps = STEPS
     bar = None
@@ -192,9 +199,14 @@ def run_cli(quick: bool = False, out: Path | str = "validation_report", seed: in
         bar.update(bar.total - bar.n)
         bar.close()
     print(summary_text(report))
+    skips = report.skipped
+    if skips:
+        print(f"{len(skips)} check(s) SKIPPED (listed above): "
+              + ("allowed in a quick run, whose time budget may run out; the full run fails on any skip."
+                 if quick else "the full run fails: every check must run."))
     print(f"report: {Path(out) / 'report.md'} and {Path(out) / 'report.html'} "
           f"({time.perf_counter() - t0:.1f} s)")
-    return 1 if report.failed else 0
+    return exit_code(report, quick)
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -213,5 +225,11 @@ def main(argv: Sequence[str] | None = None) -> int:
     args = build_parser().parse_args(argv)
     if args.seed < 0:
         print(f"python -m validation: error: --seed must be >= 0, got {args.seed}", file=sys.stderr)
+        return 2
+    try:
+        Path(args.out).mkdir(parents=True, exist_ok=True)
+    except OSError as exc:
+        print(f"python -m validation: error: --out {args.out!r}: cannot create the output folder "
+              f"({exc.strerror or exc})", file=sys.stderr)
         return 2
     return run_cli(quick=args.quick, out=args.out, seed=args.seed, progress=not args.no_progress)

@@ -33,11 +33,13 @@ from __future__ import annotations
 import numpy as np
 
 from ..model import Harvester, Params
+from ..wide import Float, Wide
 
 __all__ = [
     "drift_matrix",
     "noise_matrix",
     "mode_moments",
+    "wide_mode_moments",
     "lyapunov_covariance",
     "ring_drift_matrix",
     "dense_covariance",
@@ -65,6 +67,38 @@ def noise_matrix(params: Params) -> np.ndarray:
     return Q
 
 
+def wide_mode_moments(kappa: Wide | Float, params: Params) -> dict[str, Wide | Float]:
+    """The closed form of :func:`mode_moments` in :class:`~fpe_harvester.wide.Wide` arithmetic
+    (or, given a :class:`~fpe_harvester.wide.Float` ``kappa``, in plain floats, the fast path).
+
+    Bit-for-bit the float result wherever that stays in the normal range, and the correctly
+    scaled value where a float intermediate would overflow or underflow, so only the moments
+    themselves decide whether they are representable. ``kappa`` must be >= 0; ``x2`` is
+    returned as 0 where ``kappa == 0`` (it is infinite there: the caller masks it).
+    """
+    p = params
+    num = type(kappa) if isinstance(kappa, (Wide, Float)) else Wide
+    m, g, Kv, Kc, s, tau, D, tp = (num.of(x) for x in (p.m, p.gamma, p.Kv, p.Kc, p.sigma, p.tau, p.D, p.tau_p))
+    kap = num.of(kappa)
+    KK = Kc * Kv
+    d1 = m * tau + m * tp + g * m * tau**2 + g * m * tau * tp + KK * tau**2 * tp
+    d1 = d1 + kap * tau**2 * (tau + tp)
+    d2 = g * m + g**2 * m * tp + KK * tp + KK * g * tp**2 + g * kap * tp**2
+    c = g * tau * tp + tau + tp
+    vxi = D * s * (tau + tp) / d1
+    vV = D * Kc * s**2 * tp * c / (d1 * d2)
+    V2 = Kc * tp * vV
+    v2_num = KK * tp**3 + g * m * tau * tp + g * m * tp**2 + m * tau + m * tp + kap * tp**2 * (tau + tp)
+    v2 = D * s**2 * v2_num / (m * d1 * d2)
+    x2_num = (
+        KK * g * tau**2 * tp**2 + KK * tau**2 * tp + g**2 * m * tau**2 * tp + g**2 * m * tau * tp**2
+        + g * m * (tau + tp) ** 2 + m * (tau + tp) + (g * tau + 1.0) * kap * tp**2 * (tau + tp)
+    )
+    soft = kap.sign() == 0
+    x2 = num.where(soft, 0.0, D * s**2 * x2_num / (num.where(soft, 1.0, kap) * d1 * d2))
+    return {"V2": V2, "vV": vV, "v2": v2, "vxi": vxi, "x2": x2, "Pin": s * vxi}
+
+
 def mode_moments(kappa: np.ndarray | float, params: Params) -> dict[str, np.ndarray]:
     """Closed-form stationary second moments of a unit with stiffness ``kappa``.
 
@@ -81,6 +115,8 @@ def mode_moments(kappa: np.ndarray | float, params: Params) -> dict[str, np.ndar
     -------
     dict of ndarray
         ``V2``, ``vV``, ``v2``, ``vxi``, ``x2`` and ``Pin`` (:math:`=\\sigma\\langle v\\xi\\rangle`).
+        Evaluated without intermediate overflow (:func:`wide_mode_moments`); a moment beyond the
+        double range comes back as ``inf`` or below the smallest normal double (0 or subnormal).
 
     Examples
     --------
@@ -88,26 +124,10 @@ def mode_moments(kappa: np.ndarray | float, params: Params) -> dict[str, np.ndar
     >>> round(float(mom["V2"]) * 143, 12), round(float(mom["Pin"]) * 11, 12)
     (20.0, 3.0)
     """
-    p = params
     kap = np.asarray(kappa, dtype=float)
-    m, g, Kv, Kc, s, tau, D, tp = p.m, p.gamma, p.Kv, p.Kc, p.sigma, p.tau, p.D, p.tau_p
-    KK = Kc * Kv
-    d1 = m * tau + m * tp + g * m * tau**2 + g * m * tau * tp + KK * tau**2 * tp
-    d1 = d1 + kap * tau**2 * (tau + tp)
-    d2 = g * m + g**2 * m * tp + KK * tp + KK * g * tp**2 + g * kap * tp**2
-    c = g * tau * tp + tau + tp
-    vxi = D * s * (tau + tp) / d1
-    vV = D * Kc * s**2 * tp * c / (d1 * d2)
-    V2 = Kc * tp * vV
-    v2_num = KK * tp**3 + g * m * tau * tp + g * m * tp**2 + m * tau + m * tp + kap * tp**2 * (tau + tp)
-    v2 = D * s**2 * v2_num / (m * d1 * d2)
-    x2_num = (
-        KK * g * tau**2 * tp**2 + KK * tau**2 * tp + g**2 * m * tau**2 * tp + g**2 * m * tau * tp**2
-        + g * m * (tau + tp) ** 2 + m * (tau + tp) + (g * tau + 1.0) * kap * tp**2 * (tau + tp)
-    )
-    with np.errstate(divide="ignore"):
-        x2 = np.where(kap > 0, D * s**2 * x2_num / (np.where(kap > 0, kap, 1.0) * d1 * d2), np.inf)
-    return {"V2": V2, "vV": vV, "v2": v2, "vxi": vxi, "x2": x2, "Pin": s * vxi}
+    mom = {key: val.to_float() for key, val in wide_mode_moments(Wide.of(kap), params).items()}
+    mom["x2"] = np.where(kap > 0, mom["x2"], np.inf)
+    return mom
 
 
 def lyapunov_covariance(kappa: float, params: Params) -> np.ndarray:
@@ -138,6 +158,11 @@ def dense_covariance(h: Harvester) -> np.ndarray:
 
 
 def ring_moments(kappa: np.ndarray, params: Params) -> dict[str, np.ndarray]:
-    """Ring averages from mode stiffnesses along the last axis (means over modes)."""
-    mom = mode_moments(kappa, params)
-    return {key: val.mean(axis=-1) for key, val in mom.items()}
+    """Ring averages from mode stiffnesses along the last axis (means over modes).
+
+    ``x2`` is ``inf`` where some mode has zero stiffness; see :func:`mode_moments` for the range.
+    """
+    kap = np.asarray(kappa, dtype=float)
+    mom = {key: val.mean(axis=-1).to_float() for key, val in wide_mode_moments(Wide.of(kap), params).items()}
+    mom["x2"] = np.where(np.all(kap > 0, axis=-1), mom["x2"], np.inf)
+    return mom

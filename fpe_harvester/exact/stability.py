@@ -20,11 +20,13 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 
 from ..errors import check_int, check_real
-from ..model import Harvester, Params
+from ..model import Harvester, Params, mode_sin2
+from ..wide import Float, Wide
 
 __all__ = [
     "Threshold",
@@ -33,10 +35,14 @@ __all__ = [
     "critical_mode",
     "max_sin2",
     "mode_eigenvalues",
-    "ring_spectrum",
     "growth_rate",
     "mode_growth_rate",
     "classify",
+    "classify_modes",
+    "kappa_min",
+    "ring_spectrum",
+    "wide_mode_stiffness",
+    "wide_growth_rate",
     "MARGINAL_RTOL",
 ]
 
@@ -75,7 +81,7 @@ def k_di(N: int, a: float) -> float | None:
     s2 = max_sin2(N)
     if s2 == 0.0:
         return None
-    return -2.0 * a / (4.0 * s2)
+    return float((-2.0 * Wide.of(a) / (4.0 * s2)).to_float())
 
 
 def critical_mode(N: int) -> tuple[int, ...]:
@@ -87,6 +93,147 @@ def critical_mode(N: int) -> tuple[int, ...]:
     return (q,) if N % 2 == 0 else (q, N - q)
 
 
+def wide_mode_stiffness(a: np.ndarray | float, k: np.ndarray | float, N: int,
+                        num: type = Wide) -> tuple[Wide, Wide]:
+    """Mode stiffnesses :math:`\\kappa_q = 2a + 4k\\sin^2(\\pi q/N)` and their round-off scales.
+
+    Parameters
+    ----------
+    a, k : array_like
+        Potential strengths and couplings (broadcast); the modes go along a new last axis.
+    N : int
+        Ring size, >= 1.
+
+    Returns
+    -------
+    num : type
+        :class:`~fpe_harvester.wide.Wide` (default) or :class:`~fpe_harvester.wide.Float` (fast path).
+
+    Returns
+    -------
+    kappa, scale : Wide
+        :math:`\\kappa_q` rounded as float arithmetic rounds it (never overflowing), and
+        :math:`2a + 4|k|\\sin^2(\\pi q/N)`, the size of the terms whose cancellation can leave
+        round-off in :math:`\\kappa_q` (at most a few ulps of it).
+    """
+    a_w = num.of(np.asarray(a, dtype=float)[..., None])
+    k_arr = np.asarray(k, dtype=float)[..., None]
+    s2 = num.of(mode_sin2(N))
+    return 2.0 * a_w + 4.0 * num.of(k_arr) * s2, 2.0 * a_w + 4.0 * num.of(np.abs(k_arr)) * s2
+
+
+def classify_modes(kappa: Wide | Float, scale: Wide | Float) -> tuple[np.ndarray, np.ndarray]:
+    """Per mode: ``(marginal, unstable)`` boolean arrays.
+
+    A mode is marginal when :math:`|\\kappa_q| \\le` :data:`MARGINAL_RTOL` times its own round-off
+    scale :math:`2a + 4|k|\\sin^2(\\pi q/N)`, so that ``k = k_di`` typed in floating point lands there
+    while a mode whose stiffness is an exact ``2a`` (``q = 0``, or any mode for ``k >= 0``) never
+    does, however small ``a`` or large ``k``; it is unstable when :math:`\\kappa_q < 0` beyond that.
+    """
+    marginal = (abs(kappa) / scale).to_float() <= MARGINAL_RTOL
+    return marginal, (kappa.sign() < 0) & ~marginal
+
+
+def _cubic(kappa: Wide, p: Params) -> tuple[Wide, Wide, Wide]:
+    """Coefficients :math:`(b_2, b_1, b_0)` of the monic (x, v, V) cubic of a mode."""
+    m, g, tp = Wide.of(p.m), Wide.of(p.gamma), Wide.of(p.tau_p)
+    return g + 1.0 / tp, kappa / m + g / tp + Wide.of(p.Kv) * Wide.of(p.Kc) / m, kappa / (m * tp)
+
+
+def _numpy_roots(c: tuple[Wide, Wide, Wide]) -> tuple[np.ndarray, int]:
+    """``numpy.roots`` of :math:`s^3 + c_2 s^2 + c_1 s + c_0` as ``(lam, j)``, roots ``lam * 2**j``.
+
+    ``j = 0`` when every coefficient is a normal float in [2^-300, 2^300]; otherwise ``j`` makes
+    the coefficients of :math:`\\lambda = s/2^j` at most 1 in size. Roots at 0 (a zero
+    coefficient, or one below the scaled range) are kept, so there are always three.
+    """
+    coeffs = [float(x.to_float()) for x in c]
+    j = 0
+    if not all(x == 0.0 or 2.0**-300 <= abs(x) <= 2.0**300 for x in coeffs):
+        j = max(int(math.ceil(int(x.exp) / power)) for x, power in zip(c, (1, 2, 3)) if x.mant != 0)
+        coeffs = [float((x / Wide(1.0, j * power)).to_float()) for x, power in zip(c, (1, 2, 3))]
+    lam = np.roots([1.0, *coeffs]).astype(complex)
+    return np.append(lam, np.zeros(3 - lam.size, dtype=complex)), j
+
+
+def _roots(kappa: Wide, p: Params) -> tuple[np.ndarray, int, list | None]:
+    """Roots of a mode's (x, v, V) cubic: ``(lam, j, precise)``.
+
+    ``lam * 2**j`` are the ``numpy.roots`` values (:func:`_numpy_roots`). Those are known only
+    to about :math:`\\epsilon` times the largest root: not enough for a root far smaller than the
+    others (the slow decay of a stiff unit, e.g. -4e-22 next to roots of size 3e10) nor for a
+    real part far smaller than its root (a unit damped only by a weak electrical coupling).
+    When some root is below 1e-8 of the largest, or has such a real part, ``precise`` holds the
+    three roots as mpmath numbers: the largest from ``numpy.roots``, the smallest from the
+    reversed cubic (whose largest roots they are), the third from :math:`s_1 s_2 s_3 = -b_0`,
+    all polished by Newton's method on the exact coefficients at 40, then 160, then 640 digits
+    until their real parts are resolved (a real part still below that precision is NaN).
+    Otherwise ``precise`` is None.
+    """
+    import mpmath
+
+    b = _cubic(kappa, p)
+    lam, j = _numpy_roots(b)
+    big = float(np.abs(lam).max())
+    unresolved = (np.abs(lam) < 1e-8 * big) | (np.abs(lam.real) < 1e-8 * big)
+    if b[2].mant == 0 or not unresolved.any():
+        return lam, j, None
+    b2, b1, b0 = b
+    mu, jr = _numpy_roots((b1 / b0, b2 / b0, 1.0 / b0))
+    with mpmath.workdps(40):
+        large = sorted((_mpc(z, j) for z in lam), key=lambda z: -abs(z))
+        small = sorted((1 / _mpc(z, jr) for z in mu if z != 0), key=abs)
+        c0 = _mp(b0)
+        if large[0].imag != 0:
+            guess = [large[0], large[1], -c0 / (large[0] * large[1])]
+        elif len(small) > 1 and small[0].imag != 0:
+            guess = [large[0], small[0], small[1]]
+        else:
+            guess = [large[0], small[0], -c0 / (large[0] * small[0])]
+    return lam, j, _polish(guess, _mp(kappa), p)
+
+
+def _mp(x: Wide) -> Any:
+    """A (0-d) :class:`Wide` as an mpmath number, exactly."""
+    import mpmath
+
+    return mpmath.ldexp(mpmath.mpf(float(x.mant)), int(x.exp))
+
+
+def _mpc(z: complex, j: int) -> Any:
+    """``z * 2**j`` as an mpmath complex, exactly."""
+    import mpmath
+
+    return mpmath.mpc(mpmath.ldexp(z.real, j), mpmath.ldexp(z.imag, j))
+
+
+def _polish(guess: list, kappa: Any, p: Params) -> list:
+    """Newton's method on a mode's cubic from ``guess``, its coefficients exact at each precision.
+
+    The coefficients are formed in mpmath from the exact binary parameters (a float
+    :math:`\\kappa/m + K_vK_c/m` would drop the weak coupling that decides the damping).
+    """
+    import mpmath
+
+    for dps in (40, 160, 640):
+        with mpmath.workdps(dps):
+            m, g, tp, Kv, Kc = (mpmath.mpf(x) for x in (p.m, p.gamma, p.tau_p, p.Kv, p.Kc))
+            c2, c1, c0 = g + 1 / tp, kappa / m + g / tp + Kv * Kc / m, kappa / (m * tp)
+            zs = []
+            for z in guess:
+                z = mpmath.mpc(z)
+                for _ in range(8 + dps // 20):
+                    slope = (3 * z + 2 * c2) * z + c1
+                    if slope == 0:
+                        break
+                    z = z - (((z + c2) * z + c1) * z + c0) / slope
+                zs.append(z)
+            resolved = [abs(z.real) > mpmath.mpf(10) ** (10 - dps) * abs(z) for z in zs]
+            if all(resolved):
+                return zs
+    return [z if ok else mpmath.mpc(mpmath.nan, z.imag) for z, ok in zip(zs, resolved)]
+
+
 def mode_eigenvalues(kappa: float, params: Params) -> np.ndarray:
     """The four eigenvalues of one mode's drift: -1/tau and the roots of the (x, v, V) cubic.
 
@@ -94,40 +241,85 @@ def mode_eigenvalues(kappa: float, params: Params) -> np.ndarray:
 
         s^3 + (\\gamma + 1/\\tau_p) s^2 + (\\kappa/m + \\gamma/\\tau_p + K_vK_c/m) s
         + \\kappa/(m\\tau_p) = 0
+
+    Eigenvalues beyond the double range come back as complex infinities (or 0 below it), a
+    real part that cannot be resolved as NaN; :func:`wide_growth_rate` gives the largest real
+    part without the range limitation.
     """
-    p = params
-    cubic = [1.0, p.gamma + 1.0 / p.tau_p, kappa / p.m + p.gamma / p.tau_p + p.Kv * p.Kc / p.m,
-             kappa / (p.m * p.tau_p)]
-    roots = np.roots(cubic)
-    return np.concatenate([roots, [-1.0 / p.tau]])
+    lam, j, precise = _roots(Wide.of(kappa), params)
+    if precise is not None:
+        roots = np.array([complex(z) for z in precise])
+    else:
+        with np.errstate(over="ignore", under="ignore", invalid="ignore"):
+            roots = np.ldexp(lam.real, j) + 1j * np.ldexp(lam.imag, j)
+    return np.concatenate([roots, [-(Wide.of(1.0) / Wide.of(params.tau)).to_float()]])
+
+
+def wide_growth_rate(kappa: float | Wide, params: Params) -> Wide | None:
+    """Largest real part of the spectrum of a mode of stiffness ``kappa``, as a :class:`Wide`.
+
+    ``None`` when it is not resolved even at 640 digits (a real part below 1e-630 of its root).
+    """
+    import mpmath
+
+    lam, j, precise = _roots(Wide.of(kappa), params)
+    if precise is None:
+        rate = Wide(float(lam.real.max()), j)
+    else:
+        known = [z.real for z in precise if not mpmath.isnan(z.real)]
+        if len(known) < len(precise) and not (known and max(known) > 0):
+            return None
+        mant, exp = mpmath.frexp(max(known))
+        rate = Wide(float(mant), int(exp))
+    decay = -(Wide.of(1.0) / Wide.of(params.tau))
+    return rate if (rate - decay).sign() >= 0 else decay
 
 
 def ring_spectrum(h: Harvester) -> np.ndarray:
     """All 4N eigenvalues of the ring's drift, mode by mode (shape (N, 4))."""
-    return np.array([mode_eigenvalues(kap, h.params) for kap in h.mode_stiffness()])
+    kappa, _ = wide_mode_stiffness(h.a, h.k, h.N)
+    return np.array([mode_eigenvalues(kappa[q], h.params) for q in range(h.N)])
 
 
 def mode_growth_rate(kappa: float, params: Params) -> float:
-    """Largest real part of the spectrum of one mode of stiffness ``kappa`` (> 0: it grows)."""
-    return float(mode_eigenvalues(kappa, params).real.max())
+    """Largest real part of the spectrum of one mode of stiffness ``kappa`` (> 0: it grows).
+
+    ``inf`` (or a value below the normal range) when the rate itself is beyond the double range,
+    NaN when it is not resolved (:func:`wide_growth_rate`).
+    """
+    rate = wide_growth_rate(kappa, params)
+    return math.nan if rate is None else float(rate.to_float())
+
+
+def kappa_min(h: Harvester) -> Wide:
+    """Smallest mode stiffness: mode 0 for ``k >= 0``, the critical mode ``N // 2`` for ``k < 0``.
+
+    Computed for that mode alone, with the same operations as :func:`wide_mode_stiffness`.
+    """
+    q = np.array([h.N // 2 if h.k < 0 else 0])
+    s2 = np.sin(math.pi * np.minimum(q, h.N - q) / h.N) ** 2  # as in mode_sin2
+    return (2.0 * Wide.of(h.a) + 4.0 * Wide.of(h.k) * Wide.of(s2))[0]
 
 
 def growth_rate(h: Harvester) -> float:
-    """Largest real part of the ring's drift spectrum (> 0 means unstable)."""
-    return mode_growth_rate(float(h.mode_stiffness().min()), h.params)
+    """Largest real part of the ring's drift spectrum (> 0 means unstable; see :func:`mode_growth_rate`)."""
+    rate = wide_growth_rate(kappa_min(h), h.params)
+    return math.nan if rate is None else float(rate.to_float())
 
 
 def classify(h: Harvester) -> tuple[str, float]:
     """``("stable" | "marginal" | "unstable", smallest mode stiffness)`` of a harmonic ring.
 
-    A ring whose smallest stiffness is within :data:`MARGINAL_RTOL` of zero (relative to
-    ``2a + 4|k|``) counts as marginal, so that ``k = k_di`` typed in floating point lands there.
+    Each mode is judged against its own round-off scale (:func:`classify_modes`), so that
+    ``k = k_di`` typed in floating point is marginal while e.g. ``k = 1e14`` or ``a = 1e-14`` with
+    ``k = 1`` stays stable. The stiffness is returned as a float (``inf`` past the double range).
     """
-    kmin = float(h.mode_stiffness().min())
-    scale = 2.0 * h.a + 4.0 * abs(h.k)
-    if abs(kmin) <= MARGINAL_RTOL * scale:
-        return "marginal", kmin
-    return ("stable" if kmin > 0 else "unstable"), kmin
+    kappa, scale = wide_mode_stiffness(h.a, h.k, h.N)
+    marginal, unstable = classify_modes(kappa, scale)
+    kmin = float(kappa_min(h).to_float())
+    if unstable.any():
+        return "unstable", kmin
+    return ("marginal" if marginal.any() else "stable"), kmin
 
 
 @dataclass(frozen=True)

@@ -48,6 +48,24 @@ def test_classify():
     assert classify(Harvester.build(N=3, k=k_di(3, 0.5)))[0] == "marginal"
     assert classify(Harvester.build(N=3, k=-0.34))[0] == "unstable"
     assert classify(Harvester.build(N=3, k=k_di(3, 0.5) * (1 - 1e-12)))[0] == "stable"
+    # each mode judged on its own round-off: q = 0 has stiffness exactly 2a, however large k
+    # or small a (these three were "marginal" when the tolerance was relative to 2a + 4|k|)
+    assert classify(Harvester.build(N=3, k=1e14)) == ("stable", 1.0)
+    assert classify(Harvester.build(N=2, k=1e50)) == ("stable", 1.0)
+    assert classify(Harvester.build(a=1e-14, N=3, k=1.0)) == ("stable", 2e-14)
+    assert classify(Harvester.build(a=1e308, N=4, k=-1e308))[0] == "unstable"
+    assert classify(Harvester.build(a=1e308, N=4, k=k_di(4, 1e308)))[0] == "marginal"
+
+
+def test_growth_rates_of_stiff_and_weakly_damped_modes_are_resolved():
+    """numpy.roots alone returned 0.0 for these stable modes (slow root -4e-22 next to roots of
+    size 3e10; a real part -9e-17 next to an imaginary part 1): the sign must be right."""
+    from fpe_harvester.exact import mode_growth_rate
+
+    assert mode_growth_rate(1.0, Params(Kc=2.0**70)) == pytest.approx(-0.5 / 2.0**70, rel=1e-12)
+    assert -1e-16 < mode_growth_rate(1.0, Params(Kc=2.0**-51, gamma=0.0)) < 0
+    assert mode_growth_rate(1.0, Params(tau_p=2.0**-205)) == pytest.approx(-0.5, rel=1e-12)
+    assert mode_growth_rate(-1.0, Params()) > 0 and mode_growth_rate(0.0, Params()) == 0.0
 
 
 def test_threshold_object():

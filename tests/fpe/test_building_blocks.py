@@ -10,7 +10,6 @@ import scipy.sparse as sp
 import scipy.sparse.linalg as spla
 
 from fpe_harvester import Harvester, ParameterError
-from fpe_harvester.exact import lyapunov_covariance
 from fpe_harvester.fpe import HermiteBasis, XMesh
 from fpe_harvester.fpe.assemble import assemble_x, split_flux
 from fpe_harvester.fpe.blocksolve import BlockTridiagonal
@@ -54,11 +53,25 @@ def test_generator_reproduces_gaussian_stationary_moments() -> None:
     assert np.abs(K0 @ c).max() < 1e-12
 
 
-def test_whitening_is_lyapunov_for_harmonic() -> None:
-    h = Harvester.build(a=0.5, n=2)
+@pytest.mark.parametrize("params", [{}, {"m": 1.7, "gamma": 0.3, "Kv": 2.5, "Kc": 0.4, "sigma": 1.3,
+                                     "tau": 0.6, "D": 2.2, "tau_p": 5.0}])
+def test_whitening_of_a_harmonic_unit_is_its_stationary_covariance(params) -> None:
+    """n = 2: the equivalent stiffness is 2a and the weight is the unit's stationary covariance,
+    checked against a 40-digit Lyapunov solve (independent of the scipy solve the code uses) and
+    the exact facts <x v> = 0 (d<x^2>/dt = 0) and <xi^2> = D/tau."""
+    from validation.references import mp_mode_moments
+
+    h = Harvester.build(a=0.7, n=2, **params)
     kappa, P = equivalent_harmonic(h)
-    assert kappa == 1.0
-    assert np.allclose(P, lyapunov_covariance(1.0, h.params))
+    assert kappa == 1.4
+    ref = {key: float(val) for key, val in mp_mode_moments(1.4, h.params).items()}
+    p = h.params
+    expected = {(0, 0): ref["x2"], (1, 1): ref["v2"], (2, 2): ref["V2"], (1, 2): ref["vV"],
+                (1, 3): ref["Pin"] / p.sigma, (0, 1): 0.0, (3, 3): p.D / p.tau}
+    for (i, j), value in expected.items():
+        assert P[i, j] == pytest.approx(value, rel=1e-10, abs=1e-14), (i, j)
+        assert P[j, i] == pytest.approx(value, rel=1e-10, abs=1e-14), (j, i)
+    assert np.linalg.eigvalsh(P).min() > 0
 
 
 def test_mesh_has_node_at_zero_and_is_symmetric() -> None:

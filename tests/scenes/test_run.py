@@ -210,9 +210,15 @@ def test_shipped_harmonic_scene_quick(tmp_path: Path) -> None:
 @pytest.mark.parametrize("name", ["fig1_eta_vs_n", "fig2_eta_vs_k_n1_ring", "fig3_eta_vs_k_n3_ring",
                                   "fig5_optimum_vs_N", "fig6_eta_vs_k_several_a", "kdi_map"])
 def test_shipped_scene_quick_runs(tmp_path: Path, name: str) -> None:
+    """Every figure drawn, every status true for its system, the accuracy asked for met by every
+    stable row, harmonic rows equal to the 60-digit closed form (validation.figures.row_checks)."""
+    from validation.figures import row_checks
+
     res = scene_run.run_scene(load_scene(name), tmp_path, quick=True, progress=False)
-    assert res.rows and all(p.exists() for p in res.figures.values())
-    assert all(r.ok or r.message for r in res.rows)
+    assert res.rows and len(res.figures) == len(res.scene.figures)
+    assert all(p.exists() for p in res.figures.values())
+    failed = [c.detail for c in row_checks(name, res.scene, res.rows) if not c.passed]
+    assert not failed, failed
 
 
 def test_parallel_workers_match_serial(tmp_path: Path, monkeypatch) -> None:

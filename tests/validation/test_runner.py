@@ -26,14 +26,24 @@ def _crashing(ctx):
     raise RuntimeError("step exploded")
 
 
+def _skipping(ctx):
+    from validation.checks import skipped
+
+    sec = Section("skip", "Skipping step")
+    sec.checks.append(skipped("never ran", "Skipping step", "the quick run's overall time budget was used up"))
+    return sec
+
+
 def test_validate_writes_both_reports(tmp_path):
     rep = runner.validate(quick=True, out=tmp_path, steps=[(_passing, "Passing step")])
     assert not rep.failed
     assert (tmp_path / "report.md").is_file() and (tmp_path / "report.html").is_file()
     assert "Passing step" in (tmp_path / "report.md").read_text()
-    # the closing identities section reports every solver that produced nothing as skipped
-    skips = [c.name for c in rep.checks if c.outcome.value == "SKIP"]
+    # the closing identities section reports every solver that produced nothing as skipped ...
+    skips = [c.name for c in rep.skipped]
     assert skips == ["identities [exact]", "identities [fpe]", "identities [mc]"]
+    # ... which a quick run may do, a full run may not
+    assert runner.exit_code(rep, quick=True) == 0 and runner.exit_code(rep, quick=False) == 1
 
 
 def test_a_crashing_step_becomes_a_failed_check(tmp_path):
@@ -62,14 +72,22 @@ def test_cli_arguments():
     assert exc.value.code == 2
 
 
-@pytest.mark.parametrize(("steps", "code"), [((( _passing, "Passing step"),), 0),
-                                              (((_passing, "Passing step"), (_failing, "Failing step")), 1)])
-def test_cli_exit_code(monkeypatch, tmp_path, capsys, steps, code):
+@pytest.mark.parametrize(("steps", "quick", "code"), [
+    (((_passing, "Passing step"),), True, 0),
+    (((_passing, "Passing step"), (_failing, "Failing step")), True, 1),
+    (((_passing, "Passing step"), (_skipping, "Skipping step")), True, 0),
+    (((_passing, "Passing step"), (_skipping, "Skipping step")), False, 1),
+])
+def test_cli_exit_code(monkeypatch, tmp_path, capsys, steps, quick, code):
+    """A failure fails any run; a skip fails the full run, and a quick run names every skip."""
     monkeypatch.setattr(runner, "STEPS", steps)
-    assert main(["validate", "--quick", "--no-progress", "--out", str(tmp_path)]) == code
+    assert main(["validate", *(["--quick"] if quick else []), "--no-progress", "--out", str(tmp_path)]) == code
     out = capsys.readouterr().out
     assert "passed" in out and "report.md" in out
     assert (tmp_path / "report.html").is_file()
+    if any(title == "Skipping step" for _, title in steps):
+        assert "SKIP    never ran" in out and "check(s) SKIPPED" in out
+        assert ("allowed in a quick run" in out) == quick
 
 
 def test_cli_negative_seed_is_a_clean_error(monkeypatch, tmp_path, capsys):
@@ -93,3 +111,9 @@ def test_module_steps_are_imported_and_a_missing_one_fails(tmp_path):
 def test_report_keeps_the_plan_order(tmp_path):
     rep = runner.validate(out=tmp_path, steps=[(_failing, "Failing step"), (_passing, "Passing step")])
     assert [s.title for s in rep.sections][:2] == ["Failing step", "Passing step"]
+
+
+def test_python_m_validation_unwritable_out_is_a_one_line_error(capsys):
+    assert runner.main(["--out", "/dev/null/x", "--no-progress"]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and "--out '/dev/null/x': cannot create the output folder" in err

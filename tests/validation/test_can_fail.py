@@ -1,0 +1,102 @@
+"""Each validation check fails when it should: fed a wrong answer, a false status, an error bar
+too wide to test anything, or a result without numbers, it does not pass."""
+
+from __future__ import annotations
+
+from dataclasses import replace
+
+import pytest
+
+from fpe_harvester import Harvester, Stats, Status, solve
+from validation.checks import Outcome, agree
+from validation.crosscheck import _compare
+from validation.figures import row_checks
+from validation.paper import PAPER_ROWS, _row_check, vrms_text
+from validation.stress import _judge
+
+
+def _mc_like(r: Stats, scale: float = 1.0, rel_err: float = 1e-3, status: Status = Status.STABLE) -> Stats:
+    return Stats.from_moments(V2=r.V2 * scale, Pin=r.Pin, R=1.0, V2_err=rel_err * r.V2, Pin_err=rel_err * r.Pin,
+                              v2=r.v2, v2_err=rel_err * r.v2, vV=r.vV * scale, vV_err=rel_err * r.vV, method="mc",
+                              status=status, message="" if status is Status.STABLE else "what happened")
+
+
+H = Harvester.build(a=0.5, N=3, k=-0.25)
+
+
+def test_agree_fails_when_the_error_bars_are_too_wide_to_test_anything():
+    assert agree("x", "s", 1.0, 0.002, 1.005, 0.0, max_rel_tol=0.03).passed
+    wide = agree("x", "s", 1.0, 0.5, 1.005, 0.0, max_rel_tol=0.03)
+    assert wide.outcome is Outcome.FAIL and "exceeds the cap" in wide.detail
+
+
+def test_cross_check_needs_converged_results_and_fails_on_a_wrong_one():
+    ex = solve(H)
+    assert all(c.passed for c in _compare("ok", _mc_like(ex), ex, quick=True))
+    wrong = _compare("wrong", _mc_like(ex, scale=1.02), ex, quick=True)
+    assert not wrong[0].passed  # eta off by 2 % with 0.1 % errors
+    unconverged = _compare("nc", _mc_like(ex, rel_err=0.5, status=Status.NOT_CONVERGED), ex, quick=True)
+    assert not any(c.passed for c in unconverged) and "exceeds the cap" in unconverged[0].detail
+    honest = _compare("nc", _mc_like(ex, rel_err=1e-3, status=Status.NOT_CONVERGED), ex, quick=True)
+    assert all(c.passed for c in honest)  # a best estimate is tested by its error bar
+    none = _compare("unstable", Stats(status=Status.UNSTABLE, method="mc", message="grows"), ex, quick=True)
+    assert not any(c.passed for c in none) and "no stationary number" in none[0].detail
+
+
+def test_paper_row_check_fails_on_a_wrong_number_and_on_a_missing_one():
+    row = PAPER_ROWS[-1]  # N = 3 harmonic, k = -0.33, eta = 0.677
+    r = solve(Harvester.build(a=row.a, n=row.n, N=row.N, k=-0.33))
+    assert _row_check(row, -0.33, r, 0.0005).passed
+    assert not _row_check(row, -0.33, replace(r, eta=0.69), 0.0005).passed
+    assert not _row_check(row, -0.33, replace(r, eta_err=0.05), 0.0005).passed  # cap: cannot test 3 digits
+    nc = Stats(status=Status.NOT_CONVERGED, method="fpe", message="budget")
+    assert not _row_check(row, -0.33, nc, 0.0005).passed
+    assert not _row_check(row, -0.33, replace(r, status=Status.UNSTABLE), 0.0005).passed
+
+
+def test_vrms_paragraph_follows_the_numbers():
+    constant = vrms_text([("a", 14.1, 10.0), ("b", 14.2, 10.3)], {"a": True, "b": True})
+    assert "constant multiple of sqrt(<V^2>) within" in constant and "close to sqrt(200)" in constant
+    assert "Every printed eta agrees" in constant
+    scattered = vrms_text([("a", 10.0, 10.0), ("b", 14.2, 10.1)], {"a": True, "b": False})
+    assert "not a constant multiple" in scattered and "not for: b" in scattered
+    assert "Vrms ~ 10 eta" in scattered
+
+
+def test_stress_judge_fails_false_statuses_refusals_and_wrong_numbers():
+    nonlinear = Harvester.build(a=0.5, n=3)
+    ex = solve(H)
+    good = _judge("ok", "exact", lambda: ex, H, lambda: ex)
+    assert all(c.passed for c in good)
+    assert not any(c.passed for c in _judge("unstable", "mc", lambda: Stats(status=Status.UNSTABLE, message="m"),
+                                            nonlinear))
+    assert not any(c.passed for c in _judge("meta", "mc", lambda: Stats(status=Status.METASTABLE, message="m"),
+                                            nonlinear))
+
+    def refuse() -> Stats:
+        from fpe_harvester import ParameterError
+
+        raise ParameterError("no")
+
+    assert not any(c.passed for c in _judge("refused", "mc", refuse, nonlinear))
+    wrong = _judge("wrong", "exact", lambda: _mc_like(ex, scale=1.05), H, lambda: ex)
+    assert any(c.outcome is Outcome.FAIL for c in wrong)
+    empty = _judge("empty", "fpe", lambda: Stats(status=Status.NOT_CONVERGED, message="budget"), nonlinear)
+    assert [c.outcome for c in empty] == [Outcome.SKIP]
+    beyond = Harvester.build(a=0.5, N=3, k=-0.4)
+    assert _judge("beyond", "exact", lambda: solve(beyond), beyond, expected=Status.UNSTABLE)[0].passed
+    assert not _judge("beyond", "exact", lambda: ex, beyond, expected=Status.UNSTABLE)[0].passed
+
+
+def test_scene_rows_are_checked_for_status_accuracy_and_exact_values(tmp_path):
+    from fpe_harvester.scenes import load_scene, run_scene
+
+    res = run_scene(load_scene("fig4_eta_vs_k_harmonic"), tmp_path, quick=True, progress=False)
+    assert all(c.passed for c in row_checks("fig4", res.scene, res.rows))
+    row = res.rows[0]
+    lying = [replace(row, status="unstable")] + list(res.rows[1:])
+    assert not row_checks("fig4", res.scene, lying)[0].passed
+    sloppy = [replace(row, values={**row.values, "eta_err": 0.5 * row.values["eta"]})] + list(res.rows[1:])
+    assert not row_checks("fig4", res.scene, sloppy)[1].passed
+    off = [replace(row, values={**row.values, "eta": row.values["eta"] * (1 + 1e-9)})] + list(res.rows[1:])
+    assert not row_checks("fig4", res.scene, off)[2].passed
