@@ -24,7 +24,7 @@ import scipy.linalg
 
 from fpe_harvester.model import Harvester
 
-from ._kernels import KIND_KICK, KIND_KINK, KIND_LINEAR
+from ._kernels import KIND_KICK, KIND_KINK, KIND_LINEAR, SNAP
 
 __all__ = ["scheme_kind", "linear_stiffness", "step_coefficients", "physical_vector", "SCHEME_NAMES"]
 
@@ -90,11 +90,12 @@ def step_coefficients(h: Harvester, dt: float) -> np.ndarray:
     return cf
 
 
-def physical_vector(h: Harvester, threshold: float) -> np.ndarray:
-    """Physical parameter array ``pp`` of the kernels; ``threshold`` is the escape amplitude."""
+def physical_vector(h: Harvester, threshold: float, snap: float = SNAP) -> np.ndarray:
+    """Parameter array ``pp`` of the kernels; ``threshold`` is the escape amplitude, ``snap``
+    the kink's sticking rule (:data:`montecarlo._kernels.SNAP`)."""
     p = h.params
     return np.array(
         [p.m, p.gamma, p.Kv, p.Kc, p.tau_p, p.sigma, h.k if h.N > 1 else 0.0, h.a, h.n,
-         linear_stiffness(h), threshold, p.noise_variance],
+         linear_stiffness(h), threshold, p.noise_variance, snap],
         dtype=float,
     )

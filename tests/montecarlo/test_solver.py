@@ -108,12 +108,19 @@ def test_escape_detected_beyond_k_di() -> None:
 
 
 def test_metastable_ring_is_labelled() -> None:
+    h = Harvester.build(a=0.5, n=1.0, N=3, k=-0.01)
+    r = solve(h, "mc", seed=5, tol=0.02, dt=0.05, t_run=50.0, progress=False)
+    assert r.status is Status.METASTABLE, r.message
+    assert r.message.startswith("metastable:") and "quasi-stationary" in r.message
+    assert 0.0 <= r.info["escape_fraction"] <= 1.0
+
+
+def test_not_converged_overrides_metastable_and_keeps_the_class_in_the_message() -> None:
     h = Harvester.build(a=0.5, n=1.5, N=3, k=-0.2)
     r = solve(h, "mc", seed=5, dt=0.05, paths=32, t_run=50.0, min_replicas=2, max_replicas=2,
               progress=False)
-    assert r.status is Status.METASTABLE
-    assert "quasi-stationary" in r.message
-    assert 0.0 <= r.info["escape_fraction"] <= 1.0
+    assert r.status is Status.NOT_CONVERGED
+    assert r.message.startswith("metastable:") and "NOT CONVERGED" in r.message
 
 
 def test_time_budget_gives_not_converged_with_numbers() -> None:
