@@ -48,6 +48,8 @@ _DT_START, _DT_MIN, _BIAS_SHARE = 0.02, 0.02 / 32, 1.0 / 3.0
 #: Restarts allowed for a longer burn-in, and the drift that triggers one (in standard
 #: errors, and relative to tol).
 _BURN_RESTARTS, _DRIFT_SIGMAS, _DRIFT_SHARE = 3, 3.0, 1.0 / 3.0
+#: Automatic measured time per path, in burn-ins (when longer than 100).
+_RUN_PER_BURN = 3.0
 
 
 @dataclass(frozen=True)
@@ -112,7 +114,8 @@ class MonteCarlo:
         Burn-in per path (>= 0); None: from the slowest relaxation time and ``tol``
         (:func:`montecarlo.plan.burn_in`), doubled while the data show a transient.
     t_run : float or None
-        Measured time per path, > 0. None: 100, or the burn-in if that is longer.
+        Measured time per path, > 0. None: 100, or three times the burn-in if that is longer
+        (so that the burn-in costs at most a quarter of the run).
     max_time : float
         Wall-time budget in seconds, > 0. Default 600.
     escape : float or None
@@ -254,7 +257,7 @@ class MonteCarlo:
                 notes["t_burn"] = "no decaying mode: 100 t_run"
             elif self.t_run is None:
                 for _ in range(4):  # t_run follows a long burn-in, which then shortens
-                    t_run = max(100.0, t_burn)
+                    t_run = max(100.0, _RUN_PER_BURN * t_burn)
                     t_burn = burn_in(tau_r, self.tol, t_run)
         paths = self.paths or max(2, min(64, int(round(64 * _PATH_TIME / (t_burn + t_run)))))
         if self.t_run is None and dt > t_run:
@@ -283,7 +286,7 @@ class MonteCarlo:
         if (self.t_burn is None and drift > _DRIFT_SIGMAS * drift_se
                 and drift > _DRIFT_SHARE * self.tol * eta):
             t_burn = 2.0 * plan.t_burn
-            t_run = plan.t_run if self.t_run is not None else max(plan.t_run, t_burn)
+            t_run = plan.t_run if self.t_run is not None else max(plan.t_run, _RUN_PER_BURN * t_burn)
             paths = self.paths or max(2, min(64, int(round(64 * _PATH_TIME / (t_burn + t_run)))))
             return "t_burn", dataclasses.replace(plan, t_burn=t_burn, t_run=t_run, paths=paths)
         return None
@@ -429,6 +432,9 @@ class MonteCarlo:
                     f"t_burn + t_run = {s.info['t_burn'] + s.info['t_run']:g}; the numbers are "
                     "quasi-stationary averages over the time before escape.")
             status = Status.METASTABLE
+        elif problems:
+            head = f"{h.confinement} system;"
+            status = Status.STABLE
         else:
             head = (f"stable; relative error on eta {rel:.2e} (standard error over {est.replicas} "
                     "replicas and time-step bias estimate in quadrature)")
