@@ -8,10 +8,11 @@ Private module. The Python side (:mod:`montecarlo.scheme`) builds the coefficien
     constant force; ``cf[12] = h``; ``cf[13] = e^{-h/\\tau}``;
     ``cf[14] = \\sqrt{(D/\\tau)(1 - e^{-2h/\\tau})}``; ``cf[15] = e^{-h/2\\tau}``.
 ``pp`` (physical)
-    ``m, gamma, Kv, Kc, tau_p, sigma, k, a, n, c, threshold, D/tau, snap`` where ``c`` is
-    the stiffness kept inside the linear flow (``2k``, plus ``2a`` for the harmonic
-    potential), ``threshold`` the escape amplitude and ``snap`` the kink's sticking rule
-    (:data:`SNAP`).
+    ``m, gamma, Kv, Kc, tau_p, sigma, k, a, n, c, threshold, D/tau, snap, a_kink`` where
+    ``c`` is the stiffness kept inside the linear flow (``2k``, plus ``2a`` for the harmonic
+    potential), ``threshold`` the escape amplitude, ``snap`` the kink's sticking rule
+    (:data:`SNAP`) and ``a_kink`` the strength :math:`an` of the kink part
+    :math:`-an\\,\\mathrm{sign}(x)` integrated exactly by the kink scheme (0 for the others).
 ``cf_t`` (harmonic twin, optional)
     ``cf`` of the harmonic ring with on-site stiffness ``kappa_t`` and the same ``k``, run on
     the fine level's noise; its moments are control variates (:mod:`montecarlo.twin`).
@@ -22,8 +23,12 @@ frozen; consecutive half steps of ``O`` merge, so the loop runs ``D(h) O(h)`` an
 after ``D`` (xi-dependent observables get the exact half-step factor ``e^{-h/2tau}``).
 Inside ``D`` the neighbours' positions enter as a constant force evaluated at the
 predicted midpoint; the on-site force is either part of the exact linear flow (n = 2),
-a Strang kick around it (smooth n), or, for the kink n = 1, handled by an exact
-piecewise-linear flow with located zero crossings and Filippov sticking.
+a Strang kick around it (smooth n), or, for the kink (1 <= n <= 1 + KINK_WIDTH of
+:mod:`montecarlo.scheme`), its part :math:`-an\\,\\mathrm{sign}(x)` is handled by an exact
+piecewise-linear flow with located zero crossings and the remainder by Strang kicks. Toward
+rest the kink's swings shrink exponentially in time and never stop (docs/model.md §3); once
+they are shorter than the step the scheme holds the unit at rest (:data:`SNAP`) until the
+net force exceeds :math:`an`, a time-step artifact counted as ``stuck``.
 """
 
 from __future__ import annotations
@@ -148,12 +153,13 @@ def _kink_unit(x: float, v: float, V: float, stuck: bool, f: float, cf: np.ndarr
                pp: np.ndarray, counters: np.ndarray, cs: np.ndarray) -> tuple:
     """Advance one unit of the n = 1 potential over one D step with external force f.
 
-    The slow path of :func:`_kink_flow`, for units at, stuck at or near x = 0. Exact piecewise flow: each side of x = 0 is linear with constant force f - a s; zero
-    crossings are located on the flow's Taylor series (bracketing + safeguarded Newton); at
-    x = v = 0 the unit sticks while the net force |f - Kv V| <= a (set-valued sign), and V
-    then decays exactly.
+    The slow path of :func:`_kink_flow`, for units at, held at or near x = 0. Exact
+    piecewise flow: each side of x = 0 is linear with constant force f - a s (a = ``pp[13]``);
+    zero crossings are located on the flow's Taylor series (bracketing + safeguarded Newton);
+    at x = v = 0 the unit is held while the net force |f - Kv V| <= a, and V then decays
+    exactly.
     """
-    m, Kv, tau_p, a = pp[0], pp[2], pp[4], pp[7]
+    m, Kv, tau_p, a = pp[0], pp[2], pp[4], pp[13]
     h = cf[12]
     counters[0] += 1
     t = 0.0
@@ -236,16 +242,28 @@ def _linear_flow(x, v, V, f, cf) -> None:
             V[j, p] = cf[6] * x0 + cf[7] * v0 + cf[8] * V0 + cf[11] * fp
 
 
+@njit(cache=True, nogil=True, inline="always")
+def _kick_force(x: float, pp: np.ndarray) -> float:
+    """The on-site force left to the kicks: -U'(x), minus the kink part -pp[13] sign(x) that
+    the kink flow integrates exactly (pp[13] = 0 for the smooth scheme)."""
+    F = _onsite_force(x, pp[7], pp[8])
+    if x > 0.0:
+        F += pp[13]
+    elif x < 0.0:
+        F -= pp[13]
+    return F
+
+
 @njit(cache=True, nogil=True)
 def _kick(x, v, F, h, pp, update) -> None:
-    """Half kick v += (h/2) F/m; with ``update`` first recompute F = -U'(x)."""
+    """Half kick v += (h/2) F/m; with ``update`` first recompute F (:func:`_kick_force`)."""
     N, P = x.shape
-    m, a, n = pp[0], pp[7], pp[8]
+    m = pp[0]
     hk = 0.5 * h / m
     for j in range(N):
         for p in range(P):
             if update:
-                F[j, p] = _onsite_force(x[j, p], a, n)
+                F[j, p] = _kick_force(x[j, p], pp)
             v[j, p] += hk * F[j, p]
 
 
@@ -253,7 +271,7 @@ def _kick(x, v, F, h, pp, update) -> None:
 def _kink_flow(x, v, V, stuck, f, w, cf, pp, counters, cs) -> None:
     """D step of the kink potential: one exact affine step away from x = 0, events near it."""
     N, P = x.shape
-    m, gamma, Kv, a, c = pp[0], pp[1], pp[2], pp[7], pp[9]
+    m, gamma, Kv, a, c = pp[0], pp[1], pp[2], pp[13], pp[9]
     h = cf[12]
     for j in range(N):
         for p in range(P):
@@ -286,7 +304,9 @@ def _d_step(x, v, V, xi, F, stuck, xm, fext, w, cf, pp, kind, counters, cs) -> N
     """
     N, P = x.shape
     h = cf[12]
-    if kind == KIND_KICK:
+    # the kink scheme kicks only the smooth remainder of a near-kink potential (n > 1)
+    kicks = kind == KIND_KICK or (kind == KIND_KINK and pp[8] != 1.0)
+    if kicks:
         _kick(x, v, F, h, pp, False)
     if N > 1:
         for j in range(N):
@@ -297,7 +317,7 @@ def _d_step(x, v, V, xi, F, stuck, xm, fext, w, cf, pp, kind, counters, cs) -> N
         _kink_flow(x, v, V, stuck, fext, w, cf, pp, counters, cs)
     else:
         _linear_flow(x, v, V, fext, cf)
-    if kind == KIND_KICK:
+    if kicks:
         _kick(x, v, F, h, pp, True)
 
 
@@ -309,7 +329,7 @@ def _measure(x, v, V, xi, stuck, F, w, cf, pp, kind, acc) -> float:
     """
     N, P = x.shape
     half = cf[15]
-    a = pp[7]
+    a, n = pp[7], pp[8]
     s0 = s1 = s2 = s3 = s4 = s5 = s6 = 0.0
     for j in range(N):
         for p in range(P):
@@ -327,7 +347,8 @@ def _measure(x, v, V, xi, stuck, F, w, cf, pp, kind, acc) -> float:
     elif kind == KIND_KINK:
         for j in range(N):
             for p in range(P):
-                s6 += w[p] * a * abs(x[j, p])
+                ax = abs(x[j, p])
+                s6 += w[p] * a * (ax if n == 1.0 else n * ax**n)
     else:
         s6 = 2.0 * a * s3
     acc[0] += s0
@@ -495,8 +516,8 @@ def _run(gen, P: int, N: int, nburn: int, nrun: int, stride: int, cf_f: np.ndarr
         for p in range(P):
             xc[j, p], vc[j, p], Vc[j, p], xic[j, p] = xf[j, p], vf[j, p], Vf[j, p], xif[j, p]
             xt[j, p], vt[j, p], Vt[j, p] = xf[j, p], vf[j, p], Vf[j, p]
-            if kind == KIND_KICK:
-                Ff[j, p] = _onsite_force(xf[j, p], pp[7], pp[8])
+            if kind != KIND_LINEAR:
+                Ff[j, p] = _kick_force(xf[j, p], pp)
                 Fc[j, p] = Ff[j, p]
     h = cf_c[12] if coupled else cf_f[12]
     # the two fine half-step normals combine into the coarse normal exactly

@@ -36,11 +36,12 @@ BIAS_ORDER = {"smooth": 2.0, "nonsmooth": 1.0}
 _NAMES = ("V2", "Pin", "v2", "vV", "x2", "stuck")
 
 
-def bias_order(h: Harvester) -> float:
-    """Weak order of the time-step bias assumed for ``h``'s scheme (see :data:`BIAS_ORDER`)."""
+def bias_order(h: Harvester, kind: int | None = None) -> float:
+    """Weak order of the time-step bias assumed for a scheme (default ``h``'s, see :data:`BIAS_ORDER`)."""
     from .scheme import KIND_KINK, scheme_kind
 
-    return BIAS_ORDER["nonsmooth" if scheme_kind(h) == KIND_KINK else "smooth"]
+    kind = scheme_kind(h) if kind is None else kind
+    return BIAS_ORDER["nonsmooth" if kind == KIND_KINK else "smooth"]
 
 
 @dataclass(frozen=True)
@@ -140,7 +141,7 @@ def estimate(e: Ensemble, h: Harvester, order: float | None = None, control: boo
         least ``MIN_DOF`` residual degrees of freedom. True raises if that is not the case.
     """
     if order is None:
-        order = bias_order(h)
+        order = bias_order(h, e.notes.get("scheme_kind"))
     fine = _per_replica(e, h, 0)
     coarse = _per_replica(e, h, 1) if e.levels > 1 else None
     first = _per_replica(e, h, -1)

@@ -23,7 +23,7 @@ import numpy as np
 from fpe_harvester.errors import ParameterError, check_int, check_real
 from fpe_harvester.model import Harvester
 
-from ._kernels import MOMENTS, N_MOM, ROWS, SNAP, run_chunk
+from ._kernels import KIND_KICK, KIND_KINK, MOMENTS, N_MOM, ROWS, SNAP, run_chunk
 from .scheme import physical_vector, scheme_kind, step_coefficients
 from .twin import initial_cholesky, twin_expectations, twin_harvester, twin_is_stable
 
@@ -151,6 +151,7 @@ def simulate(
     twin: float | None = None,
     start: str = "rest",
     snap: float = SNAP,
+    kind: int | None = None,
 ) -> Ensemble:
     """Simulate independent replicas of ``h`` and return their raw moment sums.
 
@@ -198,6 +199,9 @@ def simulate(
         Kink scheme only: a zero crossing whose return would take less than ``snap * dt``
         sticks at once, >= 0 (:data:`montecarlo._kernels.SNAP`; 0: only an exhausted event
         budget sticks). For time-step studies.
+    kind : int or None
+        Scheme (:data:`montecarlo._kernels.KIND_KICK` or ``KIND_KINK``; default
+        :func:`montecarlo.scheme.scheme_kind`), for comparing the schemes near n = 1.
 
     Returns
     -------
@@ -244,8 +248,11 @@ def simulate(
     dt_f = 0.5 * dt if richardson else dt
     cf_f = step_coefficients(h, dt_f)
     cf_c = step_coefficients(h, dt)
-    pp = physical_vector(h, threshold, snap)
-    kind = scheme_kind(h)
+    if kind is not None and (h.is_linear or kind not in (KIND_KICK, KIND_KINK)):
+        raise ParameterError(f"kind must be None, or {KIND_KICK} (kick) or {KIND_KINK} (kink) for a "
+                             f"nonlinear potential, got {kind!r} with n = {h.n:g}")
+    kind = scheme_kind(h) if kind is None else kind
+    pp = physical_vector(h, threshold, snap, kind)
     lin = twin_harvester(h, twin) if twin is not None else (h if h.is_linear else None)
     if twin is not None:
         cf_t, pp_t = step_coefficients(lin, dt_f), physical_vector(lin, threshold)

@@ -15,7 +15,15 @@ Measured in one run:
   error (bias from the fitted power law, statistics from its measured variance: a model
   evaluated with measured inputs, labelled as such);
 * time-step bias: coupled (common-noise) differences eta(dt/2) - eta(dt) for the harmonic unit,
-  the kink at a = 2 and the steep n = 1.1 potential, and the naive scheme's error at a = 2.
+  the kink at a = 2 and the steep n = 1.1 potential, and the naive scheme's error at a = 2;
+* control variates (the harmonic twin, :mod:`montecarlo.control`) for single units n = 1 to 8
+  and rings N = 3: the variance-reduction factor of eta, V2 and Pin on one ensemble, the
+  twin's cost (interleaved timings, median ratio), and the solver's wall time to a relative
+  error of 1e-4 with and without them, measured in the same run within a budget and, where
+  the budget runs out, extrapolated as ``wall * (se / se_needed)^2`` (labelled);
+* the kink's time-step law: coupled differences eta(dt) - eta(dt/2) for dt = 0.04 ... 0.005
+  at a = 0.5, 1, 2 with control variates, the fitted order, the stuck fraction and the effect
+  of the snap-to-rest rule (same noise with and without it).
 
 ``python -m validation.bench.montecarlo [--quick] [--out DIR]`` writes ``bench_montecarlo.json``
 and ``bench_montecarlo.png``.
@@ -32,8 +40,8 @@ from typing import Any
 import numpy as np
 from numba import njit, prange
 
-from fpe_harvester import Harvester
-from montecarlo import estimate, simulate, simulate_naive
+from fpe_harvester import Harvester, solve
+from montecarlo import MonteCarlo, estimate, simulate, simulate_naive
 from montecarlo.simulate import default_threads
 from validation.bench.cli import bench_main, save_benchmark
 
@@ -246,6 +254,132 @@ def _bias_study(quick: bool) -> dict[str, Any]:
     return out
 
 
+#: Cases of the control-variate study: label -> Harvester.build arguments.
+CV_CASES = {
+    "N1_n1_a0.5": dict(a=0.5, n=1.0),
+    "N1_n1_a1": dict(a=1.0, n=1.0),
+    "N1_n1.5_a1": dict(a=1.0, n=1.5),
+    "N1_n3_a0.5": dict(a=0.5, n=3.0),
+    "N1_n4_a0.5": dict(a=0.5, n=4.0),
+    "N1_n8_a0.5": dict(a=0.5, n=8.0),
+    "N3_n1_a0.5_k-0.005": dict(a=0.5, n=1.0, N=3, k=-0.005),
+    "N3_n1_a0.5_k-0.01": dict(a=0.5, n=1.0, N=3, k=-0.01),
+    "N3_n1.5_a1_k-0.01": dict(a=1.0, n=1.5, N=3, k=-0.01),
+    "N3_n3_a0.5_k-0.2": dict(a=0.5, n=3.0, N=3, k=-0.2),
+    "N3_n3_a0.5_k-0.5": dict(a=0.5, n=3.0, N=3, k=-0.5),
+    "N3_n4_a0.5_k-0.5": dict(a=0.5, n=4.0, N=3, k=-0.5),
+    "N3_n8_a0.5_k-0.5": dict(a=0.5, n=8.0, N=3, k=-0.5),
+}
+QUICK_CV_CASES = ("N1_n1_a0.5", "N1_n3_a0.5", "N3_n3_a0.5_k-0.5", "N3_n1_a0.5_k-0.01")
+CV_TARGET = 1e-4
+
+
+def _time_to_target(h: Harvester, control: bool, budget: float, seed: int) -> dict[str, Any]:
+    """Solver wall time to CV_TARGET, measured, or extrapolated from a run cut by the budget."""
+    r = solve(h, "mc", seed=seed, tol=CV_TARGET, max_time=budget, control=control, progress=False)
+    info = r.info
+    out = {"status": r.status.value, "wall_s": info["wall_time"], "replicas": info["replicas"],
+           "dt": info["dt"], "eta": r.eta, "eta_err": r.eta_err,
+           "rel_err": r.eta_err / abs(r.eta) if r.eta else None, "control_used": info["control_variates"],
+           "variance_reduction": info["variance_reduction"], "restarts": info["plan_notes"].get("restarts")}
+    stat = info["eta_standard_error"] / abs(r.eta)
+    bias = abs(info["bias_eta"] / r.eta)
+    out.update(rel_se=stat, rel_bias=bias)
+    if r.status.value == "stable" and out["rel_err"] <= CV_TARGET:
+        out.update(wall_to_target_s=out["wall_s"], extrapolated=False)
+    elif bias < 0.9 * CV_TARGET:
+        need = math.sqrt((0.9 * CV_TARGET) ** 2 - bias**2)
+        out.update(wall_to_target_s=out["wall_s"] * (stat / need) ** 2, extrapolated=True,
+                   note="extrapolated as wall * (se / se_needed)^2 from this run (budget ran out)")
+    else:
+        out.update(wall_to_target_s=None, extrapolated=True,
+                   note="bias-limited at this dt: the bias estimate alone exceeds 0.9 x target")
+    return out
+
+
+def _control_variates(quick: bool) -> dict[str, Any]:
+    """Variance reduction, twin cost and time to 1e-4 with and without control variates."""
+    out: dict[str, Any] = {}
+    names = QUICK_CV_CASES if quick else tuple(CV_CASES)
+    budget = 4.0 if quick else 90.0
+    for i, name in enumerate(names):
+        h = Harvester.build(**CV_CASES[name])
+        plan = MonteCarlo(seed=500 + i, tol=CV_TARGET).plan(h)
+        row: dict[str, Any] = {"case": CV_CASES[name], "twin_kappa": plan.twin, "t_burn": plan.t_burn,
+                               "t_run": plan.t_run, "paths": plan.paths, "dt": plan.dt,
+                               "twin_source": plan.notes.get("twin")}
+        if plan.twin is None:
+            out[name] = {**row, "note": "no stable harmonic twin: plain Monte Carlo only"}
+            continue
+        kw = dict(dt=plan.dt, paths=plan.paths, t_burn=plan.t_burn, t_run=plan.t_run, richardson=True)
+        reps = 32 if quick else 128
+        e = simulate(h, replicas=reps, seed=600 + i, twin=plan.twin, start="twin", **kw)
+        cv, plain = estimate(e, h, control=None), estimate(e, h, control=False)
+        row.update(replicas=reps, control_used=cv.control, escape_fraction=e.escaped_fraction(),
+                   eta_cv=cv.mean["eta"], se_cv=cv.se["eta"], eta_plain=plain.mean["eta"], se_plain=plain.se["eta"],
+                   vrf={q: cv.reduction.get(q) for q in ("eta", "V2", "Pin")})
+        # twin cost: same work with and without the twin, interleaved, median of the ratios
+        ratios = []
+        for rep in range(3 if quick else 5):
+            small = dict(kw, replicas=max(2, default_threads()), seed=700 + rep)
+            t_tw = simulate(h, twin=plan.twin, start="twin", **small).wall_time
+            t_no = simulate(h, **small).wall_time
+            ratios.append(t_tw / t_no)
+        row["twin_cost_ratio"] = float(np.median(ratios))
+        row["twin_cost_ratios"] = ratios
+        if cv.control and row["vrf"]["eta"]:
+            row["net_speedup"] = row["vrf"]["eta"] / row["twin_cost_ratio"]
+        # time to 1e-4, interleaved: with, without
+        row["to_1e-4_control"] = _time_to_target(h, True, budget, 800 + i)
+        row["to_1e-4_plain"] = _time_to_target(h, False, budget, 900 + i)
+        a, b = row["to_1e-4_control"]["wall_to_target_s"], row["to_1e-4_plain"]["wall_to_target_s"]
+        row["time_ratio_plain_over_control"] = (b / a) if a and b else None
+        out[name] = row
+    return out
+
+
+def _kink_dt_study(quick: bool) -> dict[str, Any]:
+    """Kink n = 1: coupled eta(dt) - eta(dt/2) per dt with control variates, fitted order,
+    stuck fraction, and the snap-to-rest rule's effect on the same noise."""
+    from montecarlo.twin import linearized_stiffness
+
+    out: dict[str, Any] = {}
+    plans = {0.5: ((0.04, 0.02, 0.01, 0.005), (600, 800, 250, 150)),
+             1.0: ((0.04, 0.02, 0.01, 0.005), (600, 800, 250, 150)),
+             2.0: ((0.04, 0.02, 0.01, 0.005), (300, 400, 300, 200))}
+    if quick:
+        plans = {0.5: ((0.04, 0.02), (24, 24)), 2.0: ((0.04, 0.02), (24, 24))}
+    for a, (dts, reps) in plans.items():
+        h = Harvester.build(a=a, n=1.0)
+        pil = simulate(h, dt=0.02, paths=16, replicas=4, t_burn=40.0, t_run=100.0, seed=1)
+        m = pil.moments(0)
+        kappa = linearized_stiffness(h, float(m["xdU"].mean()), float(m["x2"].mean()))
+        rows = []
+        for dt, R in zip(dts, reps):
+            e = simulate(h, dt=dt, paths=64, replicas=R, t_burn=30.0, t_run=100.0, seed=11, twin=kappa,
+                         start="twin", richardson=True)
+            est = estimate(e, h, order=1.0)  # order 1: bias = coarse - fine, the raw difference
+            m0, m1 = e.moments(0), e.moments(1)
+            rows.append({"dt": dt, "dt_fine": dt / 2, "replicas": R, "eta_fine": est.mean["eta"],
+                         "eta_fine_se": est.se["eta"], "diff": est.bias["eta"], "diff_se": est.bias_se["eta"],
+                         "vrf": est.reduction.get("eta"), "stuck_fine": float(np.nanmean(m0["stuck"])),
+                         "stuck_coarse": float(np.nanmean(m1["stuck"])), "wall_s": e.wall_time})
+        good = [r for r in rows if abs(r["diff"]) > 3 * r["diff_se"]]
+        fit = (float(np.polyfit(np.log([r["dt"] for r in good]), np.log([abs(r["diff"]) for r in good]), 1)[0])
+               if len(good) >= 2 else None)
+        snap = []
+        for dt, R in (((0.02, 150), (0.005, 60)) if not quick else ((0.02, 8),)):
+            kw = dict(dt=dt, paths=64, replicas=R, t_burn=30.0, t_run=100.0, seed=12, twin=kappa, start="twin")
+            m1, m0 = simulate(h, **kw).moments(0), simulate(h, snap=0.0, **kw).moments(0)
+            d = m1["V2"] / m1["vxi"] - m0["V2"] / m0["vxi"]
+            snap.append({"dt": dt, "eta_diff_snap_minus_nosnap": float(d.mean()),
+                         "se": float(d.std(ddof=1) / math.sqrt(R)), "stuck_snap": float(m1["stuck"].mean()),
+                         "stuck_nosnap": float(m0["stuck"].mean())})
+        out[f"a{a:g}"] = {"twin_kappa": kappa, "rows": rows, "fitted_order_from_resolved_points": fit,
+                          "snap": snap}
+    return out
+
+
 def run(quick: bool = False, out: Path | None = None) -> dict[str, Any]:
     """Run the benchmark; returns (and writes, when ``out`` is given) the measurements."""
     threads = default_threads()
@@ -261,6 +395,8 @@ def run(quick: bool = False, out: Path | None = None) -> dict[str, Any]:
     }
     res["equal_error"] = _equal_error(quick)
     res["bias"] = _bias_study(quick)
+    res["control_variates"] = _control_variates(quick)
+    res["kink_dt"] = _kink_dt_study(quick)
     save_benchmark(res, out, STEM, _plot)
     return res
 
