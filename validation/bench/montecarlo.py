@@ -23,7 +23,8 @@ Measured in one run:
   the budget runs out, extrapolated as ``wall * (se / se_needed)^2`` (labelled);
 * the kink's time-step law: coupled differences eta(dt) - eta(dt/2) for dt = 0.04 ... 0.005
   at a = 0.5, 1, 2 with control variates, the fitted order, the stuck fraction and the effect
-  of the snap-to-rest rule (same noise with and without it).
+  of stopping a unit as soon as its swing would return within a step (``snap = 1``) against
+  the default, which follows the swings until the event budget runs out (same noise).
 
 ``python -m validation.bench.montecarlo [--quick] [--out DIR]`` writes ``bench_montecarlo.json``
 and ``bench_montecarlo.png``.
@@ -370,11 +371,13 @@ def _kink_dt_study(quick: bool) -> dict[str, Any]:
         snap = []
         for dt, R in (((0.02, 150), (0.005, 60)) if not quick else ((0.02, 8),)):
             kw = dict(dt=dt, paths=64, replicas=R, t_burn=30.0, t_run=100.0, seed=12, twin=kappa, start="twin")
-            m1, m0 = simulate(h, **kw).moments(0), simulate(h, snap=0.0, **kw).moments(0)
+            # the default stops a unit only on an exhausted event budget; snap = 1 stops it
+            # once its swing would return within one step
+            m1, m0 = simulate(h, snap=1.0, **kw).moments(0), simulate(h, **kw).moments(0)
             d = m1["V2"] / m1["vxi"] - m0["V2"] / m0["vxi"]
-            snap.append({"dt": dt, "eta_diff_snap_minus_nosnap": float(d.mean()),
-                         "se": float(d.std(ddof=1) / math.sqrt(R)), "stuck_snap": float(m1["stuck"].mean()),
-                         "stuck_nosnap": float(m0["stuck"].mean())})
+            snap.append({"dt": dt, "eta_diff_snap1_minus_default": float(d.mean()),
+                         "se": float(d.std(ddof=1) / math.sqrt(R)), "stuck_snap1": float(m1["stuck"].mean()),
+                         "stuck_default": float(m0["stuck"].mean())})
         out[f"a{a:g}"] = {"twin_kappa": kappa, "rows": rows, "fitted_order_from_resolved_points": fit,
                           "snap": snap}
     return out
@@ -407,7 +410,7 @@ def _plot(res: dict[str, Any], path: Path) -> None:
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    fig, (ax1, ax2) = plt.subplots(1, 2, figsize=(10, 3.8))
+    fig, (ax1, ax2, ax3) = plt.subplots(1, 3, figsize=(15, 3.8))
     eq = res["equal_error"]
     curve = eq["engine"]["curve"]
     ax1.loglog([c["wall_s"] for c in curve], [c["rel_se_eta"] for c in curve], "o-", label="engine (se)")
@@ -436,6 +439,18 @@ def _plot(res: dict[str, Any], path: Path) -> None:
     ax2.set_xlabel("dt")
     ax2.set_ylabel("|eta(dt/2) - eta(dt)| / eta")
     ax2.legend(fontsize=7)
+    cvs = {k: v for k, v in res.get("control_variates", {}).items() if v.get("vrf")}
+    if cvs:
+        names = list(cvs)
+        y = np.arange(len(names))
+        ax3.barh(y - 0.2, [cvs[k]["vrf"]["eta"] or 0.0 for k in names], 0.4, label="variance reduction (eta)")
+        ratio = [cvs[k].get("time_ratio_plain_over_control") or 0.0 for k in names]
+        ax3.barh(y + 0.2, ratio, 0.4, label="time to 1e-4: plain / control")
+        ax3.set_yticks(y, names, fontsize=6)
+        ax3.axvline(1.0, color="k", lw=0.8)
+        ax3.set_xscale("log")
+        ax3.legend(fontsize=7)
+        ax3.set_title("control variates (harmonic twin)")
     thr = res["throughput"]
     fig.suptitle("Monte Carlo: " + ", ".join(f"{k} {v['path_steps_per_s']:.2g}/s" for k, v in thr.items()),
                  fontsize=8)
