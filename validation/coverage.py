@@ -72,7 +72,7 @@ FULL_CASES = (
     CoverageCase("harmonic N = 1, a = 0.5", Harvester.build(a=0.5), _FULL_OPTS),
     CoverageCase("harmonic N = 3, k = -0.3", Harvester.build(a=0.5, N=3, k=-0.3), _FULL_OPTS),
     CoverageCase("n = 1, a = 0.5", Harvester.build(a=0.5, n=1.0), _FULL_OPTS),
-    CoverageCase("n = 1, a = 2", Harvester.build(a=2.0, n=1.0), _FULL_OPTS),
+    CoverageCase("n = 1, a = 1", Harvester.build(a=1.0, n=1.0), _FULL_OPTS),
     CoverageCase("n = 1.5, a = 1", Harvester.build(a=1.0, n=1.5), _FULL_OPTS),
     CoverageCase("n = 3, a = 0.5", Harvester.build(a=0.5, n=3.0), _FULL_OPTS),
     CoverageCase("n = 8, a = 0.5", Harvester.build(a=0.5, n=8.0), _FULL_OPTS),
