@@ -12,7 +12,7 @@ Public API:
 
 Scheme: Strang splitting of the exact Ornstein--Uhlenbeck flow of xi with the flow of
 (x, v, V) at frozen xi (exact linear part; Strang kick for smooth nonlinear forces;
-located zero crossings for the kink force of 1 <= n <= 1.1), numba-compiled,
+located zero crossings for the kink force of 1 <= n <= 1.05), numba-compiled,
 one :class:`numpy.random.Generator` per (replica, chunk) from a ``SeedSequence``. A harmonic
 twin ring on the same noise, whose moments are known exactly at the step used, gives
 control variates; the paths start from its stationary law.

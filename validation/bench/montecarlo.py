@@ -302,7 +302,7 @@ def _control_variates(quick: bool) -> dict[str, Any]:
     """Variance reduction, twin cost and time to 1e-4 with and without control variates."""
     out: dict[str, Any] = {}
     names = QUICK_CV_CASES if quick else tuple(CV_CASES)
-    budget = 4.0 if quick else 90.0
+    budget = 4.0 if quick else 60.0
     for i, name in enumerate(names):
         h = Harvester.build(**CV_CASES[name])
         plan = MonteCarlo(seed=500 + i, tol=CV_TARGET).plan(h)
@@ -347,7 +347,7 @@ def _kink_dt_study(quick: bool) -> dict[str, Any]:
     out: dict[str, Any] = {}
     plans = {0.5: ((0.04, 0.02, 0.01, 0.005), (600, 800, 250, 150)),
              1.0: ((0.04, 0.02, 0.01, 0.005), (600, 800, 250, 150)),
-             2.0: ((0.04, 0.02, 0.01, 0.005), (300, 400, 300, 200))}
+             2.0: ((0.04, 0.02, 0.01, 0.005), (200, 200, 150, 100))}
     if quick:
         plans = {0.5: ((0.04, 0.02), (24, 24)), 2.0: ((0.04, 0.02), (24, 24))}
     for a, (dts, reps) in plans.items():
