@@ -20,9 +20,9 @@ control variates; the paths start from its stationary law.
 
 from __future__ import annotations
 
+from .control import Regression, regression_estimate
 from .escape import EscapeCurve, escape_study
 from .estimate import Estimate, estimate
-from .control import Regression, regression_estimate
 from .naive import simulate_naive
 from .simulate import Ensemble, simulate
 from .solver import MonteCarlo, Plan

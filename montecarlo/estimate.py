@@ -20,6 +20,7 @@ from fpe_harvester.errors import ParameterError
 from fpe_harvester.model import Harvester
 
 from .control import MIN_DOF, regression_estimate
+from .scheme import KIND_KINK, scheme_kind
 from .simulate import Ensemble
 from .twin import TWIN_MOMENTS
 
@@ -40,8 +41,6 @@ _NAMES = ("V2", "Pin", "v2", "vV", "x2", "stuck")
 
 def bias_order(h: Harvester, kind: int | None = None) -> float:
     """Weak order of the time-step bias assumed for a scheme (default ``h``'s, see :data:`BIAS_ORDER`)."""
-    from .scheme import KIND_KINK, scheme_kind
-
     kind = scheme_kind(h) if kind is None else kind
     return BIAS_ORDER["nonsmooth" if kind == KIND_KINK else "smooth"]
 

@@ -207,8 +207,8 @@ class MonteCarlo:
 
     # -- planning ----------------------------------------------------------------------------
 
-    def plan(self, h: Harvester, dt: float | None = None, t_burn: float | None = None) -> Plan:
-        """Time step, burn-in, paths and twin for ``h`` (``dt``, ``t_burn`` override the settings).
+    def plan(self, h: Harvester) -> Plan:
+        """Time step, burn-in, paths and twin for ``h`` from the settings (None = automatic).
 
         A nonlinear ring gets a short pilot run from rest (no twin) that measures
         :math:`\\kappa = \\langle xU'(x)\\rangle/\\langle x^2\\rangle`
@@ -216,7 +216,7 @@ class MonteCarlo:
         Gaussian closure; failing that, no twin and a rest start.
         """
         seed = 0 if self.seed is None else self.seed
-        dt = dt or self.dt or _DT_START
+        dt = self.dt or _DT_START
         notes: dict[str, Any] = {}
         harmonic = classify(h)[0] if h.is_linear else None
         twin = None
@@ -248,8 +248,7 @@ class MonteCarlo:
         if kappa is None and harmonic is None:
             notes["relaxation_time"] = FALLBACK_NOTE
         t_run = self.t_run or 100.0
-        if t_burn is None:
-            t_burn = self.t_burn
+        t_burn = self.t_burn
         if t_burn is None:
             t_burn = burn_in(tau_r, self.tol, t_run)
             if not math.isfinite(t_burn):
