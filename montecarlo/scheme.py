@@ -110,7 +110,8 @@ def step_coefficients(h: Harvester, dt: float) -> np.ndarray:
     return cf
 
 
-def physical_vector(h: Harvester, threshold: float, snap: float = SNAP, kind: int | None = None) -> np.ndarray:
+def physical_vector(h: Harvester, threshold: float, snap: float = SNAP,
+                    kind: int | None = None) -> np.ndarray:
     """Parameter array ``pp`` of the kernels (layout in :mod:`montecarlo._kernels`).
 
     ``threshold`` is the escape amplitude, ``snap`` the kink's sticking rule

@@ -21,6 +21,7 @@ Measured in one run:
   twin's cost (interleaved timings, median ratio), and the solver's wall time to a relative
   error of 1e-4 with and without them, measured in the same run within a budget and, where
   the budget runs out, extrapolated as ``wall * (se / se_needed)^2`` (labelled);
+* error-versus-time curves (``series``) for the combined benchmark (:mod:`.combined`);
 * the kink's time-step law: coupled differences eta(dt) - eta(dt/2) for dt = 0.04 ... 0.005
   at a = 0.5, 1, 2 with control variates, the fitted order, the stuck fraction and the effect
   of stopping a unit as soon as its swing would return within a step (``snap = 1``) against
@@ -317,7 +318,8 @@ def _control_variates(quick: bool) -> dict[str, Any]:
         e = simulate(h, replicas=reps, seed=600 + i, twin=plan.twin, start="twin", **kw)
         cv, plain = estimate(e, h, control=None), estimate(e, h, control=False)
         row.update(replicas=reps, control_used=cv.control, escape_fraction=e.escaped_fraction(),
-                   eta_cv=cv.mean["eta"], se_cv=cv.se["eta"], eta_plain=plain.mean["eta"], se_plain=plain.se["eta"],
+                   eta_cv=cv.mean["eta"], se_cv=cv.se["eta"], eta_plain=plain.mean["eta"],
+                   se_plain=plain.se["eta"],
                    vrf={q: cv.reduction.get(q) for q in ("eta", "V2", "Pin")})
         # twin cost: same work with and without the twin, interleaved, median of the ratios
         ratios = []
@@ -366,11 +368,13 @@ def _kink_dt_study(quick: bool) -> dict[str, Any]:
                          "vrf": est.reduction.get("eta"), "stuck_fine": float(np.nanmean(m0["stuck"])),
                          "stuck_coarse": float(np.nanmean(m1["stuck"])), "wall_s": e.wall_time})
         good = [r for r in rows if abs(r["diff"]) > 3 * r["diff_se"]]
-        fit = (float(np.polyfit(np.log([r["dt"] for r in good]), np.log([abs(r["diff"]) for r in good]), 1)[0])
-               if len(good) >= 2 else None)
+        fit = None
+        if len(good) >= 2:
+            fit = float(np.polyfit(np.log([r["dt"] for r in good]), np.log([abs(r["diff"]) for r in good]), 1)[0])
         snap = []
         for dt, R in (((0.02, 150), (0.005, 60)) if not quick else ((0.02, 8),)):
-            kw = dict(dt=dt, paths=64, replicas=R, t_burn=30.0, t_run=100.0, seed=12, twin=kappa, start="twin")
+            kw = dict(dt=dt, paths=64, replicas=R, t_burn=30.0, t_run=100.0, seed=12, twin=kappa,
+                      start="twin")
             # the default stops a unit only on an exhausted event budget; snap = 1 stops it
             # once its swing would return within one step
             m1, m0 = simulate(h, snap=1.0, **kw).moments(0), simulate(h, **kw).moments(0)
@@ -380,6 +384,41 @@ def _kink_dt_study(quick: bool) -> dict[str, Any]:
                          "stuck_default": float(m0["stuck"].mean())})
         out[f"a{a:g}"] = {"twin_kappa": kappa, "rows": rows, "fitted_order_from_resolved_points": fit,
                           "snap": snap}
+    return out
+
+
+def series(quick: bool, res: dict[str, Any]) -> list[dict[str, Any]]:
+    """Error-versus-time curves for the combined figure (:mod:`.combined`): the solver at a
+    few tolerances with and without control variates, for the kink (n = 1, a = 0.5) and the
+    n = 3 ring; references from this run's most precise values (the kink's time-step study at
+    dt = 0.02/0.01 with its bias estimate, the ring's run at 1e-4)."""
+    cases = {"n1_single": (dict(a=0.5, n=1.0), None), "n3_ring": (dict(a=0.5, n=3.0, N=3, k=-0.5), None)}
+    rows = res.get("kink_dt", {}).get("a0.5", {}).get("rows", [])
+    if rows:
+        best = min(rows, key=lambda r: r["eta_fine_se"])
+        rel = math.hypot(best["eta_fine_se"], best["diff"]) / best["eta_fine"]
+        cases["n1_single"] = (cases["n1_single"][0], (
+            best["eta_fine"], rel, f"Monte Carlo, dt = {best['dt_fine']:g}, {best['replicas']} x 64 paths, "
+            "bias estimate folded in"))
+    ring = res.get("control_variates", {}).get("N3_n3_a0.5_k-0.5", {}).get("to_1e-4_control")
+    if ring and ring.get("eta"):
+        cases["n3_ring"] = (cases["n3_ring"][0], (
+            ring["eta"], ring["rel_err"], f"Monte Carlo + control variates, run at tol 1e-4 ({ring['status']})"))
+    out = []
+    for problem, (kw, ref) in cases.items():
+        h = Harvester.build(**kw)
+        for control in (False, True):
+            pts = []
+            for j, tol in enumerate((3e-2, 1e-2) if quick else (1e-2, 3e-3, 1e-3)):
+                r = solve(h, "mc", seed=1000 + j, tol=tol, control=control, max_time=60.0, progress=False)
+                if r.eta is not None:
+                    pts.append({"seconds": r.info["wall_time"], "eta": r.eta,
+                                "reported": r.eta_err / abs(r.eta), "tol": tol})
+            cur: dict[str, Any] = {"problem": problem, "points": pts,
+                                   "method": "Monte Carlo + control variates" if control else "Monte Carlo"}
+            if control and ref is not None:
+                cur.update(reference_eta=ref[0], reference_err=ref[1], reference=ref[2])
+            out.append(cur)
     return out
 
 
@@ -400,6 +439,7 @@ def run(quick: bool = False, out: Path | None = None) -> dict[str, Any]:
     res["bias"] = _bias_study(quick)
     res["control_variates"] = _control_variates(quick)
     res["kink_dt"] = _kink_dt_study(quick)
+    res["series"] = series(quick, res)
     save_benchmark(res, out, STEM, _plot)
     return res
 
