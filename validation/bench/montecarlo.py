@@ -239,7 +239,8 @@ def _bias_study(quick: bool) -> dict[str, Any]:
         fit = None
         good = [r for r in rows if abs(r["diff"]) > 3 * r["diff_se"]]
         if len(good) >= 2:
-            fit = float(np.polyfit(np.log([r["dt"] for r in good]), np.log([abs(r["diff"]) for r in good]), 1)[0])
+            logs = np.log([[r["dt"], abs(r["diff"])] for r in good])
+            fit = float(np.polyfit(logs[:, 0], logs[:, 1], 1)[0])
         out[name] = {"rows": rows, "fitted_order_from_resolved_points": fit}
     h = Harvester.build(a=2.0, n=1)
     kw = dict(paths=128 if quick else 1024, replicas=6 if quick else 12, t_burn=20.0,
@@ -370,7 +371,8 @@ def _kink_dt_study(quick: bool) -> dict[str, Any]:
         good = [r for r in rows if abs(r["diff"]) > 3 * r["diff_se"]]
         fit = None
         if len(good) >= 2:
-            fit = float(np.polyfit(np.log([r["dt"] for r in good]), np.log([abs(r["diff"]) for r in good]), 1)[0])
+            logs = np.log([[r["dt"], abs(r["diff"])] for r in good])
+            fit = float(np.polyfit(logs[:, 0], logs[:, 1], 1)[0])
         snap = []
         for dt, R in (((0.02, 150), (0.005, 60)) if not quick else ((0.02, 8),)):
             kw = dict(dt=dt, paths=64, replicas=R, t_burn=30.0, t_run=100.0, seed=12, twin=kappa,
@@ -403,7 +405,8 @@ def series(quick: bool, res: dict[str, Any]) -> list[dict[str, Any]]:
     ring = res.get("control_variates", {}).get("N3_n3_a0.5_k-0.5", {}).get("to_1e-4_control")
     if ring and ring.get("eta"):
         cases["n3_ring"] = (cases["n3_ring"][0], (
-            ring["eta"], ring["rel_err"], f"Monte Carlo + control variates, run at tol 1e-4 ({ring['status']})"))
+            ring["eta"], ring["rel_err"],
+            f"Monte Carlo + control variates, run at tol 1e-4 ({ring['status']})"))
     out = []
     for problem, (kw, ref) in cases.items():
         h = Harvester.build(**kw)
