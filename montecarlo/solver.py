@@ -48,6 +48,8 @@ _DT_START, _DT_MIN, _BIAS_SHARE = 0.02, 0.02 / 32, 1.0 / 3.0
 #: Restarts allowed for a longer burn-in, and the drift that triggers one (in standard
 #: errors, and relative to tol).
 _BURN_RESTARTS, _DRIFT_SIGMAS, _DRIFT_SHARE = 3, 3.0, 1.0 / 3.0
+#: Tolerance from which the automatic paths per replica drop from 64 to 16.
+_LOOSE_TOL = 5e-3
 #: Automatic measured time per path, in burn-ins (when longer than 100).
 _RUN_PER_BURN = 3.0
 
@@ -105,8 +107,9 @@ class MonteCarlo:
         from ``dt/2`` and ``dt`` gives the bias estimate. None (default): 0.02, halved after
         the first batch (down to 0.02/32) while the bias estimate exceeds a third of ``tol``.
     paths : int or None
-        Paths (rings) per replica, >= 2. None: 64, fewer when a path's burn-in and measured
-        time together exceed 140 (at least 2).
+        Paths (rings) per replica, >= 2. None: 64 for ``tol`` < 5e-3, else 16 (the first
+        batch of ``min_replicas`` then usually meets ``tol`` already); fewer when a path's
+        burn-in and measured time together exceed 140 (at least 2).
     min_replicas, max_replicas : int
         Replicas run at least (>= 2, for an error bar; the control variates need 24) and at
         most. Defaults 32 and 16384.
@@ -258,11 +261,15 @@ class MonteCarlo:
                 for _ in range(4):  # t_run follows a long burn-in, which then shortens
                     t_run = max(100.0, _RUN_PER_BURN * t_burn)
                     t_burn = burn_in(tau_r, self.tol, t_run)
-        paths = self.paths or max(2, min(64, int(round(64 * _PATH_TIME / (t_burn + t_run)))))
+        paths = self.paths or self._auto_paths(t_burn, t_run)
         if self.t_run is None and dt > t_run:
             t_run = dt
         return Plan(dt=dt, t_burn=t_burn, t_run=t_run, paths=paths, twin=twin, start=start,
                     relaxation_time=tau_r, notes=notes)
+
+    def _auto_paths(self, t_burn: float, t_run: float) -> int:
+        base = 64 if self.tol < _LOOSE_TOL else 16
+        return max(2, min(base, int(round(base * _PATH_TIME / (t_burn + t_run)))))
 
     # -- running -----------------------------------------------------------------------------
 
@@ -286,7 +293,7 @@ class MonteCarlo:
                 and drift > _DRIFT_SHARE * self.tol * eta):
             t_burn = 2.0 * plan.t_burn
             t_run = plan.t_run if self.t_run is not None else max(plan.t_run, _RUN_PER_BURN * t_burn)
-            paths = self.paths or max(2, min(64, int(round(64 * _PATH_TIME / (t_burn + t_run)))))
+            paths = self.paths or self._auto_paths(t_burn, t_run)
             return "t_burn", dataclasses.replace(plan, t_burn=t_burn, t_run=t_run, paths=paths)
         return None
 
