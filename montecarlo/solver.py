@@ -5,10 +5,10 @@ the slowest relaxation time, the harmonic twin whose moments are control variate
 started from the twin's stationary law), then runs batches of independent replicas (each
 ``paths`` rings for ``t_burn + t_run``) until the relative error on eta (standard error and,
 with ``richardson=True``, the time-step bias estimate, in quadrature) is below ``tol`` or the
-wall-time budget ``max_time`` is spent; then the status says ``NOT_CONVERGED``. After the
-first batch it halves an automatic ``dt`` while the bias estimate takes more than a third of
-``tol``, and doubles the burn-in while the first half of the measured window differs
-significantly from the whole (a transient left over).
+wall-time budget ``max_time`` is spent; then the status says ``NOT_CONVERGED``. After each
+batch it halves an automatic ``dt`` when the bias estimate takes more than a third of ``tol``,
+and doubles the burn-in when the first half of the measured window differs significantly
+from the whole (a transient left over); either restarts the ensemble.
 """
 
 from __future__ import annotations
@@ -280,13 +280,19 @@ class MonteCarlo:
                         twin=plan.twin, start=plan.start)
 
     def _restart_reason(self, h: Harvester, plan: Plan, est: Estimate) -> tuple[str, Plan] | None:
-        """After the first batch: a finer step or a longer burn-in, if the data ask for one."""
+        """After a batch: a finer step or a longer burn-in, if the data ask for one.
+
+        Both tests need three standard errors (they are repeated after every batch) and a
+        size that matters for ``tol``: the bias estimate above a third of it (only with an
+        automatic ``dt``), or the first half of the measured window off the whole by that much
+        (only with an automatic ``t_burn``, at most three doublings).
+        """
         eta = abs(est.mean["eta"])
         if not (eta > 0 and math.isfinite(eta)):
             return None
         bias, bias_se = abs(est.bias["eta"]), est.bias_se["eta"]
         if (self.dt is None and self.richardson and bias > _BIAS_SHARE * self.tol * eta
-                and bias > 2.0 * bias_se and plan.dt / 2 >= _DT_MIN):
+                and bias > _DRIFT_SIGMAS * bias_se and plan.dt / 2 >= _DT_MIN):
             return "dt", dataclasses.replace(plan, dt=plan.dt / 2)
         drift, drift_se = abs(est.drift["eta"]), est.drift_se["eta"]
         if (self.t_burn is None and drift > _DRIFT_SIGMAS * drift_se
@@ -312,19 +318,22 @@ class MonteCarlo:
                    file=sys.stderr, disable=self.progress is False,
                    delay=0.0 if self.progress else 2.0, leave=False)
         with bar:
-            while True:
-                ens = self._run(h, plan, self.min_replicas, 0)
-                bar.update(ens.replicas)
-                est = estimate(ens, h)
-                redo = self._restart_reason(h, plan, est) if len(restarts) < 5 + _BURN_RESTARTS else None
-                elapsed = time.perf_counter() - start
-                if redo is None or restarts.count("t_burn") >= _BURN_RESTARTS and redo[0] == "t_burn" \
-                        or elapsed * 3 > self.max_time:
-                    break
-                restarts.append(redo[0])
-                plan = redo[1]
+            ens = self._run(h, plan, self.min_replicas, 0)
+            bar.update(ens.replicas)
+            est = estimate(ens, h)
             met = False
             while True:
+                # the bias or a transient may only show once enough replicas resolve it:
+                # checked after every batch, a restart discards the ensemble
+                redo = self._restart_reason(h, plan, est)
+                if redo is not None and (redo[0] == "dt" or restarts.count("t_burn") < _BURN_RESTARTS) \
+                        and 3.0 * (time.perf_counter() - start) < self.max_time:
+                    restarts.append(redo[0])
+                    plan = redo[1]
+                    ens = self._run(h, plan, self.min_replicas, 0)
+                    bar.update(ens.replicas)
+                    est = estimate(ens, h)
+                    continue
                 rel = est.rel_error("eta")
                 stat_rel = est.se["eta"] / abs(est.mean["eta"]) if est.replicas else math.inf
                 bar.set_postfix_str(f"rel err eta {rel:.2e}")
@@ -463,6 +472,7 @@ class MonteCarlo:
             "t_burn": ens.t_burn,
             "t_run": ens.t_run,
             "relaxation_time": plan.relaxation_time,
+            "t_burn_rule": burn_in(plan.relaxation_time, self.tol, ens.t_run),
             "start": ens.start,
             "plan_notes": dict(plan.notes),
             "control_variates": est.control,

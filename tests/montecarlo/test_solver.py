@@ -219,7 +219,7 @@ def test_restart_rules() -> None:
     assert mc._restart_reason(h, plan, est(1e-5, 1e-6, 0.0, 1e-4)) is None
     what, new = mc._restart_reason(h, plan, est(4e-4, 1e-5, 0.0, 1e-4))
     assert what == "dt" and new.dt == plan.dt / 2
-    assert mc._restart_reason(h, plan, est(4e-4, 3e-4, 0.0, 1e-4)) is None  # bias not resolved
+    assert mc._restart_reason(h, plan, est(4e-4, 2e-4, 0.0, 1e-4)) is None  # bias not resolved
     what, new = mc._restart_reason(h, plan, est(0.0, 1e-6, 1e-3, 1e-4))
     assert what == "t_burn" and new.t_burn == 2 * plan.t_burn
     assert MonteCarlo(seed=1, tol=1e-3, dt=0.02)._restart_reason(h, plan, est(4e-4, 1e-5, 0, 1)) is None
