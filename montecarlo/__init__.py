@@ -6,24 +6,35 @@ Public API:
 * :func:`simulate` and :class:`Ensemble` -- raw per-replica moments for validation studies;
 * :func:`estimate` and :class:`Estimate` -- means, standard errors, Richardson bias;
 * :func:`escape_study` and :class:`EscapeCurve` -- escape fraction and times vs time;
-* :func:`simulate_naive` -- the plain vectorized numpy Euler--Maruyama reference.
+* :func:`simulate_naive` -- the plain vectorized numpy Euler--Maruyama reference;
+* :func:`regression_estimate` -- control variates over replicas (:mod:`.control`);
+* :func:`twin_expectations` and :func:`linearized_stiffness` -- the harmonic twin (:mod:`.twin`).
 
 Scheme: Strang splitting of the exact Ornstein--Uhlenbeck flow of xi with the flow of
 (x, v, V) at frozen xi (exact linear part; Strang kick for smooth nonlinear forces;
-located zero crossings and Filippov sticking for the kink n = 1), numba-compiled,
-one :class:`numpy.random.Generator` per (replica, chunk) from a ``SeedSequence``.
+located zero crossings for the kink force of 1 <= n <= 1.05), numba-compiled,
+one :class:`numpy.random.Generator` per (replica, chunk) from a ``SeedSequence``. A harmonic
+twin ring on the same noise, whose moments are known exactly at the step used, gives
+control variates; the paths start from its stationary law.
 """
 
 from __future__ import annotations
 
+from .control import Regression, regression_estimate
 from .escape import EscapeCurve, escape_study
 from .estimate import Estimate, estimate
 from .naive import simulate_naive
 from .simulate import Ensemble, simulate
-from .solver import MonteCarlo
+from .solver import MonteCarlo, Plan
+from .twin import linearized_stiffness, twin_expectations
 
 __all__ = [
     "MonteCarlo",
+    "Plan",
+    "regression_estimate",
+    "Regression",
+    "twin_expectations",
+    "linearized_stiffness",
     "simulate",
     "Ensemble",
     "estimate",

@@ -8,9 +8,14 @@ Private module. The Python side (:mod:`montecarlo.scheme`) builds the coefficien
     constant force; ``cf[12] = h``; ``cf[13] = e^{-h/\\tau}``;
     ``cf[14] = \\sqrt{(D/\\tau)(1 - e^{-2h/\\tau})}``; ``cf[15] = e^{-h/2\\tau}``.
 ``pp`` (physical)
-    ``m, gamma, Kv, Kc, tau_p, sigma, k, a, n, c, threshold, D/tau`` where ``c`` is the
-    stiffness kept inside the linear flow (``2k``, plus ``2a`` for the harmonic potential)
-    and ``threshold`` the escape amplitude.
+    ``m, gamma, Kv, Kc, tau_p, sigma, k, a, n, c, threshold, D/tau, snap, a_kink`` where
+    ``c`` is the stiffness kept inside the linear flow (``2k``, plus ``2a`` for the harmonic
+    potential), ``threshold`` the escape amplitude, ``snap`` the kink's sticking rule
+    (:data:`SNAP`) and ``a_kink`` the strength :math:`an` of the kink part
+    :math:`-an\\,\\mathrm{sign}(x)` integrated exactly by the kink scheme (0 for the others).
+``cf_t`` (harmonic twin, optional)
+    ``cf`` of the harmonic ring with on-site stiffness ``kappa_t`` and the same ``k``, run on
+    the fine level's noise; its moments are control variates (:mod:`montecarlo.twin`).
 
 One step is the Strang splitting ``O(h/2) D(h) O(h/2)`` of the generator into the exact
 Ornstein--Uhlenbeck flow ``O`` of xi and the deterministic flow ``D`` of (x, v, V) with xi
@@ -18,8 +23,12 @@ frozen; consecutive half steps of ``O`` merge, so the loop runs ``D(h) O(h)`` an
 after ``D`` (xi-dependent observables get the exact half-step factor ``e^{-h/2tau}``).
 Inside ``D`` the neighbours' positions enter as a constant force evaluated at the
 predicted midpoint; the on-site force is either part of the exact linear flow (n = 2),
-a Strang kick around it (smooth n), or, for the kink n = 1, handled by an exact
-piecewise-linear flow with located zero crossings and Filippov sticking.
+a Strang kick around it (smooth n), or, for the kink (1 <= n <= 1 + KINK_WIDTH of
+:mod:`montecarlo.scheme`), its part :math:`-an\\,\\mathrm{sign}(x)` is handled by an exact
+piecewise-linear flow with located zero crossings and the remainder by Strang kicks. Toward
+rest the kink's swings shrink exponentially in time and never stop (docs/model.md §3); once
+they are shorter than the step the scheme holds the unit at rest (:data:`SNAP`) until the
+net force exceeds :math:`an`, a time-step artifact counted as ``stuck``.
 """
 
 from __future__ import annotations
@@ -33,13 +42,26 @@ KIND_LINEAR = 0
 KIND_KICK = 1
 KIND_KINK = 2
 
-#: Moments accumulated per level, in this order.
-MOMENTS = ("V2", "vV", "v2", "x2", "vxi", "stuck")
+#: Moments accumulated per level, in this order: the system's (``xdU`` is
+#: :math:`x\\,U'(x)`, for the statistical linearization) and, prefixed ``t_``, the harmonic
+#: twin's (fine level only; zero without a twin).
+MOMENTS = ("V2", "vV", "v2", "x2", "vxi", "stuck", "xdU",
+           "t_V2", "t_vV", "t_v2", "t_x2", "t_vxi",
+           "t_x4", "t_x2V2", "t_x2v2", "t_absxn", "t_V2v2", "t_vxiV2")
 N_MOM = len(MOMENTS)
+#: Rows of the ``sums`` accumulator: fine level, coarse level, fine level over the first half
+#: of the measured window (the burn-in drift check compares it with the whole).
+ROWS = 3
 
-# A crossing whose return to x = 0 would take less than SNAP * h sticks at once: the
-# dropped chatter has kinetic energy O(h^2) and moves x and V by O(h^3).
-SNAP = 1.0
+#: Kink sticking rule: a crossing whose return to x = 0 would take less than SNAP * h stops
+#: the unit at once. The model's swings never stop (docs/model.md §3), so any stop is a
+#: time-step artifact; the default 0 stops a unit only when its swings exhaust the event
+#: budget (MAX_EVENTS crossings in one step). Measured (validation/bench/montecarlo.py), a = 2,
+#: dt = 0.02: SNAP = 1 holds units at rest 22 % of the time and shifts eta by +1.4e-3
+#: relative (2.3 standard errors); with 0 the held fraction is below 1e-5, at up to twice the
+#: kink's cost there (no difference for a <= 1, where units are almost never held). Passed
+#: as ``pp[12]``.
+SNAP = 0.0
 MAX_EVENTS = 64
 N_SAMPLE = 8
 N_TAYLOR = 11
@@ -136,12 +158,13 @@ def _kink_unit(x: float, v: float, V: float, stuck: bool, f: float, cf: np.ndarr
                pp: np.ndarray, counters: np.ndarray, cs: np.ndarray) -> tuple:
     """Advance one unit of the n = 1 potential over one D step with external force f.
 
-    The slow path of :func:`_kink_flow`, for units at, stuck at or near x = 0. Exact piecewise flow: each side of x = 0 is linear with constant force f - a s; zero
-    crossings are located on the flow's Taylor series (bracketing + safeguarded Newton); at
-    x = v = 0 the unit sticks while the net force |f - Kv V| <= a (set-valued sign), and V
-    then decays exactly.
+    The slow path of :func:`_kink_flow`, for units at, held at or near x = 0. Exact
+    piecewise flow: each side of x = 0 is linear with constant force f - a s (a = ``pp[13]``);
+    zero crossings are located on the flow's Taylor series (bracketing + safeguarded Newton);
+    at x = v = 0 the unit is held while the net force |f - Kv V| <= a, and V then decays
+    exactly.
     """
-    m, Kv, tau_p, a = pp[0], pp[2], pp[4], pp[7]
+    m, Kv, tau_p, a = pp[0], pp[2], pp[4], pp[13]
     h = cf[12]
     counters[0] += 1
     t = 0.0
@@ -188,7 +211,7 @@ def _kink_unit(x: float, v: float, V: float, stuck: bool, f: float, cf: np.ndarr
         t += tc
         counters[1] += 1
         net = f - Kv * V
-        if abs(net) < a and 2.0 * m * abs(v) < SNAP * h * (a - abs(net)):
+        if abs(net) < a and 2.0 * m * abs(v) < pp[12] * h * (a - abs(net)):
             v = 0.0
             stuck = True
             counters[2] += 1
@@ -224,16 +247,28 @@ def _linear_flow(x, v, V, f, cf) -> None:
             V[j, p] = cf[6] * x0 + cf[7] * v0 + cf[8] * V0 + cf[11] * fp
 
 
+@njit(cache=True, nogil=True, inline="always")
+def _kick_force(x: float, pp: np.ndarray) -> float:
+    """The on-site force left to the kicks: -U'(x), minus the kink part -pp[13] sign(x) that
+    the kink flow integrates exactly (pp[13] = 0 for the smooth scheme)."""
+    F = _onsite_force(x, pp[7], pp[8])
+    if x > 0.0:
+        F += pp[13]
+    elif x < 0.0:
+        F -= pp[13]
+    return F
+
+
 @njit(cache=True, nogil=True)
 def _kick(x, v, F, h, pp, update) -> None:
-    """Half kick v += (h/2) F/m; with ``update`` first recompute F = -U'(x)."""
+    """Half kick v += (h/2) F/m; with ``update`` first recompute F (:func:`_kick_force`)."""
     N, P = x.shape
-    m, a, n = pp[0], pp[7], pp[8]
+    m = pp[0]
     hk = 0.5 * h / m
     for j in range(N):
         for p in range(P):
             if update:
-                F[j, p] = _onsite_force(x[j, p], a, n)
+                F[j, p] = _kick_force(x[j, p], pp)
             v[j, p] += hk * F[j, p]
 
 
@@ -241,7 +276,7 @@ def _kick(x, v, F, h, pp, update) -> None:
 def _kink_flow(x, v, V, stuck, f, w, cf, pp, counters, cs) -> None:
     """D step of the kink potential: one exact affine step away from x = 0, events near it."""
     N, P = x.shape
-    m, gamma, Kv, a, c = pp[0], pp[1], pp[2], pp[7], pp[9]
+    m, gamma, Kv, a, c = pp[0], pp[1], pp[2], pp[13], pp[9]
     h = cf[12]
     for j in range(N):
         for p in range(P):
@@ -274,7 +309,9 @@ def _d_step(x, v, V, xi, F, stuck, xm, fext, w, cf, pp, kind, counters, cs) -> N
     """
     N, P = x.shape
     h = cf[12]
-    if kind == KIND_KICK:
+    # the kink scheme kicks only the smooth remainder of a near-kink potential (n > 1)
+    kicks = kind == KIND_KICK or (kind == KIND_KINK and pp[8] != 1.0)
+    if kicks:
         _kick(x, v, F, h, pp, False)
     if N > 1:
         for j in range(N):
@@ -285,16 +322,20 @@ def _d_step(x, v, V, xi, F, stuck, xm, fext, w, cf, pp, kind, counters, cs) -> N
         _kink_flow(x, v, V, stuck, fext, w, cf, pp, counters, cs)
     else:
         _linear_flow(x, v, V, fext, cf)
-    if kind == KIND_KICK:
+    if kicks:
         _kick(x, v, F, h, pp, True)
 
 
 @njit(cache=True, nogil=True)
-def _measure(x, v, V, xi, stuck, w, cf, acc) -> float:
-    """Add the moments of the live paths (weight w = 1) to acc; return unit-steps counted."""
+def _measure(x, v, V, xi, stuck, F, w, cf, pp, kind, acc) -> float:
+    """Add the moments of the live paths (weight w = 1) to acc[0:7]; return unit-steps counted.
+
+    ``F`` holds -U'(x) at the current x for the smooth kind (the last kick computed it).
+    """
     N, P = x.shape
     half = cf[15]
-    s0 = s1 = s2 = s3 = s4 = s5 = 0.0
+    a, n = pp[7], pp[8]
+    s0 = s1 = s2 = s3 = s4 = s5 = s6 = 0.0
     for j in range(N):
         for p in range(P):
             wp = w[p]
@@ -304,16 +345,62 @@ def _measure(x, v, V, xi, stuck, w, cf, acc) -> float:
             s3 += wp * x[j, p] * x[j, p]
             s4 += wp * v[j, p] * xi[j, p]
             s5 += wp * stuck[j, p]
+    if kind == KIND_KICK:
+        for j in range(N):
+            for p in range(P):
+                s6 -= w[p] * x[j, p] * F[j, p]
+    elif kind == KIND_KINK:
+        for j in range(N):
+            for p in range(P):
+                ax = abs(x[j, p])
+                s6 += w[p] * a * (ax if n == 1.0 else n * ax**n)
+    else:
+        s6 = 2.0 * a * s3
     acc[0] += s0
     acc[1] += s1
     acc[2] += s2
     acc[3] += s3
     acc[4] += s4 * half
     acc[5] += s5
+    acc[6] += s6
     live = 0.0
     for p in range(P):
         live += w[p]
     return live * N
+
+
+@njit(cache=True, nogil=True)
+def _measure_twin(x, v, V, xi, w, cf, acc, nn) -> None:
+    """Add the twin's moments (``t_*`` of :data:`MOMENTS`, ``nn`` the system's n) to acc[7:18].
+
+    Second moments and a few fourth moments and :math:`|x|^n`: the twin is Gaussian, so
+    each has an exactly known mean (:func:`montecarlo.twin.twin_expectations`), and the
+    higher ones follow the nonlinear system's amplitude-dependent response better.
+    """
+    N, P = x.shape
+    half = cf[15]
+    s = np.zeros(11)
+    for j in range(N):
+        for p in range(P):
+            wp = w[p]
+            xx, vv, VV = x[j, p] * x[j, p], v[j, p] * v[j, p], V[j, p] * V[j, p]
+            vxi = v[j, p] * xi[j, p]
+            ax = abs(x[j, p])
+            s[0] += wp * VV
+            s[1] += wp * v[j, p] * V[j, p]
+            s[2] += wp * vv
+            s[3] += wp * xx
+            s[4] += wp * vxi
+            s[5] += wp * xx * xx
+            s[6] += wp * xx * VV
+            s[7] += wp * xx * vv
+            s[8] += wp * (ax if nn == 1.0 else ax**nn)
+            s[9] += wp * VV * vv
+            s[10] += wp * VV * vxi
+    s[4] *= half
+    s[10] *= half
+    for i in range(11):
+        acc[7 + i] += s[i]
 
 
 @njit(cache=True, nogil=True)
@@ -347,10 +434,40 @@ def _check_escape(x, v, V, xi, F, stuck, w, thr, t, esc_time) -> None:
 
 
 @njit(cache=True, nogil=True)
+def _start(gen, chol, sd, x, v, V, xi) -> None:
+    """Initial state: rest with stationary xi, or a draw ``chol @ z`` of the 4N-vector
+    (x_j, v_j, V_j, xi_j) per path when ``chol`` (lower triangular, 4N x 4N) is given."""
+    N, P = x.shape
+    if chol.shape[0] == 0:
+        for j in range(N):
+            for p in range(P):
+                xi[j, p] = sd * gen.standard_normal()
+        return
+    z = np.empty(4 * N)
+    for p in range(P):
+        for i in range(4 * N):
+            z[i] = gen.standard_normal()
+        for i in range(4 * N):
+            s = 0.0
+            for l in range(i + 1):
+                s += chol[i, l] * z[l]
+            j, c = divmod(i, 4)
+            if c == 0:
+                x[j, p] = s
+            elif c == 1:
+                v[j, p] = s
+            elif c == 2:
+                V[j, p] = s
+            else:
+                xi[j, p] = s
+
+
+@njit(cache=True, nogil=True)
 def _run(gen, P: int, N: int, nburn: int, nrun: int, stride: int, cf_f: np.ndarray,
-         cf_c: np.ndarray, pp: np.ndarray, kind: int, coupled: bool, sums: np.ndarray,
-         counts: np.ndarray, esc_time: np.ndarray, counters: np.ndarray) -> None:
-    """Simulate P independent rings of N units from rest and accumulate their time averages.
+         cf_c: np.ndarray, pp: np.ndarray, kind: int, coupled: bool, cf_t: np.ndarray,
+         pp_t: np.ndarray, twin: bool, chol: np.ndarray, sums: np.ndarray, counts: np.ndarray,
+         esc_time: np.ndarray, counters: np.ndarray) -> None:
+    """Simulate P independent rings of N units and accumulate their time averages.
 
     Parameters
     ----------
@@ -365,10 +482,17 @@ def _run(gen, P: int, N: int, nburn: int, nrun: int, stride: int, cf_f: np.ndarr
         If True, each coarse step ``cf_c`` is also done as two fine steps ``cf_f`` (h/2) driven
         by the same Brownian increments (exact OU composition): level 0 = fine, 1 = coarse.
         If False, only level 0 is run, with step ``cf_f``.
-    sums : (2, N_MOM) array
-        Sums over measured unit-steps of the moments :data:`MOMENTS`, per level (accumulated).
-    counts : (2,) array
-        Number of unit-steps summed per level (accumulated).
+    cf_t, pp_t, twin : array, array, bool
+        With ``twin``, a harmonic ring (coefficients ``cf_t`` at the fine step, physical
+        vector ``pp_t``) is advanced on the fine level's xi and measured with it.
+    chol : (4N, 4N) or (0, 0) array
+        Initial law: every level (and the twin) starts from one draw of ``chol @ z`` per path,
+        or from rest with stationary xi when empty.
+    sums : (ROWS, N_MOM) array
+        Sums over measured unit-steps of the moments :data:`MOMENTS`: fine level, coarse
+        level, fine level over the first half of the measured steps (accumulated).
+    counts : (ROWS,) array
+        Number of unit-steps summed per row (accumulated).
     esc_time : (P,) array
         Time at which path p first had some |x_j| > threshold, or -1.
     counters : (5,) int64 array
@@ -381,8 +505,10 @@ def _run(gen, P: int, N: int, nburn: int, nrun: int, stride: int, cf_f: np.ndarr
     xif, Ff = np.zeros((N, P)), np.zeros((N, P))
     xc, vc, Vc = np.zeros((N, P)), np.zeros((N, P)), np.zeros((N, P))
     xic, Fc = np.zeros((N, P)), np.zeros((N, P))
+    xt, vt, Vt, Ft = np.zeros((N, P)), np.zeros((N, P)), np.zeros((N, P)), np.zeros((N, P))
     sf = np.zeros((N, P), dtype=np.bool_)
     sc = np.zeros((N, P), dtype=np.bool_)
+    st = np.zeros((N, P), dtype=np.bool_)
     xm = np.zeros((N, P))
     z1 = np.zeros((N, P))
     z2 = np.zeros((N, P))
@@ -390,14 +516,19 @@ def _run(gen, P: int, N: int, nburn: int, nrun: int, stride: int, cf_f: np.ndarr
     cs = np.zeros((3, N_TAYLOR + 1))
     fext = np.zeros((N, P))
     esc_time[:] = -1.0
+    _start(gen, chol, sd, xf, vf, Vf, xif)
     for j in range(N):
         for p in range(P):
-            xif[j, p] = sd * gen.standard_normal()
-            xic[j, p] = xif[j, p]
+            xc[j, p], vc[j, p], Vc[j, p], xic[j, p] = xf[j, p], vf[j, p], Vf[j, p], xif[j, p]
+            xt[j, p], vt[j, p], Vt[j, p] = xf[j, p], vf[j, p], Vf[j, p]
+            if kind != KIND_LINEAR:
+                Ff[j, p] = _kick_force(xf[j, p], pp)
+                Fc[j, p] = Ff[j, p]
     h = cf_c[12] if coupled else cf_f[12]
     # the two fine half-step normals combine into the coarse normal exactly
     w1 = cf_f[13] * cf_f[14] / cf_c[14]
     w2 = cf_f[14] / cf_c[14]
+    half = nburn + nrun // 2
     for step in range(nburn + nrun):
         live = 0
         for p in range(P):
@@ -406,6 +537,7 @@ def _run(gen, P: int, N: int, nburn: int, nrun: int, stride: int, cf_f: np.ndarr
         if live == 0:
             break
         meas = step >= nburn and (step - nburn) % stride == 0
+        first = step < half
         t_end = (step + 1) * h
         if coupled:
             counters[4] += 3 * live
@@ -413,38 +545,45 @@ def _run(gen, P: int, N: int, nburn: int, nrun: int, stride: int, cf_f: np.ndarr
                 for p in range(P):
                     z1[j, p] = gen.standard_normal()
                     z2[j, p] = gen.standard_normal()
-            _d_step(xf, vf, Vf, xif, Ff, sf, xm, fext, w, cf_f, pp, kind, counters, cs)
-            _check_escape(xf, vf, Vf, xif, Ff, sf, w, thr, t_end - 0.5 * h, esc_time)
-            if meas:
-                counts[0] += _measure(xf, vf, Vf, xif, sf, w, cf_f, sums[0])
-            for j in range(N):
-                for p in range(P):
-                    xif[j, p] = cf_f[13] * xif[j, p] + cf_f[14] * z1[j, p]
-            _d_step(xf, vf, Vf, xif, Ff, sf, xm, fext, w, cf_f, pp, kind, counters, cs)
-            _d_step(xc, vc, Vc, xic, Fc, sc, xm, fext, w, cf_c, pp, kind, counters, cs)
-            _check_escape(xf, vf, Vf, xif, Ff, sf, w, thr, t_end, esc_time)
-            _check_escape(xc, vc, Vc, xic, Fc, sc, w, thr, t_end, esc_time)
-            if meas:
-                counts[0] += _measure(xf, vf, Vf, xif, sf, w, cf_f, sums[0])
-                counts[1] += _measure(xc, vc, Vc, xic, sc, w, cf_c, sums[1])
-            for j in range(N):
-                for p in range(P):
-                    xif[j, p] = cf_f[13] * xif[j, p] + cf_f[14] * z2[j, p]
-                    xic[j, p] = cf_c[13] * xic[j, p] + cf_c[14] * (w1 * z1[j, p] + w2 * z2[j, p])
         else:
             counters[4] += live
-            _d_step(xf, vf, Vf, xif, Ff, sf, xm, fext, w, cf_f, pp, kind, counters, cs)
-            _check_escape(xf, vf, Vf, xif, Ff, sf, w, thr, t_end, esc_time)
-            if meas:
-                counts[0] += _measure(xf, vf, Vf, xif, sf, w, cf_f, sums[0])
             for j in range(N):
                 for p in range(P):
-                    xif[j, p] = cf_f[13] * xif[j, p] + cf_f[14] * gen.standard_normal()
+                    z1[j, p] = gen.standard_normal()
+        for sub in range(2 if coupled else 1):
+            _d_step(xf, vf, Vf, xif, Ff, sf, xm, fext, w, cf_f, pp, kind, counters, cs)
+            if twin:
+                _d_step(xt, vt, Vt, xif, Ft, st, xm, fext, w, cf_t, pp_t, KIND_LINEAR, counters, cs)
+            if coupled and sub == 1:
+                _d_step(xc, vc, Vc, xic, Fc, sc, xm, fext, w, cf_c, pp, kind, counters, cs)
+                _check_escape(xc, vc, Vc, xic, Fc, sc, w, thr, t_end, esc_time)
+            _check_escape(xf, vf, Vf, xif, Ff, sf, w, thr, t_end - (0.5 * h if coupled and sub == 0 else 0.0),
+                          esc_time)
+            if meas:
+                n0 = _measure(xf, vf, Vf, xif, sf, Ff, w, cf_f, pp, kind, sums[0])
+                counts[0] += n0
+                if twin:
+                    _measure_twin(xt, vt, Vt, xif, w, cf_f, sums[0], pp[8])
+                if first:
+                    counts[2] += _measure(xf, vf, Vf, xif, sf, Ff, w, cf_f, pp, kind, sums[2])
+                    if twin:
+                        _measure_twin(xt, vt, Vt, xif, w, cf_f, sums[2], pp[8])
+                if coupled and sub == 1:
+                    counts[1] += _measure(xc, vc, Vc, xic, sc, Fc, w, cf_c, pp, kind, sums[1])
+            zz = z1 if sub == 0 else z2
+            for j in range(N):
+                for p in range(P):
+                    xif[j, p] = cf_f[13] * xif[j, p] + cf_f[14] * zz[j, p]
+        if coupled:
+            for j in range(N):
+                for p in range(P):
+                    xic[j, p] = cf_c[13] * xic[j, p] + cf_c[14] * (w1 * z1[j, p] + w2 * z2[j, p])
 
 
 def run_chunk(gen, P: int, N: int, nburn: int, nrun: int, stride: int, cf_f: np.ndarray,
-              cf_c: np.ndarray, pp: np.ndarray, kind: int, coupled: bool, sums: np.ndarray,
+              cf_c: np.ndarray, pp: np.ndarray, kind: int, coupled: bool, cf_t: np.ndarray,
+              pp_t: np.ndarray, twin: bool, chol: np.ndarray, sums: np.ndarray,
               counts: np.ndarray, esc_time: np.ndarray, counters: np.ndarray) -> None:
     """Run :func:`_run` (arguments as there) on a scratch block sized for this chunk."""
-    _run(gen, P, N, nburn, nrun, stride, cf_f, cf_c, pp, kind, coupled, sums, counts, esc_time,
-         counters)
+    _run(gen, P, N, nburn, nrun, stride, cf_f, cf_c, pp, kind, coupled, cf_t, pp_t, twin, chol,
+         sums, counts, esc_time, counters)

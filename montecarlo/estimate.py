@@ -1,30 +1,48 @@
 """From replica moments to estimates: means, standard errors, covariance, Richardson bias.
 
 Every statistic here is computed over *replicas* (independent), never over the correlated
-samples inside a path.
+samples inside a path. With a harmonic twin in the ensemble (:mod:`.twin`), the means are
+the regression (control-variate) estimates of :mod:`.control`; without, plain means.
+
+``eta`` is the ratio of the estimated means, :math:`\\eta = \\overline{V^2}/(R\\,\\overline{P_{in}})`
+(not a mean of per-replica ratios, whose bias is of the order of the squared per-replica
+relative error), with the first-order (delta-method) error.
 """
 
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 
+from fpe_harvester.errors import ParameterError
 from fpe_harvester.model import Harvester
 
+from .control import MIN_DOF, regression_estimate
+from .scheme import KIND_KINK, scheme_kind
 from .simulate import Ensemble
+from .twin import TWIN_MOMENTS
 
-__all__ = ["Estimate", "estimate", "BIAS_ORDER"]
+__all__ = ["Estimate", "estimate", "BIAS_ORDER", "bias_order"]
 
 #: Weak order assumed when the coarse/fine difference is turned into a bias estimate of the
 #: fine level, bias = (coarse - fine) / (2^p - 1) (so fine - bias is the extrapolation).
 #: p = 2 is measured (validation/bench/montecarlo.py) for the harmonic scheme (2.03), the
-#: steep n = 1.1 potential (1.94) and rings (n = 4, N = 3 test); for the kink n = 1 the order
-#: is not resolved by the measurements, so p = 1 is assumed (a larger, conservative estimate).
+#: steep n = 1.1 potential (1.94) and rings (n = 4, N = 3 test). For the kink scheme the ratio
+#: of successive coupled differences eta(dt) - eta(dt/2), dt = 0.04 -> 0.02 -> 0.01, is 3.7
+#: and 3.7 +- 1.8 at a = 0.5 (order 2), 3.2 +- 0.6 at a = 1, but 2.3 +- 0.8 at a = 2, where
+#: units spend much time near rest: p = 1 (a bias estimate 3x too large where the order is 2).
 BIAS_ORDER = {"smooth": 2.0, "nonsmooth": 1.0}
 
-_NAMES = ("V2", "Pin", "eta", "v2", "vV", "x2", "stuck")
+#: Observables estimated from the replica moments (``eta`` is derived from V2 and Pin).
+_NAMES = ("V2", "Pin", "v2", "vV", "x2", "stuck")
+
+
+def bias_order(h: Harvester, kind: int | None = None) -> float:
+    """Weak order of the time-step bias assumed for a scheme (default ``h``'s, see :data:`BIAS_ORDER`)."""
+    kind = scheme_kind(h) if kind is None else kind
+    return BIAS_ORDER["nonsmooth" if kind == KIND_KINK else "smooth"]
 
 
 @dataclass(frozen=True)
@@ -34,8 +52,8 @@ class Estimate:
     Attributes
     ----------
     mean, se : dict of float
-        Per observable (``V2, Pin, eta, v2, vV, x2, stuck``): mean and standard error of the
-        mean over replicas (level 0).
+        Per observable (``V2, Pin, eta, v2, vV, x2, stuck``): estimate and standard error
+        (level 0, the finest step).
     bias : dict of float
         Richardson estimate of the time-step bias of level 0, value(dt/2) - value(0)
         (0 without a coarse level).
@@ -49,6 +67,14 @@ class Estimate:
     identity_V2, identity_power : tuple of float
         ``(residual, standard error)`` of :math:`V^2 - K_c\\tau_p\\langle vV\\rangle` and of
         :math:`P_{in} - m\\gamma\\langle v^2\\rangle - K_v\\langle vV\\rangle`.
+    drift : dict of float
+        Per observable, level 0's first half of the measured window minus the whole window
+        (a transient left by a too-short burn-in shows here), and ``drift_se`` its error.
+    reduction : dict of float
+        Variance-reduction factor of the control variates per observable (plain variance of
+        the mean / control-variate variance); empty without controls.
+    control : bool
+        Whether the twin's control variates were used.
     """
 
     mean: dict[str, float]
@@ -59,42 +85,47 @@ class Estimate:
     replicas: int
     identity_V2: tuple[float, float]
     identity_power: tuple[float, float]
+    drift: dict[str, float] = field(default_factory=dict)
+    drift_se: dict[str, float] = field(default_factory=dict)
+    reduction: dict[str, float] = field(default_factory=dict)
+    control: bool = False
 
     def total_error(self, name: str) -> float:
         """Standard error and bias estimate added in quadrature."""
         return math.hypot(self.se[name], self.bias[name])
 
     def rel_error(self, name: str = "eta") -> float:
-        """Total error relative to the value (inf when the value is 0)."""
+        """Total error relative to the value (inf when the value is 0 or undefined)."""
         value = abs(self.mean[name])
         return self.total_error(name) / value if value > 0 else math.inf
 
 
-def _per_replica(e: Ensemble, h: Harvester, level: int) -> dict[str, np.ndarray]:
+def _per_replica(e: Ensemble, h: Harvester, level: int) -> np.ndarray:
     m = e.moments(level)
-    out = {
-        "V2": m["V2"],
-        "Pin": h.params.sigma * m["vxi"],
-        "v2": m["v2"],
-        "vV": m["vV"],
-        "x2": m["x2"],
-        "stuck": m["stuck"],
-    }
-    with np.errstate(divide="ignore", invalid="ignore"):
-        out["eta"] = out["V2"] / (h.params.R * out["Pin"])
-    return out
+    cols = {"V2": m["V2"], "Pin": h.params.sigma * m["vxi"], "v2": m["v2"], "vV": m["vV"],
+            "x2": m["x2"], "stuck": m["stuck"]}
+    return np.column_stack([cols[name] for name in _NAMES])
 
 
-def _mean_se(x: np.ndarray) -> tuple[float, float]:
-    n = x.size
-    if n == 0:
+def _ratio(mean: np.ndarray, cov: np.ndarray, R: float) -> tuple[float, float]:
+    """eta = V2/(R Pin) from the (V2, Pin) entries of a mean vector and its covariance."""
+    V2, Pin = mean[0], mean[1]
+    if not Pin:
         return math.nan, math.nan
-    mean = float(x.mean())
-    se = float(x.std(ddof=1) / math.sqrt(n)) if n > 1 else math.inf
-    return mean, se
+    eta = V2 / (R * Pin)
+    grad = np.array([1.0 / (R * Pin), -eta / Pin])
+    var = float(grad @ cov[:2, :2] @ grad)
+    return float(eta), math.sqrt(max(var, 0.0))
 
 
-def estimate(e: Ensemble, h: Harvester, order: float | None = None) -> Estimate:
+def _linear_eta(delta: np.ndarray, cov: np.ndarray, mean: np.ndarray, R: float) -> tuple[float, float]:
+    """First-order change of eta from changes ``delta`` of (V2, Pin) with covariance ``cov``."""
+    V2, Pin = mean[0], mean[1]
+    grad = np.array([1.0 / (R * Pin), -V2 / (R * Pin * Pin)])
+    return float(grad @ delta[:2]), math.sqrt(max(float(grad @ cov[:2, :2] @ grad), 0.0))
+
+
+def estimate(e: Ensemble, h: Harvester, order: float | None = None, control: bool | None = None) -> Estimate:
     """Statistics of an ensemble of ``h`` (see :class:`Estimate`).
 
     Parameters
@@ -104,30 +135,105 @@ def estimate(e: Ensemble, h: Harvester, order: float | None = None) -> Estimate:
     h : Harvester
         The simulated problem (for sigma, R, Kc, tau_p, m, gamma, Kv).
     order : float, optional
-        Weak order for the Richardson bias; default from :data:`BIAS_ORDER`.
+        Weak order for the Richardson bias; default :func:`bias_order`.
+    control : bool, optional
+        Use the twin's moments as control variates (:mod:`.control`). None: whenever the
+        ensemble has a twin started from its stationary law, no path escaped and there are at
+        least ``MIN_DOF`` residual degrees of freedom. True raises if that is not the case.
     """
     if order is None:
-        order = BIAS_ORDER["nonsmooth" if h.n == 1.0 else "smooth"]
+        order = bias_order(h, e.notes.get("scheme_kind"))
     fine = _per_replica(e, h, 0)
-    valid = np.isfinite(fine["V2"]) & np.isfinite(fine["eta"])
-    coarse = _per_replica(e, h, 1) if len(e.dts) > 1 else None
+    coarse = _per_replica(e, h, 1) if e.levels > 1 else None
+    first = _per_replica(e, h, -1)
+    valid = np.all(np.isfinite(fine[:, :5]), axis=1) & (fine[:, 1] != 0)
     if coarse is not None:
-        valid &= np.isfinite(coarse["V2"]) & np.isfinite(coarse["eta"])
-    mean: dict[str, float] = {}
-    se: dict[str, float] = {}
-    bias: dict[str, float] = {}
-    bias_se: dict[str, float] = {}
-    for name in _NAMES:
-        mean[name], se[name] = _mean_se(fine[name][valid])
-        if coarse is not None and valid.any():
-            # e(h) = C h^p gives fine - coarse = (1 - 2^p) e(h/2)
-            d, d_se = _mean_se(coarse[name][valid] - fine[name][valid])
-            bias[name], bias_se[name] = d / (2.0**order - 1.0), d_se / (2.0**order - 1.0)
-        else:
-            bias[name], bias_se[name] = 0.0, 0.0
+        valid &= np.all(np.isfinite(coarse[:, :5]), axis=1)
+    valid &= np.all(np.isfinite(first[:, :5]), axis=1)
     n = int(valid.sum())
-    cov = float(np.cov(fine["V2"][valid], fine["Pin"][valid])[0, 1] / n) if n > 1 else 0.0
+    n_twin = len(TWIN_MOMENTS)
+    usable = (e.twin_kappa is not None and e.start == "twin" and e.escaped_fraction() == 0.0
+              and n - n_twin - 1 >= MIN_DOF)
+    if control and not usable:
+        raise ParameterError(
+            "control=True needs an ensemble with a twin started from its stationary law "
+            f"(start='twin'), no escaped path and at least {n_twin + 1 + MIN_DOF} valid replicas; "
+            f"got twin {e.twin_kappa}, start {e.start!r}, escaped fraction {e.escaped_fraction():g}, "
+            f"{n} replicas")
+    use = usable if control is None else bool(control)
+    if n < 2:
+        nan = dict.fromkeys(_NAMES + ("eta",), math.nan)
+        zero = dict.fromkeys(_NAMES + ("eta",), 0.0)
+        return Estimate(dict(nan), dict(nan), dict(zero), dict(zero), math.nan, n, (math.nan, math.nan),
+                        (math.nan, math.nan), dict(zero), dict(zero))
+    R = h.params.R
+    if use:
+        mom, mom_first = e.moments(0), e.moments(-1)
+        C = np.column_stack([mom["t_" + name][valid] for name in TWIN_MOMENTS])
+        C_first = np.column_stack([mom_first["t_" + name][valid] for name in TWIN_MOMENTS])
+        mu = np.array([e.twin_mean[name] for name in TWIN_MOMENTS])
+    reduction: dict[str, float] = {}
+    Ff = fine[valid]
+    if use:
+        reg = regression_estimate(Ff, C, mu)
+        mean, cov = reg.mean, reg.cov
+        for i, name in enumerate(_NAMES):
+            if cov[i, i] > 0:
+                reduction[name] = float(reg.plain_cov[i, i] / cov[i, i])
+    else:
+        mean, cov = _plain(Ff)
+    est_mean = {name: float(mean[i]) for i, name in enumerate(_NAMES)}
+    est_se = {name: math.sqrt(max(float(cov[i, i]), 0.0)) for i, name in enumerate(_NAMES)}
+    est_mean["eta"], est_se["eta"] = _ratio(mean, cov, R)
+    if use and est_se["eta"] > 0:
+        reduction["eta"] = (_ratio(mean, reg.plain_cov, R)[1] / est_se["eta"]) ** 2
+    bias = dict.fromkeys(_NAMES + ("eta",), 0.0)
+    bias_se = dict.fromkeys(_NAMES + ("eta",), 0.0)
+    if coarse is not None:
+        # e(h) = C h^p gives fine - coarse = (1 - 2^p) e(h/2)
+        scale = 1.0 / (2.0**order - 1.0)
+        # the twin runs at the fine step only: its controls are used for the coarse - fine
+        # difference when they lower the variance of eta's difference, which is rare
+        d_mean, d_cov = _best(coarse[valid] - Ff, C if use else None, mu if use else None, mean, R)
+        for i, name in enumerate(_NAMES):
+            bias[name] = float(d_mean[i]) * scale
+            bias_se[name] = math.sqrt(max(float(d_cov[i, i]), 0.0)) * scale
+        b, b_se = _linear_eta(d_mean, d_cov, mean, R)
+        bias["eta"], bias_se["eta"] = b * scale, b_se * scale
+    # the twin's own first-half-minus-whole difference has mean 0 (it is stationary): the
+    # control for the system's, which a transient would shift
+    dr_mean, dr_cov = _best(first[valid] - Ff, (C_first - C) if use else None,
+                            np.zeros(len(TWIN_MOMENTS)) if use else None, mean, R)
+    drift = {name: float(dr_mean[i]) for i, name in enumerate(_NAMES)}
+    drift_se = {name: math.sqrt(max(float(dr_cov[i, i]), 0.0)) for i, name in enumerate(_NAMES)}
+    drift["eta"], drift_se["eta"] = _linear_eta(dr_mean, dr_cov, mean, R)
     p = h.params
-    r1 = fine["V2"][valid] - p.Kc * p.tau_p * fine["vV"][valid]
-    r2 = fine["Pin"][valid] - p.m * p.gamma * fine["v2"][valid] - p.Kv * fine["vV"][valid]
-    return Estimate(mean, se, bias, bias_se, cov, n, _mean_se(r1), _mean_se(r2))
+    r1 = Ff[:, 0] - p.Kc * p.tau_p * Ff[:, 3]
+    r2 = Ff[:, 1] - p.m * p.gamma * Ff[:, 2] - p.Kv * Ff[:, 3]
+    return Estimate(
+        mean=est_mean, se=est_se, bias=bias, bias_se=bias_se, cov_V2_Pin=float(cov[0, 1]), replicas=n,
+        identity_V2=_mean_se(r1), identity_power=_mean_se(r2), drift=drift, drift_se=drift_se,
+        reduction=reduction, control=use)
+
+
+def _plain(Y: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Sample mean of the rows of Y and the covariance of that mean."""
+    mean = Y.mean(axis=0)
+    Yc = Y - mean
+    return mean, Yc.T @ Yc / (Y.shape[0] - 1) / Y.shape[0]
+
+
+def _best(Y: np.ndarray, C: np.ndarray | None, mu: np.ndarray | None, ref: np.ndarray,
+          R: float) -> tuple[np.ndarray, np.ndarray]:
+    """Plain or regression mean of Y, whichever gives eta's linear combination less variance."""
+    mean, cov = _plain(Y)
+    if C is None:
+        return mean, cov
+    reg = regression_estimate(Y, C, mu)
+    if _linear_eta(reg.mean, reg.cov, ref, R)[1] < _linear_eta(mean, cov, ref, R)[1]:
+        return reg.mean, reg.cov
+    return mean, cov
+
+
+def _mean_se(x: np.ndarray) -> tuple[float, float]:
+    return float(x.mean()), float(x.std(ddof=1) / math.sqrt(x.size))

@@ -62,7 +62,8 @@ def simulate_naive(
     xi = rng.standard_normal(shape) * np.sqrt(p.noise_variance)
     nburn, nrun = int(round(t_burn / dt)), max(1, int(round(t_run / dt)))
     amp = np.sqrt(2.0 * p.D * dt) / p.tau
-    sums = np.zeros((replicas, 1, N_MOM))
+    sums = np.zeros((replicas, 2, N_MOM))  # level 0, and level 0 over the first half
+    half = nburn + nrun // 2
     t0 = time.perf_counter()
     for step in range(nburn + nrun):
         force = h.potential.force(x) - p.m * p.gamma * v - p.Kv * V + p.sigma * xi
@@ -75,15 +76,17 @@ def simulate_naive(
             xi - (dt / p.tau) * xi + amp * rng.standard_normal(shape),
         )
         if step >= nburn:
-            sums[:, 0, 0] += (V * V).sum(axis=(1, 2))
-            sums[:, 0, 1] += (v * V).sum(axis=(1, 2))
-            sums[:, 0, 2] += (v * v).sum(axis=(1, 2))
-            sums[:, 0, 3] += (x * x).sum(axis=(1, 2))
-            sums[:, 0, 4] += (v * xi).sum(axis=(1, 2))
+            for row in (0, 1) if step < half else (0,):
+                sums[:, row, 0] += (V * V).sum(axis=(1, 2))
+                sums[:, row, 1] += (v * V).sum(axis=(1, 2))
+                sums[:, row, 2] += (v * v).sum(axis=(1, 2))
+                sums[:, row, 3] += (x * x).sum(axis=(1, 2))
+                sums[:, row, 4] += (v * xi).sum(axis=(1, 2))
+                sums[:, row, 6] -= (x * h.potential.force(x)).sum(axis=(1, 2))
     wall = time.perf_counter() - t0
     return Ensemble(
         sums=sums,
-        counts=np.full((replicas, 1), float(nrun * paths * h.N)),
+        counts=np.tile([float(nrun * paths * h.N), float((nrun // 2) * paths * h.N)], (replicas, 1)),
         escape_times=np.full((replicas, paths), np.inf),
         dts=(dt,),
         paths=paths,

@@ -24,23 +24,43 @@ import scipy.linalg
 
 from fpe_harvester.model import Harvester
 
-from ._kernels import KIND_KICK, KIND_KINK, KIND_LINEAR
+from ._kernels import KIND_KICK, KIND_KINK, KIND_LINEAR, SNAP
 
-__all__ = ["scheme_kind", "linear_stiffness", "step_coefficients", "physical_vector", "SCHEME_NAMES"]
+__all__ = ["scheme_kind", "linear_stiffness", "step_coefficients", "physical_vector", "SCHEME_NAMES",
+           "KINK_WIDTH"]
 
 SCHEME_NAMES = {
     KIND_LINEAR: "Strang O(h/2) D(h) O(h/2); D exact linear flow (harmonic on-site force)",
     KIND_KICK: "Strang O(h/2) D(h) O(h/2); D = kick(h/2) linear-flow(h) kick(h/2) for -U'(x)",
-    KIND_KINK: "Strang O(h/2) D(h) O(h/2); D exact piecewise-linear flow with located zero "
-    "crossings and Filippov sticking (n = 1)",
+    KIND_KINK: "Strang O(h/2) D(h) O(h/2); D exact piecewise-linear flow of the kink force "
+    "-a n sign(x) with located zero crossings, held at rest once the swings are shorter than the "
+    "step, and (n > 1) Strang kicks of the remainder -U'(x) + a n sign(x)",
 }
 
 
+#: Width of the kink scheme's range of n: 1 <= n <= 1 + KINK_WIDTH (see :func:`scheme_kind`).
+KINK_WIDTH = 0.05
+
+
 def scheme_kind(h: Harvester) -> int:
-    """Which D-step the kernel uses: 0 harmonic (exact), 1 smooth kick, 2 kink (n = 1)."""
+    """Which D-step the kernel uses: 0 harmonic (exact), 1 smooth kick, 2 kink.
+
+    The kink scheme serves :math:`1 \\le n \\le 1 +` :data:`KINK_WIDTH`: it integrates the
+    force :math:`-an\\,\\mathrm{sign}(x)` exactly (zero crossings located, the unit held at
+    rest once its swings are shorter than the step) and kicks only the remainder
+    :math:`-U'(x) + an\\,\\mathrm{sign}(x)`, which is 0 at n = 1 and small away from
+    :math:`|x| \\lesssim 2^{-1/(n-1)}` near it. Just above n = 1 the force jumps from 0 to about
+    :math:`an` within an unresolvably small :math:`|x|`, and the smooth kick scheme then
+    chatters across x = 0 like a naive scheme across the kink. Measured at a = 2 on the same
+    noise (eta ~ 0.12), the kick scheme minus the kink scheme at dt = 0.01, 0.005, 0.0025:
+    -4.7, -2.5, -1.2 % for n = 1.0001 and -3.2, -1.5, -0.8 % for n = 1.01 (a first-order
+    bias that its order-2 Richardson estimate understates), but within 0.3 % (1-2 standard
+    errors) for n = 1.05, 1.1 and 1.2, where the kink scheme's kicked remainder grows
+    instead (its bias estimate at n = 1.2 is 3x the kick scheme's).
+    """
     if h.is_linear:
         return KIND_LINEAR
-    if h.n == 1.0:
+    if h.n <= 1.0 + KINK_WIDTH:
         return KIND_KINK
     return KIND_KICK
 
@@ -90,11 +110,17 @@ def step_coefficients(h: Harvester, dt: float) -> np.ndarray:
     return cf
 
 
-def physical_vector(h: Harvester, threshold: float) -> np.ndarray:
-    """Physical parameter array ``pp`` of the kernels; ``threshold`` is the escape amplitude."""
+def physical_vector(h: Harvester, threshold: float, snap: float = SNAP,
+                    kind: int | None = None) -> np.ndarray:
+    """Parameter array ``pp`` of the kernels (layout in :mod:`montecarlo._kernels`).
+
+    ``threshold`` is the escape amplitude, ``snap`` the kink's sticking rule
+    (:data:`montecarlo._kernels.SNAP`), ``kind`` the scheme (default :func:`scheme_kind`).
+    """
     p = h.params
+    kind = scheme_kind(h) if kind is None else kind
     return np.array(
         [p.m, p.gamma, p.Kv, p.Kc, p.tau_p, p.sigma, h.k if h.N > 1 else 0.0, h.a, h.n,
-         linear_stiffness(h), threshold, p.noise_variance],
+         linear_stiffness(h), threshold, p.noise_variance, snap, h.a * h.n if kind == KIND_KINK else 0.0],
         dtype=float,
     )

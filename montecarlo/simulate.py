@@ -23,8 +23,9 @@ import numpy as np
 from fpe_harvester.errors import ParameterError, check_int, check_real
 from fpe_harvester.model import Harvester
 
-from ._kernels import MOMENTS, N_MOM, run_chunk
+from ._kernels import KIND_KICK, KIND_KINK, MOMENTS, N_MOM, ROWS, SNAP, run_chunk
 from .scheme import physical_vector, scheme_kind, step_coefficients
+from .twin import initial_cholesky, twin_expectations, twin_harvester, twin_is_stable
 
 __all__ = ["Ensemble", "simulate", "default_threads"]
 
@@ -43,15 +44,23 @@ class Ensemble:
 
     Attributes
     ----------
-    sums : ndarray, shape (replicas, levels, 6)
-        Sums over measured unit-steps of ``V^2, vV, v^2, x^2, v xi, stuck`` (see
-        :data:`montecarlo._kernels.MOMENTS`; ``v xi`` already at the Strang point).
-    counts : ndarray, shape (replicas, levels)
+    sums : ndarray, shape (replicas, levels + 1, len(MOMENTS))
+        Sums over measured unit-steps of the moments :data:`montecarlo._kernels.MOMENTS`
+        (``v xi`` already at the Strang point; the twin's ``t_*`` at level 0 only), per level;
+        the last row is level 0 over the first half of the measured window.
+    counts : ndarray, shape (replicas, levels + 1)
         Number of unit-steps summed (fewer than ``paths * N * t_run/dt`` when paths escaped).
     escape_times : ndarray, shape (replicas, paths)
         Time of the first ``|x_j| > threshold`` of each path (burn-in included), ``inf`` if none.
     dts : tuple of float
         Time step of each level: ``(dt,)``, or ``(dt/2, dt)`` with Richardson coupling.
+    twin_kappa : float or None
+        On-site stiffness of the harmonic twin run on level 0's noise (None: no twin).
+    twin_mean : dict of float
+        Exact expectations of the twin's moments at level 0's step
+        (:func:`montecarlo.twin.twin_expectations`); empty without a twin.
+    start : str
+        ``"rest"`` or ``"twin"`` (the paths start from the twin's stationary law).
     """
 
     sums: np.ndarray
@@ -68,13 +77,24 @@ class Ensemble:
     seed_entropy: int | None = None
     first_replica: int = 0
     notes: dict[str, object] = field(default_factory=dict)
+    twin_kappa: float | None = None
+    twin_mean: dict[str, float] = field(default_factory=dict)
+    start: str = "rest"
 
     @property
     def replicas(self) -> int:
         return int(self.sums.shape[0])
 
+    @property
+    def levels(self) -> int:
+        """Number of time-step levels (1, or 2 with Richardson coupling)."""
+        return len(self.dts)
+
     def moments(self, level: int = 0) -> dict[str, np.ndarray]:
-        """Per-replica averages ``{name: array(replicas)}`` of one level (NaN where nothing counted)."""
+        """Per-replica averages ``{name: array(replicas)}`` of one level (NaN where nothing counted).
+
+        ``level = -1`` gives level 0 over the first half of the measured window.
+        """
         cnt = self.counts[:, level]
         safe = np.where(cnt > 0, cnt, 1.0)
         out = {name: np.where(cnt > 0, self.sums[:, level, i] / safe, np.nan) for i, name in enumerate(MOMENTS)}
@@ -86,8 +106,10 @@ class Ensemble:
 
     def merge(self, other: Ensemble) -> Ensemble:
         """Concatenate the replicas of two runs with identical settings."""
-        if other.dts != self.dts or other.paths != self.paths or other.t_run != self.t_run:
-            raise ParameterError("can only merge ensembles with the same dt, paths and t_run")
+        if (other.dts, other.paths, other.t_run, other.t_burn, other.twin_kappa, other.start) != (
+                self.dts, self.paths, self.t_run, self.t_burn, self.twin_kappa, self.start):
+            raise ParameterError("can only merge ensembles with the same dt, paths, t_run, t_burn, "
+                                 "twin and start")
         return Ensemble(
             sums=np.concatenate([self.sums, other.sums]),
             counts=np.concatenate([self.counts, other.counts]),
@@ -100,6 +122,9 @@ class Ensemble:
             seed_entropy=self.seed_entropy,
             first_replica=min(self.first_replica, other.first_replica),
             notes=dict(self.notes),
+            twin_kappa=self.twin_kappa,
+            twin_mean=dict(self.twin_mean),
+            start=self.start,
         )
 
 
@@ -123,6 +148,10 @@ def simulate(
     threads: int | None = None,
     first_replica: int = 0,
     sample_every: float = 0.05,
+    twin: float | None = None,
+    start: str = "rest",
+    snap: float = SNAP,
+    kind: int | None = None,
 ) -> Ensemble:
     """Simulate independent replicas of ``h`` and return their raw moment sums.
 
@@ -156,6 +185,23 @@ def simulate(
         Time between accumulated samples, >= 0 (rounded to whole steps of ``dt``; 0 = every
         step). The default 0.05 is far below the correlation times (~1), so the standard
         error is unchanged while the accumulation cost drops.
+    twin : float or None
+        On-site stiffness :math:`\\kappa > 0` of a harmonic twin ring (same k) advanced on the
+        fine level's noise and measured with it (:mod:`montecarlo.twin`); its modes
+        :math:`\\kappa + 4k\\sin^2(\\pi q/N)` must all be positive. None: no twin.
+    start : {"rest", "twin"}
+        Initial state of every path: rest (x = v = V = 0, xi stationary), or a draw from the
+        twin's stationary law at the fine step (needs ``twin``, or a harmonic ``h``, which is
+        then its own twin). The twin always starts from its own law when ``start="twin"``;
+        with ``start="rest"`` a twin starts at rest too, and its expectations are then not
+        those of :attr:`Ensemble.twin_mean` during the transient.
+    snap : float
+        Kink scheme only: a zero crossing whose return would take less than ``snap * dt``
+        sticks at once, >= 0 (:data:`montecarlo._kernels.SNAP`; 0: only an exhausted event
+        budget sticks). For time-step studies.
+    kind : int or None
+        Scheme (:data:`montecarlo._kernels.KIND_KICK` or ``KIND_KINK``; default
+        :func:`montecarlo.scheme.scheme_kind`), for comparing the schemes near n = 1.
 
     Returns
     -------
@@ -166,7 +212,7 @@ def simulate(
     >>> e = simulate(Harvester.build(a=0.5), dt=0.05, paths=4, replicas=2, t_burn=1.0,
     ...              t_run=2.0, seed=3)
     >>> e.sums.shape, float(e.counts[0, 0])
-    ((2, 1, 6), 160.0)
+    ((2, 2, 18), 160.0)
     """
     if not isinstance(h, Harvester):
         raise ParameterError(f"h must be a Harvester, got {h!r} (type {type(h).__name__})")
@@ -182,15 +228,38 @@ def simulate(
     if seed is not None:
         seed = check_int("seed", seed, low=0)
     sample_every = check_real("sample_every", sample_every, low=0.0)
+    snap = check_real("snap", snap, low=0.0)
+    if start not in ("rest", "twin"):
+        raise ParameterError(f"start must be 'rest' or 'twin', got {start!r} (type {type(start).__name__})")
+    if twin is not None:
+        twin = check_real("twin", twin, low=0.0, low_open=True)
+        if not twin_is_stable(h, twin):
+            raise ParameterError(
+                f"twin must give every twin mode a positive stiffness twin + 4k sin^2(pi q/N) "
+                f"(k = {h.k:g}, N = {h.N}), got {twin!r}")
+    if start == "twin" and twin is None:
+        if not h.is_linear:
+            raise ParameterError("start='twin' needs a twin stiffness for a nonlinear potential")
     stride = max(1, int(round(sample_every / dt)))
     nrun = max(1, int(round(t_run / dt)))
     nburn = int(round(t_burn / dt))
     ss = np.random.SeedSequence(seed)
     levels = 2 if richardson else 1
-    cf_f = step_coefficients(h, 0.5 * dt if richardson else dt)
+    dt_f = 0.5 * dt if richardson else dt
+    cf_f = step_coefficients(h, dt_f)
     cf_c = step_coefficients(h, dt)
-    pp = physical_vector(h, threshold)
-    kind = scheme_kind(h)
+    if kind is not None and (h.is_linear or kind not in (KIND_KICK, KIND_KINK)):
+        raise ParameterError(f"kind must be None, or {KIND_KICK} (kick) or {KIND_KINK} (kink) for a "
+                             f"nonlinear potential, got {kind!r} with n = {h.n:g}")
+    kind = scheme_kind(h) if kind is None else kind
+    pp = physical_vector(h, threshold, snap, kind)
+    lin = twin_harvester(h, twin) if twin is not None else (h if h.is_linear else None)
+    if twin is not None:
+        cf_t, pp_t = step_coefficients(lin, dt_f), physical_vector(lin, threshold)
+        twin_mean = twin_expectations(lin, dt_f, h.n)
+    else:
+        cf_t, pp_t, twin_mean = cf_f, pp, {}
+    chol = initial_cholesky(lin, dt_f) if start == "twin" else np.zeros((0, 0))
     sizes = _chunks(paths, chunk)
     tasks = [(r, c) for r in range(replicas) for c in range(len(sizes))]
 
@@ -198,12 +267,12 @@ def simulate(
         r, c = task
         child = np.random.SeedSequence(ss.entropy, spawn_key=(first_replica + r, c))
         gen = np.random.Generator(np.random.PCG64(child))
-        sums = np.zeros((2, N_MOM))
-        counts = np.zeros(2)
+        sums = np.zeros((ROWS, N_MOM))
+        counts = np.zeros(ROWS)
         esc = np.empty(sizes[c])
         counters = np.zeros(5, dtype=np.int64)
-        run_chunk(gen, sizes[c], h.N, nburn, nrun, stride, cf_f, cf_c, pp, kind, richardson, sums,
-                  counts, esc, counters)
+        run_chunk(gen, sizes[c], h.N, nburn, nrun, stride, cf_f, cf_c, pp, kind, richardson, cf_t,
+                  pp_t, twin is not None, chol, sums, counts, esc, counters)
         return sums, counts, esc, counters
 
     t0 = time.perf_counter()
@@ -213,14 +282,15 @@ def simulate(
         with ThreadPoolExecutor(max_workers=threads) as pool:
             results = list(pool.map(work, tasks))
     wall = time.perf_counter() - t0
-    sums = np.zeros((replicas, levels, N_MOM))
-    counts = np.zeros((replicas, levels))
+    rows = list(range(levels)) + [2]
+    sums = np.zeros((replicas, levels + 1, N_MOM))
+    counts = np.zeros((replicas, levels + 1))
     esc_times = np.full((replicas, paths), np.inf)
     counters = np.zeros(5, dtype=np.int64)
     offsets = np.concatenate([[0], np.cumsum(sizes)])
     for (r, c), (s, n, e, k) in zip(tasks, results):
-        sums[r] += s[:levels]
-        counts[r] += n[:levels]
+        sums[r] += s[rows]
+        counts[r] += n[rows]
         esc_times[r, offsets[c]:offsets[c + 1]] = np.where(e >= 0.0, e, np.inf)
         counters += k
     return Ensemble(
@@ -238,5 +308,8 @@ def simulate(
         seed_entropy=int(ss.entropy) if seed is None else seed,
         first_replica=first_replica,
         notes={"threads": threads, "chunk": chunk, "scheme_kind": kind, "sample_stride": stride},
+        twin_kappa=twin,
+        twin_mean=twin_mean,
+        start=start,
     )
 

@@ -1,9 +1,14 @@
 """The Monte Carlo solver: adaptive replicas until a target error on eta, with a status.
 
-``MonteCarlo(...).solve(h)`` runs batches of independent replicas (each ``paths`` rings for
-``t_burn + t_run``) until the relative error on eta (standard error and, with
-``richardson=True``, the time-step bias estimate, in quadrature) is below ``tol`` or the
-wall-time budget ``max_time`` is spent; then the status says ``NOT_CONVERGED``.
+``MonteCarlo(...).solve(h)`` plans the run (:meth:`MonteCarlo.plan`: time step, burn-in from
+the slowest relaxation time, the harmonic twin whose moments are control variates, paths
+started from the twin's stationary law), then runs batches of independent replicas (each
+``paths`` rings for ``t_burn + t_run``) until the relative error on eta (standard error and,
+with ``richardson=True``, the time-step bias estimate, in quadrature) is below ``tol`` or the
+wall-time budget ``max_time`` is spent; then the status says ``NOT_CONVERGED``. After each
+batch it halves an automatic ``dt`` when the bias estimate takes more than a third of ``tol``,
+and doubles the burn-in when the first half of the measured window differs significantly
+from the whole (a transient left over); either restarts the ensemble.
 """
 
 from __future__ import annotations
@@ -18,29 +23,67 @@ from typing import Any, ClassVar
 import numpy as np
 
 from fpe_harvester.errors import ParameterError, check_int, check_real
-from fpe_harvester.exact import classify, growth_rate, k_di, max_sin2, mode_eigenvalues
+from fpe_harvester.exact import classify, growth_rate, k_di, max_sin2
 from fpe_harvester.model import Harvester
-from fpe_harvester.result import Stats, Status, propagated_eta_error
+from fpe_harvester.result import Stats, Status
 
-from .estimate import Estimate, estimate
-from .scheme import SCHEME_NAMES, scheme_kind
+from .estimate import Estimate, bias_order, estimate
+from .plan import FALLBACK_NOTE, burn_in, relaxation_time
+from .scheme import KIND_KINK, SCHEME_NAMES, scheme_kind
 from .simulate import Ensemble, default_threads, simulate
+from .twin import linearized_stiffness
 
-__all__ = ["MonteCarlo"]
+__all__ = ["MonteCarlo", "Plan"]
 
 _RNG = "numpy Generator(PCG64) drawn inside numba, one SeedSequence child per (replica, chunk)"
 
 
-def _auto_burn(h: Harvester) -> float:
-    """Burn-in: 8 slowest linear relaxation times for harmonic rings, else 40, in [20, 2000]."""
-    if h.is_linear:
-        kap = float(max(h.mode_stiffness().min(), 0.0))
-        re = mode_eigenvalues(kap, h.params).real
-        # at k = k_di the zero eigenvalue is x's free diffusion, which never equilibrates
-        re = re[re < -1e-12]
-        rate = -float(re.max()) if re.size else 0.0
-        return float(min(2000.0, max(20.0, 8.0 / rate))) if rate > 0 else 2000.0
-    return 40.0
+#: Replica index where the pilot run's streams start (far from the measured replicas').
+_PILOT_FIRST = 2**40
+#: Path time (burn-in + measured) per replica at which ``paths`` = 64 is kept; longer paths get
+#: proportionally fewer per replica, so that the first batch costs about the same.
+_PATH_TIME = 140.0
+#: Coarsest and finest automatic time step, and the share of tol the bias may take.
+_DT_START, _DT_MIN, _BIAS_SHARE = 0.02, 0.02 / 32, 1.0 / 3.0
+#: Restarts allowed for a longer burn-in, and the drift that triggers one (in standard
+#: errors, and relative to tol).
+_BURN_RESTARTS, _DRIFT_SIGMAS, _DRIFT_SHARE = 3, 3.0, 1.0 / 3.0
+#: Tolerance from which the automatic paths per replica drop from 64 to 16.
+_LOOSE_TOL = 5e-3
+#: Automatic measured time per path, in burn-ins (when longer than 100).
+_RUN_PER_BURN = 3.0
+
+
+@dataclass(frozen=True)
+class Plan:
+    """What the solver runs for one harvester (see :meth:`MonteCarlo.plan`).
+
+    Attributes
+    ----------
+    dt : float
+        Coarse time step (the reported level is ``dt/2`` with Richardson).
+    t_burn, t_run : float
+        Burn-in and measured time per path.
+    paths : int
+        Paths per replica.
+    twin : float or None
+        On-site stiffness of the harmonic twin (None: no twin).
+    start : str
+        ``"twin"`` (stationary law of the twin, or of a harmonic ring itself) or ``"rest"``.
+    relaxation_time : float
+        Slowest relaxation time behind ``t_burn`` (:func:`montecarlo.plan.relaxation_time`).
+    notes : dict
+        How each choice was made.
+    """
+
+    dt: float
+    t_burn: float
+    t_run: float
+    paths: int
+    twin: float | None
+    start: str
+    relaxation_time: float
+    notes: dict[str, Any]
 
 
 @dataclass(frozen=True)
@@ -59,17 +102,23 @@ class MonteCarlo:
     tol : float
         Target relative error on eta, in (0, 1): the standard error over replicas and (with
         ``richardson``) the time-step bias estimate, added in quadrature. Default 1e-2.
-    dt : float
+    dt : float or None
         Time step, > 0 (model time units). With ``richardson`` the reported numbers come
-        from ``dt/2`` and ``dt`` gives the bias estimate. Default 0.02.
-    paths : int
-        Paths (rings) per replica, >= 2. Default 256.
+        from ``dt/2`` and ``dt`` gives the bias estimate. None (default): 0.02, halved after
+        the first batch (down to 0.02/32) while the bias estimate exceeds a third of ``tol``.
+    paths : int or None
+        Paths (rings) per replica, >= 2. None: 64 for ``tol`` < 5e-3, else 16 (the first
+        batch of ``min_replicas`` then usually meets ``tol`` already); fewer when a path's
+        burn-in and measured time together exceed 140 (at least 2).
     min_replicas, max_replicas : int
-        Replicas run at least (>= 2, for an error bar) and at most. Defaults 8 and 4096.
+        Replicas run at least (>= 2, for an error bar; the control variates need 24) and at
+        most. Defaults 32 and 16384.
     t_burn : float or None
-        Burn-in per path (>= 0); None picks 8 slowest relaxation times (harmonic) or 40.
-    t_run : float
-        Measured time per path, > 0. Default 100.
+        Burn-in per path (>= 0); None: from the slowest relaxation time and ``tol``
+        (:func:`montecarlo.plan.burn_in`), doubled while the data show a transient.
+    t_run : float or None
+        Measured time per path, > 0. None: 100, or three times the burn-in if that is longer
+        (so that the burn-in costs at most a quarter of the run).
     max_time : float
         Wall-time budget in seconds, > 0. Default 600.
     escape : float or None
@@ -83,11 +132,17 @@ class MonteCarlo:
         Also run at the coarse step on the same noise and fold the bias into the error.
     threads : int or None
         Worker threads (results do not depend on it). Default: usable CPUs.
+    control : bool
+        For a nonlinear potential, run the harmonic twin (stiffness from a pilot run's
+        :math:`\\langle xU'\\rangle/\\langle x^2\\rangle`) on the same noise and use its
+        exactly known moments as control variates (:mod:`montecarlo.control`); the paths then
+        start from the twin's stationary law. Used whenever a stable twin exists and no path
+        escaped; ``info["variance_reduction"]`` gives the factor. Default True.
 
     Examples
     --------
     >>> from fpe_harvester import Harvester, solve
-    >>> r = solve(Harvester.build(a=0.5), "mc", seed=1, tol=0.05, paths=64, t_run=20,
+    >>> r = solve(Harvester.build(a=0.5), "mc", seed=1, tol=0.05, paths=16, t_run=20,
     ...           progress=False)
     >>> abs(r.eta - 20 / 39) < 4 * r.eta_err
     True
@@ -97,55 +152,52 @@ class MonteCarlo:
 
     seed: int | None = None
     tol: float = 1e-2
-    dt: float = 0.02
-    paths: int = 256
-    min_replicas: int = 8
-    max_replicas: int = 4096
+    dt: float | None = None
+    paths: int | None = None
+    min_replicas: int = 32
+    max_replicas: int = 16384
     t_burn: float | None = None
-    t_run: float = 100.0
+    t_run: float | None = None
     max_time: float = 600.0
     escape: float | None = None
     progress: bool | None = None
     richardson: bool = True
     threads: int | None = None
+    control: bool = True
 
     def __post_init__(self) -> None:
         if self.seed is not None:
             object.__setattr__(self, "seed", check_int("seed", self.seed, low=0))
         object.__setattr__(self, "tol", check_real("tol", self.tol, low=0.0, high=1.0, low_open=True,
                                                    high_open=True))
-        object.__setattr__(self, "dt", check_real("dt", self.dt, low=0.0, low_open=True))
-        object.__setattr__(self, "paths", check_int("paths", self.paths, low=2))
+        if self.dt is not None:
+            object.__setattr__(self, "dt", check_real("dt", self.dt, low=0.0, low_open=True))
+        if self.paths is not None:
+            object.__setattr__(self, "paths", check_int("paths", self.paths, low=2))
         object.__setattr__(self, "min_replicas", check_int("min_replicas", self.min_replicas, low=2))
         object.__setattr__(self, "max_replicas",
                            check_int("max_replicas", self.max_replicas, low=self.min_replicas))
         if self.t_burn is not None:
             object.__setattr__(self, "t_burn", check_real("t_burn", self.t_burn, low=0.0))
-        object.__setattr__(self, "t_run", check_real("t_run", self.t_run, low=0.0, low_open=True))
-        if self.dt > self.t_run:
-            raise ParameterError(f"dt must not exceed t_run = {self.t_run:g}, got {self.dt!r}")
+        if self.t_run is not None:
+            object.__setattr__(self, "t_run", check_real("t_run", self.t_run, low=0.0, low_open=True))
+            if self.dt is not None and self.dt > self.t_run:
+                raise ParameterError(f"dt must not exceed t_run = {self.t_run:g}, got {self.dt!r}")
         object.__setattr__(self, "max_time", check_real("max_time", self.max_time, low=0.0, low_open=True))
         if self.escape is not None:
             object.__setattr__(self, "escape", check_real("escape", self.escape, low=0.0, low_open=True))
-        if self.progress is not None and not isinstance(self.progress, bool):
-            raise ParameterError(f"progress must be True, False or None, got {self.progress!r} "
-                                 f"(type {type(self.progress).__name__})")
-        if not isinstance(self.richardson, bool):
-            raise ParameterError(f"richardson must be True or False, got {self.richardson!r} "
-                                 f"(type {type(self.richardson).__name__})")
+        for flag in ("progress", "richardson", "control"):
+            value = getattr(self, flag)
+            if not isinstance(value, bool) and not (flag == "progress" and value is None):
+                choices = "True, False or None" if flag == "progress" else "True or False"
+                raise ParameterError(f"{flag} must be {choices}, got {value!r} "
+                                     f"(type {type(value).__name__})")
         if self.threads is not None:
             object.__setattr__(self, "threads", check_int("threads", self.threads, low=1))
 
     def unsupported_reason(self, h: Harvester) -> str | None:
         """Always None: Monte Carlo handles every harvester."""
         return None
-
-    # -- running ---------------------------------------------------------------------------
-
-    def _run(self, h: Harvester, replicas: int, first: int, t_burn: float) -> Ensemble:
-        return simulate(h, dt=self.dt, paths=self.paths, replicas=replicas, t_burn=t_burn,
-                        t_run=self.t_run, seed=self.seed, richardson=self.richardson,
-                        threshold=self.threshold(h), threads=self.threads, first_replica=first)
 
     def threshold(self, h: Harvester) -> float:
         """Escape threshold used for ``h`` (see ``escape``)."""
@@ -156,32 +208,139 @@ class MonteCarlo:
             return float(max(100.0, 4.0 * x_star))
         return 100.0
 
-    def run(self, h: Harvester) -> tuple[Ensemble, Estimate, bool]:
-        """Adaptive replica loop; returns the ensemble, its estimate and whether tol was met."""
+    # -- planning ----------------------------------------------------------------------------
+
+    def plan(self, h: Harvester) -> Plan:
+        """Time step, burn-in, paths and twin for ``h`` from the settings (None = automatic).
+
+        A nonlinear ring gets a short pilot run from rest (no twin) that measures
+        :math:`\\kappa = \\langle xU'(x)\\rangle/\\langle x^2\\rangle`
+        (:func:`montecarlo.twin.linearized_stiffness`); failing a stable twin there, the
+        Gaussian closure; failing that, no twin and a rest start.
+        """
+        seed = 0 if self.seed is None else self.seed
+        dt = self.dt or _DT_START
+        notes: dict[str, Any] = {}
+        harmonic = classify(h)[0] if h.is_linear else None
+        twin = None
+        if harmonic is not None:
+            kappa = 2.0 * h.a if harmonic == "stable" else None
+            start = "twin" if harmonic == "stable" else "rest"
+            notes["twin"] = "harmonic: no twin needed" + (", paths start from its own stationary law"
+                                                         if start == "twin" else "")
+        else:
+            kappa = linearized_stiffness(h)
+            notes["twin"] = "Gaussian closure" if kappa is not None else "none (no closure root)"
+            t_run0 = self.t_run or 100.0
+            pil_burn = burn_in(relaxation_time(h, kappa), self.tol, t_run0) if self.t_burn is None \
+                else self.t_burn
+            if self.control and math.isfinite(pil_burn):
+                pilot = simulate(h, dt=dt, paths=16, replicas=max(2, self.threads or default_threads()),
+                                 t_burn=pil_burn, t_run=t_run0, seed=seed, threshold=self.threshold(h),
+                                 threads=self.threads, first_replica=_PILOT_FIRST)
+                m = pilot.moments(0)
+                ok = np.isfinite(m["xdU"]) & np.isfinite(m["x2"])
+                if ok.any() and m["x2"][ok].mean() > 0 and m["xdU"][ok].mean() > 0:
+                    kp = linearized_stiffness(h, float(m["xdU"][ok].mean()), float(m["x2"][ok].mean()))
+                    if kp is not None:
+                        kappa = kp
+                        notes["twin"] = "pilot <x U'(x)>/<x^2>"
+            twin = kappa if self.control else None
+            start = "twin" if twin is not None else "rest"
+        tau_r = relaxation_time(h, kappa)
+        if kappa is None and harmonic is None:
+            notes["relaxation_time"] = FALLBACK_NOTE
+        t_run = self.t_run or 100.0
+        t_burn = self.t_burn
+        if t_burn is None:
+            t_burn = burn_in(tau_r, self.tol, t_run)
+            if not math.isfinite(t_burn):
+                t_burn = 100.0 * t_run
+                notes["t_burn"] = "no decaying mode: 100 t_run"
+            elif self.t_run is None:
+                for _ in range(4):  # t_run follows a long burn-in, which then shortens
+                    t_run = max(100.0, _RUN_PER_BURN * t_burn)
+                    t_burn = burn_in(tau_r, self.tol, t_run)
+        paths = self.paths or self._auto_paths(t_burn, t_run)
+        if self.t_run is None and dt > t_run:
+            t_run = dt
+        return Plan(dt=dt, t_burn=t_burn, t_run=t_run, paths=paths, twin=twin, start=start,
+                    relaxation_time=tau_r, notes=notes)
+
+    def _auto_paths(self, t_burn: float, t_run: float) -> int:
+        base = 64 if self.tol < _LOOSE_TOL else 16
+        return max(2, min(base, int(round(base * _PATH_TIME / (t_burn + t_run)))))
+
+    # -- running -----------------------------------------------------------------------------
+
+    def _run(self, h: Harvester, plan: Plan, replicas: int, first: int) -> Ensemble:
+        return simulate(h, dt=plan.dt, paths=plan.paths, replicas=replicas, t_burn=plan.t_burn,
+                        t_run=plan.t_run, seed=self.seed, richardson=self.richardson,
+                        threshold=self.threshold(h), threads=self.threads, first_replica=first,
+                        twin=plan.twin, start=plan.start)
+
+    def _restart_reason(self, h: Harvester, plan: Plan, est: Estimate) -> tuple[str, Plan] | None:
+        """After a batch: a finer step or a longer burn-in, if the data ask for one.
+
+        Both tests need three standard errors (they are repeated after every batch) and a
+        size that matters for ``tol``: the bias estimate above a third of it (only with an
+        automatic ``dt``), or the first half of the measured window off the whole by that much
+        (only with an automatic ``t_burn``, at most three doublings).
+        """
+        eta = abs(est.mean["eta"])
+        if not (eta > 0 and math.isfinite(eta)):
+            return None
+        bias, bias_se = abs(est.bias["eta"]), est.bias_se["eta"]
+        if (self.dt is None and self.richardson and bias > _BIAS_SHARE * self.tol * eta
+                and bias > _DRIFT_SIGMAS * bias_se and plan.dt / 2 >= _DT_MIN):
+            return "dt", dataclasses.replace(plan, dt=plan.dt / 2)
+        drift, drift_se = abs(est.drift["eta"]), est.drift_se["eta"]
+        if (self.t_burn is None and drift > _DRIFT_SIGMAS * drift_se
+                and drift > _DRIFT_SHARE * self.tol * eta):
+            t_burn = 2.0 * plan.t_burn
+            t_run = plan.t_run if self.t_run is not None else max(plan.t_run, _RUN_PER_BURN * t_burn)
+            paths = self.paths or self._auto_paths(t_burn, t_run)
+            return "t_burn", dataclasses.replace(plan, t_burn=t_burn, t_run=t_run, paths=paths)
+        return None
+
+    def run(self, h: Harvester, plan: Plan | None = None) -> tuple[Ensemble, Estimate, bool, Plan]:
+        """Adaptive replica loop; returns the ensemble, its estimate, whether tol was met, the plan."""
         from tqdm import tqdm
 
         if self.seed is None:
             # one entropy for every batch, so that batches are distinct children of one root
-            return dataclasses.replace(self, seed=int(np.random.SeedSequence().entropy)).run(h)
-        t_burn = _auto_burn(h) if self.t_burn is None else self.t_burn
+            return dataclasses.replace(self, seed=int(np.random.SeedSequence().entropy)).run(h, plan)
+        plan = plan or self.plan(h)
         threads = self.threads or default_threads()
         start = time.perf_counter()
+        restarts: list[str] = []
         bar = tqdm(desc=f"mc N={h.N} n={h.n:g}", unit="replica",
                    file=sys.stderr, disable=self.progress is False,
                    delay=0.0 if self.progress else 2.0, leave=False)
-        ens = self._run(h, self.min_replicas, 0, t_burn)
-        bar.update(ens.replicas)
-        est = estimate(ens, h)
-        met = False
         with bar:
+            ens = self._run(h, plan, self.min_replicas, 0)
+            bar.update(ens.replicas)
+            est = estimate(ens, h)
+            met = False
             while True:
+                # the bias or a transient may only show once enough replicas resolve it:
+                # checked after every batch, a restart discards the ensemble
+                redo = self._restart_reason(h, plan, est)
+                if redo is not None and (redo[0] == "dt" or restarts.count("t_burn") < _BURN_RESTARTS) \
+                        and 3.0 * (time.perf_counter() - start) < self.max_time:
+                    restarts.append(redo[0])
+                    plan = redo[1]
+                    ens = self._run(h, plan, self.min_replicas, 0)
+                    bar.update(ens.replicas)
+                    est = estimate(ens, h)
+                    continue
                 rel = est.rel_error("eta")
                 stat_rel = est.se["eta"] / abs(est.mean["eta"]) if est.replicas else math.inf
                 bar.set_postfix_str(f"rel err eta {rel:.2e}")
                 if rel <= self.tol:
                     met = True
                     break
-                if ens.escaped_fraction() >= 0.5 or est.replicas < 2:
+                if ens.escaped_fraction() >= 0.5 or est.replicas < 2 or not math.isfinite(stat_rel):
                     break
                 # bias-dominated: more replicas cannot reach tol
                 if est.bias["eta"] != 0.0 and abs(est.bias["eta"]) / abs(est.mean["eta"]) > self.tol \
@@ -192,15 +351,17 @@ class MonteCarlo:
                     break
                 elapsed = time.perf_counter() - start
                 per_rep = max(ens.wall_time, 1e-9) / R
-                want = math.ceil(R * (stat_rel / (0.9 * self.tol)) ** 2) - R if math.isfinite(stat_rel) else R
+                budget = (0.9 * self.tol) ** 2 - (est.bias["eta"] / est.mean["eta"]) ** 2
+                target = 0.9 * self.tol if budget <= 0 else math.sqrt(budget)
+                want = math.ceil(R * (stat_rel / target) ** 2) - R
                 batch = int(min(max(want, threads), R, self.max_replicas - R))
                 batch = min(batch, int((self.max_time - elapsed) / per_rep))
                 if batch < 1:
                     break
-                ens = ens.merge(self._run(h, batch, R, t_burn))
+                ens = ens.merge(self._run(h, plan, batch, R))
                 bar.update(batch)
                 est = estimate(ens, h)
-        return ens, est, met
+        return ens, est, met, dataclasses.replace(plan, notes={**plan.notes, "restarts": restarts})
 
     # -- result ------------------------------------------------------------------------------
 
@@ -211,12 +372,12 @@ class MonteCarlo:
         start = time.perf_counter()
         harmonic_status = classify(h)[0] if h.is_linear else None
         if harmonic_status == "unstable":
-            # short run: only to show the escape, statistics do not exist
+            # short run from rest: only to show the escape, statistics do not exist
             short = dataclasses.replace(self, max_replicas=self.min_replicas, tol=0.999)
-            ens, est, _ = short.run(h)
+            ens, est, _, plan = short.run(h)
         else:
-            ens, est, met = self.run(h)
-        info = self._info(h, ens, est, time.perf_counter() - start)
+            ens, est, met, plan = self.run(h)
+        info = self._info(h, ens, est, plan, time.perf_counter() - start)
         esc = ens.escaped_fraction()
         kd = k_di(h.N, h.a) if h.N > 1 else None
         if harmonic_status == "unstable":
@@ -226,70 +387,100 @@ class MonteCarlo:
                 f"mode grows like exp({rate:.4g} t). {esc:.1%} of the simulated paths passed "
                 f"|x| = {self.threshold(h):g} (times in info); no stationary statistics exist."))
         if est.replicas < 2:
-            status = Status.METASTABLE if h.confinement == "metastable" else Status.UNSTABLE
-            return Stats(status=status, method=self.name, info=info, message=(
-                f"{est.replicas} replica(s) measured anything, too few for an error bar: the paths "
-                f"escaped (|x| > {self.threshold(h):g}) during burn-in (median escape time "
-                f"{info['escape_time_median']}). No statistics."))
+            where = (f"(|x| > {self.threshold(h):g}) during burn-in (median escape time "
+                     f"{info['escape_time_median']})")
+            if h.confinement == "metastable":
+                return Stats(status=Status.METASTABLE, method=self.name, info=info, message=(
+                    f"metastable: {est.replicas} replica(s) measured anything, too few for an error "
+                    f"bar: the paths escaped {where}. No statistics."))
+            return Stats(status=Status.NOT_CONVERGED, method=self.name, info=info, message=(
+                f"not converged: this system is {h.confinement} (it has a stationary state), but "
+                f"the simulated paths blew up {where}: a numerical instability of the scheme at "
+                f"dt = {plan.dt:g}. Lower dt. No statistics."))
         stats = self._stats(h, est, info)
         return self._label(h, stats, est, esc, met, kd, harmonic_status)
 
     def _stats(self, h: Harvester, est: Estimate, info: dict[str, Any]) -> Stats:
         mean, se = est.mean, est.se
         tot = est.total_error
-        eta_stat = propagated_eta_error(mean["eta"], mean["V2"], se["V2"], mean["Pin"], se["Pin"],
-                                        est.cov_V2_Pin)
-        info["eta_standard_error"] = eta_stat
+        info["eta_standard_error"] = se["eta"]
         return Stats.from_moments(
             V2=mean["V2"], Pin=mean["Pin"], R=h.params.R, V2_err=tot("V2"), Pin_err=tot("Pin"),
-            cov_V2_Pin=est.cov_V2_Pin, eta_err=math.hypot(eta_stat, est.bias["eta"]), v2=mean["v2"],
+            cov_V2_Pin=est.cov_V2_Pin, eta_err=math.hypot(se["eta"], est.bias["eta"]), v2=mean["v2"],
             v2_err=tot("v2"), vV=mean["vV"], vV_err=tot("vV"), x2=mean["x2"], x2_err=tot("x2"),
             method=self.name, info=info)
 
     def _label(self, h: Harvester, s: Stats, est: Estimate, esc: float, met: bool,
                kd: float | None, harmonic_status: str | None) -> Stats:
+        """Status and message. The order matters: a problem with the numbers (escapes of a
+        system that should not escape, a transient, an unmet tolerance) is reported as
+        ``not_converged`` whatever the system's class, which the message then also gives."""
         rel = s.eta_err / abs(s.eta) if s.eta else math.inf
         fields = {f: getattr(s, f) for f in s.__dataclass_fields__}
         bias_rel = abs(est.bias["eta"] / s.eta) if s.eta else 0.0
         why = ("the time-step bias estimate dominates: lower dt" if bias_rel > self.tol
                else "the time budget max_time or max_replicas ran out: raise them")
-        note = "" if met else (
-            f" NOT CONVERGED: relative error on eta {rel:.2e} > tol {self.tol:g} after "
-            f"{est.replicas} replicas; {why}.")
+        problems = []
+        if not met:
+            problems.append(f"NOT CONVERGED: relative error on eta {rel:.2e} > tol {self.tol:g} after "
+                            f"{est.replicas} replicas; {why}.")
+        drift, drift_se = est.drift["eta"], est.drift_se["eta"]
+        if abs(drift) > _DRIFT_SIGMAS * drift_se and abs(drift) > _DRIFT_SHARE * self.tol * abs(s.eta):
+            problems.append(f"TRANSIENT: eta over the first half of the measured window differs from "
+                            f"the whole by {drift:.3g} +- {drift_se:.2g} (burn-in "
+                            f"{s.info['t_burn']:g} too short): raise t_burn.")
+        metastable = h.confinement == "metastable"
+        if esc > 0.0 and not metastable:
+            problems.append(f"{esc:.2%} of paths escaped (|x| > {self.threshold(h):g}) although the "
+                            "system should not: numerical instability, a too-low escape threshold "
+                            "or a diffusing marginal mode; numbers are averages before escape. "
+                            "Lower dt or raise escape.")
+        note = " ".join(problems)
         if harmonic_status == "marginal":
-            fields.update(status=Status.MARGINAL, x2=None, x2_err=None, message=(
-                f"marginal: k = k_di = {kd:.10g}; x of the critical mode diffuses (x2 not reported); "
-                "V2, Pin, eta are finite." + note))
-        elif h.confinement == "metastable":
-            fields.update(status=Status.METASTABLE, message=(
-                f"metastable: n = {h.n:g} < 2 with k = {h.k:g} < 0 is unbounded below at large "
-                f"amplitude. {esc:.2%} of paths escaped (|x| > {self.threshold(h):g}) within "
-                f"t_burn + t_run = {s.info['t_burn'] + s.info['t_run']:g}; the numbers are "
-                "quasi-stationary averages over the time before escape." + note))
-        elif esc > 0.0:
-            fields.update(status=Status.NOT_CONVERGED, message=(
-                f"{esc:.2%} of paths escaped (|x| > {self.threshold(h):g}) although this system is "
-                "confined: numerical instability or a too-low escape threshold; numbers are "
-                "averages before escape. Lower dt or raise escape." + note))
-        elif not met:
-            fields.update(status=Status.NOT_CONVERGED, message=note.strip())
+            fields.update(x2=None, x2_err=None)
+            head = (f"marginal: k = k_di = {kd:.10g}; x of the critical mode diffuses (x2 not "
+                    "reported); V2, Pin, eta are finite.")
+            status = Status.MARGINAL
+        elif metastable:
+            head = (f"metastable: n = {h.n:g} < 2 with k = {h.k:g} < 0 is unbounded below at large "
+                    f"amplitude. {esc:.2%} of paths escaped (|x| > {self.threshold(h):g}) within "
+                    f"t_burn + t_run = {s.info['t_burn'] + s.info['t_run']:g}; the numbers are "
+                    "quasi-stationary averages over the time before escape.")
+            status = Status.METASTABLE
+        elif problems:
+            head = f"{h.confinement} system;"
+            status = Status.STABLE
         else:
-            fields.update(status=Status.STABLE, message=(
-                f"stable; relative error on eta {rel:.2e} (standard error over {est.replicas} "
-                "replicas and time-step bias estimate in quadrature)"))
+            head = (f"stable; relative error on eta {rel:.2e} (standard error over {est.replicas} "
+                    "replicas and time-step bias estimate in quadrature)")
+            status = Status.STABLE
+        if problems and status is not Status.METASTABLE or (metastable and not met):
+            status = Status.NOT_CONVERGED
+        fields.update(status=status, message=(head + " " + note).strip())
         return Stats(**fields)
 
-    def _info(self, h: Harvester, ens: Ensemble, est: Estimate, wall: float) -> dict[str, Any]:
+    def _info(self, h: Harvester, ens: Ensemble, est: Estimate, plan: Plan, wall: float) -> dict[str, Any]:
         esc = ens.escape_times[np.isfinite(ens.escape_times)]
         info: dict[str, Any] = {
             "dt": ens.dts[0],
             "dt_coarse": ens.dts[1] if len(ens.dts) > 1 else None,
             "richardson": len(ens.dts) > 1,
+            "bias_order": bias_order(h),
             "paths": ens.paths,
             "replicas": ens.replicas,
             "replicas_valid": est.replicas,
             "t_burn": ens.t_burn,
             "t_run": ens.t_run,
+            "relaxation_time": plan.relaxation_time,
+            "t_burn_rule": burn_in(plan.relaxation_time, self.tol, ens.t_run),
+            "start": ens.start,
+            "plan_notes": dict(plan.notes),
+            "control_variates": est.control,
+            "twin_kappa": ens.twin_kappa,
+            "variance_reduction": est.reduction.get("eta"),
+            "variance_reduction_V2": est.reduction.get("V2"),
+            "variance_reduction_Pin": est.reduction.get("Pin"),
+            "burn_in_drift_eta": [est.drift["eta"], est.drift_se["eta"]],
             "path_steps": ens.path_steps,
             "path_steps_per_s": ens.path_steps / ens.wall_time if ens.wall_time > 0 else None,
             "wall_time": wall,
@@ -311,7 +502,7 @@ class MonteCarlo:
             "identity_Pin_minus_mgamma_v2_minus_Kv_vV": list(est.identity_power),
             "confinement": h.confinement,
         }
-        if scheme_kind(h) == 2:
+        if scheme_kind(h) == KIND_KINK:
             slow, crossings, snaps, exhausted = ens.kink_counters
             info.update(stuck_fraction=est.mean["stuck"], kink_slow_steps=slow, kink_crossings=crossings,
                         kink_snaps=snaps, kink_event_budget_exhausted=exhausted)

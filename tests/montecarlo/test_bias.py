@@ -6,6 +6,7 @@ import numpy as np
 import pytest
 
 from fpe_harvester import Harvester, solve
+from fpe_harvester.errors import ParameterError
 from montecarlo import estimate, simulate, simulate_naive
 
 
@@ -94,3 +95,35 @@ def test_simulate_is_deterministic_and_counts_steps() -> None:
     assert np.array_equal(a.sums, b.sums)
     assert a.path_steps == 2 * 8 * 100
     assert a.counts[0, 0] == 8 * 3 * 80
+
+
+def test_near_kink_potentials_use_the_kink_scheme() -> None:
+    from montecarlo._kernels import KIND_KICK, KIND_KINK
+    from montecarlo.scheme import KINK_WIDTH, scheme_kind
+
+    assert scheme_kind(Harvester.build(n=1.0)) == KIND_KINK
+    assert scheme_kind(Harvester.build(n=1.0 + KINK_WIDTH / 2)) == KIND_KINK
+    assert scheme_kind(Harvester.build(n=1.0 + 2 * KINK_WIDTH)) == KIND_KICK
+    # n = 1.0001 is the kink up to |x|^1e-4: same noise, nearly the same paths as n = 1
+    # (at a = 0.5, where units are rarely near rest and the paths do not decorrelate)
+    kw = dict(dt=0.04, paths=16, replicas=2, t_burn=5.0, t_run=20.0, seed=4)
+    m1 = simulate(Harvester.build(a=0.5, n=1.0), **kw).moments(0)
+    m2 = simulate(Harvester.build(a=0.5, n=1.0001), **kw).moments(0)
+    assert np.allclose(m1["V2"], m2["V2"], rtol=2e-4) and np.allclose(m1["vxi"], m2["vxi"], rtol=2e-4)
+    with pytest.raises(ParameterError, match="kind must be None"):
+        simulate(Harvester.build(a=0.5), kind=KIND_KINK, **kw)
+
+
+@pytest.mark.slow
+def test_smooth_scheme_is_biased_just_above_the_kink() -> None:
+    # a = 2, n = 1.0001: the kick scheme chatters across x = 0 (eta ~5 % low at dt = 0.01),
+    # the kink scheme agrees with n = 1 (docs/model.md §3; montecarlo.scheme.scheme_kind)
+    from montecarlo._kernels import KIND_KICK
+
+    h = Harvester.build(a=2.0, n=1.0001)
+    kw = dict(dt=0.02, paths=32, replicas=12, t_burn=30.0, t_run=100.0, seed=41)
+    kink = simulate(h, **kw).moments(0)
+    kick = simulate(h, kind=KIND_KICK, **kw).moments(0)
+    d = kick["V2"] / kick["vxi"] - kink["V2"] / kink["vxi"]
+    eta = (kink["V2"] / kink["vxi"]).mean()
+    assert d.mean() < -0.02 * eta and abs(d.mean()) > 4 * d.std(ddof=1) / np.sqrt(d.size)

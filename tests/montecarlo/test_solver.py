@@ -108,12 +108,19 @@ def test_escape_detected_beyond_k_di() -> None:
 
 
 def test_metastable_ring_is_labelled() -> None:
+    h = Harvester.build(a=0.5, n=1.0, N=3, k=-0.01)
+    r = solve(h, "mc", seed=5, tol=0.05, dt=0.05, paths=16, t_run=50.0, progress=False)
+    assert r.status is Status.METASTABLE, r.message
+    assert r.message.startswith("metastable:") and "quasi-stationary" in r.message
+    assert 0.0 <= r.info["escape_fraction"] <= 1.0
+
+
+def test_not_converged_overrides_metastable_and_keeps_the_class_in_the_message() -> None:
     h = Harvester.build(a=0.5, n=1.5, N=3, k=-0.2)
     r = solve(h, "mc", seed=5, dt=0.05, paths=32, t_run=50.0, min_replicas=2, max_replicas=2,
               progress=False)
-    assert r.status is Status.METASTABLE
-    assert "quasi-stationary" in r.message
-    assert 0.0 <= r.info["escape_fraction"] <= 1.0
+    assert r.status is Status.NOT_CONVERGED
+    assert r.message.startswith("metastable:") and "NOT CONVERGED" in r.message
 
 
 def test_time_budget_gives_not_converged_with_numbers() -> None:
@@ -148,3 +155,71 @@ def test_marginal_ring_reports_finite_V2_and_no_x2() -> None:
     assert r.info["t_burn"] < 100.0
     for name in ("eta", "V2", "Pin"):
         assert abs(r.value(name)[0] - getattr(ex, name)) < 4 * r.value(name)[1], name
+
+
+def test_marginal_does_not_hide_non_convergence() -> None:
+    h = Harvester.build(a=0.5, N=4, k=-0.25)
+    r = solve(h, "mc", seed=2, dt=0.05, paths=16, t_run=50.0, min_replicas=6, max_replicas=6,
+              tol=1e-3, progress=False)
+    assert r.status is Status.NOT_CONVERGED
+    assert r.message.startswith("marginal:") and "NOT CONVERGED" in r.message
+    assert r.x2 is None
+
+
+def test_confined_system_blowing_up_is_not_converged() -> None:
+    # n = 8 at dt = 0.5: the kick scheme is unstable, the paths overflow during burn-in
+    r = solve(Harvester.build(a=2.0, n=8), "mc", seed=2, dt=0.5, t_run=50.0, progress=False)
+    assert r.status is Status.NOT_CONVERGED
+    assert "blew up" in r.message and "Lower dt" in r.message
+    assert r.eta is None
+
+
+def test_transient_left_by_a_short_burn_in_is_detected() -> None:
+    # tau_p = 20: V relaxes over ~10 time units; measuring from rest shows in the first half
+    h = Harvester.build(a=0.5, n=3, tau_p=20.0)
+    r = solve(h, "mc", seed=2, t_burn=0.0, t_run=40.0, control=False, tol=0.05, progress=False)
+    assert r.status is Status.NOT_CONVERGED
+    assert "TRANSIENT" in r.message and "raise t_burn" in r.message
+    drift, drift_se = r.info["burn_in_drift_eta"]
+    assert abs(drift) > 3 * drift_se
+    auto = solve(h, "mc", seed=2, tol=0.05, paths=16, progress=False)
+    assert auto.status is Status.STABLE, auto.message
+    assert auto.info["t_burn"] > 3 * auto.info["relaxation_time"]
+
+
+def test_plan_follows_the_slowest_relaxation_time() -> None:
+    mc = MonteCarlo(seed=1, tol=1e-2)
+    fast = mc.plan(Harvester.build(a=0.5, n=3))
+    slow = mc.plan(Harvester.build(a=0.5, n=3, tau_p=200.0))
+    assert slow.relaxation_time > 50 * fast.relaxation_time
+    assert slow.t_burn > 3 * slow.relaxation_time and slow.t_run >= slow.t_burn
+    assert slow.paths < fast.paths
+    assert fast.twin is not None and fast.start == "twin"
+    lin = mc.plan(Harvester.build(a=0.5, N=3, k=-0.2))
+    assert lin.twin is None and lin.start == "twin"
+    marginal = mc.plan(Harvester.build(a=0.5, N=4, k=-0.25))
+    assert marginal.start == "rest"
+    assert MonteCarlo(seed=1, control=False).plan(Harvester.build(a=0.5, n=3)).twin is None
+
+
+def test_restart_rules() -> None:
+    from montecarlo.estimate import Estimate
+
+    h = Harvester.build(a=0.5, n=3)
+    mc = MonteCarlo(seed=1, tol=1e-3)
+    plan = mc.plan(h)
+
+    def est(bias, bias_se, drift, drift_se):
+        base = dict.fromkeys(("V2", "Pin", "eta", "v2", "vV", "x2", "stuck"), 1.0)
+        return Estimate(mean=dict(base, eta=0.5), se=dict(base), bias=dict(base, eta=bias),
+                        bias_se=dict(base, eta=bias_se), cov_V2_Pin=0.0, replicas=32,
+                        identity_V2=(0.0, 1.0), identity_power=(0.0, 1.0),
+                        drift=dict(base, eta=drift), drift_se=dict(base, eta=drift_se))
+
+    assert mc._restart_reason(h, plan, est(1e-5, 1e-6, 0.0, 1e-4)) is None
+    what, new = mc._restart_reason(h, plan, est(4e-4, 1e-5, 0.0, 1e-4))
+    assert what == "dt" and new.dt == plan.dt / 2
+    assert mc._restart_reason(h, plan, est(4e-4, 2e-4, 0.0, 1e-4)) is None  # bias not resolved
+    what, new = mc._restart_reason(h, plan, est(0.0, 1e-6, 1e-3, 1e-4))
+    assert what == "t_burn" and new.t_burn == 2 * plan.t_burn
+    assert MonteCarlo(seed=1, tol=1e-3, dt=0.02)._restart_reason(h, plan, est(4e-4, 1e-5, 0, 1)) is None

@@ -15,7 +15,17 @@ Measured in one run:
   error (bias from the fitted power law, statistics from its measured variance: a model
   evaluated with measured inputs, labelled as such);
 * time-step bias: coupled (common-noise) differences eta(dt/2) - eta(dt) for the harmonic unit,
-  the kink at a = 2 and the steep n = 1.1 potential, and the naive scheme's error at a = 2.
+  the kink at a = 2 and the steep n = 1.1 potential, and the naive scheme's error at a = 2;
+* control variates (the harmonic twin, :mod:`montecarlo.control`) for single units n = 1 to 8
+  and rings N = 3: the variance-reduction factor of eta, V2 and Pin on one ensemble, the
+  twin's cost (interleaved timings, median ratio), and the solver's wall time to a relative
+  error of 1e-4 with and without them, measured in the same run within a budget and, where
+  the budget runs out, extrapolated as ``wall * (se / se_needed)^2`` (labelled);
+* error-versus-time curves (``series``) for the combined benchmark (:mod:`.combined`);
+* the kink's time-step law: coupled differences eta(dt) - eta(dt/2) for dt = 0.04 ... 0.005
+  at a = 0.5, 1, 2 with control variates, the fitted order, the stuck fraction and the effect
+  of stopping a unit as soon as its swing would return within a step (``snap = 1``) against
+  the default, which follows the swings until the event budget runs out (same noise).
 
 ``python -m validation.bench.montecarlo [--quick] [--out DIR]`` writes ``bench_montecarlo.json``
 and ``bench_montecarlo.png``.
@@ -32,8 +42,8 @@ from typing import Any
 import numpy as np
 from numba import njit, prange
 
-from fpe_harvester import Harvester
-from montecarlo import estimate, simulate, simulate_naive
+from fpe_harvester import Harvester, solve
+from montecarlo import MonteCarlo, estimate, simulate, simulate_naive
 from montecarlo.simulate import default_threads
 from validation.bench.cli import bench_main, save_benchmark
 
@@ -232,7 +242,8 @@ def _bias_study(quick: bool) -> dict[str, Any]:
         fit = None
         good = [r for r in rows if abs(r["diff"]) > 3 * r["diff_se"]]
         if len(good) >= 2:
-            fit = float(np.polyfit(np.log([r["dt"] for r in good]), np.log([abs(r["diff"]) for r in good]), 1)[0])
+            logs = np.log([[r["dt"], abs(r["diff"])] for r in good])
+            fit = float(np.polyfit(logs[:, 0], logs[:, 1], 1)[0])
         out[name] = {"rows": rows, "fitted_order_from_resolved_points": fit}
     h = Harvester.build(a=2.0, n=1)
     kw = dict(paths=128 if quick else 1024, replicas=6 if quick else 12, t_burn=20.0,
@@ -246,6 +257,174 @@ def _bias_study(quick: bool) -> dict[str, Any]:
         "naive_rel_error": naive.mean["eta"] / ours.mean["eta"] - 1.0,
         "naive_V2_ratio": naive.mean["V2"] / ours.mean["V2"], "naive_Pin_ratio": naive.mean["Pin"] / ours.mean["Pin"],
     }
+    return out
+
+
+#: Cases of the control-variate study: label -> Harvester.build arguments.
+CV_CASES = {
+    "N1_n1_a0.5": dict(a=0.5, n=1.0),
+    "N1_n1_a1": dict(a=1.0, n=1.0),
+    "N1_n1.5_a1": dict(a=1.0, n=1.5),
+    "N1_n3_a0.5": dict(a=0.5, n=3.0),
+    "N1_n4_a0.5": dict(a=0.5, n=4.0),
+    "N1_n8_a0.5": dict(a=0.5, n=8.0),
+    "N3_n1_a0.5_k-0.005": dict(a=0.5, n=1.0, N=3, k=-0.005),
+    "N3_n1_a0.5_k-0.01": dict(a=0.5, n=1.0, N=3, k=-0.01),
+    "N3_n1.5_a1_k-0.01": dict(a=1.0, n=1.5, N=3, k=-0.01),
+    "N3_n3_a0.5_k-0.2": dict(a=0.5, n=3.0, N=3, k=-0.2),
+    "N3_n3_a0.5_k-0.5": dict(a=0.5, n=3.0, N=3, k=-0.5),
+    "N3_n4_a0.5_k-0.5": dict(a=0.5, n=4.0, N=3, k=-0.5),
+    "N3_n8_a0.5_k-0.5": dict(a=0.5, n=8.0, N=3, k=-0.5),
+}
+QUICK_CV_CASES = ("N1_n1_a0.5", "N1_n3_a0.5", "N3_n3_a0.5_k-0.5", "N3_n1_a0.5_k-0.01")
+CV_TARGET = 1e-4
+
+
+def _time_to_target(h: Harvester, control: bool, budget: float, seed: int) -> dict[str, Any]:
+    """Solver wall time to CV_TARGET, measured, or extrapolated from a run cut by the budget."""
+    r = solve(h, "mc", seed=seed, tol=CV_TARGET, max_time=budget, control=control, progress=False)
+    info = r.info
+    out = {"status": r.status.value, "wall_s": info["wall_time"], "replicas": info["replicas"],
+           "dt": info["dt"], "eta": r.eta, "eta_err": r.eta_err,
+           "rel_err": r.eta_err / abs(r.eta) if r.eta else None, "control_used": info["control_variates"],
+           "variance_reduction": info["variance_reduction"], "restarts": info["plan_notes"].get("restarts")}
+    stat = info["eta_standard_error"] / abs(r.eta)
+    bias = abs(info["bias_eta"] / r.eta)
+    out.update(rel_se=stat, rel_bias=bias)
+    if r.status.value == "stable" and out["rel_err"] <= CV_TARGET:
+        out.update(wall_to_target_s=out["wall_s"], extrapolated=False)
+    elif bias < 0.9 * CV_TARGET:
+        need = math.sqrt((0.9 * CV_TARGET) ** 2 - bias**2)
+        out.update(wall_to_target_s=out["wall_s"] * (stat / need) ** 2, extrapolated=True,
+                   note="extrapolated as wall * (se / se_needed)^2 from this run (budget ran out)")
+    else:
+        out.update(wall_to_target_s=None, extrapolated=True,
+                   note="bias-limited at this dt: the bias estimate alone exceeds 0.9 x target")
+    return out
+
+
+def _control_variates(quick: bool) -> dict[str, Any]:
+    """Variance reduction, twin cost and time to 1e-4 with and without control variates."""
+    out: dict[str, Any] = {}
+    names = QUICK_CV_CASES if quick else tuple(CV_CASES)
+    budget = 4.0 if quick else 60.0
+    for i, name in enumerate(names):
+        h = Harvester.build(**CV_CASES[name])
+        plan = MonteCarlo(seed=500 + i, tol=CV_TARGET).plan(h)
+        row: dict[str, Any] = {"case": CV_CASES[name], "twin_kappa": plan.twin, "t_burn": plan.t_burn,
+                               "t_run": plan.t_run, "paths": plan.paths, "dt": plan.dt,
+                               "twin_source": plan.notes.get("twin")}
+        if plan.twin is None:
+            out[name] = {**row, "note": "no stable harmonic twin: plain Monte Carlo only"}
+            continue
+        kw = dict(dt=plan.dt, paths=plan.paths, t_burn=plan.t_burn, t_run=plan.t_run, richardson=True)
+        reps = 32 if quick else 128
+        e = simulate(h, replicas=reps, seed=600 + i, twin=plan.twin, start="twin", **kw)
+        cv, plain = estimate(e, h, control=None), estimate(e, h, control=False)
+        row.update(replicas=reps, control_used=cv.control, escape_fraction=e.escaped_fraction(),
+                   eta_cv=cv.mean["eta"], se_cv=cv.se["eta"], eta_plain=plain.mean["eta"],
+                   se_plain=plain.se["eta"],
+                   vrf={q: cv.reduction.get(q) for q in ("eta", "V2", "Pin")})
+        # twin cost: same work with and without the twin, interleaved, median of the ratios
+        ratios = []
+        for rep in range(3 if quick else 5):
+            small = dict(kw, replicas=max(2, default_threads()), seed=700 + rep)
+            t_tw = simulate(h, twin=plan.twin, start="twin", **small).wall_time
+            t_no = simulate(h, **small).wall_time
+            ratios.append(t_tw / t_no)
+        row["twin_cost_ratio"] = float(np.median(ratios))
+        row["twin_cost_ratios"] = ratios
+        if cv.control and row["vrf"]["eta"]:
+            row["net_speedup"] = row["vrf"]["eta"] / row["twin_cost_ratio"]
+        # time to 1e-4, interleaved: with, without
+        row["to_1e-4_control"] = _time_to_target(h, True, budget, 800 + i)
+        row["to_1e-4_plain"] = _time_to_target(h, False, budget, 900 + i)
+        a, b = row["to_1e-4_control"]["wall_to_target_s"], row["to_1e-4_plain"]["wall_to_target_s"]
+        row["time_ratio_plain_over_control"] = (b / a) if a and b else None
+        out[name] = row
+    return out
+
+
+def _kink_dt_study(quick: bool) -> dict[str, Any]:
+    """Kink n = 1: coupled eta(dt) - eta(dt/2) per dt with control variates, fitted order,
+    stuck fraction, and the snap-to-rest rule's effect on the same noise."""
+    from montecarlo.twin import linearized_stiffness
+
+    out: dict[str, Any] = {}
+    plans = {0.5: ((0.04, 0.02, 0.01, 0.005), (600, 800, 250, 150)),
+             1.0: ((0.04, 0.02, 0.01, 0.005), (600, 800, 250, 150)),
+             2.0: ((0.04, 0.02, 0.01, 0.005), (200, 200, 150, 100))}
+    if quick:
+        plans = {0.5: ((0.04, 0.02), (24, 24)), 2.0: ((0.04, 0.02), (24, 24))}
+    for a, (dts, reps) in plans.items():
+        h = Harvester.build(a=a, n=1.0)
+        pil = simulate(h, dt=0.02, paths=16, replicas=4, t_burn=40.0, t_run=100.0, seed=1)
+        m = pil.moments(0)
+        kappa = linearized_stiffness(h, float(m["xdU"].mean()), float(m["x2"].mean()))
+        rows = []
+        for dt, R in zip(dts, reps):
+            e = simulate(h, dt=dt, paths=64, replicas=R, t_burn=30.0, t_run=100.0, seed=11, twin=kappa,
+                         start="twin", richardson=True)
+            est = estimate(e, h, order=1.0)  # order 1: bias = coarse - fine, the raw difference
+            m0, m1 = e.moments(0), e.moments(1)
+            rows.append({"dt": dt, "dt_fine": dt / 2, "replicas": R, "eta_fine": est.mean["eta"],
+                         "eta_fine_se": est.se["eta"], "diff": est.bias["eta"], "diff_se": est.bias_se["eta"],
+                         "vrf": est.reduction.get("eta"), "stuck_fine": float(np.nanmean(m0["stuck"])),
+                         "stuck_coarse": float(np.nanmean(m1["stuck"])), "wall_s": e.wall_time})
+        good = [r for r in rows if abs(r["diff"]) > 3 * r["diff_se"]]
+        fit = None
+        if len(good) >= 2:
+            logs = np.log([[r["dt"], abs(r["diff"])] for r in good])
+            fit = float(np.polyfit(logs[:, 0], logs[:, 1], 1)[0])
+        snap = []
+        for dt, R in (((0.02, 150), (0.005, 60)) if not quick else ((0.02, 8),)):
+            kw = dict(dt=dt, paths=64, replicas=R, t_burn=30.0, t_run=100.0, seed=12, twin=kappa,
+                      start="twin")
+            # the default stops a unit only on an exhausted event budget; snap = 1 stops it
+            # once its swing would return within one step
+            m1, m0 = simulate(h, snap=1.0, **kw).moments(0), simulate(h, **kw).moments(0)
+            d = m1["V2"] / m1["vxi"] - m0["V2"] / m0["vxi"]
+            snap.append({"dt": dt, "eta_diff_snap1_minus_default": float(d.mean()),
+                         "se": float(d.std(ddof=1) / math.sqrt(R)), "stuck_snap1": float(m1["stuck"].mean()),
+                         "stuck_default": float(m0["stuck"].mean())})
+        out[f"a{a:g}"] = {"twin_kappa": kappa, "rows": rows, "fitted_order_from_resolved_points": fit,
+                          "snap": snap}
+    return out
+
+
+def series(quick: bool, res: dict[str, Any]) -> list[dict[str, Any]]:
+    """Error-versus-time curves for the combined figure (:mod:`.combined`): the solver at a
+    few tolerances with and without control variates, for the kink (n = 1, a = 0.5) and the
+    n = 3 ring; references from this run's most precise values (the kink's time-step study at
+    dt = 0.02/0.01 with its bias estimate, the ring's run at 1e-4)."""
+    cases = {"n1_single": (dict(a=0.5, n=1.0), None), "n3_ring": (dict(a=0.5, n=3.0, N=3, k=-0.5), None)}
+    rows = res.get("kink_dt", {}).get("a0.5", {}).get("rows", [])
+    if rows:
+        best = min(rows, key=lambda r: r["eta_fine_se"])
+        rel = math.hypot(best["eta_fine_se"], best["diff"]) / best["eta_fine"]
+        cases["n1_single"] = (cases["n1_single"][0], (
+            best["eta_fine"], rel, f"Monte Carlo, dt = {best['dt_fine']:g}, {best['replicas']} x 64 paths, "
+            "bias estimate folded in"))
+    ring = res.get("control_variates", {}).get("N3_n3_a0.5_k-0.5", {}).get("to_1e-4_control")
+    if ring and ring.get("eta"):
+        cases["n3_ring"] = (cases["n3_ring"][0], (
+            ring["eta"], ring["rel_err"],
+            f"Monte Carlo + control variates, run at tol 1e-4 ({ring['status']})"))
+    out = []
+    for problem, (kw, ref) in cases.items():
+        h = Harvester.build(**kw)
+        for control in (False, True):
+            pts = []
+            for j, tol in enumerate((3e-2, 1e-2) if quick else (1e-2, 3e-3, 1e-3)):
+                r = solve(h, "mc", seed=1000 + j, tol=tol, control=control, max_time=60.0, progress=False)
+                if r.eta is not None:
+                    pts.append({"seconds": r.info["wall_time"], "eta": r.eta,
+                                "reported": r.eta_err / abs(r.eta), "tol": tol})
+            cur: dict[str, Any] = {"problem": problem, "points": pts,
+                                   "method": "Monte Carlo + control variates" if control else "Monte Carlo"}
+            if control and ref is not None:
+                cur.update(reference_eta=ref[0], reference_err=ref[1], reference=ref[2])
+            out.append(cur)
     return out
 
 
@@ -264,6 +443,9 @@ def run(quick: bool = False, out: Path | None = None) -> dict[str, Any]:
     }
     res["equal_error"] = _equal_error(quick)
     res["bias"] = _bias_study(quick)
+    res["control_variates"] = _control_variates(quick)
+    res["kink_dt"] = _kink_dt_study(quick)
+    res["series"] = series(quick, res)
     save_benchmark(res, out, STEM, _plot)
     return res
 
@@ -274,7 +456,7 @@ def _plot(res: dict[str, Any], path: Path) -> None:
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    fig, (ax1, ax2) = plt.subplots(1, 2, figsize=(10, 3.8))
+    fig, (ax1, ax2, ax3) = plt.subplots(1, 3, figsize=(15, 3.8))
     eq = res["equal_error"]
     curve = eq["engine"]["curve"]
     ax1.loglog([c["wall_s"] for c in curve], [c["rel_se_eta"] for c in curve], "o-", label="engine (se)")
@@ -303,6 +485,18 @@ def _plot(res: dict[str, Any], path: Path) -> None:
     ax2.set_xlabel("dt")
     ax2.set_ylabel("|eta(dt/2) - eta(dt)| / eta")
     ax2.legend(fontsize=7)
+    cvs = {k: v for k, v in res.get("control_variates", {}).items() if v.get("vrf")}
+    if cvs:
+        names = list(cvs)
+        y = np.arange(len(names))
+        ax3.barh(y - 0.2, [cvs[k]["vrf"]["eta"] or 0.0 for k in names], 0.4, label="variance reduction (eta)")
+        ratio = [cvs[k].get("time_ratio_plain_over_control") or 0.0 for k in names]
+        ax3.barh(y + 0.2, ratio, 0.4, label="time to 1e-4: plain / control")
+        ax3.set_yticks(y, names, fontsize=6)
+        ax3.axvline(1.0, color="k", lw=0.8)
+        ax3.set_xscale("log")
+        ax3.legend(fontsize=7)
+        ax3.set_title("control variates (harmonic twin)")
     thr = res["throughput"]
     fig.suptitle("Monte Carlo: " + ", ".join(f"{k} {v['path_steps_per_s']:.2g}/s" for k, v in thr.items()),
                  fontsize=8)

@@ -1,0 +1,258 @@
+"""The harmonic twin: a linear ring on the same noise, whose averages are known exactly.
+
+The twin of a harvester ring is the harmonic ring with the same parameters and coupling
+``k`` and an on-site stiffness :math:`\\kappa` (potential :math:`\\kappa x^2/2`), driven by the
+same noise paths :math:`\\xi_j(t)`. Its moments fluctuate with the system's, and their
+expectations are known exactly, so they serve as control variates
+(:mod:`montecarlo.control`). Exact here means: for the integrator itself at the step ``h``,
+not only in the limit h -> 0, so that subtracting the twin's fluctuation adds no time-step
+bias. Mode ``q`` of the twin (:math:`s_q = \\sin^2(\\pi q/N)`) advances, one step of the
+kernel's splitting, as
+
+.. math::
+
+    y' = E y + g\\,\\big(\\sigma\\xi + k(2 - 4 s_q)(x + \\tfrac h2 v)\\big),\\qquad
+    \\xi' = e^{-h/\\tau}\\xi + \\sqrt{(D/\\tau)(1 - e^{-2h/\\tau})}\\,Z,
+
+with :math:`y = (x, v, V)`, :math:`(E, g)` the exact flow of the linear part with stiffness
+:math:`\\kappa + 2k` (:func:`montecarlo.scheme.step_coefficients`). The moments are measured
+after the y update, with :math:`v\\xi` times :math:`e^{-h/2\\tau}`. The stationary covariance
+of this recursion solves a discrete Lyapunov equation per mode, and ring averages are means
+over modes (Parseval). The paths start from that stationary law (:func:`initial_cholesky`),
+so the twin is stationary from the first step and its expected time averages over any
+window are the stationary values.
+
+The stiffness comes from the statistical linearization of the ring
+(:func:`linearized_stiffness`): :math:`\\kappa = \\langle xU'(x)\\rangle / \\langle x^2\\rangle`,
+with the averages taken either over a Gaussian x of the twin's own variance (closure) or
+measured in a pilot run.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from fpe_harvester.errors import ParameterError, check_real
+from fpe_harvester.exact import mode_moments
+from fpe_harvester.model import Harvester, mode_sin2
+
+from .scheme import step_coefficients
+
+__all__ = [
+    "TWIN_MOMENTS",
+    "twin_harvester",
+    "twin_is_stable",
+    "scheme_matrices",
+    "stationary_covariances",
+    "twin_expectations",
+    "initial_cholesky",
+    "linearized_stiffness",
+]
+
+#: The twin's measured moments (the ``t_`` entries of :data:`montecarlo._kernels.MOMENTS`):
+#: second moments, then fourth moments and :math:`|x|^n` (n the system's exponent).
+TWIN_MOMENTS = ("V2", "vV", "v2", "x2", "vxi", "x4", "x2V2", "x2v2", "absxn", "V2v2", "vxiV2")
+
+
+def twin_harvester(h: Harvester, kappa: float) -> Harvester:
+    """The harmonic ring with on-site stiffness ``kappa`` (``a = kappa/2``) and ``h``'s k, N, params.
+
+    Parameters
+    ----------
+    h : Harvester
+        The system.
+    kappa : float
+        On-site stiffness of the twin, > 0 (its potential is :math:`\\kappa x^2/2`).
+    """
+    kappa = check_real("kappa", kappa, low=0.0, low_open=True)
+    return h.replace(a=0.5 * kappa, n=2.0)
+
+
+def twin_is_stable(h: Harvester, kappa: float) -> bool:
+    """Whether every mode stiffness :math:`\\kappa + 4k s_q` of the twin is positive."""
+    return bool(np.all(kappa + 4.0 * h.k * mode_sin2(h.N) > 0.0)) if kappa > 0 else False
+
+
+def scheme_matrices(lin: Harvester, dt: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Per-mode one-step matrices of the kernel's harmonic scheme.
+
+    Parameters
+    ----------
+    lin : Harvester
+        A harmonic ring (n = 2).
+    dt : float
+        Time step, > 0.
+
+    Returns
+    -------
+    M : ndarray (N, 4, 4)
+        State (x, v, V, xi) before one step -> before the next.
+    T : ndarray (N, 4, 4)
+        State before a step -> the measured state (y after the step, xi before its update).
+    Q : ndarray (4, 4)
+        Covariance of the noise added per step (on xi only).
+    """
+    if not lin.is_linear:
+        raise ParameterError(f"scheme_matrices needs a harmonic ring (n = 2), got n = {lin.n!r}")
+    dt = check_real("dt", dt, low=0.0, low_open=True)
+    cf = step_coefficients(lin, dt)
+    E = cf[0:9].reshape(3, 3)
+    g = cf[9:12]
+    k = lin.k if lin.N > 1 else 0.0
+    cq = 2.0 - 4.0 * mode_sin2(lin.N)
+    T = np.zeros((lin.N, 4, 4))
+    T[:, :3, :3] = E
+    T[:, :3, 0] += (k * cq)[:, None] * g
+    T[:, :3, 1] += (0.5 * dt * k * cq)[:, None] * g
+    T[:, :3, 3] = lin.params.sigma * g
+    T[:, 3, 3] = 1.0
+    M = T.copy()
+    M[:, 3, 3] = cf[13]
+    Q = np.zeros((4, 4))
+    Q[3, 3] = cf[14] ** 2
+    return M, T, Q
+
+
+def stationary_covariances(lin: Harvester, dt: float) -> np.ndarray:
+    """Stationary covariance (N, 4, 4) of each mode's state before a step (discrete Lyapunov).
+
+    Raises :class:`ParameterError` when some mode of the discrete scheme is not stable
+    (spectral radius >= 1).
+    """
+    import scipy.linalg
+
+    M, _, Q = scheme_matrices(lin, dt)
+    out = np.empty_like(M)
+    for q in range(lin.N):
+        rho = float(np.max(np.abs(np.linalg.eigvals(M[q]))))
+        if not rho < 1.0:
+            raise ParameterError(
+                f"the harmonic twin (stiffness {2 * lin.a:g}, k = {lin.k:g}) has no stationary "
+                f"law at dt = {dt:g}: mode {q} has spectral radius {rho:.6g} >= 1")
+        out[q] = scipy.linalg.solve_discrete_lyapunov(M[q], Q)
+    return out
+
+
+def twin_expectations(lin: Harvester, dt: float, n: float = 2.0) -> dict[str, float]:
+    """Exact expected values of the twin's measured moments (:data:`TWIN_MOMENTS`) at step dt.
+
+    The second moments differ from the continuous-time values of
+    :func:`fpe_harvester.exact.mode_moments` by the scheme's O(dt^2) bias, which is what the
+    simulated twin carries. A unit's measured state (x, v, V, xi) is Gaussian with covariance
+    S, the mean over modes of :math:`T P_q T^T`, so the higher moments follow from Isserlis'
+    theorem, e.g. :math:`\\langle x^2V^2\\rangle = S_{xx}S_{VV} + 2S_{xV}^2`, and
+    :math:`\\langle|x|^n\\rangle = S_{xx}^{n/2}\\,2^{n/2}\\Gamma(\\frac{n+1}2)/\\sqrt\\pi`.
+
+    Parameters
+    ----------
+    lin : Harvester
+        The twin (harmonic ring).
+    dt : float
+        Its time step, > 0.
+    n : float
+        Exponent of the ``absxn`` moment (the system's n), >= 1.
+
+    Examples
+    --------
+    >>> lin = Harvester.build(a=0.5)
+    >>> e = twin_expectations(lin, 1e-3)
+    >>> abs(e["V2"] * 143 / 20 - 1) < 1e-5
+    True
+    """
+    P = stationary_covariances(lin, dt)
+    _, T, _ = scheme_matrices(lin, dt)
+    S = np.einsum("qij,qjk,qlk->qil", T, P, T).mean(axis=0)
+    half = math.exp(-0.5 * dt / lin.params.tau)
+    n = check_real("n", n, low=1.0)
+    absxn = S[0, 0] ** (0.5 * n) * 2.0 ** (0.5 * n) * math.gamma(0.5 * (n + 1)) / math.sqrt(math.pi)
+    out = {
+        "V2": S[2, 2], "vV": S[1, 2], "v2": S[1, 1], "x2": S[0, 0], "vxi": S[1, 3] * half,
+        "x4": 3.0 * S[0, 0] ** 2,
+        "x2V2": S[0, 0] * S[2, 2] + 2.0 * S[0, 2] ** 2,
+        "x2v2": S[0, 0] * S[1, 1] + 2.0 * S[0, 1] ** 2,
+        "absxn": absxn,
+        "V2v2": S[2, 2] * S[1, 1] + 2.0 * S[1, 2] ** 2,
+        "vxiV2": (S[1, 3] * S[2, 2] + 2.0 * S[1, 2] * S[2, 3]) * half,
+    }
+    return {key: float(val) for key, val in out.items()}
+
+
+def initial_cholesky(lin: Harvester, dt: float) -> np.ndarray:
+    """Lower Cholesky factor (4N x 4N) of the twin ring's stationary law before a step.
+
+    State ordered unit by unit, (x_j, v_j, V_j, xi_j). The unit-space covariance is the
+    block-circulant :math:`C_{jl} = N^{-1}\\sum_q P_q \\cos(2\\pi q (j - l)/N)`.
+    """
+    P = stationary_covariances(lin, dt)
+    N = lin.N
+    q = np.arange(N)
+    lag = np.arange(N)
+    w = np.cos(2.0 * math.pi * np.outer(lag, q) / N) / N
+    blocks = np.einsum("lq,qab->lab", w, P)
+    C = np.empty((4 * N, 4 * N))
+    for j in range(N):
+        for l in range(N):
+            C[4 * j:4 * j + 4, 4 * l:4 * l + 4] = blocks[(j - l) % N]
+    C = 0.5 * (C + C.T)
+    return np.linalg.cholesky(C)
+
+
+def _closure_mismatch(h: Harvester, log_kappa: float) -> float:
+    """ln<xU'> - ln(kappa <x^2>) for Gaussian x of the twin's variance (0 at the closure)."""
+    kap = math.exp(log_kappa) + 4.0 * h.k * mode_sin2(h.N)
+    s2 = float(np.mean(mode_moments(kap, h.params)["x2"]))
+    n, a = h.n, h.a
+    c_n = a * n * 2.0 ** (n / 2) * math.gamma((n + 1) / 2) / math.sqrt(math.pi)
+    return math.log(c_n) + 0.5 * n * math.log(s2) - math.log(s2) - log_kappa
+
+
+def linearized_stiffness(h: Harvester, xdU: float | None = None, x2: float | None = None) -> float | None:
+    """Equivalent on-site stiffness :math:`\\kappa = \\langle xU'(x)\\rangle / \\langle x^2\\rangle`.
+
+    Parameters
+    ----------
+    h : Harvester
+        The system, any n >= 1 and ring.
+    xdU, x2 : float, optional
+        Measured :math:`\\langle xU'(x)\\rangle` and :math:`\\langle x^2\\rangle` (a pilot
+        run). Without them, x is taken Gaussian with the twin's own stationary variance,
+        :math:`\\langle xU'\\rangle = c_n s^n`,
+        :math:`c_n = a n 2^{n/2}\\Gamma(\\frac{n+1}2)/\\sqrt\\pi`, and :math:`\\kappa` solves
+        :math:`\\kappa = c_n s(\\kappa)^{n-2}` on the twin's stable range.
+
+    Returns
+    -------
+    float or None
+        The stiffness, or None when the twin with it would have no stationary state (some
+        :math:`\\kappa + 4ks_q \\le 0`) or the closure has no root (n < 2 with k < 0, or the
+        kink with a strong constant force).
+
+    Examples
+    --------
+    >>> round(linearized_stiffness(Harvester.build(a=0.5, n=2, N=3, k=-0.2)), 12)
+    1.0
+    """
+    if xdU is not None or x2 is not None:
+        if xdU is None or x2 is None:
+            raise ParameterError("linearized_stiffness needs both xdU and x2, or neither")
+        xdU = check_real("xdU", xdU, low=0.0, low_open=True)
+        x2 = check_real("x2", x2, low=0.0, low_open=True)
+        kappa = xdU / x2
+        return kappa if twin_is_stable(h, kappa) else None
+    if h.is_linear:
+        return 2.0 * h.a
+    from scipy.optimize import brentq
+
+    low = max(0.0, -4.0 * h.k * float(mode_sin2(h.N).max()))
+    lo = math.log(low) + 1e-9 if low > 0 else math.log(2.0 * h.a) - 40.0
+    hi = math.log(max(2.0 * h.a, low)) + 40.0
+    grid = np.linspace(lo, hi, 321)
+    vals = np.array([_closure_mismatch(h, t) for t in grid])
+    sign = np.nonzero(np.diff(np.sign(vals)) != 0)[0]
+    if sign.size != 1:
+        return None
+    i = int(sign[0])
+    kappa = math.exp(brentq(lambda t: _closure_mismatch(h, t), grid[i], grid[i + 1], xtol=1e-13))
+    return kappa if twin_is_stable(h, kappa) else None
