@@ -101,16 +101,10 @@ def test_monte_carlo_fuzz_single_units_and_harmonic_rings(fuzz) -> None:
          h=st.one_of(harvester(st.just(1), EXPONENTS), harvester(st.integers(2, 4), st.just(2.0))))
 
 
-@pytest.mark.slow
-@pytest.mark.xfail(reason="issue 15, Monte Carlo item (not this branch): a confined ring whose paths blow up "
-                          "numerically is labelled unstable instead of not_converged", strict=False)
-def test_monte_carlo_fuzz_nonlinear_rings() -> None:
-    """Long profile only until the blow-up status is fixed (the strict xfail below pins one case)."""
-    settings(settings.get_profile("long"), max_examples=300)(
-        given(h=harvester(st.integers(2, 4), EXPONENTS.filter(lambda n: n != 2.0)))(_mc))()
+def test_monte_carlo_fuzz_nonlinear_rings(fuzz) -> None:
+    fuzz(_mc, {"ci": 6, "long": 300}, h=harvester(st.integers(2, 4), EXPONENTS.filter(lambda n: n != 2.0)))
 
 
-@pytest.mark.xfail(reason="issue 15, Monte Carlo item (not this branch): blow-up labelled unstable", strict=True)
 def test_confined_ring_that_blows_up_numerically_is_not_called_unstable() -> None:
     """Found by the fuzz test above: n = 4 (always confined), stiff (m = 0.012): paths blow up."""
     h = Harvester.build(a=74, n=4, N=2, k=-6.2, m=0.012461067711525808, gamma=72.08507599473113,
