@@ -454,7 +454,10 @@ class MonteCarlo:
             head = (f"stable; relative error on eta {rel:.2e} (standard error over {est.replicas} "
                     "replicas and time-step bias estimate in quadrature)")
             status = Status.STABLE
-        if problems and status is not Status.METASTABLE or (metastable and not met):
+        # a metastable ring whose paths escape has no stationary state to converge to: it stays
+        # metastable (more replicas would not help); one that no path left is quasi-stationary
+        # and reports an unmet tolerance as not_converged
+        if problems and status is not Status.METASTABLE or (metastable and not met and esc == 0.0):
             status = Status.NOT_CONVERGED
         fields.update(status=status, message=(head + " " + note).strip())
         return Stats(**fields)
