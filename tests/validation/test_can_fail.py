@@ -100,3 +100,31 @@ def test_scene_rows_are_checked_for_status_accuracy_and_exact_values(tmp_path):
     assert not row_checks("fig4", res.scene, sloppy)[1].passed
     off = [replace(row, values={**row.values, "eta": row.values["eta"] * (1 + 1e-9)})] + list(res.rows[1:])
     assert not row_checks("fig4", res.scene, off)[2].passed
+
+
+def test_error_bar_checks_fail_when_the_promise_breaks(tmp_path):
+    from validation.checks import Context, SolveCache
+    from validation.errorbars import Bound, FpeCase, _fpe_checks
+    from validation.report import Section
+
+    assert Bound("x", 1e-3, reported=1e-4, actual=1e-5, ref_err=1e-7, status="stable", seconds=0.0).holds
+    assert not Bound("x", 1e-3, reported=1e-5, actual=1e-4, ref_err=1e-7, status="stable", seconds=0.0).holds
+    # a reference that is wrong by far more than the errors: every bound check fails
+    h = Harvester.build(a=0.5, n=3.0)
+    wrong_ref = solve(h.replace(a=0.55), "fpe", tol=1e-3)
+
+    class WrongReference(Context):
+        def solve(self, h, method, **overrides):
+            if overrides.get("tol") == 1e-5:
+                return wrong_ref
+            return super().solve(h, method, **overrides)
+
+    ctx = WrongReference(quick=True, out=tmp_path, cache=SolveCache())
+    import validation.errorbars as eb
+    old = eb.QUICK_FPE
+    eb.QUICK_FPE = (FpeCase(3.0, 0.5, (1e-2,), 1e-5),)
+    try:
+        checks = _fpe_checks(ctx, Section("e", "E"))
+    finally:
+        eb.QUICK_FPE = old
+    assert checks and not any(c.passed for c in checks)

@@ -196,7 +196,7 @@ def run(quick: bool = False, out: pathlib.Path | None = None) -> dict:
     """
     cases: dict[str, Any] = {}
     if quick:
-        plan = [(3.0, 0.5, [1e-3, 1e-5]), (8.0, 0.5, [1e-3, 1e-4]), (1.5, 0.5, [1e-2, 1e-3])]
+        plan = [(3.0, 0.5, [1e-3, 1e-5]), (8.0, 0.5, [1e-3, 1e-4]), (1.5, 0.5, [1e-2, 1e-4])]
         budget, mc_rel = 60.0, None
     else:
         plan = [(n, a, [1e-4, 1e-6]) for n, a in SMOOTH] + [(n, a, [1e-3, 1e-4]) for n, a in SUB_QUADRATIC]

@@ -1,0 +1,229 @@
+"""Do the error bars hold? Monte Carlo coverage and Fokker--Planck error bounds, measured.
+
+Every number the library returns for a nonlinear system carries an error estimate. This step
+checks those estimates against actual errors:
+
+* **Monte Carlo** (:func:`validation.coverage.mc_coverage`): many results with independent
+  seeds against a reference (exact for harmonic rings, else a run ten times tighter); the
+  fractions of results within 1, 2, 3 reported standard errors of the reference should be
+  close to 68.3 / 95.4 / 99.7 %.
+* **Fokker--Planck**: results at a requested tolerance against a much tighter solve of the
+  same problem (or the exact solver for n = 2). The reported error is meant as a bound:
+  the actual error :math:`|\\eta - \\eta_{ref}|` must not exceed the reported error plus the
+  reference's own. The ratio reported / actual says how conservative the bound is.
+
+Each of these is a check that fails when the promise breaks.
+"""
+
+from __future__ import annotations
+
+import math
+import time
+from dataclasses import dataclass
+
+import numpy as np
+
+from fpe_harvester.model import Harvester
+from fpe_harvester.result import Stats, Status
+
+from .checks import CheckResult, Context, expect
+from .report import Figure, Section, Table
+
+__all__ = ["run", "FpeCase", "QUICK_FPE", "FULL_FPE", "fpe_bounds", "MC_COVERAGE_LIMITS"]
+
+_SECTION = "Error bars"
+
+#: (lower bound of the 1-sigma fraction, upper bound, lower bound at 2 sigma, at 3 sigma) of the
+#: pooled Monte Carlo coverage; quick runs have few results, so wider limits. Honest bars give
+#: 0.683 / 0.954 / 0.997; bars wrong by 2x give about 0.38 / 0.68 / 0.87 (too small) or
+#: 0.95 / 1.0 / 1.0 (too large).
+MC_COVERAGE_LIMITS = {True: (0.45, 0.95, 0.80, 0.93), False: (0.55, 0.92, 0.88, 0.97)}
+
+
+@dataclass(frozen=True)
+class FpeCase:
+    """A Fokker--Planck problem, the tolerances checked, and the reference tolerance
+    (None: the exact solver, for n = 2)."""
+
+    n: float
+    a: float
+    tols: tuple[float, ...]
+    ref_tol: float | None
+
+    @property
+    def h(self) -> Harvester:
+        return Harvester.build(a=self.a, n=self.n)
+
+
+QUICK_FPE = (
+    FpeCase(2.0, 0.5, (1e-4,), None),
+    FpeCase(3.0, 0.5, (1e-3, 1e-4), 1e-5),
+    FpeCase(4.0, 0.5, (1e-2, 1e-3), 1e-5),
+)
+FULL_FPE = QUICK_FPE + (
+    FpeCase(1.5, 0.5, (1e-2, 1e-3), 1e-4),
+    FpeCase(3.0, 1.0, (1e-3, 1e-4), 1e-6),
+    FpeCase(3.0, 2.0, (1e-3, 1e-4), 1e-5),
+    FpeCase(4.0, 2.0, (1e-3, 1e-4), 1e-5),
+    FpeCase(6.0, 0.5, (1e-3, 1e-4), 1e-5),
+    FpeCase(8.0, 0.5, (1e-3, 1e-4), 1e-5),
+)
+
+
+@dataclass(frozen=True)
+class Bound:
+    """One Fokker--Planck result against its reference."""
+
+    label: str
+    tol: float
+    reported: float
+    actual: float
+    ref_err: float
+    status: str
+    seconds: float
+
+    @property
+    def holds(self) -> bool:
+        return self.actual <= self.reported + self.ref_err
+
+    @property
+    def ratio(self) -> float:
+        """Reported / actual error; the actual is floored at the reference's own error."""
+        return self.reported / max(self.actual, self.ref_err, 1e-300)
+
+
+def fpe_bounds(ctx: Context, cases: tuple[FpeCase, ...]) -> list[Bound]:
+    """Solve every case at each tolerance and compare eta with the reference."""
+    out = []
+    for case in cases:
+        h = case.h
+        ref = ctx.solve(h, "exact") if case.ref_tol is None else ctx.solve(h, "fpe", tol=case.ref_tol,
+                                                                                  max_seconds=600.0)
+        if ref.status is not Status.STABLE or ref.eta is None:
+            raise RuntimeError(f"reference for n = {case.n:g}, a = {case.a:g} is {ref.status.value}: "
+                               f"{ref.message}")
+        for tol in case.tols:
+            t0 = time.perf_counter()
+            r: Stats = ctx.solve(h, "fpe", tol=tol)
+            seconds = time.perf_counter() - t0
+            if r.eta is None:
+                raise RuntimeError(f"n = {case.n:g}, a = {case.a:g}, tol {tol:g}: {r.status.value} "
+                                   f"without a number: {r.message}")
+            out.append(Bound(f"n = {case.n:g}, a = {case.a:g}", tol, float(r.eta_err),
+                             abs(r.eta - ref.eta), float(ref.eta_err or 0.0), r.status.value, seconds))
+    return out
+
+
+def _fpe_checks(ctx: Context, sec: Section) -> list[CheckResult]:
+    ctx.require("fpe")
+    bounds = fpe_bounds(ctx, QUICK_FPE if ctx.quick else FULL_FPE)
+    table = Table("Fokker-Planck: reported against actual error of eta",
+                  ("problem", "tol", "status", "reported", "actual", "reference error",
+                   "reported / actual", "bound holds", "time [s]"))
+    checks = []
+    for b in bounds:
+        table.rows.append((b.label, f"{b.tol:g}", b.status, f"{b.reported:.2e}", f"{b.actual:.2e}",
+                           f"{b.ref_err:.1e}", f"{b.ratio:.3g}", "yes" if b.holds else "NO",
+                           f"{b.seconds:.2f}"))
+        checks.append(expect(f"fpe error bound: {b.label}, tol {b.tol:g}", _SECTION, b.holds,
+                             f"actual {b.actual:.2e} vs reported {b.reported:.2e} (+ reference "
+                             f"{b.ref_err:.1e}); status {b.status}"))
+    ratios = np.array([b.ratio for b in bounds])
+    held = sum(b.holds for b in bounds)
+    table.note = (f"The bound held in {held} of {len(bounds)} results; reported / actual: median "
+                  f"{np.median(ratios):.3g}, range {ratios.min():.3g} - {ratios.max():.3g} (> 1 is "
+                  "conservative). The actual error is floored at the reference's own error, so large "
+                  "ratios may be limited by the reference.")
+    sec.tables.append(table)
+    sec.figures.append(_plot_bounds(ctx, bounds))
+    return checks
+
+
+def _mc_checks(ctx: Context, sec: Section) -> list[CheckResult]:
+    from .coverage import NORMAL_COVERAGE, mc_coverage
+
+    ctx.require("mc")
+    res = mc_coverage(quick=ctx.quick, runs=8 if ctx.quick else None, seed=ctx.seed)
+    table = Table("Monte Carlo: fraction of results within 1, 2, 3 reported standard errors",
+                  ("quantity", "within 1", "within 2", "within 3", "results"))
+    for q, f in res["fractions"].items():
+        table.rows.append((q, *(f"{x:.3f}" for x in f), str(res["count"])))
+    table.rows.append(("pooled", *(f"{x:.3f}" for x in res["fractions_all"]), str(3 * res["count"])))
+    table.rows.append(("normal", *(f"{x:.3f}" for x in NORMAL_COVERAGE), "-"))
+    table.note = ("Cases: " + "; ".join(f"{c['label']} (reference {c['reference_method']}, median "
+                                         f"relative error {c['median_rel_err_eta']:.1e}, {c['wall_s']:.0f} s)"
+                                         for c in res["cases"])
+                  + ". The three quantities of one result share their noise, so the pooled fractions "
+                    "are correlated.")
+    sec.tables.append(table)
+    sec.figures.append(_plot_coverage(ctx, res))
+    lo1, hi1, lo2, lo3 = MC_COVERAGE_LIMITS[ctx.quick]
+    f1, f2, f3 = res["fractions_all"]
+    return [expect("mc coverage within 1 standard error", _SECTION, lo1 < f1 < hi1,
+                   f"{f1:.3f} of {3 * res['count']} (normal 0.683; limits {lo1}-{hi1})"),
+            expect("mc coverage within 2 standard errors", _SECTION, f2 > lo2,
+                   f"{f2:.3f} (normal 0.954; limit > {lo2})"),
+            expect("mc coverage within 3 standard errors", _SECTION, f3 > lo3,
+                   f"{f3:.3f} (normal 0.997; limit > {lo3})")]
+
+
+def _plot_coverage(ctx: Context, res: dict) -> Figure:
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    z = np.concatenate([np.asarray(c["z"][q]) for c in res["cases"] for q in c["z"]])
+    fig, ax = plt.subplots(figsize=(6, 4))
+    ax.hist(np.clip(z, -5, 5), bins=np.linspace(-5, 5, 41), density=True, alpha=0.6,
+            label=f"Monte Carlo, {z.size} values")
+    x = np.linspace(-5, 5, 400)
+    ax.plot(x, np.exp(-x * x / 2) / math.sqrt(2 * math.pi), "k-", label="standard normal")
+    ax.set_xlabel("(result - reference) / combined reported error")
+    ax.set_ylabel("density")
+    ax.legend()
+    fig.tight_layout()
+    path = ctx.out / "errorbars_mc_coverage.png"
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
+    return Figure(path, "Monte Carlo: normalized errors of eta, V2 and Pin against the reference; honest "
+                        "one-standard-error bars give the standard normal (values beyond 5 are drawn at 5).")
+
+
+def _plot_bounds(ctx: Context, bounds: list[Bound]) -> Figure:
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    fig, ax = plt.subplots(figsize=(5.5, 4.5))
+    for label in dict.fromkeys(b.label for b in bounds):
+        pts = [(max(b.actual, b.ref_err, 1e-16), b.reported) for b in bounds if b.label == label]
+        ax.loglog(*zip(*pts), "o", label=label)
+    lo = min(min(b.reported for b in bounds), min(max(b.actual, b.ref_err, 1e-16) for b in bounds))
+    hi = max(max(b.reported for b in bounds), max(b.actual for b in bounds))
+    ax.loglog([lo, hi], [lo, hi], "k--", lw=1, label="reported = actual")
+    ax.set_xlabel("actual error of eta (vs reference)")
+    ax.set_ylabel("reported error of eta")
+    ax.legend(fontsize=8)
+    fig.tight_layout()
+    path = ctx.out / "errorbars_fpe_bounds.png"
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
+    return Figure(path, "Fokker-Planck: reported against actual error of eta; points above the diagonal "
+                        "are bounds that hold.")
+
+
+def run(ctx: Context) -> Section:
+    """Monte Carlo coverage and Fokker--Planck error bounds."""
+    sec = Section("errorbars", _SECTION)
+    sec.text.append(
+        "Every number for a nonlinear system carries an error estimate; here they are checked against "
+        "actual errors. Monte Carlo errors are one standard error (statistical, Student-t scaled, with "
+        "the time-step bias estimate in quadrature): over independent seeds about 68 / 95 / 99.7 % of "
+        "results should lie within 1 / 2 / 3 errors of a much tighter reference. Fokker-Planck errors "
+        "are refinement estimates meant as bounds: the actual error should not exceed them."
+        + (" Quick mode: a subset of the cases and 8 Monte Carlo results per case." if ctx.quick else ""))
+    sec.checks += ctx.check("Monte Carlo coverage", _SECTION, lambda: _mc_checks(ctx, sec))
+    sec.checks += ctx.check("Fokker-Planck error bounds", _SECTION, lambda: _fpe_checks(ctx, sec))
+    return sec
