@@ -71,7 +71,7 @@ from fpe_harvester import Harvester
 from fpe_harvester.fpe import discretize, stationary
 from validation.bench.cli import bench_main, save_benchmark
 
-__all__ = ["STEM", "PREVIOUS", "run", "work", "table", "series"]
+__all__ = ["STEM", "PREVIOUS", "PREVIOUS_SERIES_N3", "run", "work", "table", "series"]
 
 #: Name of the written ``.json`` and ``.png``.
 STEM = "bench_fpe"
@@ -209,6 +209,14 @@ def run(quick: bool = False, out: pathlib.Path | None = None) -> dict:
     return result
 
 
+#: The previous design (commit e011c60) on n = 3, a = 0.5 for the combined plot: (tol, seconds,
+#: eta), each a fresh process, the minimum of two runs interleaved with the current design's on
+#: a loaded 2-core machine (the current design in the same runs: 0.76, 0.28, 0.49, 4.3, 4.3 s).
+PREVIOUS_SERIES_N3 = ((1e-2, 0.86, 0.48400807801970425), (1e-3, 0.59, 0.4840021617609992),
+                      (1e-4, 0.29, 0.4840021617609992), (1e-5, 2.91, 0.48400192360302235),
+                      (1e-6, 12.32, 0.48400192360302235))
+
+
 def series(quick: bool) -> list[dict[str, Any]]:
     """Error-versus-time curves of the Fokker--Planck solver for the combined plot: n = 3
     (a = 0.5) at tol 1e-2 ... 1e-6 (1e-2 ... 1e-4 quick) against a run at 1e-7 (1e-5),
@@ -226,7 +234,10 @@ def series(quick: bool) -> list[dict[str, Any]]:
     out.append({"problem": "n3_single", "method": "Fokker-Planck", "points": pts,
                 "reference": f"Fokker-Planck at tol = {1e-5 if quick else 1e-7:g} "
                              f"(reported relative error {ref.eta_err / ref.eta:.1g})",
-                "reference_eta": ref.eta})
+                "reference_eta": ref.eta, "reference_err": ref.eta_err / abs(ref.eta)})
+    out.append({"problem": "n3_single", "method": "Fokker-Planck (previous design)",
+                "points": [{"seconds": sec, "eta": eta, "tol": tol} for tol, sec, eta in PREVIOUS_SERIES_N3],
+                "reference": "measured in an earlier session (PREVIOUS_SERIES_N3)"})
     h1 = Harvester.build(a=0.5, n=1.0)
     pts = []
     for tol in ([1e-2] if quick else [1e-2, 3e-3, 1e-3]):
