@@ -123,15 +123,17 @@ def _decode(raw: bytes) -> dict[str, Any]:
     Raises
     ------
     ValueError
-        The line is not UTF-8 JSON of an object, its checksum does not match, or the record
-        is not valid (the message says which).
+        The line is not UTF-8 JSON, its checksum does not match, or the record is not valid
+        (the message says which).
+    TypeError
+        The line is JSON but not an object.
     """
     try:
         rec = json.loads(raw.decode("utf-8"))
     except (UnicodeDecodeError, json.JSONDecodeError) as exc:
         raise ValueError(f"not a JSON line ({type(exc).__name__})") from None
     if not isinstance(rec, dict):
-        raise ValueError("not a JSON object")
+        raise TypeError("not a JSON object")
     if "sum" in rec:
         if rec.pop("sum") != _digest(rec):
             raise ValueError("checksum mismatch")
@@ -191,7 +193,7 @@ class PointCache:
                 continue
             try:
                 rec = _decode(raw)
-            except ValueError as exc:
+            except (ValueError, TypeError) as exc:
                 self.skipped_lines += 1
                 if len(self.problems) < _MAX_PROBLEMS:
                     self.problems.append(f"line {number}: {exc}")
