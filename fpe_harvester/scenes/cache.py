@@ -14,11 +14,13 @@ Faults the format survives
   partial last line. That line is skipped when read, and the next append first ends it with
   a newline, so it never glues onto a good record.
 * **Garbled lines** (a truncated line, a flipped byte, inserted junk, a NaN): every line
-  carries a checksum (``"sum"``: SHA-256 of the canonical JSON of the rest of the record), and
-  a record must also pass validation (key, status, finite numbers). A line that fails is
-  skipped and counted (:attr:`PointCache.skipped_lines`, with reasons in
-  :attr:`PointCache.problems`); its point is computed again. Lines without a checksum, written
-  by earlier versions, are accepted when they pass validation and hold no unknown fields.
+  starts with a checksum, ``{"sum":"<16 hex digits>",`` and then the record's fields: the
+  first 64 bits of the SHA-256 of the record's own JSON text (the rest of the line with its
+  ``{``), so any changed byte is caught without re-serializing. A record must also pass
+  validation (key, status, finite numbers). A line that fails is skipped and counted
+  (:attr:`PointCache.skipped_lines`, with reasons in :attr:`PointCache.problems`); its point
+  is computed again. Lines without a checksum, written by earlier versions, are accepted when
+  they pass validation and hold no unknown fields.
 * **Two runs writing one folder at once**: appends take an exclusive advisory lock
   (``fcntl.flock`` on the cache file; POSIX only, elsewhere the single ``O_APPEND`` write is
   the only guard) and reading takes a shared one, so lines never interleave. Each run reads
@@ -105,16 +107,18 @@ def stats_from_dict(d: Mapping[str, Any]) -> Stats:
                  growth_rate=d.get("growth_rate"), info=info, **kwargs)
 
 
-def _digest(payload: Mapping[str, Any]) -> str:
-    text = json.dumps(payload, sort_keys=True, separators=(",", ":"))
-    return hashlib.sha256(text.encode()).hexdigest()[:16]
+#: Every line this version writes starts with its checksum: ``{"sum":"<16 hex>",`` + record.
+_SUM_OPEN, _SUM_LEN = b'{"sum":"', 16
+
+
+def _digest(body: bytes) -> bytes:
+    return hashlib.sha256(body).hexdigest()[:_SUM_LEN].encode()
 
 
 def _encode(record: Mapping[str, Any]) -> bytes:
-    """One cache line: the record as canonical JSON with its checksum, newline-terminated."""
-    payload = json.loads(json.dumps(record, default=str))  # JSON-native, as a reader will see it
-    return (json.dumps({**payload, "sum": _digest(payload)}, sort_keys=True, separators=(",", ":"))
-            + "\n").encode()
+    """One cache line: the checksum of the record's JSON text, then the record, then a newline."""
+    body = json.dumps(record, default=str, separators=(",", ":")).encode()
+    return _SUM_OPEN + _digest(body) + b'",' + body[1:] + b"\n"  # records are never empty
 
 
 def _decode(raw: bytes) -> dict[str, Any]:
@@ -128,16 +132,20 @@ def _decode(raw: bytes) -> dict[str, Any]:
     TypeError
         The line is JSON but not an object.
     """
+    head = len(_SUM_OPEN) + _SUM_LEN
+    checked = raw.startswith(_SUM_OPEN)
+    if checked:
+        body = b"{" + raw[head + 2:]
+        if raw[head:head + 2] != b'",' or _digest(body) != raw[len(_SUM_OPEN):head]:
+            raise ValueError("checksum mismatch")
+        raw = body
     try:
         rec = json.loads(raw.decode("utf-8"))
     except (UnicodeDecodeError, json.JSONDecodeError) as exc:
         raise ValueError(f"not a JSON line ({type(exc).__name__})") from None
     if not isinstance(rec, dict):
         raise TypeError("not a JSON object")
-    if "sum" in rec:
-        if rec.pop("sum") != _digest(rec):
-            raise ValueError("checksum mismatch")
-    elif not rec.keys() <= _FIELDS:
+    if not checked and not rec.keys() <= _FIELDS:
         raise ValueError(f"no checksum and unknown fields {sorted(rec.keys() - _FIELDS)}")
     if not isinstance(rec.get("key"), str) or not rec["key"]:
         raise ValueError("no key")
