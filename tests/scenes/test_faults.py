@@ -261,3 +261,18 @@ def test_rows_missing_the_accuracy_are_not_converged(tmp_path: Path, monkeypatch
                 optimize=Optimize("eta", "k", (-0.3, -0.1), points=3))
     row = scene_run.run_scene(opt, tmp_path / "opt", progress=False).rows[0]
     assert row.status == "not_converged" and "accuracy not met" in row.message
+
+
+def test_cli_says_how_many_cache_lines_it_skipped(tmp_path: Path, capsys) -> None:
+    from fpe_harvester.cli import main
+
+    toml = tmp_path / "h.toml"
+    toml.write_text('name = "h"\nobservables = ["eta"]\noutputs = []\n[system]\nn = 2\nN = 3\n'
+                    "[axes]\nk = [0.0, -0.1]\n")
+    args = ["scene", "run", str(toml), "--out", str(tmp_path), "--no-progress"]
+    assert main(args) == 0 and "skipped" not in capsys.readouterr().out
+    path = tmp_path / CACHE_NAME
+    path.write_bytes(path.read_bytes()[:-20])  # the last line cut
+    assert main(args) == 0
+    out = capsys.readouterr().out
+    assert "1 computed, 1 reused" in out and "points.jsonl: 1 unreadable lines skipped" in out
