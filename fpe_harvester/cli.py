@@ -211,6 +211,9 @@ def cmd_scene(args: argparse.Namespace) -> int:
     print(result.table())
     print(f"\n{len(result.rows)} points: {result.computed} computed, {result.reused} reused, "
           f"{result.elapsed:.1f} s")
+    if result.cache_skipped:
+        print(f"points.jsonl: {result.cache_skipped} unreadable lines skipped (partial, garbled or invalid); "
+              "their points were computed again")
     for label, path in (("csv", result.csv_path), ("json", result.json_path),
                         ("table", result.table_path), *result.figures.items()):
         if path is not None:

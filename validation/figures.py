@@ -81,7 +81,8 @@ def row_checks(label: str, scene: Any, rows: list[Any]) -> list[CheckResult]:
       stationary state (harmonic beyond k_di), ``marginal`` only for a harmonic ring,
       ``metastable`` only for an n < 2 ring with k < 0;
     * a stable or marginal row has finite values with errors below them and meets the scene's
-      relative accuracy ``rtol`` on eta (a row that does not is a failure, whatever its status);
+      relative accuracy ``rtol`` on eta (a row that does not is a failure, whatever its status:
+      the runner reports it as ``not_converged``, and a ``not_converged`` row with numbers fails);
     * harmonic rows agree with the closed form evaluated in 60-digit arithmetic
       (:func:`validation.references.mp_closed_form`) within their stated errors.
     """
@@ -100,9 +101,12 @@ def row_checks(label: str, scene: Any, rows: list[Any]) -> list[CheckResult]:
         if (row.status == "unstable" and truth != "unstable") or (row.status == "marginal" and truth != "marginal") \
                 or (row.status == "metastable" and truth != "metastable"):
             false_status.append(f"({where}) {row.status}, truly {truth}")
+        eta, err = row.values.get("eta"), row.values.get("eta_err")
+        if row.status == "not_converged" and eta is not None:
+            # the scene runner demotes a row that misses rtol to not_converged: still a failure
+            inaccurate.append(f"({where}) not converged: eta = {eta} +- {err}")
         if not row.ok:
             continue
-        eta, err = row.values.get("eta"), row.values.get("eta_err")
         if eta is not None and not (err is not None and math.isfinite(eta) and 0 <= err <= scene.rtol * abs(eta)):
             inaccurate.append(f"({where}) eta = {eta} +- {err}")
         if row.method == "exact":

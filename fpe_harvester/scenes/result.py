@@ -17,6 +17,7 @@ from typing import Any
 import numpy as np
 
 from ..result import Status
+from .cache import atomic_path
 from .spec import DERIVED, Scene
 
 __all__ = ["ERROR", "NOT_AVAILABLE", "SceneResult", "SceneRow", "write_csv"]
@@ -90,6 +91,9 @@ class SceneResult:
         Solver results computed in this run / taken from the cache.
     elapsed : float
         Wall time in seconds.
+    cache_skipped : int
+        Lines of the point cache that could not be used (partial, garbled or invalid; see
+        :mod:`.cache`): their points were computed again.
     """
 
     scene: Scene
@@ -102,6 +106,7 @@ class SceneResult:
     computed: int
     reused: int
     elapsed: float
+    cache_skipped: int = 0
 
     @property
     def columns(self) -> list[str]:
@@ -138,6 +143,7 @@ class SceneResult:
             "method": self.scene.method, "observables": list(self.scene.observables),
             "system": self.scene.system.to_dict(), "spec": self.scene.to_dict(),
             "computed": self.computed, "reused": self.reused, "elapsed_s": self.elapsed,
+            "cache_skipped": self.cache_skipped,
             "figures": {k: str(v) for k, v in self.figures.items()},
             "rows": [row.to_dict() for row in self.rows],
         }
@@ -152,14 +158,17 @@ def _fmt(value: Any) -> str:
 
 
 def write_csv(result: SceneResult, path: Path) -> Path:
-    """Write the rows of ``result`` to ``path`` as CSV (each observable with its error column)."""
+    """Write the rows of ``result`` to ``path`` as CSV (each observable with its error column).
+
+    The file is replaced atomically (:func:`.cache.atomic_path`): a concurrent reader never
+    sees a partial table."""
     cols = result.columns
     obs = [c for c in cols if c in result.scene.observables]
     header = [c for c in cols if c not in obs]
     for o in obs:
         header += [o] if o in DERIVED else [o, o + "_err"]
     header += ["status", "method", "message"]
-    with path.open("w", newline="", encoding="utf-8") as fh:
+    with atomic_path(path) as tmp, tmp.open("w", newline="", encoding="utf-8") as fh:
         writer = csv.writer(fh)
         writer.writerow(header)
         for row in result.rows:

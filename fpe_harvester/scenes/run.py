@@ -6,7 +6,8 @@ nonlinear ring -> Monte Carlo with ``tol = rtol`` and a seed derived from the sc
 point). Harmonic points are computed together with :func:`~fpe_harvester.exact.exact_stats` (one
 vectorized call per ring size and parameter set); the rest one by one. Each finished point
 is appended to ``points.jsonl`` in the output folder (see :mod:`.cache`), so reruns
-reuse it and an interrupted run resumes. A point whose solver fails or is not available is
+reuse it and an interrupted run resumes (even one killed mid-write; two runs may share a
+folder). Outputs are replaced atomically. A point whose solver fails or is not available is
 reported with its status and message; the scene goes on.
 """
 
@@ -27,7 +28,7 @@ from ..exact import Exact, exact_stats, k_di
 from ..model import Harvester
 from ..result import QUANTITIES, Stats, Status
 from ..solve import choose_method, solve
-from .cache import PointCache, point_key, point_seed, stats_from_dict
+from .cache import PointCache, atomic_path, point_key, point_seed, stats_from_dict, write_text_atomic
 from .result import ERROR, NOT_AVAILABLE, SceneResult, SceneRow, write_csv
 from .spec import Scene, load_scene
 
@@ -188,12 +189,17 @@ def _row(scene: Scene, index: int, point: Mapping[str, float], h: Harvester,
         return SceneRow(index, dict(point), Status.STABLE.value, "", msg, values, info)
     if isinstance(res, _Failure):
         return SceneRow(index, dict(point), res.status, res.method, res.message, values, info)
-    message = res.message
-    if res.ok and res.eta is not None and res.eta_err and res.eta_err > scene.rtol * abs(res.eta):
-        message += (f"; accuracy not met: eta_err/eta = {res.eta_err / abs(res.eta):.2g} "
-                    f"> rtol = {scene.rtol:g}")
+    status, message = res.status.value, res.message
+    # whatever the solver said (a cached point, a tol overridden in the scene's options), a row
+    # that misses the scene's accuracy on eta is not converged; the message keeps the solver's
+    if res.ok and res.eta is not None and not (res.eta_err is not None
+                                               and res.eta_err <= scene.rtol * abs(res.eta)):
+        rel = "unknown" if res.eta_err is None or res.eta == 0 else f"{res.eta_err / abs(res.eta):.2g}"
+        status = Status.NOT_CONVERGED.value
+        message += (f"; accuracy not met: eta_err/eta = {rel} > rtol = {scene.rtol:g} "
+                    f"(the numbers are the best estimate; tighten the solver settings or loosen rtol)")
     carried = {key: res.info[key] for key in _CARRIED_INFO if key in res.info}
-    return SceneRow(index, dict(point), res.status.value, res.method, message, values, {**info, **carried})
+    return SceneRow(index, dict(point), status, res.method, message, values, {**info, **carried})
 
 
 def _sweep_rows(scene: Scene, runner: _Runner, points: list[dict[str, float]]) -> list[SceneRow]:
@@ -287,7 +293,8 @@ def run_scene(
     Returns
     -------
     SceneResult
-        Rows, output paths and counts of computed/reused points.
+        Rows, output paths, counts of computed/reused points and of unusable cache lines.
+        A stable or marginal row that misses ``rtol`` on eta has status ``not_converged``.
 
     Raises
     ------
@@ -322,12 +329,11 @@ def run_scene(
         runner = _Runner(sc, cache, bar, workers)
         rows = _optimize_rows(sc, runner, points) if sc.optimize else _sweep_rows(sc, runner, points)
     result = SceneResult(sc, tuple(rows), out, MappingProxyType({}), None, None, None,
-                         runner.computed, runner.reused, 0.0)
+                         runner.computed, runner.reused, 0.0, cache_skipped=cache.skipped_lines)
     if "csv" in sc.outputs:
         result = replace(result, csv_path=write_csv(result, out / f"{sc.name}.csv"))
     if "table" in sc.outputs:
-        table_path = out / f"{sc.name}.txt"
-        table_path.write_text(result.table() + "\n", encoding="utf-8")
+        table_path = write_text_atomic(out / f"{sc.name}.txt", result.table() + "\n")
         result = replace(result, table_path=table_path)
     drawn: dict[str, Path] = {}
     if wanted:
@@ -335,10 +341,12 @@ def run_scene(
 
         for spec in sc.figures:
             if spec.name in wanted:
-                drawn[spec.name] = draw_figure(sc, spec, rows, out / f"{sc.name}_{spec.name}.png")
+                drawn[spec.name] = path = out / f"{sc.name}_{spec.name}.png"
+                with atomic_path(path) as tmp:
+                    draw_figure(sc, spec, rows, tmp)
     result = replace(result, figures=MappingProxyType(drawn), elapsed=time.perf_counter() - t0)
     if "json" in sc.outputs:
         result = replace(result, json_path=out / f"{sc.name}.json")
-        result.json_path.write_text(json.dumps({**result.to_dict(), "quick": quick}, indent=1,
-                                               default=str), encoding="utf-8")
+        write_text_atomic(result.json_path, json.dumps({**result.to_dict(), "quick": quick}, indent=1,
+                                                       default=str))
     return result
