@@ -111,13 +111,22 @@ class Optimum:
                 "message": self.message, "info": _jsonable(dict(self.info))}
 
 
-def _fit(x: np.ndarray, y: np.ndarray, x0: float, scale: float) -> tuple[float, float, float]:
-    """Vertex, value there and curvature of the least-squares quadratic through (x, y)."""
-    c2, c1, c0 = np.polyfit((x - x0) / scale, y, 2)
+def _fit(x: np.ndarray, y: np.ndarray, x0: float, scale: float) -> tuple[float, float, float, float]:
+    """Vertex, value there and curvature of the least-squares quadratic through (x, y), and the
+    cubic fit's local maximum (the model check; NaN with fewer than 5 points or no maximum)."""
+    u = (x - x0) / scale
+    c2, c1, c0 = np.polyfit(u, y, 2)
+    cubic = math.nan
+    if u.size >= 5:
+        d3, d2, d1, _ = np.polyfit(u, y, 3)
+        roots = np.roots([3 * d3, 2 * d2, d1])
+        maxima = [r.real for r in roots if abs(r.imag) < 1e-12 and 6 * d3 * r.real + 2 * d2 < 0]
+        if maxima:
+            cubic = x0 + scale * min(maxima, key=lambda r: abs(r - u.mean()))
     if c2 >= 0.0:
-        return math.nan, math.nan, float(c2)
-    u = -c1 / (2.0 * c2)
-    return x0 + scale * u, c0 + c1 * u + c2 * u * u, float(c2)
+        return math.nan, math.nan, float(c2), cubic
+    v = -c1 / (2.0 * c2)
+    return x0 + scale * v, c0 + c1 * v + c2 * v * v, float(c2), cubic
 
 
 def _student(confidence: float, dof: int) -> float:
@@ -231,7 +240,7 @@ def maximize_noisy(
                            info={**info, "window": xs.tolist()},
                            message=f"not converged: only {xs_ok.size} of the {window} points around "
                                    f"x = {center:.6g} gave a result; a quadratic needs 3")
-        x_v, y_v, curv = _fit(xs_ok, Y.mean(axis=0), center, step)
+        x_v, y_v, curv, x_cubic = _fit(xs_ok, Y.mean(axis=0), center, step)
         inside = math.isfinite(x_v) and xs[0] <= x_v <= xs[-1]
         if not inside and shifts < max_shifts:
             target = x_v if math.isfinite(x_v) else float(xs_ok[np.argmax(Y.mean(axis=0))])
@@ -244,7 +253,7 @@ def maximize_noisy(
         if np.isfinite(jack).all():
             se = np.sqrt((nb - 1) / nb * ((jack - jack.mean(axis=0)) ** 2).sum(axis=0))
         else:
-            se = np.full(3, math.nan)
+            se = np.full(4, math.nan)
         if tol is not None and inside and se[0] > tol and nb < max_batches:
             nb = min(2 * nb, max_batches)
             continue
@@ -268,6 +277,17 @@ def maximize_noisy(
                        means[i] + t * y_se), confidence=confidence, status=Status.NOT_CONVERGED,
                        method="callable", info=info, message=f"not converged: {why}; reported: the best "
                        f"point evaluated (no error on its position)")
+    # lack of fit: the cubic's maximum off the quadratic's vertex by more than twice the
+    # jackknife error of that shift adds the shift to the position's error
+    shift = x_cubic - x_v
+    shifts_jk = jack[:, 3] - jack[:, 0]
+    shift_se = float(np.sqrt((nb - 1) / nb * np.sum((shifts_jk - shifts_jk.mean()) ** 2)))
+    info.update(x_opt_cubic=x_cubic, model_shift=[shift, shift_se])
+    model_note = ""
+    if math.isfinite(shift) and math.isfinite(shift_se) and abs(shift) > 2.0 * shift_se:
+        se[0] = math.hypot(se[0], shift)
+        model_note = (f"; the cubic fit moves the maximum by {shift:.2g} (+- {shift_se:.1g}), added to the "
+                      "position's error (a narrower bracket, i.e. more grid points, reduces it)")
     x_ci = (x_v - t * se[0], x_v + t * se[0])
     y_ci = (y_v - t * se[1], y_v + t * se[1])
     problems = []
@@ -289,7 +309,7 @@ def maximize_noisy(
                    message=("not converged: " + "; ".join(problems)) if problems else
                    f"converged: interior maximum from a quadratic fit over {xs_ok.size} points and {nb} "
                    f"independent batches (common random numbers inside each); {confidence:.0%} intervals "
-                   "from the jackknife over batches")
+                   "from the jackknife over batches" + model_note)
 
 
 def default_bounds(h: Harvester, over: str) -> tuple[float, float]:
