@@ -8,10 +8,10 @@ from dataclasses import replace
 import pytest
 
 from fpe_harvester import Harvester, Optimum, Stats, Status, solve
+from validation import paper
 from validation.checks import Outcome, agree
 from validation.crosscheck import _compare
 from validation.figures import row_checks
-from validation import paper
 from validation.paper import PAPER_ROWS, _row_check, vrms_text
 from validation.stress import _judge
 
