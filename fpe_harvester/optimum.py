@@ -208,8 +208,8 @@ def maximize_noisy(
 
     cache: dict[tuple[float, int], float] = {}
 
-    def evaluate(xs: np.ndarray, nb: int, first: int = 0) -> np.ndarray:
-        new = [(float(x), b) for b in range(first, nb) for x in xs if (float(x), b) not in cache]
+    def evaluate(xs: np.ndarray, nb: int) -> np.ndarray:
+        new = [(float(x), b) for b in range(nb) for x in xs if (float(x), b) not in cache]
         for key in new:
             v = f(*key)
             cache[key] = math.nan if v is None else float(v)
@@ -250,10 +250,9 @@ def maximize_noisy(
                 center, shifts = moved, shifts + 1
                 continue
         jack = np.array([_fit(xs_ok, np.delete(Y, b, axis=0).mean(axis=0), center, step) for b in range(nb)])
-        if np.isfinite(jack).all():
-            se = np.sqrt((nb - 1) / nb * ((jack - jack.mean(axis=0)) ** 2).sum(axis=0))
-        else:
-            se = np.full(4, math.nan)
+        # per column: NaN where some jackknife fit has no maximum (a cubic without one leaves the
+        # quadratic's errors intact)
+        se = np.sqrt((nb - 1) / nb * ((jack - jack.mean(axis=0)) ** 2).sum(axis=0))
         if tol is not None and inside and se[0] > tol and nb < max_batches:
             nb = min(2 * nb, max_batches)
             continue
@@ -291,7 +290,7 @@ def maximize_noisy(
     x_ci = (x_v - t * se[0], x_v + t * se[0])
     y_ci = (y_v - t * se[1], y_v + t * se[1])
     problems = []
-    if not np.isfinite(se).all() or info["jackknife_curvature_max"] >= 0.0:
+    if not np.isfinite(se[:3]).all() or info["jackknife_curvature_max"] >= 0.0:
         problems.append("the curvature is not negative in every jackknife fit: the maximum is not "
                         "resolved; use more batches (or more replicas per point)")
     elif x_ci[0] < xs_ok[0] or x_ci[1] > xs_ok[-1]:
