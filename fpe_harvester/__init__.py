@@ -3,7 +3,8 @@
 Public API: the model (:class:`Params`, :class:`Potential`, :class:`Harvester`), the one
 entry point :func:`solve` with its result :class:`Stats`, the exact harmonic solver
 (:class:`Exact`, :func:`exact_sweep`), stability thresholds (:func:`k_di`,
-:func:`threshold`) and declarative studies (:class:`Scene`, :func:`run_scene`).
+:func:`threshold`), optima with error bars (:func:`optimize`, :func:`maximize_noisy`) and
+declarative studies (:class:`Scene`, :func:`run_scene`).
 
 The solvers are the subpackages :mod:`.exact` (harmonic rings, closed form),
 :mod:`.fpe` (Fokker--Planck, one nonlinear unit) and ``montecarlo`` (a top-level package:
@@ -31,6 +32,7 @@ from .exact import (
     threshold,
 )
 from .model import Harvester, Params, Potential
+from .optimum import Optimum, maximize_noisy, optimize
 from .result import QUANTITIES, Stats, Status
 from .scenes import Axis, FigureSpec, Optimize, Scene, SceneResult, list_scenes, load_scene, run_scene
 from .solve import METHODS, choose_method, get_solver, solve
@@ -64,6 +66,9 @@ __all__ = [
     "list_scenes",
     "run_scene",
     "SceneResult",
+    "optimize",
+    "maximize_noisy",
+    "Optimum",
     "HarvesterError",
     "ParameterError",
     "UnstableSystemError",

@@ -1,4 +1,4 @@
-"""Command-line interface: ``harvester stats``, ``harvester threshold``, ``harvester scene``.
+"""Command-line interface: ``harvester stats``, ``threshold``, ``optimize``, ``scene``, ``validate``.
 
 Every command prints a readable table, or one JSON object with ``--json``. Never a traceback:
 bad input (an argument out of range, a parameter set whose answer is beyond double precision,
@@ -73,8 +73,8 @@ def _params(pairs: Sequence[tuple[str, str]]) -> Params:
     return Params().replace(**changes)
 
 
-def _print_table(rows: Sequence[tuple[str, str, str]], header: tuple[str, str, str]) -> None:
-    widths = [max(len(r[i]) for r in (header, *rows)) for i in range(3)]
+def _print_table(rows: Sequence[tuple[str, ...]], header: tuple[str, ...]) -> None:
+    widths = [max(len(r[i]) for r in (header, *rows)) for i in range(len(header))]
     line = "  ".join("-" * w for w in widths)
     print("  ".join(h.ljust(w) for h, w in zip(header, widths)))
     print(line)
@@ -170,6 +170,35 @@ def cmd_threshold(args: argparse.Namespace) -> int:
     return 0
 
 
+def cmd_optimize(args: argparse.Namespace) -> int:
+    """The coupling (or other parameter) that maximizes eta, with error bars."""
+    from .optimum import optimize
+
+    h = Harvester.build(a=args.a, n=args.n, N=args.N).replace(params=_params(args.param))
+    opt = optimize(h, args.over, None if args.bounds is None else tuple(args.bounds), args.maximize,
+                   method=args.method, tol=args.tol, seed=args.seed, batches=args.batches,
+                   replicas=args.replicas, progress=False if args.no_progress or args.json else None)
+    if args.json:
+        out = opt.to_dict()
+        out["harvester"] = h.to_dict()
+        print(json.dumps(out, indent=2))
+        return 0
+    print(f"Harvester: U(x) = {h.a:g}|x|^{h.n:g}, N = {h.N}; maximize {opt.maximize} over {opt.over}; "
+          f"method = {opt.method}; status = {opt.status.value}")
+    print(opt.message)
+    level = f"{opt.confidence:.0%} interval"
+
+    def ci(pair: tuple[float, float] | None) -> str:
+        return "-" if pair is None else f"[{pair[0]:.6g}, {pair[1]:.6g}]"
+
+    _print_table([(f"{opt.over}_opt", *_fmt(opt.x_opt, opt.x_opt_err), ci(opt.x_ci)),
+                  (f"{opt.maximize}_max", *_fmt(opt.value, opt.value_err), ci(opt.value_ci))],
+                 ("quantity", "value", "error", level))
+    if "wall_time" in opt.info:
+        print(f"{opt.info.get('evaluations')} Monte Carlo runs in {opt.info['wall_time']:.1f} s")
+    return 0
+
+
 def _writable_folder(flag: str, path: str) -> str:
     """``path`` after creating it, or a :class:`ParameterError` naming ``flag`` if that fails."""
     try:
@@ -226,6 +255,7 @@ COMMANDS: dict[str, Callable[[argparse.Namespace], int]] = {
     "stats": cmd_stats,
     "validate": cmd_validate,
     "threshold": cmd_threshold,
+    "optimize": cmd_optimize,
 }
 
 
@@ -255,6 +285,26 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--N", type=int, default=3, help="number of units (default 3)")
     p.add_argument("--a", type=_number, default=0.5, help="potential strength a > 0 (default 0.5)")
     p.add_argument("--json", action="store_true", help="print one JSON object")
+
+    p = sub.add_parser("optimize", help="the coupling k (or another parameter) that maximizes eta, with errors")
+    p.add_argument("--n", type=_number, default=2.0, help=f"potential exponent n in [1, {MAX_EXPONENT:g}] (default 2)")
+    p.add_argument("--a", type=_number, default=0.5, help="potential strength a > 0 (default 0.5)")
+    p.add_argument("--N", type=int, default=3, help="number of units in the ring (default 3)")
+    p.add_argument("--over", default="k", help="parameter varied (default k; a, n or a --param name)")
+    p.add_argument("--maximize", default="eta", help="observable maximized (default eta)")
+    p.add_argument("--bounds", type=_number, nargs=2, default=None, metavar=("LOW", "HIGH"),
+                   help="search interval (default for k: [k_di, 0] harmonic, [3 k_di, 0] nonlinear)")
+    p.add_argument("--param", type=_key_value, action="append", default=[], metavar="NAME=VALUE",
+                   help="physical parameter (m, gamma, Kv, Kc, sigma, tau, D, tau_p, R); repeatable")
+    p.add_argument("--method", choices=("auto", "exact", "mc"), default="auto",
+                   help="solver of the objective (default auto: exact for n = 2, else Monte Carlo)")
+    p.add_argument("--tol", type=_number, default=None,
+                   help="Monte Carlo: target standard error of the optimum's position, > 0 (adds batches)")
+    p.add_argument("--batches", type=int, default=8, help="independent common-random-number batches, >= 3")
+    p.add_argument("--replicas", type=int, default=16, help="Monte Carlo replicas per point and batch, >= 2")
+    p.add_argument("--seed", type=int, default=2017, help="base random seed, >= 0 (default 2017)")
+    p.add_argument("--json", action="store_true", help="print one JSON object")
+    p.add_argument("--no-progress", action="store_true", help="no progress bar")
 
     p = sub.add_parser("validate", help="cross-checks, paper comparison, stress tests, benchmarks -> report")
     p.add_argument("--quick", action="store_true", help="CI subset, under 3 minutes")

@@ -26,6 +26,7 @@ import numpy as np
 from ..errors import HarvesterError, MethodNotAvailableError, ParameterError, check_int
 from ..exact import Exact, exact_stats, k_di
 from ..model import Harvester
+from ..optimum import optimize
 from ..result import QUANTITIES, Stats, Status
 from ..solve import choose_method, solve
 from .cache import PointCache, atomic_path, point_key, point_seed, stats_from_dict, write_text_atomic
@@ -221,6 +222,9 @@ def _optimize_rows(scene: Scene, runner: _Runner, points: list[dict[str, float]]
     for index, p in enumerate(points):
         h0 = scene.harvester(p)
         lo, hi = opt.interval(h0)
+        if hi > lo and runner.method_of(h0.replace(**{opt.over: 0.5 * (lo + hi)}))[0] == "mc":
+            rows.append(_noisy_optimum_row(scene, runner, index, p, h0, lo, hi))
+            continue
         grid = np.linspace(lo, hi, opt.points) if hi > lo else np.array([lo])
         hs = [h0.replace(**{opt.over: float(x)}) for x in grid]
         res = runner.evaluate(hs)
@@ -260,6 +264,30 @@ def _optimize_rows(scene: Scene, runner: _Runner, points: list[dict[str, float]]
                            row.values, row.info)
         rows.append(row)
     return rows
+
+
+def _noisy_optimum_row(scene: Scene, runner: _Runner, index: int, p: Mapping[str, float], h0: Harvester,
+                       lo: float, hi: float) -> SceneRow:
+    """A Monte Carlo optimum: :func:`~fpe_harvester.optimum.optimize` (common random numbers,
+    quadratic fit, jackknife errors); the maximized observable is the fit's value at the vertex,
+    the others come from one more solve there."""
+    opt = scene.optimize
+    assert opt is not None
+    found = optimize(h0, opt.over, (lo, hi), opt.maximize, method="mc", seed=point_seed(scene.name, h0),
+                     mc_tol=scene.rtol, progress=False)
+    info: dict[str, Any] = {"optimize": {"maximize": opt.maximize, "over": opt.over, "interval": [lo, hi],
+                                         **{k: v for k, v in found.to_dict().items() if k != "info"},
+                                         "window": found.info.get("window"),
+                                         "batches": found.info.get("batches")}}
+    runner.bar.update(opt.points)
+    if found.x_opt is None:
+        return _row(scene, index, {**p, opt.over: None}, h0,  # type: ignore[dict-item]
+                    _Failure(Status.NOT_CONVERGED.value, found.message, "mc"), info)
+    final = runner.evaluate([h0.replace(**{opt.over: found.x_opt})])[0]
+    row = _row(scene, index, {**p, opt.over: found.x_opt}, h0, final, info)
+    values = {**row.values, opt.maximize: found.value, opt.maximize + "_err": found.value_err}
+    status = row.status if found.status is Status.STABLE else found.status.value
+    return SceneRow(row.index, row.point, status, "mc", f"{found.message}; {row.message}", values, row.info)
 
 
 def run_scene(

@@ -193,8 +193,10 @@ class Optimize:
         each point, where eta reaches its finite marginal limit.
     points : int
         Size of the uniform grid scanned first, >= 3. For exact (harmonic) points an interior
-        best grid point is then refined with a bounded scalar optimizer (scipy); for the other
-        methods the result is the best grid point, the neighbouring grid points its bracket.
+        best grid point is then refined with a bounded scalar optimizer (scipy); for Fokker--Planck
+        points the result is the best grid point, the neighbouring grid points its bracket. Monte
+        Carlo points use :func:`~fpe_harvester.optimum.optimize` instead (common random numbers,
+        local quadratic fit, error bars on the position in ``info["optimize"]``).
         A maximum on a bound is reported as such in the row's message (harmonic eta(k) on
         [k_di, 0] is monotone decreasing, so its optimum is the marginal limit at k_di).
     """

@@ -199,6 +199,29 @@ def test_optimize_at_threshold_and_interior(tmp_path: Path) -> None:
     assert row.info["optimize"]["at_bound"] is None
 
 
+def test_optimize_monte_carlo_points_use_the_noisy_optimizer(tmp_path: Path, monkeypatch) -> None:
+    from fpe_harvester import Optimum, Status
+
+    asked: list[dict] = []
+
+    def fake_optimize(h, over, bounds, maximize, **kw):
+        asked.append({"h": h, "over": over, "bounds": bounds, **kw})
+        return Optimum(over, maximize, -0.3, 0.002, 0.553, 0.0006, (-0.304, -0.296), (0.5518, 0.5542),
+                       status=Status.STABLE, method="mc", message="converged", info={"window": [], "batches": 8})
+
+    monkeypatch.setattr(scene_run, "optimize", fake_optimize)
+    # the final solve at k_opt: its harmonic twin stands in for Monte Carlo (stable at k = -0.3)
+    monkeypatch.setattr(scene_run, "solve", lambda h, method, **o: solve(h.replace(n=2.0), "exact"))
+    sc = Scene("nlopt", system=Harvester.build(a=0.5, n=3, N=3), observables=("eta", "Vrms"),
+               optimize=Optimize("eta", "k", (-1.0, 0.0), points=9))
+    row = scene_run.run_scene(sc, tmp_path, progress=False, figures=[]).rows[0]
+    assert asked[0]["bounds"] == (-1.0, 0.0) and asked[0]["method"] == "mc"
+    assert asked[0]["seed"] == point_seed("nlopt", sc.harvester({}))
+    assert row.point["k"] == -0.3 and (row.values["eta"], row.values["eta_err"]) == (0.553, 0.0006)
+    assert row.values["Vrms"] is not None and row.info["optimize"]["k_opt_err"] == 0.002
+    assert row.status == "stable" and row.message.startswith("converged")
+
+
 def test_shipped_harmonic_scene_quick(tmp_path: Path) -> None:
     res = scene_run.run_scene(load_scene("fig4_eta_vs_k_harmonic"), tmp_path, quick=True, progress=False)
     row = next(r for r in res.rows if r.point["k"] == pytest.approx(-0.33))

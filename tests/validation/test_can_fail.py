@@ -7,7 +7,8 @@ from dataclasses import replace
 
 import pytest
 
-from fpe_harvester import Harvester, Stats, Status, solve
+from fpe_harvester import Harvester, Optimum, Stats, Status, solve
+from validation import paper
 from validation.checks import Outcome, agree
 from validation.crosscheck import _compare
 from validation.figures import row_checks
@@ -52,6 +53,28 @@ def test_paper_row_check_fails_on_a_wrong_number_and_on_a_missing_one():
     nc = Stats(status=Status.NOT_CONVERGED, method="fpe", message="budget")
     assert not _row_check(row, -0.33, nc, 0.0005).passed
     assert not _row_check(row, -0.33, replace(r, status=Status.UNSTABLE), 0.0005).passed
+
+
+def test_paper_maximum_row_uses_the_optimizer_and_can_fail(monkeypatch, tmp_path):
+    """Outside quick mode a "maximum" row reports the optimizer's eta_max and k_opt: a wrong
+    eta_max, or one whose error bar cannot test the paper's digits, fails the check."""
+    from validation.checks import Context, SolveCache
+
+    row = next(r for r in PAPER_ROWS if r.maximum and r.n == 4)
+    found = Optimum("k", "eta", -0.3, 0.01, 0.5081, 0.0005, status=Status.STABLE, method="mc")
+    monkeypatch.setattr(paper, "optimize", lambda h, over, **kw: found)
+    solved = []
+    monkeypatch.setattr(paper, "solve_first", lambda ctx, h, methods: solved.append(h.k) or _mc_like(solve(H)))
+    ctx = Context(quick=False, out=tmp_path, cache=SolveCache())
+    k, r, opt = paper._row_result(ctx, row)
+    assert k == -0.3 and solved == [-0.3] and opt is found and (r.eta, r.eta_err) == (0.5081, 0.0005)
+    assert _row_check(row, k, r, 0.0005, opt).passed
+    assert "k_opt = -0.3000" in _row_check(row, k, r, 0.0005, opt).detail
+    assert not _row_check(row, k, replace(r, eta=0.52), 0.0005, opt).passed
+    assert not _row_check(row, k, replace(r, eta_err=0.05), 0.0005, opt).passed
+    quick = Context(quick=True, out=tmp_path, cache=SolveCache())
+    solved.clear()
+    assert paper._row_result(quick, row)[2] is None and solved == list(row.k_quick)
 
 
 def test_vrms_paragraph_follows_the_numbers():

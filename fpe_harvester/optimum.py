@@ -1,0 +1,520 @@
+"""The optimum of an observable over one parameter, with error bars: ``optimize(h, over="k")``.
+
+Monte Carlo values of :math:`\\eta(k)` are noisy; their *differences* between nearby ``k`` are
+far more precise when every ``k`` is simulated on the same noise paths (common random
+numbers, CRN: the same seed, time step, burn-in, run length and paths for every ``k``).
+Measured for the n = 3 ring (N = 3, a = 0.5, 16 replicas of 16 paths, t_run = 200, six
+seeds): eta at k = -0.4 ... -0.6 has a standard deviation of 1.2e-3 to 1.4e-3 across seeds,
+while its difference to eta(-0.5) has 2.1e-4 at |dk| = 0.05 and 4.1e-4 to 7.0e-4 at
+|dk| = 0.1 (correlation 0.96 to 0.99 at |dk| <= 0.1): the variance of a difference is 10 to
+40 times smaller than that of a value. That is what makes the position of a shallow maximum
+measurable.
+
+The search (:func:`maximize_noisy`, for any noisy objective ``f(x, batch)``):
+
+1. **Bracket.** A uniform grid of ``points`` over the interval, averaged over the first
+   ``pilot`` batches; its best point and its neighbours bracket the maximum.
+2. **Local quadratic fit.** ``window`` equally spaced points across the bracket, every batch
+   (a batch is one seed, shared by all ``x``: CRN inside a batch, batches independent). A
+   quadratic is fitted to the batch-mean curve; its vertex is the optimum and its value there
+   the maximum. A vertex outside the window moves the window (at most ``max_shifts`` times).
+3. **Error bars by the jackknife over batches.** Batches are independent, points inside one
+   batch are strongly correlated (that is CRN): so no per-point error is assumed independent.
+   Deleting one batch at a time and refitting gives the standard error of the vertex and of
+   its value, Student-t scaled with ``batches - 1`` degrees of freedom for the confidence
+   interval. The quadratic model is assumed adequate across the window (two grid steps): its
+   lack of fit is not part of the error bars.
+
+The status is ``stable`` (converged: an interior vertex, a negative curvature in every
+jackknife fit, the confidence interval inside the window and, with ``tol``, the standard error
+of the optimum below it) or ``not_converged`` with a message that says which test failed and
+what to do. For a harmonic ring the exact solver makes the objective deterministic: eta(k)
+grows monotonically toward the threshold k_di, so its optimum over ``[k_di, 0]`` is the
+marginal limit at k_di, a supremum that no stable ring attains: the status is ``marginal``.
+"""
+
+from __future__ import annotations
+
+import math
+import sys
+from collections.abc import Callable
+from dataclasses import dataclass, field
+from types import MappingProxyType
+from typing import Any
+
+import numpy as np
+
+from .errors import ParameterError, check_choice, check_int, check_real
+from .exact import k_di
+from .model import Harvester, Params
+from .result import QUANTITIES, Stats, Status
+from .solve import choose_method, solve
+
+__all__ = ["Optimum", "maximize_noisy", "optimize", "default_bounds", "OVER"]
+
+#: Fields an optimization may vary (the ring size N is an integer: a sweep, not an optimum).
+OVER = ("a", "n", "k", *(f for f in Params.__dataclass_fields__))
+
+
+@dataclass(frozen=True)
+class Optimum:
+    """The maximum of an observable over one parameter, with its errors and a status.
+
+    Attributes
+    ----------
+    over, maximize : str
+        The parameter varied (e.g. ``"k"``) and the observable maximized (e.g. ``"eta"``).
+    x_opt, x_opt_err : float or None
+        Position of the maximum and its standard error (one sigma; 0 when exact).
+    value, value_err : float or None
+        The maximum and its standard error (one sigma; 0 when exact).
+    x_ci, value_ci : (float, float) or None
+        Confidence intervals at level ``confidence``.
+    confidence : float
+        Level of the confidence intervals, in (0, 1).
+    status : Status
+        ``stable`` (converged), ``marginal`` (a supremum at the stability threshold) or
+        ``not_converged``; ``message`` says why and what to do.
+    method : str
+        ``"exact"`` or ``"mc"`` (the solver of the objective), or ``"callable"``.
+    info : Mapping
+        Details: bracket, window, the points evaluated and their batch means, curvature,
+        batches, evaluations, wall time.
+    """
+
+    over: str
+    maximize: str
+    x_opt: float | None
+    x_opt_err: float | None
+    value: float | None
+    value_err: float | None
+    x_ci: tuple[float, float] | None = None
+    value_ci: tuple[float, float] | None = None
+    confidence: float = 0.95
+    status: Status = Status.NOT_CONVERGED
+    message: str = ""
+    method: str = ""
+    info: Any = field(default_factory=dict)
+
+    def __post_init__(self) -> None:
+        object.__setattr__(self, "status", Status(self.status))
+        object.__setattr__(self, "info", MappingProxyType(dict(self.info)))
+
+    def to_dict(self) -> dict[str, Any]:
+        """JSON-ready dict; keys named after the problem, e.g. ``k_opt``, ``eta_max``."""
+        from .result import _jsonable
+
+        x, y = self.over, self.maximize
+        return {f"{x}_opt": self.x_opt, f"{x}_opt_err": self.x_opt_err, f"{y}_max": self.value,
+                f"{y}_max_err": self.value_err, f"{x}_opt_ci": self.x_ci, f"{y}_max_ci": self.value_ci,
+                "confidence": self.confidence, "method": self.method, "status": self.status.value,
+                "message": self.message, "info": _jsonable(dict(self.info))}
+
+
+def _fit(x: np.ndarray, y: np.ndarray, x0: float, scale: float) -> tuple[float, float, float, float]:
+    """Vertex, value there and curvature of the least-squares quadratic through (x, y), and the
+    cubic fit's local maximum (the model check; NaN with fewer than 5 points or no maximum)."""
+    u = (x - x0) / scale
+    c2, c1, c0 = np.polyfit(u, y, 2)
+    cubic = math.nan
+    if u.size >= 5:
+        d3, d2, d1, _ = np.polyfit(u, y, 3)
+        roots = np.roots([3 * d3, 2 * d2, d1])
+        maxima = [r.real for r in roots if abs(r.imag) < 1e-12 and 6 * d3 * r.real + 2 * d2 < 0]
+        if maxima:
+            cubic = x0 + scale * min(maxima, key=lambda r: abs(r - u.mean()))
+    if c2 >= 0.0:
+        return math.nan, math.nan, float(c2), cubic
+    v = -c1 / (2.0 * c2)
+    return x0 + scale * v, c0 + c1 * v + c2 * v * v, float(c2), cubic
+
+
+def _student(confidence: float, dof: int) -> float:
+    from scipy.stats import t
+
+    return float(t.ppf(0.5 + confidence / 2.0, dof))
+
+
+def maximize_noisy(
+    f: Callable[[float, int], float | None],
+    bounds: tuple[float, float],
+    *,
+    batches: int = 8,
+    pilot: int = 2,
+    points: int = 9,
+    window: int = 5,
+    tol: float | None = None,
+    max_batches: int = 32,
+    max_shifts: int = 2,
+    confidence: float = 0.95,
+    progress: Callable[[int], None] | None = None,
+) -> Optimum:
+    """Maximize a noisy objective evaluated with common random numbers per batch.
+
+    Parameters
+    ----------
+    f : callable ``f(x, batch) -> float or None``
+        The objective at ``x`` on the noise of ``batch`` (0, 1, ...): calls with the same batch
+        must share their random numbers, different batches must be independent. ``None`` or a
+        non-finite value marks a point without a result (left out).
+    bounds : (float, float)
+        Search interval ``lo < hi``.
+    batches : int
+        Independent batches in the fit, >= 3 (default 8): the jackknife's sample size.
+    pilot : int
+        Batches averaged on the bracketing grid, in [1, batches] (default 2).
+    points : int
+        Bracketing grid size, >= 3 (default 9).
+    window : int
+        Points of the local quadratic fit, >= 4 (default 5).
+    tol : float, optional
+        Target standard error of the optimum's position, > 0: batches are doubled (up to
+        ``max_batches``) until it is met; unmet, the status is ``not_converged``.
+    max_batches : int
+        Upper limit for ``batches`` when ``tol`` asks for more, >= ``batches``.
+    max_shifts : int
+        How often the fit window may move toward a vertex outside it, >= 0.
+    confidence : float
+        Level of the confidence intervals, in (0, 1) (default 0.95).
+    progress : callable, optional
+        Called with the number of new evaluations after each group of them.
+
+    Returns
+    -------
+    Optimum
+        With ``method = "callable"``.
+
+    Examples
+    --------
+    >>> def f(x, b):  # a common offset per batch, smaller independent noise per point
+    ...     r = np.random.default_rng([b, int(x * 1e6) % 2**31])
+    ...     return 1 - (x - 0.3) ** 2 + 0.1 * np.random.default_rng(b).normal() + 1e-4 * r.normal()
+    >>> opt = maximize_noisy(f, (-1.0, 1.0))
+    >>> opt.status.value, abs(opt.x_opt - 0.3) < 4 * opt.x_opt_err
+    ('stable', True)
+    """
+    lo, hi = (check_real("bounds", b) for b in bounds)
+    if not lo < hi:
+        raise ParameterError(f"bounds must satisfy low < high, got ({lo!r}, {hi!r})")
+    batches = check_int("batches", batches, low=3)
+    pilot = check_int("pilot", pilot, low=1, high=batches)
+    points = check_int("points", points, low=3)
+    window = check_int("window", window, low=4)
+    if tol is not None:
+        tol = check_real("tol", tol, low=0.0, low_open=True)
+    max_batches = check_int("max_batches", max_batches, low=batches)
+    max_shifts = check_int("max_shifts", max_shifts, low=0)
+    confidence = check_real("confidence", confidence, low=0.0, high=1.0, low_open=True, high_open=True)
+
+    cache: dict[tuple[float, int], float] = {}
+
+    def evaluate(xs: np.ndarray, nb: int) -> np.ndarray:
+        new = [(float(x), b) for b in range(nb) for x in xs if (float(x), b) not in cache]
+        for key in new:
+            v = f(*key)
+            cache[key] = math.nan if v is None else float(v)
+        if progress is not None and new:
+            progress(len(new))
+        return np.array([[cache[(float(x), b)] for x in xs] for b in range(nb)])
+
+    grid = np.linspace(lo, hi, points)
+    coarse = evaluate(grid, pilot)
+    good = np.isfinite(coarse).all(axis=0)
+    info: dict[str, Any] = {"bounds": [lo, hi], "grid": grid.tolist(),
+                            "grid_means": np.where(good, coarse.mean(axis=0), np.nan).tolist()}
+    if not good.any():
+        return Optimum("x", "f", None, None, None, None, confidence=confidence, status=Status.NOT_CONVERGED,
+                       method="callable", info=info,
+                       message="not converged: the objective gave no result anywhere on the search grid")
+    best = int(np.nanargmax(np.where(good, coarse.mean(axis=0), -np.inf)))
+    step = grid[1] - grid[0]
+    center, shifts, nb = float(grid[best]), 0, batches
+    while True:
+        left = min(max(lo, center - step), hi - 2 * step)
+        xs = np.linspace(left, left + 2 * step, window)
+        Y = evaluate(xs, nb)
+        ok = np.isfinite(Y).all(axis=0)
+        xs_ok, Y = xs[ok], Y[:, ok]
+        if xs_ok.size < 3:
+            return Optimum("x", "f", None, None, None, None, confidence=confidence, method="callable",
+                           info={**info, "window": xs.tolist()},
+                           message=f"not converged: only {xs_ok.size} of the {window} points around "
+                                   f"x = {center:.6g} gave a result; a quadratic needs 3")
+        x_v, y_v, curv, x_cubic = _fit(xs_ok, Y.mean(axis=0), center, step)
+        inside = math.isfinite(x_v) and xs[0] <= x_v <= xs[-1]
+        if not inside and shifts < max_shifts:
+            target = x_v if math.isfinite(x_v) else float(xs_ok[np.argmax(Y.mean(axis=0))])
+            moved = float(np.clip(target, lo, hi))
+            if abs(moved - center) > 0.25 * step and not (xs[0] <= lo and moved <= xs[0]) \
+                    and not (xs[-1] >= hi and moved >= xs[-1]):
+                center, shifts = moved, shifts + 1
+                continue
+        jack = np.array([_fit(xs_ok, np.delete(Y, b, axis=0).mean(axis=0), center, step) for b in range(nb)])
+        # per column: NaN where some jackknife fit has no maximum (a cubic without one leaves the
+        # quadratic's errors intact)
+        se = np.sqrt((nb - 1) / nb * ((jack - jack.mean(axis=0)) ** 2).sum(axis=0))
+        if tol is not None and inside and se[0] > tol and nb < max_batches:
+            nb = min(2 * nb, max_batches)
+            continue
+        break
+    means = Y.mean(axis=0)
+    info.update(window=xs_ok.tolist(), window_means=means.tolist(), curvature=curv / step ** 2,
+                batches=nb, shifts=shifts, evaluations=len(cache),
+                jackknife_curvature_max=float(np.nanmax(jack[:, 2])) / step ** 2)
+    t = _student(confidence, nb - 1)
+    at_lo, at_hi = xs[0] <= lo, xs[-1] >= hi
+    if not inside:
+        i = int(np.argmax(means))
+        x_b = float(xs_ok[i])
+        y_se = float(np.std(Y[:, i], ddof=1) / math.sqrt(nb))
+        where = ("at the low end" if at_lo and x_b == xs_ok[0] else "at the high end" if at_hi and x_b == xs_ok[-1]
+                 else None)
+        why = (f"the maximum is {where} of the search interval [{lo:.6g}, {hi:.6g}]: widen the bounds"
+               if where else "the quadratic fit has no interior maximum in its window (flat or noisy "
+                             "objective): more batches or a wider interval")
+        return Optimum("x", "f", x_b, None, float(means[i]), y_se, value_ci=(means[i] - t * y_se,
+                       means[i] + t * y_se), confidence=confidence, status=Status.NOT_CONVERGED,
+                       method="callable", info=info, message=f"not converged: {why}; reported: the best "
+                       f"point evaluated (no error on its position)")
+    # lack of fit: the cubic's maximum off the quadratic's vertex by more than twice the
+    # jackknife error of that shift adds the shift to the position's error
+    shift = x_cubic - x_v
+    shifts_jk = jack[:, 3] - jack[:, 0]
+    shift_se = float(np.sqrt((nb - 1) / nb * np.sum((shifts_jk - shifts_jk.mean()) ** 2)))
+    info.update(x_opt_cubic=x_cubic, model_shift=[shift, shift_se])
+    model_note = ""
+    if math.isfinite(shift) and math.isfinite(shift_se) and abs(shift) > 2.0 * shift_se:
+        se[0] = math.hypot(se[0], shift)
+        model_note = (f"; the cubic fit moves the maximum by {shift:.2g} (+- {shift_se:.1g}), added to the "
+                      "position's error (a narrower bracket, i.e. more grid points, reduces it)")
+    x_ci = (x_v - t * se[0], x_v + t * se[0])
+    y_ci = (y_v - t * se[1], y_v + t * se[1])
+    problems = []
+    if not np.isfinite(se[:3]).all() or info["jackknife_curvature_max"] >= 0.0:
+        problems.append("the curvature is not negative in every jackknife fit: the maximum is not "
+                        "resolved; use more batches (or more replicas per point)")
+    elif x_ci[0] < xs_ok[0] or x_ci[1] > xs_ok[-1]:
+        problems.append(f"the confidence interval [{x_ci[0]:.6g}, {x_ci[1]:.6g}] is wider than the fit "
+                        f"window [{xs_ok[0]:.6g}, {xs_ok[-1]:.6g}]; use more batches")
+    if tol is not None and not se[0] <= tol:
+        problems.append(f"the standard error {se[0]:.3g} of the optimum exceeds tol = {tol:g} after "
+                        f"{nb} batches; raise max_batches")
+    x_err = float(se[0]) if math.isfinite(se[0]) else None
+    y_err = float(se[1]) if math.isfinite(se[1]) else None
+    return Optimum("x", "f", float(x_v), x_err, float(y_v), y_err,
+                   x_ci=x_ci if x_err is not None else None, value_ci=y_ci if y_err is not None else None,
+                   confidence=confidence, status=Status.NOT_CONVERGED if problems else Status.STABLE,
+                   method="callable", info=info,
+                   message=("not converged: " + "; ".join(problems)) if problems else
+                   f"converged: interior maximum from a quadratic fit over {xs_ok.size} points and {nb} "
+                   f"independent batches (common random numbers inside each); {confidence:.0%} intervals "
+                   "from the jackknife over batches" + model_note)
+
+
+def default_bounds(h: Harvester, over: str) -> tuple[float, float]:
+    """Search interval when none is given: for ``over = "k"``, ``[k_di, 0]`` for a harmonic ring
+    (eta's supremum is at k_di) and ``[3 k_di, 0]`` for a nonlinear one (n > 2 rings stay
+    confined beyond k_di; the paper's maxima lie within 1.5 k_di).
+
+    Raises
+    ------
+    ParameterError
+        ``over = "k"`` with ``N = 1`` (no coupling), or any other ``over`` (no natural interval).
+    """
+    if over != "k":
+        raise ParameterError(f"bounds: no default search interval for over = {over!r}; give bounds=(low, high)")
+    if h.N == 1:
+        raise ParameterError("over = 'k' needs a ring: N >= 2 (N = 1 has no coupling); got N = 1")
+    kd = k_di(h.N, h.a)
+    assert kd is not None
+    return (kd, 0.0) if h.is_linear else (3.0 * kd, 0.0)
+
+
+def _optimize_exact(h: Harvester, over: str, maximize: str, lo: float, hi: float, points: int) -> Optimum:
+    """Deterministic objective (exact solver): grid, then a bounded scalar search in the best cell."""
+    from scipy.optimize import minimize_scalar
+
+    def value(x: float) -> float:
+        v = solve(h.replace(**{over: x}), "exact").value(maximize)[0]
+        return -math.inf if v is None else float(v)
+
+    grid = np.linspace(lo, hi, max(points, 41))
+    vals = np.array([value(float(x)) for x in grid])
+    best = int(np.argmax(vals))
+    x_opt, y_opt = float(grid[best]), float(vals[best])
+    if 0 < best < len(grid) - 1:
+        found = minimize_scalar(lambda x: -value(x), bounds=(grid[best - 1], grid[best + 1]), method="bounded",
+                                options={"xatol": 1e-10 * max(1.0, abs(x_opt))})
+        if -found.fun >= y_opt:
+            x_opt, y_opt = float(found.x), float(-found.fun)
+    info = {"bounds": [lo, hi], "grid_points": len(grid)}
+    if not math.isfinite(y_opt):
+        return Optimum(over, maximize, None, None, None, None, status=Status.NOT_CONVERGED, method="exact",
+                       info=info, message=f"not converged: no stationary state in {over} in [{lo:.6g}, {hi:.6g}]")
+    kd = k_di(h.N, h.a) if h.N > 1 else None
+    final = solve(h.replace(**{over: x_opt}), "exact")
+    if final.status is Status.MARGINAL and over == "k":
+        return Optimum(over, maximize, x_opt, 0.0, y_opt, 0.0, (x_opt, x_opt), (y_opt, y_opt),
+                       status=Status.MARGINAL, method="exact", info=info, message=(
+                           f"marginal: {maximize} grows monotonically toward the threshold k_di = {kd:.10g}; "
+                           f"its supremum {y_opt:.10g} is the finite marginal limit at k_di, approached as "
+                           "k -> k_di+ but attained by no stable ring (at k_di x of the critical mode diffuses)"))
+    if best in (0, len(grid) - 1):
+        end = "low" if best == 0 else "high"
+        return Optimum(over, maximize, x_opt, 0.0, y_opt, 0.0, status=Status.NOT_CONVERGED, method="exact",
+                       info=info, message=f"not converged: the maximum is at the {end} end of the search "
+                       f"interval {over} in [{lo:.6g}, {hi:.6g}]: widen the bounds")
+    return Optimum(over, maximize, x_opt, 0.0, y_opt, 0.0, (x_opt, x_opt), (y_opt, y_opt), status=Status.STABLE,
+                   method="exact", info=info, message="converged: exact objective, interior maximum (bounded "
+                   "scalar search, |dx| < 1e-10 relative)")
+
+
+def optimize(
+    h: Harvester,
+    over: str = "k",
+    bounds: tuple[float, float] | None = None,
+    maximize: str = "eta",
+    *,
+    method: str = "auto",
+    tol: float | None = None,
+    seed: int = 2017,
+    batches: int = 8,
+    replicas: int = 16,
+    points: int = 9,
+    mc_tol: float = 1e-2,
+    confidence: float = 0.95,
+    progress: bool | None = None,
+) -> Optimum:
+    """The ``over`` that maximizes ``maximize`` for the harvester ``h``, with error bars.
+
+    .. math::
+
+        x_{opt} = \\arg\\max_{x \\in [lo, hi]} \\eta(h; x), \\qquad
+        \\eta_{max} = \\eta(h; x_{opt})
+
+    Parameters
+    ----------
+    h : Harvester
+        The system; its value of ``over`` is ignored.
+    over : str
+        Parameter varied: ``"k"`` (coupling, default), ``"a"``, ``"n"`` or a :class:`Params` field.
+    bounds : (float, float), optional
+        Search interval; default :func:`default_bounds` (``over = "k"`` only).
+    maximize : str
+        Observable, one of :data:`~fpe_harvester.result.QUANTITIES` (default ``"eta"``).
+    method : {"auto", "exact", "mc"}
+        Solver of the objective: ``"auto"`` is exact for a harmonic system (deterministic:
+        bounded scalar search), Monte Carlo otherwise (noisy: :func:`maximize_noisy` with common
+        random numbers).
+    tol : float, optional
+        Monte Carlo: target standard error of the optimum's position, > 0 (batches are doubled up
+        to 32 until met). Default: the ``batches`` given.
+    seed : int
+        Base seed, >= 0: batch ``b`` uses one child seed of it at every point.
+    batches : int
+        Independent batches of common random numbers, >= 3 (default 8).
+    replicas : int
+        Monte Carlo replicas per point and batch, >= 2 (default 16).
+    points : int
+        Bracketing grid size, >= 3 (default 9).
+    mc_tol : float
+        Accuracy, in (0, 1), that plans the Monte Carlo time step, burn-in and run length (once,
+        at the middle of the interval, then frozen so that all points share their noise).
+    confidence : float
+        Level of the confidence intervals, in (0, 1).
+    progress : bool or None
+        Progress bar on stderr over evaluations (``None``: only on a terminal).
+
+    Returns
+    -------
+    Optimum
+        ``to_dict()`` gives e.g. ``k_opt, k_opt_err, eta_max, eta_max_err, method, status``.
+        With Monte Carlo, ``eta_max_err`` also holds the time-step bias estimate at the optimum.
+
+    Raises
+    ------
+    ParameterError
+        Invalid ``over``, ``maximize``, ``method``, bounds or settings.
+
+    Examples
+    --------
+    >>> opt = optimize(Harvester.build(a=0.5, n=2, N=3))
+    >>> opt.status.value, round(opt.x_opt, 10) == round(k_di(3, 0.5), 10)
+    ('marginal', True)
+    """
+    if not isinstance(h, Harvester):
+        raise ParameterError(f"h must be a Harvester, got {h!r} (type {type(h).__name__})")
+    check_choice("over", over, OVER)
+    check_choice("maximize", maximize, QUANTITIES)
+    check_choice("method", method, ("auto", "exact", "mc"))
+    seed = check_int("seed", seed, low=0)
+    replicas = check_int("replicas", replicas, low=2)
+    mc_tol = check_real("mc_tol", mc_tol, low=0.0, high=1.0, low_open=True, high_open=True)
+    if bounds is None:
+        lo, hi = default_bounds(h, over)
+    else:
+        if not isinstance(bounds, (tuple, list)) or len(bounds) != 2:
+            raise ParameterError(f"bounds must be (low, high), got {bounds!r} (type {type(bounds).__name__})")
+        lo, hi = (check_real("bounds", b) for b in bounds)
+        if not lo < hi:
+            raise ParameterError(f"bounds must satisfy low < high, got ({lo!r}, {hi!r})")
+    mid = h.replace(**{over: 0.5 * (lo + hi)})  # validates over's values (e.g. a > 0) at both ends
+    h.replace(**{over: lo}), h.replace(**{over: hi})
+    if method == "auto":
+        method = "exact" if choose_method(mid) == "exact" else "mc"
+    if method == "exact":
+        if not h.is_linear:
+            raise ParameterError(f"method 'exact' needs a harmonic potential (n = 2), got n = {h.n!r}; "
+                                 "use method 'mc' or 'auto'")
+        return _optimize_exact(h, over, maximize, lo, hi, points)
+    return _optimize_mc(h, over, maximize, lo, hi, mid, tol=tol, seed=seed, batches=batches, replicas=replicas,
+                        points=points, mc_tol=mc_tol, confidence=confidence, progress=progress)
+
+
+def _optimize_mc(h: Harvester, over: str, maximize: str, lo: float, hi: float, mid: Harvester, *,
+                 tol: float | None, seed: int, batches: int, replicas: int, points: int, mc_tol: float,
+                 confidence: float, progress: bool | None) -> Optimum:
+    import time
+
+    from tqdm import tqdm
+
+    from montecarlo import MonteCarlo
+
+    start = time.perf_counter()
+    plan = MonteCarlo(tol=mc_tol, seed=seed, progress=False).plan(mid)
+    seeds = [int(s.generate_state(1)[0]) for s in np.random.SeedSequence(seed).spawn(64)]
+    bias: dict[tuple[float, int], float] = {}
+    # frozen plan and a fixed replica count: every point runs on the same noise paths (tol = 0.999
+    # is met after the one batch of ``replicas``, so no adaptive step depends on x)
+    solver = {"dt": plan.dt, "t_burn": plan.t_burn, "t_run": plan.t_run, "paths": plan.paths,
+              "min_replicas": replicas, "max_replicas": replicas, "tol": 0.999, "progress": False}
+
+    def f(x: float, b: int) -> float | None:
+        r: Stats = solve(h.replace(**{over: x}), "mc", seed=seeds[b], **solver)
+        value = r.value(maximize)[0]
+        if value is None or r.status not in (Status.STABLE, Status.NOT_CONVERGED):
+            return None
+        if maximize == "eta":
+            bias[(x, b)] = abs(float(r.info.get("bias_eta") or 0.0))
+        return value
+
+    with tqdm(desc=f"optimize {maximize} over {over}", unit="run", file=sys.stderr, leave=False,
+              disable=None if progress is None else not progress) as bar:
+        core = maximize_noisy(f, (lo, hi), batches=batches, points=points, tol=tol,
+                              max_batches=max(batches, 32 if tol is not None else batches),
+                              confidence=confidence, progress=bar.update)
+    info = {**core.info, "mc": {**solver, "seeds": seeds[:core.info.get("batches", batches)]},
+            "wall_time": time.perf_counter() - start}
+    value_err, message = core.value_err, core.message
+    if core.x_opt is not None and bias and core.value_err is not None:
+        near = min({x for x, _ in bias}, key=lambda x: abs(x - core.x_opt))
+        b = float(np.mean([v for (x, _), v in bias.items() if x == near]))
+        info["bias_eta_at_optimum"] = b
+        value_err = math.hypot(core.value_err, b)
+        message += f"; {maximize}_max_err includes the time-step bias estimate {b:.2g} at dt = {plan.dt:g}"
+    value_ci = core.value_ci
+    if value_ci is not None and value_err is not None and core.value_err:
+        t = (core.value - value_ci[0]) / core.value_err
+        value_ci = (core.value - t * value_err, core.value + t * value_err)
+    return Optimum(over, maximize, core.x_opt, core.x_opt_err, core.value, value_err, core.x_ci, value_ci,
+                   confidence, core.status, message, "mc", info)
