@@ -23,7 +23,6 @@ from __future__ import annotations
 import math
 
 import pytest
-from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from fpe_harvester import Harvester, HarvesterError, Params, Status, solve

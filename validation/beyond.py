@@ -35,7 +35,7 @@ from fpe_harvester.model import Harvester, Params
 from fpe_harvester.result import Status
 
 from .checks import CheckResult, Context, agree, expect, skipped
-from .report import Figure, Section, Table
+from .report import Figure, Section, Table, new_figure, save_figure
 
 __all__ = ["eta_mode", "eta_bound", "optimum", "plateau", "escape_time", "run"]
 
@@ -152,12 +152,7 @@ def _optimum_study(ctx: Context, sec: Section) -> list[CheckResult]:
 
 def _plot_optimum(ctx: Context, Ns: list[int], As: tuple[float, ...], data: Mapping[float, list[float]],
                   vrms: Mapping[float, list[float]], bound: float) -> Figure:
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
-    fig, (ax1, ax2) = plt.subplots(1, 2, figsize=(11, 4))
+    fig, (ax1, ax2) = new_figure((11, 4), ncols=2)
     for a in As:
         ax1.plot(Ns, data[a], "o-", ms=3, label=f"a = {a:g}")
         ax2.plot(Ns, vrms[a], "o-", ms=3, label=f"a = {a:g}")
@@ -167,11 +162,7 @@ def _plot_optimum(ctx: Context, Ns: list[int], As: tuple[float, ...], data: Mapp
         ax.set_xlabel("N (units in the ring)")
         ax.set_ylabel(lab)
         ax.legend(fontsize=8)
-    fig.tight_layout()
-    path = ctx.out / "beyond_optimum_vs_N.png"
-    fig.savefig(path, dpi=110)
-    plt.close(fig)
-    return Figure(path, "Exact optimum over k of eta and Vrms versus N for several a (harmonic rings), "
+    return save_figure(fig, ctx.out / "beyond_optimum_vs_N.png", "Exact optimum over k of eta and Vrms versus N for several a (harmonic rings), "
                         "with the upper bound eta(kappa = 0).")
 
 
@@ -276,23 +267,14 @@ def _metastable_status(ctx: Context) -> list[CheckResult]:
 
 
 def _plot_escape(ctx: Context, found: list[tuple[float, float, float, float]]) -> Figure:
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
-    fig, ax = plt.subplots(figsize=(6, 4))
+    fig, ax = new_figure()
     for n in sorted({f[0] for f in found}):
         pts = sorted((1 / abs(k), t) for nn, k, t, _ in found if nn == n)
         ax.semilogy(*zip(*pts), "o-", label=f"n = {n:g}")
     ax.set_xlabel("1/|k|")
     ax.set_ylabel("mean escape time (Monte Carlo, censored MLE)")
     ax.legend()
-    fig.tight_layout()
-    path = ctx.out / "beyond_escape_time.png"
-    fig.savefig(path, dpi=110)
-    plt.close(fig)
-    return Figure(path, "Escape time of n < 2 rings (N = 3, a = 0.5) versus 1/|k|: Kramers predicts a straight line.")
+    return save_figure(fig, ctx.out / "beyond_escape_time.png", "Escape time of n < 2 rings (N = 3, a = 0.5) versus 1/|k|: Kramers predicts a straight line.")
 
 
 def run(ctx: Context) -> Section:

@@ -27,7 +27,7 @@ from fpe_harvester.model import Harvester
 from fpe_harvester.result import Stats, Status
 
 from .checks import CheckResult, Context, expect
-from .report import Figure, Section, Table
+from .report import Figure, Section, Table, new_figure, save_figure
 
 __all__ = ["run", "FpeCase", "QUICK_FPE", "FULL_FPE", "fpe_bounds", "MC_COVERAGE_LIMITS"]
 
@@ -168,13 +168,8 @@ def _mc_checks(ctx: Context, sec: Section) -> list[CheckResult]:
 
 
 def _plot_coverage(ctx: Context, res: dict) -> Figure:
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
     z = np.concatenate([np.asarray(c["z"][q]) for c in res["cases"] for q in c["z"]])
-    fig, ax = plt.subplots(figsize=(6, 4))
+    fig, ax = new_figure()
     ax.hist(np.clip(z, -5, 5), bins=np.linspace(-5, 5, 41), density=True, alpha=0.6,
             label=f"Monte Carlo, {z.size} values")
     x = np.linspace(-5, 5, 400)
@@ -182,21 +177,12 @@ def _plot_coverage(ctx: Context, res: dict) -> Figure:
     ax.set_xlabel("(result - reference) / combined reported error")
     ax.set_ylabel("density")
     ax.legend()
-    fig.tight_layout()
-    path = ctx.out / "errorbars_mc_coverage.png"
-    fig.savefig(path, dpi=110)
-    plt.close(fig)
-    return Figure(path, "Monte Carlo: normalized errors of eta, V2 and Pin against the reference; honest "
+    return save_figure(fig, ctx.out / "errorbars_mc_coverage.png", "Monte Carlo: normalized errors of eta, V2 and Pin against the reference; honest "
                         "one-standard-error bars give the standard normal (values beyond 5 are drawn at 5).")
 
 
 def _plot_bounds(ctx: Context, bounds: list[Bound]) -> Figure:
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
-    fig, ax = plt.subplots(figsize=(5.5, 4.5))
+    fig, ax = new_figure((5.5, 4.5))
     for label in dict.fromkeys(b.label for b in bounds):
         pts = [(max(b.actual, b.ref_err, 1e-16), b.reported) for b in bounds if b.label == label]
         ax.loglog(*zip(*pts), "o", label=label)
@@ -206,11 +192,7 @@ def _plot_bounds(ctx: Context, bounds: list[Bound]) -> Figure:
     ax.set_xlabel("actual error of eta (vs reference)")
     ax.set_ylabel("reported error of eta")
     ax.legend(fontsize=8)
-    fig.tight_layout()
-    path = ctx.out / "errorbars_fpe_bounds.png"
-    fig.savefig(path, dpi=110)
-    plt.close(fig)
-    return Figure(path, "Fokker-Planck: reported against actual error of eta; points above the diagonal "
+    return save_figure(fig, ctx.out / "errorbars_fpe_bounds.png", "Fokker-Planck: reported against actual error of eta; points above the diagonal "
                         "are bounds that hold.")
 
 

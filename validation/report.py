@@ -85,6 +85,26 @@ class Report:
         return [c for c in self.checks if c.outcome is Outcome.SKIP]
 
 
+def new_figure(figsize: tuple[float, float] = (6, 4), ncols: int = 1):
+    """A matplotlib figure and its axes (``ncols`` side by side) drawn off-screen (Agg backend)."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    return plt.subplots(1, ncols, figsize=figsize)
+
+
+def save_figure(fig, path: Path, caption: str) -> Figure:
+    """Write ``fig`` as PNG to ``path`` (110 dpi), close it, and return the report's :class:`Figure`."""
+    import matplotlib.pyplot as plt
+
+    fig.tight_layout()
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
+    return Figure(path, caption)
+
+
 def _md_table(header: Sequence[str], rows: Sequence[Sequence[str]]) -> list[str]:
     def cell(s: str) -> str:
         return str(s).replace("|", "\\|").replace("\n", " ")

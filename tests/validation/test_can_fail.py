@@ -5,7 +5,6 @@ from __future__ import annotations
 
 from dataclasses import replace
 
-import pytest
 
 from fpe_harvester import Harvester, Optimum, Stats, Status, solve
 from validation import paper
