@@ -1,0 +1,129 @@
+"""Scenes on a Dask cluster: same numbers as in one process, resumable cache, lost workers."""
+
+from __future__ import annotations
+
+import json
+import os
+import signal
+import sys
+from pathlib import Path
+
+import pytest
+
+from fpe_harvester.cli import main
+from fpe_harvester.errors import ParameterError
+from fpe_harvester.model import Harvester
+from fpe_harvester.scenes import Axis, Scene, run_scene
+from fpe_harvester.scenes import run as scene_run
+from fpe_harvester.scenes.cache import CACHE_NAME
+
+distributed = pytest.importorskip("distributed")
+
+#: Small Monte Carlo settings: each point takes a fraction of a second once compiled.
+MC = {"paths": 32, "t_run": 20.0, "min_replicas": 4}
+
+
+def mc_scene(ks: tuple[float, ...] = (0.1, 0.0, -0.1, -0.2)) -> Scene:
+    return Scene("dask_mc", system=Harvester.build(a=0.5, n=3, N=2), observables=("eta", "V2"),
+                 method="mc", rtol=0.1, axes=(Axis("k", ks),), options={"mc": MC}, outputs=())
+
+
+@pytest.fixture(scope="module")
+def client():
+    with distributed.LocalCluster(n_workers=2, threads_per_worker=1, processes=True, host="127.0.0.1",
+                                  dashboard_address=None) as cluster, distributed.Client(cluster) as c:
+        yield c
+
+
+@pytest.fixture(scope="module")
+def reference(tmp_path_factory: pytest.TempPathFactory):
+    """The scene run in this process: the numbers every cluster run must reproduce."""
+    return run_scene(mc_scene(), tmp_path_factory.mktemp("in_process"), progress=False)
+
+
+def cache_lines(folder: Path) -> list[dict]:
+    return [json.loads(line) for line in (folder / CACHE_NAME).read_text().splitlines()]
+
+
+def test_cluster_gives_the_numbers_of_one_process_and_resumes(tmp_path: Path, client, reference) -> None:
+    res = run_scene(mc_scene(), tmp_path, progress=False, scheduler=client)
+    assert res.computed == 4 and res.reused == 0
+    assert [(r.status, r.values, r.info["seed"]) for r in res.rows] == \
+        [(r.status, r.values, r.info["seed"]) for r in reference.rows]
+    assert all(r.status == "stable" for r in res.rows)
+    assert len(cache_lines(tmp_path)) == 4  # written by this process as points finished
+    again = run_scene(mc_scene(), tmp_path, progress=False, scheduler=client)
+    assert again.computed == 0 and again.reused == 4
+    assert [r.values for r in again.rows] == [r.values for r in reference.rows]
+
+
+def test_a_worker_killed_mid_run_loses_only_its_point(tmp_path: Path, client, reference, monkeypatch) -> None:
+    killed: list[int] = []
+    put = scene_run.PointCache.put
+
+    def put_then_kill(self, *args, **kwargs):
+        # after the first point, kill a worker that is computing another one
+        put(self, *args, **kwargs)
+        if not killed:
+            busy = [addr for addr, tasks in client.processing().items() if tasks]
+            assert busy, "no point in flight: the test needs slower points"
+            pids = client.run(os.getpid, workers=busy[:1])
+            killed.extend(pids.values())
+            os.kill(killed[0], signal.SIGKILL)
+
+    monkeypatch.setattr(scene_run.PointCache, "put", put_then_kill)
+    res = run_scene(mc_scene(), tmp_path, progress=False, scheduler=client)
+    assert len(killed) == 1 and killed[0] not in client.run(os.getpid).values()
+    assert res.computed == 4
+    assert [(r.status, r.values) for r in res.rows] == [(r.status, r.values) for r in reference.rows]
+    lines = cache_lines(tmp_path)
+    assert len(lines) == 4 and len({rec["key"] for rec in lines}) == 4  # every point once
+
+
+def test_identical_points_stay_separate_tasks(tmp_path: Path, client, reference) -> None:
+    res = run_scene(mc_scene((0.1, 0.1)), tmp_path, progress=False, scheduler=client)
+    assert res.computed == 2 and res.rows[0].values == res.rows[1].values == reference.rows[0].values
+
+
+def test_cli_scheduler_address_flag_and_environment(tmp_path: Path, client, reference, monkeypatch, capsys) -> None:
+    # the scene of ``reference`` (seeds depend on the scene's name), first two points
+    scene = tmp_path / "dask_mc.toml"
+    scene.write_text('name = "dask_mc"\nobservables = ["eta", "V2"]\nmethod = "mc"\nrtol = 0.1\n'
+                     "[system]\na = 0.5\nn = 3\nN = 2\n[axes]\nk = [0.1, 0.0]\n"
+                     f"[options.mc]\npaths = {MC['paths']}\nt_run = {MC['t_run']}\n"
+                     f"min_replicas = {MC['min_replicas']}\n")
+    seen: list[object] = []
+    real = scene_run.run_scene
+
+    def spy(*args, **kwargs):
+        seen.append(kwargs.get("scheduler"))
+        return real(*args, **kwargs)
+
+    monkeypatch.setattr("fpe_harvester.scenes.run_scene", spy)
+    address = client.scheduler.address
+    assert main(["scene", "run", str(scene), "--out", str(tmp_path / "a"), "--json",
+                 "--scheduler", address]) == 0
+    out = json.loads(capsys.readouterr().out)
+    assert out["computed"] == 2
+    assert [row["eta"] for row in out["rows"]] == [r.values["eta"] for r in reference.rows[:2]]
+    monkeypatch.setenv("DASK_SCHEDULER_ADDRESS", address)
+    assert main(["scene", "run", str(scene), "--out", str(tmp_path / "a"), "--json"]) == 0
+    assert json.loads(capsys.readouterr().out)["reused"] == 2
+    # an explicit --workers means local processes: the environment variable is not used
+    assert main(["scene", "run", str(scene), "--out", str(tmp_path / "a"), "--json", "--workers", "1"]) == 0
+    capsys.readouterr()
+    assert seen == [address, address, None]
+    assert main(["scene", "run", str(scene), "--out", str(tmp_path / "a"), "--scheduler", address,
+                 "--workers", "2"]) == 2
+    assert "only applies to local processes" in capsys.readouterr().err
+
+
+def test_errors_name_the_extra_and_the_address(tmp_path: Path, monkeypatch) -> None:
+    with pytest.raises(ParameterError, match="scheduler must be 'local', a scheduler address"):
+        run_scene(mc_scene(), tmp_path, scheduler=8786)
+    with pytest.importorskip("dask").config.set({"distributed.comm.timeouts.connect": "0.5s"}):
+        with pytest.raises(ParameterError, match=r"cannot reach the Dask scheduler at 'tcp://127.0.0.1:9'"):
+            run_scene(mc_scene(), tmp_path, scheduler="tcp://127.0.0.1:9")
+    monkeypatch.setitem(sys.modules, "distributed", None)
+    with pytest.raises(ParameterError, match=r'needs Dask, which is not installed: pip install "fpe-harvester\[dask\]"'):
+        run_scene(mc_scene(), tmp_path, scheduler="local")
