@@ -3,9 +3,10 @@
 Each point that needs a pointwise solver (Fokker--Planck, Monte Carlo) becomes one task;
 the client (the process that runs the scene) receives the results as they finish and
 appends each to the scene's cache at once, so the cache stays the single record of what is
-done and workers never write to it. Points carry their seed and Monte Carlo thread count
+done and workers never write to it. Points carry their seed and Monte Carlo replica batch
 (:meth:`.run._Runner.method_of`), so a point gives the same numbers on any worker, in any
-order, as in one process.
+order, as in one process. Each task takes one worker thread: Monte Carlo runs
+single-threaded there unless the scene sets ``threads``.
 
 A worker lost mid-run costs only the points it was computing: the scheduler hands them to
 another worker. A point that takes down ``distributed.scheduler.allowed-failures`` + 1

@@ -67,9 +67,10 @@ class _Runner:
         if method == "mc":
             from montecarlo.simulate import default_threads
 
-            # the adaptive solver sizes replica batches by its thread count: fixing it here
-            # (this machine's count) makes a point's numbers independent of where it runs
-            opts.update(seed=point_seed(self.scene.name, h), threads=default_threads())
+            # the replica batch (by default the thread count) shapes the numbers: fixed here,
+            # as in a run in this process, a point gives the same numbers on any Dask worker
+            batch = self.scene.options.get("mc", {}).get("threads") or default_threads()
+            opts.update(seed=point_seed(self.scene.name, h), batch=batch)
         opts.update(self.scene.options.get(method, {}))
         return method, opts
 
@@ -126,7 +127,13 @@ class _Runner:
                            out: list[Stats | _Failure | None]) -> None:
         from .cluster import run_tasks
 
-        args = [(hs[i], method, opts, self.fallback(hs[i], method)) for i, _, method, opts in todo]
+        def on_worker(method: str, opts: dict[str, Any]) -> dict[str, Any]:
+            # one task per worker thread: Monte Carlo runs single-threaded unless the scene says
+            return {"threads": 1, **opts} if method == "mc" else opts
+
+        fallbacks = [self.fallback(hs[i], method) for i, _, method, _ in todo]
+        args = [(hs[i], method, on_worker(method, opts), fb and (fb[0], on_worker(*fb)))
+                for (i, _, method, opts), fb in zip(todo, fallbacks)]
         for j, res in run_tasks(self.client, _solve_portable, args,
                                 lambda j, why: _Failure(ERROR, why, todo[j][2])):
             i, key, _, opts = todo[j]

@@ -16,6 +16,7 @@ from fpe_harvester.model import Harvester
 from fpe_harvester.scenes import Axis, Scene, run_scene
 from fpe_harvester.scenes import run as scene_run
 from fpe_harvester.scenes.cache import CACHE_NAME
+from montecarlo.simulate import default_threads
 
 distributed = pytest.importorskip("distributed")
 
@@ -51,7 +52,11 @@ def test_cluster_gives_the_numbers_of_one_process_and_resumes(tmp_path: Path, cl
     assert [(r.status, r.values, r.info["seed"]) for r in res.rows] == \
         [(r.status, r.values, r.info["seed"]) for r in reference.rows]
     assert all(r.status == "stable" for r in res.rows)
-    assert len(cache_lines(tmp_path)) == 4  # written by this process as points finished
+    lines = cache_lines(tmp_path)  # written by this process as points finished
+    assert len(lines) == 4
+    # one worker thread per task; the replica batch of this machine, as in the reference
+    assert {(rec["stats"]["info"]["threads"], rec["stats"]["info"]["batch"]) for rec in lines} == \
+        {(1, default_threads())}
     again = run_scene(mc_scene(), tmp_path, progress=False, scheduler=client)
     assert again.computed == 0 and again.reused == 4
     assert [r.values for r in again.rows] == [r.values for r in reference.rows]
