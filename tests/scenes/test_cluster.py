@@ -32,7 +32,8 @@ def mc_scene(ks: tuple[float, ...] = (0.1, 0.0, -0.1, -0.2)) -> Scene:
 @pytest.fixture(scope="module")
 def client():
     with distributed.LocalCluster(n_workers=2, threads_per_worker=1, processes=True, host="127.0.0.1",
-                                  dashboard_address=None) as cluster, distributed.Client(cluster) as c:
+                                  dashboard_address=None,
+                                  scheduler_kwargs={"dashboard": False}) as cluster, distributed.Client(cluster) as c:
         yield c
 
 
@@ -46,9 +47,11 @@ def cache_lines(folder: Path) -> list[dict]:
     return [json.loads(line) for line in (folder / CACHE_NAME).read_text().splitlines()]
 
 
-def test_cluster_gives_the_numbers_of_one_process_and_resumes(tmp_path: Path, client, reference) -> None:
-    res = run_scene(mc_scene(), tmp_path, progress=False, scheduler=client)
+def test_cluster_gives_the_numbers_of_one_process_and_resumes(tmp_path: Path, client, reference,
+                                                              capsys) -> None:
+    res = run_scene(mc_scene(), tmp_path, progress=True, scheduler=client)
     assert res.computed == 4 and res.reused == 0
+    assert "dask_mc:" in capsys.readouterr().err  # the progress bar is drawn
     assert [(r.status, r.values, r.info["seed"]) for r in res.rows] == \
         [(r.status, r.values, r.info["seed"]) for r in reference.rows]
     assert all(r.status == "stable" for r in res.rows)
@@ -62,7 +65,7 @@ def test_cluster_gives_the_numbers_of_one_process_and_resumes(tmp_path: Path, cl
     assert [r.values for r in again.rows] == [r.values for r in reference.rows]
 
 
-def test_a_worker_killed_mid_run_loses_only_its_point(tmp_path: Path, client, reference, monkeypatch) -> None:
+def test_a_worker_killed_mid_run_loses_nothing(tmp_path: Path, client, reference, monkeypatch) -> None:
     killed: list[int] = []
     put = scene_run.PointCache.put
 
@@ -83,6 +86,47 @@ def test_a_worker_killed_mid_run_loses_only_its_point(tmp_path: Path, client, re
     assert [(r.status, r.values) for r in res.rows] == [(r.status, r.values) for r in reference.rows]
     lines = cache_lines(tmp_path)
     assert len(lines) == 4 and len({rec["key"] for rec in lines}) == 4  # every point once
+
+
+def test_fokker_planck_points_match_too(tmp_path: Path, client) -> None:
+    sc = Scene("dask_fpe", system=Harvester.build(a=0.5, n=3, N=1), observables=("eta", "V2", "x2"),
+               method="fpe", rtol=1e-3, axes=(Axis("a", (0.5, 1.0)),), outputs=())
+    here = run_scene(sc, tmp_path / "here", progress=False)
+    there = run_scene(sc, tmp_path / "there", progress=False, scheduler=client)
+    assert [(r.status, r.values) for r in there.rows] == [(r.status, r.values) for r in here.rows]
+    assert all(r.status == "stable" and r.method == "fpe" for r in there.rows)
+
+
+@pytest.mark.slow
+def test_a_point_that_keeps_killing_workers_fails_alone(tmp_path: Path, reference, monkeypatch) -> None:
+    # no second chance: the point whose worker is killed is reported failed, the rest finish,
+    # and the next run computes it
+    dask = pytest.importorskip("dask")
+    with dask.config.set({"distributed.scheduler.allowed-failures": 0}), \
+            distributed.LocalCluster(n_workers=2, threads_per_worker=1, processes=True, host="127.0.0.1",
+                                     dashboard_address=None,
+                                  scheduler_kwargs={"dashboard": False}) as cluster, distributed.Client(cluster) as c:
+        victim: list[str] = []
+        put = scene_run.PointCache.put
+
+        def put_then_kill(self, *args, **kwargs):
+            put(self, *args, **kwargs)
+            if not victim:
+                busy = [addr for addr, tasks in c.processing().items() if tasks]
+                assert busy, "no point in flight: the test needs slower points"
+                victim.extend(busy[:1])
+                os.kill(c.run(os.getpid, workers=victim)[victim[0]], signal.SIGKILL)
+
+        monkeypatch.setattr(scene_run.PointCache, "put", put_then_kill)
+        res = run_scene(mc_scene(), tmp_path, progress=False, scheduler=c)
+        # the worker held the point it was computing and maybe one queued behind it
+        failed = [r for r in res.rows if r.status == "error"]
+        assert 1 <= len(failed) <= 2 and res.computed == 4 - len(failed)
+        assert all("kept dying" in r.message and r.method == "mc" for r in failed)
+        monkeypatch.undo()
+        again = run_scene(mc_scene(), tmp_path, progress=False, scheduler=c)
+    assert again.computed == len(failed) and again.reused == 4 - len(failed)
+    assert [r.values for r in again.rows] == [r.values for r in reference.rows]
 
 
 def test_identical_points_stay_separate_tasks(tmp_path: Path, client, reference) -> None:
