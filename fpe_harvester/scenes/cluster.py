@@ -17,12 +17,11 @@ tried again on the next run, like any failed point.
 from __future__ import annotations
 
 from collections.abc import Callable, Iterator, Sequence
-from contextlib import contextmanager
-from typing import Any
+from typing import Any, Self
 
 from ..errors import ParameterError
 
-__all__ = ["LOCAL", "open_client", "run_tasks"]
+__all__ = ["LOCAL", "Connection", "run_tasks"]
 
 #: ``scheduler`` value that starts a LocalCluster on this machine.
 LOCAL = "local"
@@ -38,9 +37,11 @@ def _distributed(scheduler: object) -> Any:
     return distributed
 
 
-@contextmanager
-def open_client(scheduler: Any, workers: int | None = None) -> Iterator[Any]:
-    """A Dask client for one scene run, closed afterwards if opened here.
+class Connection:
+    """The Dask client of one scene run: checked at once, connected when first needed.
+
+    A scene whose points are all harmonic (or cached) never starts a cluster or contacts the
+    scheduler. Use as a context manager; :meth:`close` closes what was opened here.
 
     Parameters
     ----------
@@ -55,39 +56,54 @@ def open_client(scheduler: Any, workers: int | None = None) -> Iterator[Any]:
     Raises
     ------
     ParameterError
-        Dask is not installed, ``workers`` is given for a running cluster, or the scheduler
-        cannot be reached.
+        Dask is not installed, ``scheduler`` is of the wrong type, or ``workers`` is given
+        for a running cluster; on first use (:meth:`client`), the scheduler cannot be reached.
     """
-    distributed = _distributed(scheduler)
-    if isinstance(scheduler, distributed.Client):
-        if workers is not None:
-            raise ParameterError(f"workers={workers!r} only applies to local processes or "
-                                 "scheduler='local': a running cluster has its own workers")
-        yield scheduler
-        return
-    if not isinstance(scheduler, str) or not scheduler:
-        raise ParameterError(f"scheduler must be 'local', a scheduler address or a distributed.Client, "
-                             f"got {scheduler!r} (type {type(scheduler).__name__})")
-    if scheduler == LOCAL:
-        from montecarlo.simulate import default_threads
 
-        cluster = distributed.LocalCluster(n_workers=workers or default_threads(), threads_per_worker=1,
-                                           processes=True)
-        try:
-            with distributed.Client(cluster) as client:
-                yield client
-        finally:
-            cluster.close()
-        return
-    if workers is not None:
-        raise ParameterError(f"workers={workers!r} only applies to local processes or scheduler='local': "
-                             f"the cluster at {scheduler!r} has its own workers")
-    try:
-        client = distributed.Client(scheduler)
-    except (OSError, TimeoutError, ValueError) as exc:
-        raise ParameterError(f"cannot reach the Dask scheduler at {scheduler!r}: {exc}") from exc
-    with client:
-        yield client
+    def __init__(self, scheduler: Any, workers: int | None = None) -> None:
+        self._dd = _distributed(scheduler)
+        given = isinstance(scheduler, self._dd.Client)
+        if not given and (not isinstance(scheduler, str) or not scheduler):
+            raise ParameterError(f"scheduler must be 'local', a scheduler address or a distributed.Client, "
+                                 f"got {scheduler!r} (type {type(scheduler).__name__})")
+        if workers is not None and scheduler != LOCAL:
+            where = "the given client" if given else f"the cluster at {scheduler!r}"
+            raise ParameterError(f"workers={workers!r} only applies to local processes or "
+                                 f"scheduler='local': {where} has its own workers")
+        self.scheduler, self.workers = scheduler, workers
+        self._client: Any = scheduler if given else None
+        self._opened: list[Any] = []
+
+    def client(self) -> Any:
+        """The connected ``distributed.Client`` (started or connected on the first call)."""
+        if self._client is not None:
+            return self._client
+        dd = self._dd
+        if self.scheduler == LOCAL:
+            from montecarlo.simulate import default_threads
+
+            cluster = dd.LocalCluster(n_workers=self.workers or default_threads(), threads_per_worker=1,
+                                      processes=True)
+            self._opened.append(cluster)
+            self._client = dd.Client(cluster)
+        else:
+            try:
+                self._client = dd.Client(self.scheduler)
+            except (OSError, TimeoutError, ValueError) as exc:
+                raise ParameterError(f"cannot reach the Dask scheduler at {self.scheduler!r}: {exc}") from exc
+        self._opened.insert(0, self._client)
+        return self._client
+
+    def close(self) -> None:
+        """Close the client and cluster opened here (a given client stays open)."""
+        while self._opened:
+            self._opened.pop(0).close()
+
+    def __enter__(self) -> Self:
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.close()
 
 
 def run_tasks(client: Any, fn: Callable[..., Any], args: Sequence[tuple[Any, ...]],

@@ -20,7 +20,7 @@ from contextlib import ExitStack
 from dataclasses import dataclass, replace
 from pathlib import Path
 from types import MappingProxyType
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
@@ -32,6 +32,9 @@ from ..solve import choose_method, solve
 from .cache import PointCache, point_key, point_seed, stats_from_dict
 from .result import ERROR, NOT_AVAILABLE, SceneResult, SceneRow, write_csv
 from .spec import Scene, load_scene
+
+if TYPE_CHECKING:
+    from .cluster import Connection
 
 __all__ = ["run_scene"]
 
@@ -52,8 +55,9 @@ class _Failure:
 class _Runner:
     """Evaluates harvesters for one scene run, through the cache."""
 
-    def __init__(self, scene: Scene, cache: PointCache, bar: Any, workers: int = 1, client: Any = None) -> None:
-        self.scene, self.cache, self.bar, self.workers, self.client = scene, cache, bar, workers, client
+    def __init__(self, scene: Scene, cache: PointCache, bar: Any, workers: int = 1,
+                 cluster: Connection | None = None) -> None:
+        self.scene, self.cache, self.bar, self.workers, self.cluster = scene, cache, bar, workers, cluster
         self.computed = self.reused = 0
         self.needs_solver = any(o in QUANTITIES for o in scene.observables)
 
@@ -109,7 +113,7 @@ class _Runner:
                 out[i] = self._store(hs[i], key, opts, stats)
         in_batch = {t[0] for t in batch}
         rest = [t for t in todo if t[0] not in in_batch]
-        if self.client is not None and rest:
+        if self.cluster is not None and rest:
             self._solve_distributed(hs, rest, out)
         pool = [t for t in rest if t[2] in _POOLED] if self.workers > 1 else []
         if len(pool) > 1:
@@ -134,7 +138,7 @@ class _Runner:
         fallbacks = [self.fallback(hs[i], method) for i, _, method, _ in todo]
         args = [(hs[i], method, on_worker(method, opts), fb and (fb[0], on_worker(*fb)))
                 for (i, _, method, opts), fb in zip(todo, fallbacks)]
-        for j, res in run_tasks(self.client, _solve_portable, args,
+        for j, res in run_tasks(self.cluster.client(), _solve_portable, args,
                                 lambda j, why: _Failure(ERROR, why, todo[j][2])):
             i, key, _, opts = todo[j]
             out[i] = self._store(hs[i], key, opts, stats_from_dict(res) if isinstance(res, dict) else res)
@@ -335,7 +339,7 @@ def run_scene(
     ------
     ParameterError
         A point is not a valid harvester, ``figures`` names an unknown figure, or the Dask
-        scheduler is unusable (see :func:`.cluster.open_client`). Solver failures do not
+        scheduler is unusable (see :class:`.cluster.Connection`). Solver failures do not
         raise: they are reported on their points.
     """
     from tqdm.auto import tqdm
@@ -362,14 +366,14 @@ def run_scene(
         total = sum(1 + (sc.optimize.points if np.ptp(sc.optimize.interval(h)) > 0 else 1) for h in hs0)
     cache = PointCache(out)
     with ExitStack() as stack:
-        client = None
+        cluster = None
         if scheduler is not None:
-            from .cluster import open_client
+            from .cluster import Connection
 
-            client = stack.enter_context(open_client(scheduler, workers))
+            cluster = stack.enter_context(Connection(scheduler, workers))
         bar = stack.enter_context(tqdm(total=total, desc=sc.name, unit="pt", leave=False,
                                        disable=None if progress is None else not progress))
-        runner = _Runner(sc, cache, bar, 1 if client is not None else workers or 1, client)
+        runner = _Runner(sc, cache, bar, 1 if cluster is not None else workers or 1, cluster)
         rows = _optimize_rows(sc, runner, points) if sc.optimize else _sweep_rows(sc, runner, points)
     result = SceneResult(sc, tuple(rows), out, MappingProxyType({}), None, None, None,
                          runner.computed, runner.reused, 0.0)

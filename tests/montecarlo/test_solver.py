@@ -60,8 +60,8 @@ def test_same_seed_identical_different_seed_different() -> None:
 def test_results_depend_on_the_batch_not_on_threads() -> None:
     # the adaptive loop sizes its batches by ``batch``: fixed, the thread count is free
     h = Harvester.build(a=0.5, n=3, N=2, k=-0.2)
-    opts = dict(dt=0.05, paths=8, t_run=5.0, t_burn=2.0, min_replicas=2, max_replicas=8, tol=1e-3,
-                seed=5, batch=3, progress=False)
+    opts = {"dt": 0.05, "paths": 8, "t_run": 5.0, "t_burn": 2.0, "min_replicas": 2, "max_replicas": 8,
+            "tol": 1e-3, "seed": 5, "batch": 3, "progress": False}
     a = solve(h, "mc", threads=1, **opts)
     b = solve(h, "mc", threads=3, **opts)
     assert a.info["replicas"] > 2 and a.info["batch"] == 3  # more than one batch ran

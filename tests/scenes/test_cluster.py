@@ -173,6 +173,13 @@ def test_errors_name_the_extra_and_the_address(tmp_path: Path, monkeypatch) -> N
     with pytest.importorskip("dask").config.set({"distributed.comm.timeouts.connect": "0.5s"}):
         with pytest.raises(ParameterError, match=r"cannot reach the Dask scheduler at 'tcp://127.0.0.1:9'"):
             run_scene(mc_scene(), tmp_path, scheduler="tcp://127.0.0.1:9")
+        # harmonic points never leave this process: no scheduler is contacted
+        harmonic = Scene("dask_exact", system=Harvester.build(a=0.5, n=2, N=3), observables=("eta",),
+                         axes=(Axis("k", (0.0, -0.2)),), outputs=())
+        assert run_scene(harmonic, tmp_path, scheduler="tcp://127.0.0.1:9").computed == 2
+    with pytest.raises(ParameterError, match=r"workers=2 only applies to local processes or scheduler='local': "
+                                              r"the cluster at 'tcp://127.0.0.1:9' has its own workers"):
+        run_scene(mc_scene(), tmp_path, scheduler="tcp://127.0.0.1:9", workers=2)
     monkeypatch.setitem(sys.modules, "distributed", None)
     with pytest.raises(ParameterError, match=r'needs Dask, which is not installed: pip install "fpe-harvester\[dask\]"'):
         run_scene(mc_scene(), tmp_path, scheduler="local")
