@@ -129,6 +129,12 @@ def test_a_point_that_keeps_killing_workers_fails_alone(tmp_path: Path, referenc
     assert [r.values for r in again.rows] == [r.values for r in reference.rows]
 
 
+@pytest.mark.filterwarnings("ignore:Port 8787 is already in use")  # its dashboard moves elsewhere
+def test_local_cluster_started_for_the_run(tmp_path: Path, reference) -> None:
+    res = run_scene(mc_scene((0.1,)), tmp_path, progress=False, scheduler="local", workers=1)
+    assert res.computed == 1 and res.rows[0].values == reference.rows[0].values
+
+
 def test_identical_points_stay_separate_tasks(tmp_path: Path, client, reference) -> None:
     res = run_scene(mc_scene((0.1, 0.1)), tmp_path, progress=False, scheduler=client)
     assert res.computed == 2 and res.rows[0].values == res.rows[1].values == reference.rows[0].values
