@@ -37,7 +37,7 @@ def _canonical(h: Harvester, method: str, rtol: float | None, options: Mapping[s
 
 
 def point_key(h: Harvester, method: str, rtol: float | None, options: Mapping[str, Any]) -> str:
-    """Cache key: hash of harvester, method, accuracy and settings (seed, progress, threads, batch excluded)."""
+    """Cache key: hash of harvester, method, accuracy and settings (except those in ``_NOT_IN_KEY``)."""
     return hashlib.sha256(_canonical(h, method, rtol, options).encode()).hexdigest()[:24]
 
 

@@ -120,7 +120,8 @@ class _Runner:
             self._solve_parallel(hs, pool, out)
         for i, key, method, opts in rest:
             if out[i] is None:
-                out[i] = self._store(hs[i], key, opts, _solve_point(hs[i], method, opts, self.fallback(hs[i], method)))
+                res = _solve_point(hs[i], method, opts, self.fallback(hs[i], method))
+                out[i] = self._store(hs[i], key, opts, res)
         return out
 
     def fallback(self, h: Harvester, method: str) -> tuple[str, dict[str, Any]] | None:
@@ -136,7 +137,7 @@ class _Runner:
             return {"threads": 1, **opts} if method == "mc" else opts
 
         fallbacks = [self.fallback(hs[i], method) for i, _, method, _ in todo]
-        args = [(hs[i], method, on_worker(method, opts), fb and (fb[0], on_worker(*fb)))
+        args = [(hs[i], method, on_worker(method, opts), None if fb is None else (fb[0], on_worker(*fb)))
                 for (i, _, method, opts), fb in zip(todo, fallbacks)]
         for j, res in run_tasks(self.cluster.client(), _solve_portable, args,
                                 lambda j, why: _Failure(ERROR, why, todo[j][2])):
@@ -154,8 +155,8 @@ class _Runner:
         methods = multiprocessing.get_all_start_methods()
         ctx = multiprocessing.get_context("fork" if "fork" in methods else "spawn")
         with ProcessPoolExecutor(max_workers=self.workers, mp_context=ctx) as ex:
-            futures = {ex.submit(_solve_portable, hs[i], method, opts, self.fallback(hs[i], method)): (i, key, opts)
-                       for i, key, method, opts in todo}
+            futures = {ex.submit(_solve_portable, hs[i], method, opts, self.fallback(hs[i], method)):
+                       (i, key, opts) for i, key, method, opts in todo}
             for fut in as_completed(futures):
                 i, key, opts = futures[fut]
                 res = fut.result()

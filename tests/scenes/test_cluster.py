@@ -29,11 +29,15 @@ def mc_scene(ks: tuple[float, ...] = (0.1, 0.0, -0.1, -0.2)) -> Scene:
                  method="mc", rtol=0.1, axes=(Axis("k", ks),), options={"mc": MC}, outputs=())
 
 
+def loopback_cluster():
+    """Two single-threaded worker processes on 127.0.0.1, no dashboard."""
+    return distributed.LocalCluster(n_workers=2, threads_per_worker=1, processes=True, host="127.0.0.1",
+                                    dashboard_address=None, scheduler_kwargs={"dashboard": False})
+
+
 @pytest.fixture(scope="module")
 def client():
-    with distributed.LocalCluster(n_workers=2, threads_per_worker=1, processes=True, host="127.0.0.1",
-                                  dashboard_address=None,
-                                  scheduler_kwargs={"dashboard": False}) as cluster, distributed.Client(cluster) as c:
+    with loopback_cluster() as cluster, distributed.Client(cluster) as c:
         yield c
 
 
@@ -102,10 +106,8 @@ def test_a_point_that_keeps_killing_workers_fails_alone(tmp_path: Path, referenc
     # no second chance: the point whose worker is killed is reported failed, the rest finish,
     # and the next run computes it
     dask = pytest.importorskip("dask")
-    with dask.config.set({"distributed.scheduler.allowed-failures": 0}), \
-            distributed.LocalCluster(n_workers=2, threads_per_worker=1, processes=True, host="127.0.0.1",
-                                     dashboard_address=None,
-                                  scheduler_kwargs={"dashboard": False}) as cluster, distributed.Client(cluster) as c:
+    with dask.config.set({"distributed.scheduler.allowed-failures": 0}), loopback_cluster() as cluster, \
+            distributed.Client(cluster) as c:
         victim: list[str] = []
         put = scene_run.PointCache.put
 
@@ -140,7 +142,8 @@ def test_identical_points_stay_separate_tasks(tmp_path: Path, client, reference)
     assert res.computed == 2 and res.rows[0].values == res.rows[1].values == reference.rows[0].values
 
 
-def test_cli_scheduler_address_flag_and_environment(tmp_path: Path, client, reference, monkeypatch, capsys) -> None:
+def test_cli_scheduler_address_flag_and_environment(tmp_path: Path, client, reference, monkeypatch,
+                                                     capsys) -> None:
     # the scene of ``reference`` (seeds depend on the scene's name), first two points
     scene = tmp_path / "dask_mc.toml"
     scene.write_text('name = "dask_mc"\nobservables = ["eta", "V2"]\nmethod = "mc"\nrtol = 0.1\n'
@@ -183,9 +186,10 @@ def test_errors_name_the_extra_and_the_address(tmp_path: Path, monkeypatch) -> N
         harmonic = Scene("dask_exact", system=Harvester.build(a=0.5, n=2, N=3), observables=("eta",),
                          axes=(Axis("k", (0.0, -0.2)),), outputs=())
         assert run_scene(harmonic, tmp_path, scheduler="tcp://127.0.0.1:9").computed == 2
-    with pytest.raises(ParameterError, match=r"workers=2 only applies to local processes or scheduler='local': "
-                                              r"the cluster at 'tcp://127.0.0.1:9' has its own workers"):
+    with pytest.raises(ParameterError, match=r"workers=2 only applies to local processes or "
+                                              r"scheduler='local': the cluster at 'tcp://127.0.0.1:9' has"):
         run_scene(mc_scene(), tmp_path, scheduler="tcp://127.0.0.1:9", workers=2)
     monkeypatch.setitem(sys.modules, "distributed", None)
-    with pytest.raises(ParameterError, match=r'needs Dask, which is not installed: pip install "fpe-harvester\[dask\]"'):
+    with pytest.raises(ParameterError, match=r'needs Dask, which is not installed: '
+                                              r'pip install "fpe-harvester\[dask\]"'):
         run_scene(mc_scene(), tmp_path, scheduler="local")
