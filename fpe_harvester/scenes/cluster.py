@@ -116,7 +116,7 @@ def run_tasks(client: Any, fn: Callable[..., Any], args: Sequence[tuple[Any, ...
     """
     distributed = _distributed(client)
     # pure=False: every point is its own task, even two that look alike
-    futures = [client.submit(fn, *a, pure=False) for a in args]
+    futures = client.map(fn, *zip(*args), pure=False)
     index = {fut.key: i for i, fut in enumerate(futures)}
     try:
         for fut in distributed.as_completed(futures):
