@@ -92,6 +92,25 @@ def test_a_worker_killed_mid_run_loses_nothing(tmp_path: Path, client, reference
     assert len(lines) == 4 and len({rec["key"] for rec in lines}) == 4  # every point once
 
 
+def test_an_interrupted_run_cancels_its_tasks_and_resumes(tmp_path: Path, client, reference,
+                                                          monkeypatch) -> None:
+    put = scene_run.PointCache.put
+
+    def put_then_stop(self, *args, **kwargs):
+        put(self, *args, **kwargs)
+        raise KeyboardInterrupt
+
+    monkeypatch.setattr(scene_run.PointCache, "put", put_then_stop)
+    with pytest.raises(KeyboardInterrupt):
+        run_scene(mc_scene(), tmp_path, progress=False, scheduler=client)
+    monkeypatch.undo()
+    assert len(cache_lines(tmp_path)) == 1
+    assert not any(client.processing().values())  # nothing left running for the stopped run
+    res = run_scene(mc_scene(), tmp_path, progress=False, scheduler=client)
+    assert (res.computed, res.reused) == (3, 1)
+    assert [r.values for r in res.rows] == [r.values for r in reference.rows]
+
+
 def test_fokker_planck_points_match_too(tmp_path: Path, client) -> None:
     sc = Scene("dask_fpe", system=Harvester.build(a=0.5, n=3, N=1), observables=("eta", "V2", "x2"),
                method="fpe", rtol=1e-3, axes=(Axis("a", (0.5, 1.0)),), outputs=())
