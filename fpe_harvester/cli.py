@@ -218,6 +218,16 @@ def cmd_validate(args: argparse.Namespace) -> int:
                    progress=not args.no_progress)
 
 
+def _scheduler(args: argparse.Namespace) -> str | None:
+    """Where scene points run: ``--scheduler``, ``--dask local``, else ``DASK_SCHEDULER_ADDRESS``
+    unless ``--workers`` asks for local processes, else this process (``None``)."""
+    if args.scheduler or args.dask:
+        return args.scheduler or args.dask
+    if args.workers is None:
+        return os.environ.get("DASK_SCHEDULER_ADDRESS") or None
+    return None
+
+
 def cmd_scene(args: argparse.Namespace) -> int:
     """List the shipped scenes, or run one and print its table and output paths."""
     from .scenes import list_scenes, load_scene, run_scene
@@ -232,7 +242,8 @@ def cmd_scene(args: argparse.Namespace) -> int:
                      ("scene", "points (full/quick)", "title"))
         return 0
     result = run_scene(load_scene(args.scene), _writable_folder("--out", args.out), quick=args.quick,
-                       progress=False if args.no_progress or args.json else None, workers=args.workers)
+                       progress=False if args.no_progress or args.json else None, workers=args.workers,
+                       scheduler=_scheduler(args))
     if args.json:
         print(json.dumps(result.to_dict(), indent=2, default=str))
         return 0
@@ -324,8 +335,15 @@ def build_parser() -> argparse.ArgumentParser:
     q.add_argument("--quick", action="store_true", help="the scene's reduced variant")
     q.add_argument("--json", action="store_true", help="print one JSON object")
     q.add_argument("--no-progress", action="store_true", help="no progress bar")
-    q.add_argument("--workers", type=int, default=1, metavar="P",
-                   help="processes for Fokker-Planck points (default 1; Monte Carlo is threaded)")
+    q.add_argument("--workers", type=int, default=None, metavar="P",
+                   help="processes for Fokker-Planck points (default 1; Monte Carlo is threaded); "
+                        "with --dask local: the cluster's workers (default: one per CPU)")
+    where = q.add_mutually_exclusive_group()
+    where.add_argument("--scheduler", metavar="ADDRESS",
+                       help="run the points on the Dask cluster of this scheduler, e.g. tcp://host:8786 "
+                            "(default: $DASK_SCHEDULER_ADDRESS if set and --workers is not given)")
+    where.add_argument("--dask", choices=("local",),
+                       help="run the points on a local Dask cluster (one worker per CPU)")
     return parser
 
 

@@ -131,7 +131,12 @@ class MonteCarlo:
     richardson : bool
         Also run at the coarse step on the same noise and fold the bias into the error.
     threads : int or None
-        Worker threads (results do not depend on it). Default: usable CPUs.
+        Worker threads (results do not depend on it, only on ``batch``). Default: usable CPUs.
+    batch : int or None
+        Replica granularity, >= 1: the pilot run and each extra batch use at least this many
+        replicas. Default: ``threads``, or the usable CPUs (so that every thread is busy).
+        The results depend on it: fix it (with ``seed``) for the same numbers on machines of
+        other sizes or with other ``threads``.
     control : bool
         For a nonlinear potential, run the harmonic twin (stiffness from a pilot run's
         :math:`\\langle xU'\\rangle/\\langle x^2\\rangle`) on the same noise and use its
@@ -163,6 +168,7 @@ class MonteCarlo:
     progress: bool | None = None
     richardson: bool = True
     threads: int | None = None
+    batch: int | None = None
     control: bool = True
 
     def __post_init__(self) -> None:
@@ -194,6 +200,8 @@ class MonteCarlo:
                                      f"(type {type(value).__name__})")
         if self.threads is not None:
             object.__setattr__(self, "threads", check_int("threads", self.threads, low=1))
+        if self.batch is not None:
+            object.__setattr__(self, "batch", check_int("batch", self.batch, low=1))
 
     def unsupported_reason(self, h: Harvester) -> str | None:
         """Always None: Monte Carlo handles every harvester."""
@@ -235,7 +243,7 @@ class MonteCarlo:
             pil_burn = burn_in(relaxation_time(h, kappa), self.tol, t_run0) if self.t_burn is None \
                 else self.t_burn
             if self.control and math.isfinite(pil_burn):
-                pilot = simulate(h, dt=dt, paths=16, replicas=max(2, self.threads or default_threads()),
+                pilot = simulate(h, dt=dt, paths=16, replicas=max(2, self._batch()),
                                  t_burn=pil_burn, t_run=t_run0, seed=seed, threshold=self.threshold(h),
                                  threads=self.threads, first_replica=_PILOT_FIRST)
                 m = pilot.moments(0)
@@ -272,6 +280,9 @@ class MonteCarlo:
         return max(2, min(base, int(round(base * _PATH_TIME / (t_burn + t_run)))))
 
     # -- running -----------------------------------------------------------------------------
+
+    def _batch(self) -> int:
+        return self.batch or self.threads or default_threads()
 
     def _run(self, h: Harvester, plan: Plan, replicas: int, first: int) -> Ensemble:
         return simulate(h, dt=plan.dt, paths=plan.paths, replicas=replicas, t_burn=plan.t_burn,
@@ -311,7 +322,7 @@ class MonteCarlo:
             # one entropy for every batch, so that batches are distinct children of one root
             return dataclasses.replace(self, seed=int(np.random.SeedSequence().entropy)).run(h, plan)
         plan = plan or self.plan(h)
-        threads = self.threads or default_threads()
+        granule = self._batch()
         start = time.perf_counter()
         restarts: list[str] = []
         bar = tqdm(desc=f"mc N={h.N} n={h.n:g}", unit="replica",
@@ -354,7 +365,7 @@ class MonteCarlo:
                 budget = (0.9 * self.tol) ** 2 - (est.bias["eta"] / est.mean["eta"]) ** 2
                 target = 0.9 * self.tol if budget <= 0 else math.sqrt(budget)
                 want = math.ceil(R * (stat_rel / target) ** 2) - R
-                batch = int(min(max(want, threads), R, self.max_replicas - R))
+                batch = int(min(max(want, granule), R, self.max_replicas - R))
                 batch = min(batch, int((self.max_time - elapsed) / per_rep))
                 if batch < 1:
                     break
@@ -489,6 +500,7 @@ class MonteCarlo:
             "wall_time": wall,
             "seed": ens.seed_entropy,
             "threads": ens.notes.get("threads"),
+            "batch": self._batch(),
             "scheme": SCHEME_NAMES[scheme_kind(h)],
             "rng": _RNG,
             "bias_eta": est.bias["eta"],

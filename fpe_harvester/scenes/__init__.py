@@ -3,7 +3,8 @@
 A scene (:mod:`.spec`: a TOML file or a :class:`Scene` object) says what to compute and
 draw: the systems, the sweep axes, the observables, the accuracy and the outputs.
 :func:`run_scene` (:mod:`.run`) picks the cheapest adequate solver per point, keeps finished
-points in a cache that makes runs resumable (:mod:`.cache`) and returns a
+points in a cache that makes runs resumable (:mod:`.cache`), optionally computes them on a
+Dask cluster (:mod:`.cluster`) and returns a
 :class:`SceneResult` of :class:`SceneRow` (:mod:`.result`); :mod:`.plotting` draws the
 figures from those rows. The shipped scenes (one per figure of the paper, and more) are
 the TOML files in ``data/``: see :func:`list_scenes`.

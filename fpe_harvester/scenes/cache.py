@@ -57,8 +57,9 @@ __all__ = ["PointCache", "atomic_path", "point_key", "point_seed"]
 
 CACHE_NAME = "points.jsonl"
 #: Solver settings that do not change the result's meaning: not part of the cache key
-#: (Monte Carlo results do not depend on the thread count; the seed is derived from the point).
-_NOT_IN_KEY = ("seed", "progress", "threads")
+#: (Monte Carlo results do not depend on the thread count, and only statistically on the replica
+#: batch; the seed is derived from the point).
+_NOT_IN_KEY = ("seed", "progress", "threads", "batch")
 #: Fields a record may hold (besides the checksum ``"sum"``).
 _FIELDS = frozenset({"key", "harvester", "scene", "seed", "method", "stats", "failure"})
 #: Problems kept verbatim (the count covers all).
@@ -74,7 +75,7 @@ def _canonical(h: Harvester, method: str, rtol: float | None, options: Mapping[s
 
 
 def point_key(h: Harvester, method: str, rtol: float | None, options: Mapping[str, Any]) -> str:
-    """Cache key: hash of harvester, method, accuracy and settings (seed, progress, threads excluded)."""
+    """Cache key: hash of harvester, method, accuracy and settings (except those in ``_NOT_IN_KEY``)."""
     return hashlib.sha256(_canonical(h, method, rtol, options).encode()).hexdigest()[:24]
 
 

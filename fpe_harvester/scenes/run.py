@@ -8,7 +8,8 @@ vectorized call per ring size and parameter set); the rest one by one. Each fini
 is appended to ``points.jsonl`` in the output folder (see :mod:`.cache`), so reruns
 reuse it and an interrupted run resumes (even one killed mid-write; two runs may share a
 folder). Outputs are replaced atomically. A point whose solver fails or is not available is
-reported with its status and message; the scene goes on.
+reported with its status and message; the scene goes on. With ``scheduler`` the pointwise
+points run as tasks on a Dask cluster (:mod:`.cluster`) and give the same numbers.
 """
 
 from __future__ import annotations
@@ -16,10 +17,11 @@ from __future__ import annotations
 import json
 import time
 from collections.abc import Mapping, Sequence
+from contextlib import ExitStack
 from dataclasses import dataclass, replace
 from pathlib import Path
 from types import MappingProxyType
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
@@ -32,6 +34,9 @@ from ..solve import choose_method, solve
 from .cache import PointCache, atomic_path, point_key, point_seed, stats_from_dict, write_text_atomic
 from .result import ERROR, NOT_AVAILABLE, SceneResult, SceneRow, write_csv
 from .spec import Scene, load_scene
+
+if TYPE_CHECKING:
+    from .cluster import Connection
 
 __all__ = ["run_scene"]
 
@@ -52,8 +57,9 @@ class _Failure:
 class _Runner:
     """Evaluates harvesters for one scene run, through the cache."""
 
-    def __init__(self, scene: Scene, cache: PointCache, bar: Any, workers: int = 1) -> None:
-        self.scene, self.cache, self.bar, self.workers = scene, cache, bar, workers
+    def __init__(self, scene: Scene, cache: PointCache, bar: Any, workers: int = 1,
+                 cluster: Connection | None = None) -> None:
+        self.scene, self.cache, self.bar, self.workers, self.cluster = scene, cache, bar, workers, cluster
         self.computed = self.reused = 0
         self.needs_solver = any(o in QUANTITIES for o in scene.observables)
 
@@ -65,7 +71,12 @@ class _Runner:
             # the scene draws its own progress bar over points
             opts.update(tol=self.scene.rtol, progress=False)
         if method == "mc":
-            opts["seed"] = point_seed(self.scene.name, h)
+            from montecarlo.simulate import default_threads
+
+            # the replica batch (by default the thread count) shapes the numbers: fixed here,
+            # as in a run in this process, a point gives the same numbers on any Dask worker
+            batch = self.scene.options.get("mc", {}).get("threads") or default_threads()
+            opts.update(seed=point_seed(self.scene.name, h), batch=batch)
         opts.update(self.scene.options.get(method, {}))
         return method, opts
 
@@ -104,26 +115,36 @@ class _Runner:
                 out[i] = self._store(hs[i], key, opts, stats)
         in_batch = {t[0] for t in batch}
         rest = [t for t in todo if t[0] not in in_batch]
+        if self.cluster is not None and rest:
+            self._solve_distributed(hs, rest, out)
         pool = [t for t in rest if t[2] in _POOLED] if self.workers > 1 else []
         if len(pool) > 1:
             self._solve_parallel(hs, pool, out)
         for i, key, method, opts in rest:
             if out[i] is None:
-                out[i] = self._store(hs[i], key, opts, self._solve_point(hs[i], method, opts))
+                res = _solve_point(hs[i], method, opts, self.fallback(hs[i], method))
+                out[i] = self._store(hs[i], key, opts, res)
         return out
 
-    def _solve_point(self, h: Harvester, method: str, opts: dict[str, Any]) -> Stats | _Failure:
-        """Solve one point; with method "auto", a Fokker--Planck point that produced no numbers
-        (density not resolved) falls back to Monte Carlo, and the message says so."""
-        res = _attempt(h, method, opts)
-        if (self.scene.method == "auto" and method == "fpe" and isinstance(res, Stats)
-                and res.status is Status.NOT_CONVERGED and res.eta is None):
-            mc_method, mc_opts = self.method_of(h, "mc")
-            fallback = _attempt(h, mc_method, mc_opts)
-            if isinstance(fallback, Stats):
-                note = f"Fokker-Planck gave no result ({res.message}); Monte Carlo used instead"
-                return replace(fallback, message=f"{fallback.message}; {note}")
-        return res
+    def fallback(self, h: Harvester, method: str) -> tuple[str, dict[str, Any]] | None:
+        """Method and settings to try when ``method`` gives no numbers (see :func:`_solve_point`)."""
+        return self.method_of(h, "mc") if self.scene.method == "auto" and method == "fpe" else None
+
+    def _solve_distributed(self, hs: Sequence[Harvester], todo: list[tuple[int, str, str, dict[str, Any]]],
+                           out: list[Stats | _Failure | None]) -> None:
+        from .cluster import run_tasks
+
+        def on_worker(method: str, opts: dict[str, Any]) -> dict[str, Any]:
+            # one task per worker thread: Monte Carlo runs single-threaded unless the scene says
+            return {"threads": 1, **opts} if method == "mc" else opts
+
+        fallbacks = [self.fallback(hs[i], method) for i, _, method, _ in todo]
+        args = [(hs[i], method, on_worker(method, opts), None if fb is None else (fb[0], on_worker(*fb)))
+                for (i, _, method, opts), fb in zip(todo, fallbacks)]
+        for j, res in run_tasks(self.cluster.client(), _solve_portable, args,
+                                lambda j, why: _Failure(ERROR, why, todo[j][2])):
+            i, key, _, opts = todo[j]
+            out[i] = self._store(hs[i], key, opts, stats_from_dict(res) if isinstance(res, dict) else res)
 
     def _solve_parallel(self, hs: Sequence[Harvester], todo: list[tuple[int, str, str, dict[str, Any]]],
                         out: list[Stats | _Failure | None]) -> None:
@@ -136,8 +157,8 @@ class _Runner:
         methods = multiprocessing.get_all_start_methods()
         ctx = multiprocessing.get_context("fork" if "fork" in methods else "spawn")
         with ProcessPoolExecutor(max_workers=self.workers, mp_context=ctx) as ex:
-            futures = {ex.submit(_attempt_portable, hs[i], method, opts): (i, key, opts)
-                       for i, key, method, opts in todo}
+            futures = {ex.submit(_solve_portable, hs[i], method, opts, self.fallback(hs[i], method)):
+                       (i, key, opts) for i, key, method, opts in todo}
             for fut in as_completed(futures):
                 i, key, opts = futures[fut]
                 res = fut.result()
@@ -169,9 +190,24 @@ def _attempt(h: Harvester, method: str, opts: dict[str, Any]) -> Stats | _Failur
         return _Failure(ERROR, f"method {method!r} raised {type(exc).__name__}: {exc}", method)
 
 
-def _attempt_portable(h: Harvester, method: str, opts: dict[str, Any]) -> dict[str, Any] | _Failure:
-    """:func:`_attempt` for a worker process: Stats travel as dicts (their info is read-only)."""
+def _solve_point(h: Harvester, method: str, opts: dict[str, Any],
+                 fallback: tuple[str, dict[str, Any]] | None) -> Stats | _Failure:
+    """Solve one point; a point that produced no numbers (Fokker--Planck density not resolved)
+    is tried again with ``fallback`` (method, settings) if given, and the message says so."""
     res = _attempt(h, method, opts)
+    if (fallback is not None and isinstance(res, Stats) and res.status is Status.NOT_CONVERGED
+            and res.eta is None):
+        second = _attempt(h, *fallback)
+        if isinstance(second, Stats):
+            note = f"Fokker-Planck gave no result ({res.message}); Monte Carlo used instead"
+            return replace(second, message=f"{second.message}; {note}")
+    return res
+
+
+def _solve_portable(h: Harvester, method: str, opts: dict[str, Any],
+                    fallback: tuple[str, dict[str, Any]] | None) -> dict[str, Any] | _Failure:
+    """:func:`_solve_point` for a worker process: Stats travel as dicts (their info is read-only)."""
+    res = _solve_point(h, method, opts, fallback)
     return res.to_dict() if isinstance(res, Stats) else res
 
 
@@ -296,7 +332,8 @@ def run_scene(
     quick: bool = False,
     progress: bool | None = None,
     figures: Sequence[str] | None = None,
-    workers: int = 1,
+    workers: int | None = None,
+    scheduler: Any = None,
 ) -> SceneResult:
     """Run a scene: compute its points, write the outputs it asks for, draw its figures.
 
@@ -313,10 +350,20 @@ def run_scene(
         Progress bar over points; ``None`` shows it only on a terminal.
     figures : sequence of str, optional
         Draw only these of the scene's figures (default: all declared; ``[]``: none).
-    workers : int
-        Processes for single-threaded pointwise solvers (Fokker--Planck), >= 1 (default 1:
-        everything in this process). Monte Carlo points always run in this process (the
-        simulator is multi-threaded itself); harmonic points are vectorized in this process.
+    workers : int or None
+        Without ``scheduler``: processes for single-threaded pointwise solvers
+        (Fokker--Planck), >= 1 (default 1: everything in this process); Monte Carlo points run
+        in this process (the simulator is multi-threaded itself). With ``scheduler="local"``:
+        the LocalCluster's worker processes (default: one per usable CPU). Harmonic points are
+        always vectorized in this process.
+    scheduler : str, distributed.Client or None
+        Run the Fokker--Planck and Monte Carlo points as tasks on a Dask cluster (needs the
+        ``dask`` extra): ``"local"`` starts a LocalCluster on this machine, an address such as
+        ``"tcp://10.0.0.5:8786"`` connects to a running scheduler, a Client is used as is.
+        Results reach the cache as they finish; the numbers are those of a run in this process
+        (same seeds and Monte Carlo settings); a lost worker costs only its points, which
+        another worker computes. ``None`` (default): no Dask (the environment variable
+        ``DASK_SCHEDULER_ADDRESS`` is read by the command line only).
 
     Returns
     -------
@@ -327,8 +374,9 @@ def run_scene(
     Raises
     ------
     ParameterError
-        A point is not a valid harvester, or ``figures`` names an unknown figure. Solver
-        failures do not raise: they are reported on their points.
+        A point is not a valid harvester, ``figures`` names an unknown figure, or the Dask
+        scheduler is unusable (see :class:`.cluster.Connection`). Solver failures do not
+        raise: they are reported on their points.
     """
     from tqdm.auto import tqdm
 
@@ -336,7 +384,8 @@ def run_scene(
         scene = load_scene(scene)
     if not isinstance(scene, Scene):
         raise ParameterError(f"scene must be a Scene, got {scene!r} (type {type(scene).__name__})")
-    workers = check_int("workers", workers, low=1)
+    if workers is not None:
+        workers = check_int("workers", workers, low=1)
     sc = scene.variant(quick)
     names = [f.name for f in sc.figures]
     wanted = names if figures is None else list(figures)
@@ -352,9 +401,15 @@ def run_scene(
     if sc.optimize is not None:
         total = sum(1 + (sc.optimize.points if np.ptp(sc.optimize.interval(h)) > 0 else 1) for h in hs0)
     cache = PointCache(out)
-    with tqdm(total=total, desc=sc.name, unit="pt", disable=None if progress is None else not progress,
-              leave=False) as bar:
-        runner = _Runner(sc, cache, bar, workers)
+    with ExitStack() as stack:
+        cluster = None
+        if scheduler is not None:
+            from .cluster import Connection
+
+            cluster = stack.enter_context(Connection(scheduler, workers))
+        bar = stack.enter_context(tqdm(total=total, desc=sc.name, unit="pt", leave=False,
+                                       disable=None if progress is None else not progress))
+        runner = _Runner(sc, cache, bar, 1 if cluster is not None else workers or 1, cluster)
         rows = _optimize_rows(sc, runner, points) if sc.optimize else _sweep_rows(sc, runner, points)
     result = SceneResult(sc, tuple(rows), out, MappingProxyType({}), None, None, None,
                          runner.computed, runner.reused, 0.0, cache_skipped=cache.skipped_lines)

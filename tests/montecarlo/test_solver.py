@@ -57,6 +57,17 @@ def test_same_seed_identical_different_seed_different() -> None:
     assert a.V2 != c.V2 and a.Pin != c.Pin
 
 
+def test_results_depend_on_the_batch_not_on_threads() -> None:
+    # the adaptive loop sizes its batches by ``batch``: fixed, the thread count is free
+    h = Harvester.build(a=0.5, n=3, N=2, k=-0.2)
+    opts = {"dt": 0.05, "paths": 8, "t_run": 5.0, "t_burn": 2.0, "min_replicas": 2, "max_replicas": 8,
+            "tol": 1e-3, "seed": 5, "batch": 3, "progress": False}
+    a = solve(h, "mc", threads=1, **opts)
+    b = solve(h, "mc", threads=3, **opts)
+    assert a.info["replicas"] > 2 and a.info["batch"] == 3  # more than one batch ran
+    assert (a.eta, a.eta_err, a.V2, a.Pin) == (b.eta, b.eta_err, b.V2, b.Pin)
+
+
 def test_unsupported_reason_is_none_for_every_harvester() -> None:
     for h in (Harvester.build(n=1), Harvester.build(n=1.3, N=4, k=-1.0), Harvester.build(N=2, k=-9.0)):
         assert MonteCarlo().unsupported_reason(h) is None
@@ -76,6 +87,7 @@ def test_unsupported_reason_is_none_for_every_harvester() -> None:
         ({"max_time": 0}, "max_time"),
         ({"escape": -1.0}, "escape"),
         ({"seed": -3}, "seed"),
+        ({"batch": 0}, "batch must be an integer"),
         ({"seed": 1.5}, "seed must be an integer"),
         ({"progress": "yes"}, "progress must be"),
         ({"richardson": 1}, "richardson must be"),
