@@ -166,3 +166,19 @@ def test_vrms_error_covers_the_square_root_rounding() -> None:
     h = Harvester.build(a=0.5, N=46, k=0.25, m=0.5, gamma=6.875, Kv=0.94921875, Kc=1152.0, tau=0.15625,
                         tau_p=369.2989518558326)
     check_exact(h)
+
+
+@pytest.mark.parametrize("kappa", [1e-8, 1.0, 2e8, 1e12])
+def test_numerical_lyapunov_covariance_matches_the_closed_form_for_stiff_and_soft_units(kappa):
+    import warnings
+
+    from fpe_harvester.exact.moments import lyapunov_covariance, mode_moments
+    from fpe_harvester.model import Params
+
+    p = Params()
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")  # scipy warns (and perturbs A) on an unbalanced stiff unit
+        X = lyapunov_covariance(kappa, p)
+    m = mode_moments(kappa, p)
+    assert X[0, 0] == pytest.approx(float(m["x2"]), rel=1e-12)
+    assert X[2, 2] == pytest.approx(float(m["V2"]), rel=1e-12)
