@@ -104,10 +104,11 @@ def check_resumed(toml: Path, tmp_path: Path, delays: np.ndarray, n_points: int)
 
 
 def test_sigkill_at_random_moments_resumes_to_the_same_numbers(tmp_path: Path) -> None:
-    n_points = 6
+    n_points = 10
     rng = np.random.default_rng(15)
     progress = check_resumed(kill_scene(tmp_path, n_points), tmp_path, rng.uniform(0.0, 0.5, 2), n_points)
-    assert 0 < progress[0] < progress[1] < n_points  # each killed run added points
+    # the first kill lands mid-run (later ones may find the sweep done on a fast machine)
+    assert 0 < progress[0] < n_points and progress == sorted(progress)
 
 
 @pytest.mark.slow
