@@ -92,17 +92,10 @@ def test_sub_quadratic_error_includes_the_slow_moment() -> None:
     assert slow * est.moments["eta"] > own  # the slow moment is what sets it here
 
 
-def test_stop_keeps_the_estimate_with_the_smallest_error(monkeypatch: pytest.MonkeyPatch) -> None:
+def test_stop_keeps_the_estimate_with_the_smallest_error(break_levels_from) -> None:
     """A level that fails at M = 12 ends the refinement; the result is the best estimate
     so far (here M = 10), with an error smaller than its value."""
-    real = refine_mod.solve_level
-
-    def flaky(h, M, mesh, order, w):  # noqa: ANN001, ANN202
-        if M >= 12:
-            raise FloatingPointError("simulated breakdown")
-        return real(h, M, mesh, order, w)
-
-    monkeypatch.setattr(refine_mod, "solve_level", flaky)
+    break_levels_from(12)
     r = solve(Harvester.build(a=2.0, n=4), "fpe", tol=1e-7)
     assert r.status is Status.NOT_CONVERGED and "simulated breakdown" in r.message
     assert r.info["M"] == 10 and 0.0 < r.eta_err < r.eta

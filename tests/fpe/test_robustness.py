@@ -66,15 +66,8 @@ def test_slow_drive_level_is_not_degenerate() -> None:
     assert math.isfinite(lv.moments["eta"]) and lv.moments["V2"] > 0.0
 
 
-def test_failed_level_becomes_not_converged(monkeypatch: pytest.MonkeyPatch) -> None:
-    real = refine_mod.solve_level
-
-    def flaky(h, M, mesh, order, w):  # noqa: ANN001, ANN202
-        if M >= 8:
-            raise FloatingPointError("simulated breakdown")
-        return real(h, M, mesh, order, w)
-
-    monkeypatch.setattr(refine_mod, "solve_level", flaky)
+def test_failed_level_becomes_not_converged(break_levels_from) -> None:
+    break_levels_from(8)
     r = solve(Harvester.build(a=0.5, n=4), "fpe", tol=1e-8)
     assert r.status is Status.NOT_CONVERGED and "simulated breakdown" in r.message
     assert r.eta is not None and r.eta_err > 0.0
