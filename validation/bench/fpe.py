@@ -169,10 +169,12 @@ def _case(n: float, a: float, tols: list[float], budget: float, mc_rel: float | 
             r["work_previous_over_new"] = prev[2] / r["work_GF"] if r["work_GF"] > 0 else math.inf
     if mc_rel is not None:
         case["monte_carlo"] = mc = _monte_carlo(h, mc_rel, mc_time)
-        if mc and "seconds_1e-4_extrapolated" in mc:
+        if mc and mc.get("rel_err"):
             for key, r in runs.items():
-                ext = mc.get(f"seconds_{key}_extrapolated")
-                if ext and r["status"] == "stable":
+                # Monte Carlo's time to this run's tol, extrapolated (time ~ 1/error^2)
+                ext = mc["seconds"] * (mc["rel_err"] / float(key)) ** 2
+                r["monte_carlo_seconds_extrapolated"] = ext
+                if r["status"] == "stable":
                     r["monte_carlo_over_fpe"] = ext / r["seconds"]
     return case
 
