@@ -15,6 +15,7 @@ relative error), with the first-order (delta-method) error.
 
 from __future__ import annotations
 
+import functools
 import math
 from dataclasses import dataclass, field
 
@@ -179,19 +180,17 @@ def estimate(e: Ensemble, h: Harvester, order: float | None = None, control: boo
     reduction: dict[str, float] = {}
     Ff = fine[valid]
     if use:
-        reg = regression_estimate(Ff, C, mu)
-        mean, cov = reg.mean, reg.cov * student_factor(reg.dof) ** 2
+        mean, cov, plain_cov = _regression(Ff, C, mu)
         for i, name in enumerate(_NAMES):
             if cov[i, i] > 0:
-                reduction[name] = float(reg.plain_cov[i, i] * student_factor(n - 1) ** 2 / cov[i, i])
+                reduction[name] = float(plain_cov[i, i] / cov[i, i])
     else:
         mean, cov = _plain(Ff)
     est_mean = {name: float(mean[i]) for i, name in enumerate(_NAMES)}
     est_se = {name: math.sqrt(max(float(cov[i, i]), 0.0)) for i, name in enumerate(_NAMES)}
     est_mean["eta"], est_se["eta"] = _ratio(mean, cov, R)
     if use and est_se["eta"] > 0:
-        reduction["eta"] = (_ratio(mean, reg.plain_cov * student_factor(n - 1) ** 2, R)[1]
-                            / est_se["eta"]) ** 2
+        reduction["eta"] = (_ratio(mean, plain_cov, R)[1] / est_se["eta"]) ** 2
     bias = dict.fromkeys(_NAMES + ("eta",), 0.0)
     bias_se = dict.fromkeys(_NAMES + ("eta",), 0.0)
     if coarse is not None:
@@ -221,6 +220,7 @@ def estimate(e: Ensemble, h: Harvester, order: float | None = None, control: boo
         reduction=reduction, control=use)
 
 
+@functools.cache
 def student_factor(dof: int) -> float:
     """Ratio of Student's t quantile with ``dof`` degrees of freedom to the normal one at 0.8413.
 
@@ -243,16 +243,23 @@ def _plain(Y: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     return mean, Yc.T @ Yc / (n - 1) / n * student_factor(n - 1) ** 2
 
 
+def _regression(Y: np.ndarray, C: np.ndarray, mu: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Regression mean of Y with controls C (expectation mu), its Student-scaled covariance,
+    and the Student-scaled covariance of the plain mean (for the variance-reduction factor)."""
+    reg = regression_estimate(Y, C, mu)
+    n = Y.shape[0]
+    return reg.mean, reg.cov * student_factor(reg.dof) ** 2, reg.plain_cov * student_factor(n - 1) ** 2
+
+
 def _best(Y: np.ndarray, C: np.ndarray | None, mu: np.ndarray | None, ref: np.ndarray,
           R: float) -> tuple[np.ndarray, np.ndarray]:
     """Plain or regression mean of Y, whichever gives eta's linear combination less variance."""
     mean, cov = _plain(Y)
     if C is None:
         return mean, cov
-    reg = regression_estimate(Y, C, mu)
-    reg_cov = reg.cov * student_factor(reg.dof) ** 2
-    if _linear_eta(reg.mean, reg_cov, ref, R)[1] < _linear_eta(mean, cov, ref, R)[1]:
-        return reg.mean, reg_cov
+    reg_mean, reg_cov, _ = _regression(Y, C, mu)
+    if _linear_eta(reg_mean, reg_cov, ref, R)[1] < _linear_eta(mean, cov, ref, R)[1]:
+        return reg_mean, reg_cov
     return mean, cov
 
 
