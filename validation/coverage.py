@@ -27,10 +27,15 @@ import numpy as np
 
 from fpe_harvester import Harvester, Stats, Status, solve
 
-__all__ = ["CoverageCase", "QUICK_CASES", "FULL_CASES", "NORMAL_COVERAGE", "mc_coverage"]
+__all__ = ["CoverageCase", "QUICK_CASES", "FULL_CASES", "NORMAL_COVERAGE", "COVERAGE_LIMITS", "mc_coverage"]
 
 #: Fractions of a normal variable within 1, 2, 3 standard deviations.
 NORMAL_COVERAGE = (0.6827, 0.9545, 0.9973)
+#: Limits on the pooled fractions within 1, 2, 3 errors, by ``quick``: (lowest and highest
+#: at 1, lowest at 2, lowest at 3). Quick runs have few results, so wider limits. Honest bars
+#: give 0.683 / 0.954 / 0.997; bars wrong by 2x give about 0.38 / 0.68 / 0.87 (too small) or
+#: 0.95 / 1.0 / 1.0 (too large).
+COVERAGE_LIMITS = {True: (0.45, 0.95, 0.80, 0.93), False: (0.55, 0.92, 0.88, 0.97)}
 #: How much tighter the reference runs' tolerance is than the results'.
 REF_FACTOR = 10.0
 _QUANTITIES = ("eta", "V2", "Pin")

@@ -28,15 +28,12 @@ from fpe_harvester.result import Stats, Status
 from .checks import CheckResult, Context, expect
 from .report import Figure, Section, Table, new_figure, save_figure
 
-__all__ = ["run", "FpeCase", "QUICK_FPE", "FULL_FPE", "fpe_bounds", "MC_COVERAGE_LIMITS"]
+__all__ = ["run", "FpeCase", "QUICK_FPE", "FULL_FPE", "fpe_bounds"]
 
 _SECTION = "Error bars"
+#: Monte Carlo results per coverage case in quick mode (the full run: the coverage default).
+_QUICK_MC_RUNS = 8
 
-#: (lower bound of the 1-sigma fraction, upper bound, lower bound at 2 sigma, at 3 sigma) of the
-#: pooled Monte Carlo coverage; quick runs have few results, so wider limits. Honest bars give
-#: 0.683 / 0.954 / 0.997; bars wrong by 2x give about 0.38 / 0.68 / 0.87 (too small) or
-#: 0.95 / 1.0 / 1.0 (too large).
-MC_COVERAGE_LIMITS = {True: (0.45, 0.95, 0.80, 0.93), False: (0.55, 0.92, 0.88, 0.97)}
 
 
 @dataclass(frozen=True)
@@ -86,9 +83,14 @@ class Bound:
         return self.actual <= self.reported + self.ref_err
 
     @property
+    def resolved(self) -> float:
+        """The actual error floored at what the reference resolves (its own error; > 0)."""
+        return max(self.actual, self.ref_err, 1e-300)
+
+    @property
     def ratio(self) -> float:
-        """Reported / actual error; the actual is floored at the reference's own error."""
-        return self.reported / max(self.actual, self.ref_err, 1e-300)
+        """Reported / actual error, the actual floored at the reference's own error."""
+        return self.reported / self.resolved
 
 
 def fpe_bounds(ctx: Context, cases: tuple[FpeCase, ...]) -> list[Bound]:
@@ -138,10 +140,10 @@ def _fpe_checks(ctx: Context, sec: Section) -> list[CheckResult]:
 
 
 def _mc_checks(ctx: Context, sec: Section) -> list[CheckResult]:
-    from .coverage import NORMAL_COVERAGE, mc_coverage
+    from .coverage import COVERAGE_LIMITS, NORMAL_COVERAGE, mc_coverage
 
     ctx.require("mc")
-    res = mc_coverage(quick=ctx.quick, runs=8 if ctx.quick else None, seed=ctx.seed)
+    res = mc_coverage(quick=ctx.quick, runs=_QUICK_MC_RUNS if ctx.quick else None, seed=ctx.seed)
     table = Table("Monte Carlo: fraction of results within 1, 2, 3 reported standard errors",
                   ("quantity", "within 1", "within 2", "within 3", "results"))
     for q, f in res["fractions"].items():
@@ -155,7 +157,7 @@ def _mc_checks(ctx: Context, sec: Section) -> list[CheckResult]:
                     "are correlated.")
     sec.tables.append(table)
     sec.figures.append(_plot_coverage(ctx, res))
-    lo1, hi1, lo2, lo3 = MC_COVERAGE_LIMITS[ctx.quick]
+    lo1, hi1, lo2, lo3 = COVERAGE_LIMITS[ctx.quick]
     f1, f2, f3 = res["fractions_all"]
     return [expect("mc coverage within 1 standard error", _SECTION, lo1 < f1 < hi1,
                    f"{f1:.3f} of {3 * res['count']} (normal 0.683; limits {lo1}-{hi1})"),
@@ -175,23 +177,25 @@ def _plot_coverage(ctx: Context, res: dict) -> Figure:
     ax.set_xlabel("(result - reference) / combined reported error")
     ax.set_ylabel("density")
     ax.legend()
-    return save_figure(fig, ctx.out / "errorbars_mc_coverage.png", "Monte Carlo: normalized errors of eta, V2 and Pin against the reference; honest "
-                        "one-standard-error bars give the standard normal (values beyond 5 are drawn at 5).")
+    return save_figure(fig, ctx.out / "errorbars_mc_coverage.png",
+                       "Monte Carlo: normalized errors of eta, V2 and Pin against the reference; honest "
+                       "one-standard-error bars give the standard normal (values beyond 5 are drawn at 5).")
 
 
 def _plot_bounds(ctx: Context, bounds: list[Bound]) -> Figure:
     fig, ax = new_figure((5.5, 4.5))
     for label in dict.fromkeys(b.label for b in bounds):
-        pts = [(max(b.actual, b.ref_err, 1e-16), b.reported) for b in bounds if b.label == label]
+        pts = [(max(b.resolved, 1e-16), b.reported) for b in bounds if b.label == label]
         ax.loglog(*zip(*pts), "o", label=label)
-    lo = min(min(b.reported for b in bounds), min(max(b.actual, b.ref_err, 1e-16) for b in bounds))
+    lo = min(min(b.reported for b in bounds), min(max(b.resolved, 1e-16) for b in bounds))
     hi = max(max(b.reported for b in bounds), max(b.actual for b in bounds))
     ax.loglog([lo, hi], [lo, hi], "k--", lw=1, label="reported = actual")
     ax.set_xlabel("actual error of eta (vs reference)")
     ax.set_ylabel("reported error of eta")
     ax.legend(fontsize=8)
-    return save_figure(fig, ctx.out / "errorbars_fpe_bounds.png", "Fokker-Planck: reported against actual error of eta; points above the diagonal "
-                        "are bounds that hold.")
+    return save_figure(fig, ctx.out / "errorbars_fpe_bounds.png",
+                       "Fokker-Planck: reported against actual error of eta; points above the diagonal "
+                       "are bounds that hold.")
 
 
 def run(ctx: Context) -> Section:
@@ -203,7 +207,7 @@ def run(ctx: Context) -> Section:
         "the time-step bias estimate in quadrature): over independent seeds about 68 / 95 / 99.7 % of "
         "results should lie within 1 / 2 / 3 errors of a much tighter reference. Fokker-Planck errors "
         "are refinement estimates meant as bounds: the actual error should not exceed them."
-        + (" Quick mode: a subset of the cases and 8 Monte Carlo results per case." if ctx.quick else ""))
+        + (f" Quick mode: a subset of the cases and {_QUICK_MC_RUNS} Monte Carlo results per case." if ctx.quick else ""))
     sec.checks += ctx.check("Monte Carlo coverage", _SECTION, lambda: _mc_checks(ctx, sec))
     sec.checks += ctx.check("Fokker-Planck error bounds", _SECTION, lambda: _fpe_checks(ctx, sec))
     return sec
