@@ -40,7 +40,7 @@ import numpy as np
 
 from ..model import Harvester
 from .discretize import Level, Whitening, solve_level
-from .estimate import mesh_order, tail_error
+from .estimate import mesh_error, tail_error
 from .mesh import XMesh
 
 __all__ = ["Plan", "Estimate", "RefinementResult", "refine", "level_gigabytes", "default_memory_gb",
@@ -373,9 +373,10 @@ def _mesh_check(levels: _Levels, est: Estimate, nh: int, Mc: int | None = None,
     :data:`M_CHECK`; or at ``Mc``) against twice the elements.
 
     With the difference d of the two meshes and an error :math:`\\propto N^{-q}`, the
-    error of the coarser is :math:`d/(1 - 2^{-q})`; q is the observed order when a third
-    mesh (half the elements, solved when the degree is low) contracts, capped to [1, p + 1],
-    else 1 (the bound 2d for any order >= 1). The third mesh is solved only if 2d on eta is
+    error of the coarser is :math:`d/(1 - 2^{-q})`, d plus the finer one's
+    (:func:`~.estimate.mesh_error`); q is the observed order when a third mesh (half the
+    elements, solved when the degree is low) contracts, capped to [1, p + 1], else 1 (the
+    bound 2d for any order >= 1). The third mesh is solved only if 2d on eta is
     above ``enough`` (relative): it can only sharpen the estimate.
 
     The mesh error changes with M, in both directions, so a check at a lower degree is an
@@ -394,13 +395,13 @@ def _mesh_check(levels: _Levels, est: Estimate, nh: int, Mc: int | None = None,
     if (2.0 * d > enough and Mc <= M_CHECK + 2 and nh % 2 == 0
             and Mc <= DEGREES_PER_ELEMENT * (nh // 2)):
         coarse = levels.get_or_none(Mc, nh // 2)
+    meshes = ([coarse] if coarse is not None else []) + [a, b]
+    sizes = [lv.mesh.half_elements for lv in meshes]
     mesh = {}
     for name in OBSERVABLES:
-        q = 1.0
-        if coarse is not None:
-            seq = [coarse.moments[name], a.moments[name], b.moments[name]]
-            q = mesh_order([nh // 2, nh, 2 * nh], seq, levels.plan.order) or 1.0
-        mesh[name] = abs(a.moments[name] - b.moments[name]) / (1.0 - 2.0**-q)
+        values = [lv.moments[name] for lv in meshes]
+        # the error of nh elements is that of 2 nh plus their difference
+        mesh[name] = abs(values[-2] - values[-1]) + mesh_error(sizes, values, levels.plan.order)
     return Estimate(est.moments, est.hermite, mesh, est.level, True)
 
 
