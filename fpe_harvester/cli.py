@@ -270,18 +270,23 @@ COMMANDS: dict[str, Callable[[argparse.Namespace], int]] = {
 }
 
 
+def _harvester_arguments(p: argparse.ArgumentParser, N: int) -> None:
+    """--n, --a, --N (default ``N``) and --param: the harvester of ``stats`` and ``optimize``."""
+    p.add_argument("--n", type=_number, default=2.0, help=f"potential exponent n in [1, {MAX_EXPONENT:g}] (default 2)")
+    p.add_argument("--a", type=_number, default=0.5, help="potential strength a > 0 (default 0.5)")
+    p.add_argument("--N", type=int, default=N, help=f"number of units in the ring (default {N})")
+    p.add_argument("--param", type=_key_value, action="append", default=[], metavar="NAME=VALUE",
+                   help="physical parameter (m, gamma, Kv, Kc, sigma, tau, D, tau_p, R); repeatable")
+
+
 def build_parser() -> argparse.ArgumentParser:
     """The argument parser (exposed for documentation and tests)."""
     parser = _Parser(prog="harvester", description="Power and efficiency of noise-driven harvesters.")
     sub = parser.add_subparsers(dest="command", required=True, parser_class=_Parser)
 
     p = sub.add_parser("stats", help="stationary statistics (eta, V2, Vrms, Pin) of one harvester")
-    p.add_argument("--n", type=_number, default=2.0, help=f"potential exponent n in [1, {MAX_EXPONENT:g}] (default 2)")
-    p.add_argument("--a", type=_number, default=0.5, help="potential strength a > 0 (default 0.5)")
-    p.add_argument("--N", type=int, default=1, help="number of units in the ring (default 1)")
+    _harvester_arguments(p, N=1)
     p.add_argument("--k", type=_number, default=0.0, help="coupling k (default 0)")
-    p.add_argument("--param", type=_key_value, action="append", default=[], metavar="NAME=VALUE",
-                   help="physical parameter (m, gamma, Kv, Kc, sigma, tau, D, tau_p, R); repeatable")
     p.add_argument("--method", choices=("auto", *METHODS), default="auto",
                    help="solver (default auto: exact for n = 2, fpe for one nonlinear unit, else mc)")
     p.add_argument("--tol", type=_number, default=None,
@@ -298,15 +303,11 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--json", action="store_true", help="print one JSON object")
 
     p = sub.add_parser("optimize", help="the coupling k (or another parameter) that maximizes eta, with errors")
-    p.add_argument("--n", type=_number, default=2.0, help=f"potential exponent n in [1, {MAX_EXPONENT:g}] (default 2)")
-    p.add_argument("--a", type=_number, default=0.5, help="potential strength a > 0 (default 0.5)")
-    p.add_argument("--N", type=int, default=3, help="number of units in the ring (default 3)")
+    _harvester_arguments(p, N=3)
     p.add_argument("--over", default="k", help="parameter varied (default k; a, n or a --param name)")
     p.add_argument("--maximize", default="eta", help="observable maximized (default eta)")
     p.add_argument("--bounds", type=_number, nargs=2, default=None, metavar=("LOW", "HIGH"),
                    help="search interval (default for k: [k_di, 0] harmonic, [3 k_di, 0] nonlinear)")
-    p.add_argument("--param", type=_key_value, action="append", default=[], metavar="NAME=VALUE",
-                   help="physical parameter (m, gamma, Kv, Kc, sigma, tau, D, tau_p, R); repeatable")
     p.add_argument("--method", choices=("auto", "exact", "mc"), default="auto",
                    help="solver of the objective (default auto: exact for n = 2, else Monte Carlo)")
     p.add_argument("--tol", type=_number, default=None,
