@@ -22,7 +22,9 @@ import math
 import numpy as np
 
 from fpe_harvester.exact import mode_eigenvalues
-from fpe_harvester.model import Harvester, mode_sin2
+from fpe_harvester.model import Harvester
+
+from .twin import twin_harvester
 
 __all__ = ["relaxation_time", "burn_in", "MIN_BURN", "FALLBACK_NOTE"]
 
@@ -60,7 +62,7 @@ def relaxation_time(h: Harvester, kappa: float | None) -> float:
     if kappa is None:
         stiff = np.array([2.0 * h.a])
     else:
-        stiff = kappa + 4.0 * h.k * mode_sin2(h.N) if h.N > 1 else np.array([kappa])
+        stiff = twin_harvester(h, kappa).mode_stiffness()
     rates = []
     for kap in np.unique(np.maximum(stiff, 0.0)):
         re = mode_eigenvalues(float(kap), h.params).real

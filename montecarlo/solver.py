@@ -226,6 +226,9 @@ class MonteCarlo:
         (:func:`montecarlo.twin.linearized_stiffness`); failing a stable twin there, the
         Gaussian closure; failing that, no twin and a rest start.
         """
+        if not math.isfinite(2.0 * h.a):
+            raise ParameterError(f"a = {h.a!r}: Monte Carlo needs the unit stiffness 2a in the double "
+                                 f"range, a <= {0.5 * sys.float_info.max:.6g}")
         seed = 0 if self.seed is None else self.seed
         dt = self.dt or _DT_START
         notes: dict[str, Any] = {}

@@ -72,7 +72,7 @@ def twin_harvester(h: Harvester, kappa: float) -> Harvester:
 
 def twin_is_stable(h: Harvester, kappa: float) -> bool:
     """Whether every mode stiffness :math:`\\kappa + 4k s_q` of the twin is positive."""
-    return bool(np.all(kappa + 4.0 * h.k * mode_sin2(h.N) > 0.0)) if kappa > 0 else False
+    return bool(np.all(twin_harvester(h, kappa).mode_stiffness() > 0.0)) if kappa > 0 else False
 
 
 def scheme_matrices(lin: Harvester, dt: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -201,7 +201,7 @@ def initial_cholesky(lin: Harvester, dt: float) -> np.ndarray:
 
 def _closure_mismatch(h: Harvester, log_kappa: float) -> float:
     """ln<xU'> - ln(kappa <x^2>) for Gaussian x of the twin's variance (0 at the closure)."""
-    kap = math.exp(log_kappa) + 4.0 * h.k * mode_sin2(h.N)
+    kap = twin_harvester(h, math.exp(log_kappa)).mode_stiffness()
     s2 = float(np.mean(mode_moments(kap, h.params)["x2"]))
     n, a = h.n, h.a
     c_n = a * n * 2.0 ** (n / 2) * math.gamma((n + 1) / 2) / math.sqrt(math.pi)

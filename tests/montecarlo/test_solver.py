@@ -247,3 +247,9 @@ def test_restart_rules() -> None:
     what, new = mc._restart_reason(h, plan, est(0.0, 1e-6, 1e-3, 1e-4))
     assert what == "t_burn" and new.t_burn == 2 * plan.t_burn
     assert MonteCarlo(seed=1, tol=1e-3, dt=0.02)._restart_reason(h, plan, est(4e-4, 1e-5, 0, 1)) is None
+
+
+def test_stiffness_beyond_the_double_range_is_a_clear_error() -> None:
+    # 2a overflows: was a LinAlgError from the relaxation-time eigenvalues
+    with pytest.raises(ParameterError, match=r"a = 1e\+308: Monte Carlo needs the unit stiffness 2a"):
+        solve(Harvester.build(a=1e308), "mc", seed=0, tol=0.1, progress=False)
