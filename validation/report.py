@@ -85,14 +85,14 @@ class Report:
         return [c for c in self.checks if c.outcome is Outcome.SKIP]
 
 
-def new_figure(figsize: tuple[float, float] = (6, 4), ncols: int = 1):
-    """A matplotlib figure and its axes (``ncols`` side by side) drawn off-screen (Agg backend)."""
+def new_figure(figsize: tuple[float, float] = (6, 4), ncols: int = 1, nrows: int = 1):
+    """A matplotlib figure and its axes (``nrows`` x ``ncols``) drawn off-screen (Agg backend)."""
     import matplotlib
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    return plt.subplots(1, ncols, figsize=figsize)
+    return plt.subplots(nrows, ncols, figsize=figsize)
 
 
 def save_figure(fig, path: Path, caption: str) -> Figure:

@@ -28,7 +28,7 @@ from collections.abc import Iterator, Mapping
 from typing import Any
 
 from ..checks import CheckResult, Context, expect, skipped
-from ..report import Figure, Section, Table
+from ..report import Figure, Section, Table, new_figure, save_figure
 
 __all__ = ["BENCH_MODULES", "PROBLEMS", "error_time_pairs", "resolve_series", "run"]
 
@@ -159,13 +159,8 @@ def resolve_series(series: list[dict[str, Any]]) -> dict[str, list[dict[str, Any
 
 
 def _plot(ctx: Context, series: list[dict[str, Any]]) -> Figure:
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
     by = resolve_series(series)
-    fig, axes = plt.subplots(2, 2, figsize=(10, 7.5))
+    fig, axes = new_figure((10, 7.5), ncols=2, nrows=2)
     for ax, (key, title) in zip(axes.ravel(), PROBLEMS.items()):
         curves = by.get(key, [])
         for c in curves:
@@ -185,15 +180,12 @@ def _plot(ctx: Context, series: list[dict[str, Any]]) -> Figure:
         ax.grid(True, which="both", alpha=0.3)
         if curves:
             ax.legend(fontsize=7, loc="best")
-    fig.tight_layout()
-    path = ctx.out / "bench_error_vs_time.png"
-    fig.savefig(path, dpi=110)
-    plt.close(fig)
     refs = "; ".join(f"{PROBLEMS[k]}: {next((c['reference_used'][2] for c in v if 'reference_used' in c), 'none')}"
                      for k, v in by.items() if k in PROBLEMS)
-    return Figure(path, "Actual relative error of eta versus wall time, measured in this run, one panel per "
-                        "problem and one line per method (dotted: the uncertainty of the reference; an error of "
-                        f"exactly 0 is drawn at 1e-17). References: {refs}.")
+    return save_figure(fig, ctx.out / "bench_error_vs_time.png",
+                       "Actual relative error of eta versus wall time, measured in this run, one panel per "
+                       "problem and one line per method (dotted: the uncertainty of the reference; an error of "
+                       f"exactly 0 is drawn at 1e-17). References: {refs}.")
 
 
 def _run_one(ctx: Context, module: str, solver: str, sec: Section,
