@@ -69,21 +69,26 @@ def test_cluster_gives_the_numbers_of_one_process_and_resumes(tmp_path: Path, cl
     assert [r.values for r in again.rows] == [r.values for r in reference.rows]
 
 
-def test_a_worker_killed_mid_run_loses_nothing(tmp_path: Path, client, reference, monkeypatch) -> None:
+def kill_a_busy_worker_after_the_first_point(client, monkeypatch) -> list[int]:
+    """Once the first point reaches the cache, SIGKILL a worker that is computing another one;
+    returns the killed process id (filled during the run)."""
     killed: list[int] = []
     put = scene_run.PointCache.put
 
     def put_then_kill(self, *args, **kwargs):
-        # after the first point, kill a worker that is computing another one
         put(self, *args, **kwargs)
         if not killed:
             busy = [addr for addr, tasks in client.processing().items() if tasks]
             assert busy, "no point in flight: the test needs slower points"
-            pids = client.run(os.getpid, workers=busy[:1])
-            killed.extend(pids.values())
+            killed.extend(client.run(os.getpid, workers=busy[:1]).values())
             os.kill(killed[0], signal.SIGKILL)
 
     monkeypatch.setattr(scene_run.PointCache, "put", put_then_kill)
+    return killed
+
+
+def test_a_worker_killed_mid_run_loses_nothing(tmp_path: Path, client, reference, monkeypatch) -> None:
+    killed = kill_a_busy_worker_after_the_first_point(client, monkeypatch)
     res = run_scene(mc_scene(), tmp_path, progress=False, scheduler=client)
     assert len(killed) == 1 and killed[0] not in client.run(os.getpid).values()
     assert res.computed == 4
@@ -127,18 +132,7 @@ def test_a_point_that_keeps_killing_workers_fails_alone(tmp_path: Path, referenc
     dask = pytest.importorskip("dask")
     with dask.config.set({"distributed.scheduler.allowed-failures": 0}), loopback_cluster() as cluster, \
             distributed.Client(cluster) as c:
-        victim: list[str] = []
-        put = scene_run.PointCache.put
-
-        def put_then_kill(self, *args, **kwargs):
-            put(self, *args, **kwargs)
-            if not victim:
-                busy = [addr for addr, tasks in c.processing().items() if tasks]
-                assert busy, "no point in flight: the test needs slower points"
-                victim.extend(busy[:1])
-                os.kill(c.run(os.getpid, workers=victim)[victim[0]], signal.SIGKILL)
-
-        monkeypatch.setattr(scene_run.PointCache, "put", put_then_kill)
+        kill_a_busy_worker_after_the_first_point(c, monkeypatch)
         res = run_scene(mc_scene(), tmp_path, progress=False, scheduler=c)
         # the worker held the point it was computing and maybe one queued behind it
         failed = [r for r in res.rows if r.status == "error"]
