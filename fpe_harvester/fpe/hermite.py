@@ -58,12 +58,15 @@ def linear_drift(h: Harvester) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
 
 @dataclass(frozen=True)
 class HermiteBasis:
-    """Total-degree-M index set of normalized Hermite functions in three variables.
+    """Total-degree-M index set of normalized Hermite functions in ``dim`` variables.
 
     Parameters
     ----------
     M : int
         Total degree, >= 2 (second moments must be resolved).
+    dim : int
+        Number of variables: 3 for (v, V, xi) of the 1-D solver, 2 for (V, xi) of the
+        kink solver (:mod:`.kink`).
 
     Examples
     --------
@@ -71,24 +74,21 @@ class HermiteBasis:
     10
     >>> HermiteBasis(2).index[(0, 0, 2)]
     9
+    >>> HermiteBasis(2, dim=2).size
+    6
     """
 
     M: int
+    dim: int = 3
 
     def __post_init__(self) -> None:
-        alphas = [
-            (a0, a1, a2)
-            for deg in range(self.M + 1)
-            for a0 in range(deg, -1, -1)
-            for a1 in range(deg - a0, -1, -1)
-            for a2 in [deg - a0 - a1]
-        ]
-        object.__setattr__(self, "alphas", np.array(alphas, dtype=int))
+        alphas = [a for deg in range(self.M + 1) for a in _compositions(deg, self.dim)]
+        object.__setattr__(self, "alphas", np.array(alphas, dtype=int).reshape(-1, self.dim))
         object.__setattr__(self, "index", {a: i for i, a in enumerate(alphas)})
 
     @property
     def size(self) -> int:
-        """Number of coefficients, :math:`\\binom{M+3}{3}`."""
+        """Number of coefficients, :math:`\\binom{M+d}{d}`."""
         return len(self.alphas)
 
     def degree(self) -> np.ndarray:
@@ -135,13 +135,13 @@ class HermiteBasis:
                 entries[(r, c)] = entries.get((r, c), 0.0) + v
 
         for r, al in enumerate(map(tuple, self.alphas)):
-            for i in range(3):
+            for i in range(self.dim):
                 if al[i] == 0:
                     continue
                 be = list(al)
                 be[i] -= 1
                 si = math.sqrt(al[i])
-                for j in range(3):
+                for j in range(self.dim):
                     bij = Bz[i, j]
                     if bij != 0.0:
                         up = list(be)
@@ -167,7 +167,7 @@ class HermiteBasis:
         """Matrix :math:`K_1` of :math:`g\\cdot\\nabla_z h_\\alpha = \\sum_i g_i\\sqrt{\\alpha_i} h_{\\alpha-e_i}`."""
         rows, cols, vals = [], [], []
         for r, al in enumerate(map(tuple, self.alphas)):
-            for i in range(3):
+            for i in range(self.dim):
                 if al[i] > 0 and g[i] != 0.0:
                     rows.append(r)
                     cols.append(self._shift(al, i, -1))
@@ -180,10 +180,11 @@ class HermiteBasis:
         Uses :math:`z_k z_l = h_{e_k+e_l}` (k != l), :math:`z_k^2 = \\sqrt2 h_{2e_k} + 1` and
         :math:`y = L z`.
         """
-        Wz = np.zeros((3, 3, self.size))
-        for k in range(3):
-            for l in range(3):
-                a = [0, 0, 0]
+        d = self.dim
+        Wz = np.zeros((d, d, self.size))
+        for k in range(d):
+            for l in range(d):
+                a = [0] * d
                 a[k] += 1
                 a[l] += 1
                 if k == l:
@@ -195,12 +196,19 @@ class HermiteBasis:
 
     def first_moment_weights(self, Lchol: np.ndarray) -> np.ndarray:
         """Weights ``w[i, :]`` with :math:`\\langle y_i | x\\rangle = w_i\\cdot c(x)/c_0(x)`."""
-        wz = np.zeros((3, self.size))
-        for k in range(3):
-            a = [0, 0, 0]
+        wz = np.zeros((self.dim, self.size))
+        for k in range(self.dim):
+            a = [0] * self.dim
             a[k] = 1
             wz[k, self.index[tuple(a)]] = 1.0
         return Lchol @ wz
+
+
+def _compositions(total: int, parts: int) -> list[tuple[int, ...]]:
+    """Tuples of ``parts`` non-negative integers summing to ``total``, first entry descending."""
+    if parts == 1:
+        return [(total,)]
+    return [(first, *rest) for first in range(total, -1, -1) for rest in _compositions(total - first, parts - 1)]
 
 
 def equivalent_harmonic(h: Harvester) -> tuple[float, np.ndarray]:

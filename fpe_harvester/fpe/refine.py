@@ -34,17 +34,18 @@ import os
 import time
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
-from typing import Any
+from typing import Any, Protocol
 
 import numpy as np
 
+from ..errors import NotConvergedError
 from ..model import Harvester
-from .discretize import Level, Whitening, solve_level
+from .discretize import Whitening, level_gigabytes
 from .estimate import mesh_error, tail_error
 from .mesh import XMesh
 
 __all__ = ["Plan", "Estimate", "RefinementResult", "refine", "level_gigabytes", "default_memory_gb",
-           "MESH_SHARE"]
+           "MESH_SHARE", "Discretization", "LevelLike"]
 
 #: Observables carried through the refinement (each gets its own estimate).
 OBSERVABLES = ("eta", "V2", "Pin", "v2", "vV", "x2")
@@ -55,12 +56,58 @@ MESH_SHARE = 0.25
 #: Lowest Hermite degree of a mesh check (lower levels say little about the mesh).
 M_CHECK = 6
 
-#: Highest Hermite degree per element of the half mesh. Beyond it the levels are not
-#: resolved and may be wrong while looking physical. Measured on 8 elements per half: M = 16
-#: gives eta 0.4004351 for 0.4003794 (n = 6, a = 2; M = 14 there: 0.4003764) and 0.4722403
-#: for 0.4722554 (n = 8, a = 0.5), M = 18 gives 0.2002 for 0.2069 (n = 1.5, a = 2) and
-#: 0.4463 for 0.44656 (n = 8, a = 1); M = 12 is within the mesh error in every case.
-DEGREES_PER_ELEMENT = 1.5
+
+
+class LevelLike(Protocol):
+    """What the refinement reads of a solved level (:class:`~.discretize.Level`,
+    :class:`~.kink.KinkLevel`)."""
+
+    M: int
+    moments: dict[str, float]
+    seconds: float
+    dofs: int
+
+    @property
+    def size(self) -> int: ...  # the mesh knob the level was solved on
+
+    @property
+    def elements(self) -> int: ...
+
+    def summary(self) -> dict[str, Any]: ...
+
+
+class Discretization(Protocol):
+    """A family of levels indexed by the Hermite degree M and an integer mesh size (one
+    refinement step doubles it): the 1-D Hermite x DG discretization
+    (:class:`~.discretize.HermiteDG`, size = elements per half) or the kink's
+    (:class:`~.kinkdisc.KinkDG`, size = subdivisions of the base (x, v) mesh)."""
+
+    order: int
+    #: Hermite errors with algebraic tails (potentials with n < 2, see :mod:`.estimate`).
+    algebraic: bool
+
+    def solve(self, M: int, size: int, lower: LevelLike | None = None) -> LevelLike:
+        """Solve level (M, size); ``lower`` is a solved lower degree on the same mesh."""
+        ...
+
+    def unknowns(self, M: int, size: int) -> int: ...
+
+    def gigabytes(self, M: int, size: int) -> float: ...
+
+    def max_degree(self, size: int) -> int:
+        """The highest M the mesh of ``size`` carries."""
+        ...
+
+    def work(self, M: int, size: int) -> tuple[float, float]:
+        """Cost model of a level, ``(w, u)``: the time scales like :math:`w\,u^q`, q in
+        :attr:`work_exponents` (measured from the solved levels)."""
+        ...
+
+    work_exponents: tuple[float, float]
+
+    def describe(self, size: int) -> str:
+        """The mesh of ``size`` in words (e.g. '16 elements')."""
+        ...
 
 
 @dataclass(frozen=True)
@@ -133,7 +180,7 @@ class Estimate:
     moments: dict[str, float]
     hermite: dict[str, float]
     mesh: dict[str, float]
-    level: Level
+    level: LevelLike
     mesh_checked: bool = False
 
     @property
@@ -173,13 +220,11 @@ class _Stop(Exception):
 
 
 class _Levels:
-    """Solved levels of one refinement, keyed by (M, half_elements), with the plan's limits."""
+    """Solved levels of one refinement, keyed by (M, size), with the plan's limits."""
 
-    def __init__(self, h: Harvester, plan: Plan, progress: Callable[[str], None] | None) -> None:
-        self.h, self.plan, self.progress = h, plan, progress
-        self.w = Whitening.of(h)
-        self.base = plan.mesh(h, self.w)
-        self.cache: dict[tuple[int, int], Level] = {}
+    def __init__(self, disc: Discretization, plan: Plan, progress: Callable[[str], None] | None) -> None:
+        self.disc, self.plan, self.progress = disc, plan, progress
+        self.cache: dict[tuple[int, int], LevelLike] = {}
         self.failed: dict[tuple[int, int], str] = {}
         self.t0 = time.perf_counter()
 
@@ -189,25 +234,25 @@ class _Levels:
 
     def limit(self, M: int, nh: int) -> str:
         """Why level (M, nh) may not be computed ('' if it may)."""
-        plan = self.plan
+        plan, disc = self.plan, self.disc
         if M > plan.max_M:
             return f"Hermite degree M = {M} would exceed max_M = {plan.max_M}"
         if nh > plan.max_half_elements:
-            return f"{2 * nh} elements would exceed {2 * plan.max_half_elements}"
-        if 2 * nh * _block_size(M, plan.order) > plan.max_dofs:
+            return f"{disc.describe(nh)} would exceed {disc.describe(plan.max_half_elements)}"
+        if disc.unknowns(M, nh) > plan.max_dofs:
             return f"unknowns would exceed max_dofs = {plan.max_dofs}"
-        gb = level_gigabytes(M, nh, plan.order)
+        gb = disc.gigabytes(M, nh)
         if gb > plan.memory_limit:
-            return (f"memory: level M = {M}, {2 * nh} elements would need about {gb:.3g} GB, more "
+            return (f"memory: level M = {M}, {disc.describe(nh)} would need about {gb:.3g} GB, more "
                     f"than max_gb = {plan.memory_limit:.3g} GB")
         if plan.max_seconds is not None:
-            need = _predicted_seconds(self.cache, M, nh, plan.order)
+            need = _predicted_seconds(self.cache, M, nh, disc)
             if self.elapsed + need > plan.max_seconds:
                 return (f"time budget max_seconds = {plan.max_seconds:g} s: {self.elapsed:.3g} s used, "
-                        f"the next level (M = {M}, {2 * nh} elements) would need about {need:.3g} s more")
+                        f"the next level (M = {M}, {disc.describe(nh)}) would need about {need:.3g} s more")
         return ""
 
-    def get(self, M: int, nh: int) -> Level:
+    def get(self, M: int, nh: int) -> LevelLike:
         """Level (M, nh); raises :class:`_Stop` at a limit or if it fails."""
         key = (M, nh)
         if key in self.cache:
@@ -217,22 +262,23 @@ class _Levels:
         why = self.limit(M, nh)
         if why:
             raise _Stop(why)
+        lower = max((m for (m, k) in self.cache if k == nh and m < M), default=None)
         try:
-            lv = solve_level(self.h, M, self.base.with_elements(nh), self.plan.order, self.w)
-        except (ArithmeticError, ValueError, np.linalg.LinAlgError) as exc:
-            self.failed[key] = f"level M = {M}, {2 * nh} elements failed ({exc})"
+            lv = self.disc.solve(M, nh, None if lower is None else self.cache[(lower, nh)])
+        except (ArithmeticError, ValueError, np.linalg.LinAlgError, NotConvergedError) as exc:
+            self.failed[key] = f"level M = {M}, {self.disc.describe(nh)} failed ({exc})"
             raise _Stop(self.failed[key]) from exc
         bad = _unphysical(lv)
         if bad:
-            self.failed[key] = f"level M = {M}, {2 * nh} elements is unphysical ({bad})"
+            self.failed[key] = f"level M = {M}, {self.disc.describe(nh)} is unphysical ({bad})"
             raise _Stop(self.failed[key])
         self.cache[key] = lv
         if self.progress is not None:
-            self.progress(f"M={M} elements={2 * nh} dofs={lv.dofs} eta={lv.moments['eta']:.10g} "
+            self.progress(f"M={M} ({self.disc.describe(nh)}) dofs={lv.dofs} eta={lv.moments['eta']:.10g} "
                           f"({lv.seconds:.2f} s)")
         return lv
 
-    def get_or_none(self, M: int, nh: int) -> Level | None:
+    def get_or_none(self, M: int, nh: int) -> LevelLike | None:
         """Level (M, nh), or None if it fails (limits still raise)."""
         if (M, nh) not in self.cache and (M, nh) not in self.failed:
             why = self.limit(M, nh)
@@ -249,20 +295,22 @@ class _Levels:
         return [lv.summary() for _, lv in sorted(self.cache.items())]
 
 
-def refine(h: Harvester, tol: float, plan: Plan, progress: Callable[[str], None] | None = None
+def refine(disc: Discretization, tol: float, plan: Plan, progress: Callable[[str], None] | None = None
            ) -> RefinementResult:
-    """Refine M and the mesh until the estimated relative error on eta is below ``tol``.
+    """Refine M and the mesh of ``disc`` until the estimated relative error on eta is below ``tol``.
 
-    See the module docstring. Returns the best estimate (the one that meets tol, or at a
-    limit the one with the smallest estimated error) and the history of the levels.
+    See the module docstring. ``plan`` gives the starting level (``M``, ``half_elements``:
+    the discretization's mesh size) and the limits. Returns the best estimate (the one that
+    meets tol, or at a limit the one with the smallest estimated error) and the history of
+    the levels.
     """
-    levels = _Levels(h, plan, progress)
+    levels = _Levels(disc, plan, progress)
     found: list[Estimate] = []
     try:
         if plan.fixed:
             est = _fixed(levels, plan.M, plan.half_elements)
             ok = est.relative <= tol
-            reason = "" if ok else (f"fixed M = {plan.M}, {2 * plan.half_elements} elements: estimated "
+            reason = "" if ok else (f"fixed M = {plan.M}, {disc.describe(plan.half_elements)}: estimated "
                                     f"relative error {est.relative:.2g} > tol = {tol:.2g}")
             return RefinementResult(est, ok, reason, levels.history(), levels.elapsed)
         M, nh, mesh = plan.M, plan.half_elements, math.inf
@@ -291,7 +339,7 @@ def _hermite(levels: _Levels, nh: int, M: int, tol: float, mesh: float, found: l
     """Raise M (steps of 2) on ``nh`` elements per half until the Hermite error is below
     ``(1 - MESH_SHARE) * tol`` (returns ``"converged"``), the sequence stops contracting at
     M >= 10 (``"stalled"``: the mesh is suspect), or M would exceed what the mesh carries,
-    :data:`DEGREES_PER_ELEMENT` times the elements per half (``"resolution"``). Every
+    the discretization's ``max_degree`` of the mesh (``"resolution"``). Every
     estimate on the way is appended to ``found``, its mesh part the last relative mesh
     error ``mesh``.
 
@@ -302,10 +350,10 @@ def _hermite(levels: _Levels, nh: int, M: int, tol: float, mesh: float, found: l
     are 1.4e-4 off at M = 6 and 1.7e-5 at M = 12; n = 8, a = 2: 2e-4 and 3e-5), hence the
     check at M - 2 >= 8 (n = 8, a = 0.5: 9.2e-6 at M = 8, 1.1e-5 at M = 12).
     """
-    algebraic = levels.h.n < 2.0
+    algebraic = levels.disc.algebraic
     est = None
     while True:
-        if M > DEGREES_PER_ELEMENT * nh:
+        if M > levels.disc.max_degree(nh):
             return est, "resolution"
         est = _hermite_estimate(levels, nh, M, algebraic, mesh)
         if est is not None and M >= M_CHECK + 4 and not math.isfinite(mesh):
@@ -329,7 +377,7 @@ def _stalled(values: Sequence[float]) -> bool:
     return abs(e2) >= abs(e1) or (e1 * e2 < 0.0 and abs(e2) >= 0.5 * abs(e1))
 
 
-def _sequence(levels: _Levels, nh: int, M: int) -> list[Level]:
+def _sequence(levels: _Levels, nh: int, M: int) -> list[LevelLike]:
     """The levels M - 6, M - 4, M - 2, M on ``nh`` (lower ones solved as needed); a failed
     lower level ends the sequence (a low Hermite truncation may lose positivity)."""
     seq = [levels.get(M, nh)]
@@ -393,15 +441,15 @@ def _mesh_check(levels: _Levels, est: Estimate, nh: int, Mc: int | None = None,
     coarse = None
     d = abs(a.moments["eta"] - b.moments["eta"]) / abs(a.moments["eta"])
     if (2.0 * d > enough and Mc <= M_CHECK + 2 and nh % 2 == 0
-            and Mc <= DEGREES_PER_ELEMENT * (nh // 2)):
+            and Mc <= levels.disc.max_degree(nh // 2)):
         coarse = levels.get_or_none(Mc, nh // 2)
     meshes = ([coarse] if coarse is not None else []) + [a, b]
-    sizes = [lv.mesh.half_elements for lv in meshes]
+    sizes = [lv.size for lv in meshes]
     mesh = {}
     for name in OBSERVABLES:
         values = [lv.moments[name] for lv in meshes]
         # the error of nh elements is that of 2 nh plus their difference
-        mesh[name] = abs(values[-2] - values[-1]) + mesh_error(sizes, values, levels.plan.order)
+        mesh[name] = abs(values[-2] - values[-1]) + mesh_error(sizes, values, levels.disc.order)
     return Estimate(est.moments, est.hermite, mesh, est.level, True)
 
 
@@ -434,7 +482,7 @@ def _stopped(why: str, found: list[Estimate], levels: _Levels, tol: float) -> Re
     if not good and hermite_only:
         est = min(hermite_only, key=lambda e: e.error_M / abs(e.moments["eta"]))
         try:
-            est = _mesh_check(levels, est, est.level.mesh.half_elements)
+            est = _mesh_check(levels, est, est.level.size)
         except _Stop:
             pass
         else:
@@ -453,26 +501,17 @@ def _stopped(why: str, found: list[Estimate], levels: _Levels, tol: float) -> Re
     reason = (f"tol = {tol:.2g} not reached: estimated relative error on eta {best.relative:.2g} "
               f"(Hermite part {best.error_M / abs(best.moments['eta']):.2g}, mesh part "
               f"{best.error_x / abs(best.moments['eta']):.2g}{checked}) at M = {best.level.M}, "
-              f"{best.level.mesh.elements} elements; stopped: {why}")
+              f"{best.level.elements} elements; stopped: {why}")
     return RefinementResult(best, False, reason, levels.history(), levels.elapsed)
 
 
-def _unphysical(lv: Level) -> str:
+def _unphysical(lv: LevelLike) -> str:
     """Why the moments of ``lv`` cannot be a density's (empty if they can)."""
     mo = lv.moments
     for name in ("V2", "Pin", "v2", "x2", "eta"):
         if not math.isfinite(mo[name]) or mo[name] <= 0.0:
             return f"{name} = {mo[name]:.3g}"
     return ""
-
-
-def level_gigabytes(M: int, half_elements: int, order: int) -> float:
-    """Memory (GB) of one level's factorization: the dense LU of every element block of the
-    half mesh (:math:`N_h n_b^2` doubles) plus half as much again for the coupling solves,
-    the sparse operator and temporaries, plus 0.2 GB (measured peaks: 0.45 GB at M = 12 and
-    1.58 GB at M = 16 with 8 elements per half, predicted 0.62 and 1.64)."""
-    nb = _block_size(M, order)
-    return 1.5 * half_elements * nb * nb * 8 / 1e9 + 0.2
 
 
 def default_memory_gb() -> float:
@@ -484,28 +523,27 @@ def default_memory_gb() -> float:
     return max(0.5 * total / 1e9, 1.0)
 
 
-def _block_size(M: int, order: int) -> int:
-    """Unknowns per element, :math:`n_b = (p + 1)\\binom{M+3}{3}`."""
-    return (order + 1) * math.comb(M + 3, 3)
-
-
-def _predicted_seconds(cache: dict[tuple[int, int], Level], M: int, nh: int, order: int) -> float:
+def _predicted_seconds(cache: dict[tuple[int, int], LevelLike], M: int, nh: int, disc: Discretization
+                       ) -> float:
     """Predicted wall time (s) of level (M, nh) from the costliest measured level.
 
-    Cost = elements x :math:`n_b^q`, :math:`n_b = (p+1)\\binom{M+3}{3}`. The dense block LU
-    gives q = 3 asymptotically; at moderate M assembly and O(n_b^2) work dominate, so q is
-    measured from the two costliest levels on one mesh and clipped to [2, 3] (timings are
-    noisy on a busy machine; 3 when only one level is known).
+    Cost :math:`w\,u^q` with ``(w, u) = disc.work(M, nh)`` (1-D: elements and the block
+    size :math:`n_b`; the dense block LU gives q = 3 asymptotically, but at moderate M
+    assembly and O(n_b^2) work dominate). q is measured from the two costliest levels on
+    one mesh and clipped to ``disc.work_exponents`` (timings are noisy on a busy machine;
+    the upper end when only one level is known).
     """
     if not cache:
         return 0.0
-    unit = lambda m: float(_block_size(m, order))  # noqa: E731  n_b
-    ranked = sorted(cache.items(), key=lambda kv: kv[0][1] * unit(kv[0][0]) ** 3)
+    lo, hi = disc.work_exponents
+    cost = lambda key, q: disc.work(*key)[0] * disc.work(*key)[1] ** q  # noqa: E731
+    ranked = sorted(cache.items(), key=lambda kv: cost(kv[0], hi))
     (m0, k0), lv0 = ranked[-1]
-    q = 3.0
+    q = hi
     same = [(m, lv) for (m, k), lv in ranked[:-1] if k == k0 and m < m0]
     if same and lv0.seconds > 0.0:
         m1, lv1 = same[-1]
-        if lv1.seconds > 0.0:
-            q = min(max(math.log(lv0.seconds / lv1.seconds) / math.log(unit(m0) / unit(m1)), 2.0), 3.0)
-    return lv0.seconds * (nh / k0) * (unit(M) / unit(m0)) ** q
+        u0, u1 = disc.work(m0, k0)[1], disc.work(m1, k0)[1]
+        if lv1.seconds > 0.0 and u0 > u1:
+            q = min(max(math.log(lv0.seconds / lv1.seconds) / math.log(u0 / u1), lo), hi)
+    return lv0.seconds * cost((M, nh), q) / cost((m0, k0), q)

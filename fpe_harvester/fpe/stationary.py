@@ -31,7 +31,7 @@ from ..errors import MethodNotAvailableError, NotConvergedError, ParameterError,
 from ..model import Harvester
 from ..result import Stats, Status
 from .assemble import _element
-from .discretize import Level
+from .discretize import HermiteDG, Level, Whitening
 from .estimate import reported_eta_error
 from .refine import Plan, RefinementResult, refine
 
@@ -229,7 +229,8 @@ def stationary(
     plan = default_plan(h, M, half_elements, order, theta)
     plan = Plan(**{**plan.__dict__, "max_M": max_M, "max_dofs": max_dofs, "max_seconds": max_seconds,
                     "max_gb": max_gb})
-    ref = refine(h, tol, plan, progress)
+    w = Whitening.of(h)
+    ref = refine(HermiteDG(h, plan.mesh(h, w), plan.order, w), tol, plan, progress)
     stats = _stats(h, ref, tol)
     lv = None if ref.best is None else ref.best.level
     if lv is None:

@@ -6,7 +6,7 @@ from collections.abc import Callable
 
 import pytest
 
-from fpe_harvester.fpe import refine as refine_mod
+from fpe_harvester.fpe import discretize
 
 
 @pytest.fixture
@@ -15,13 +15,13 @@ def break_levels_from(monkeypatch: pytest.MonkeyPatch) -> Callable[[int], None]:
     ("simulated breakdown") inside the refinement."""
 
     def install(M_fail: int) -> None:
-        real = refine_mod.solve_level
+        real = discretize.solve_level
 
         def flaky(h, M, mesh, order, w):  # noqa: ANN001, ANN202
             if M >= M_fail:
                 raise FloatingPointError("simulated breakdown")
             return real(h, M, mesh, order, w)
 
-        monkeypatch.setattr(refine_mod, "solve_level", flaky)
+        monkeypatch.setattr(discretize, "solve_level", flaky)
 
     return install

@@ -8,6 +8,7 @@ import numpy as np
 import pytest
 
 from fpe_harvester import Harvester, Status, solve
+from fpe_harvester.fpe import discretize
 from fpe_harvester.fpe import refine as refine_mod
 from fpe_harvester.fpe import stationary
 from fpe_harvester.fpe.discretize import Whitening, solve_level
@@ -76,7 +77,7 @@ def test_degree_never_exceeds_what_the_mesh_carries() -> None:
     h = Harvester.build(a=0.5, n=3)
     sol = stationary(h, tol=1e-7, half_elements=2, max_seconds=4.0, grid=3)
     for lv in sol.stats.info["history"]:
-        assert lv["M"] <= refine_mod.DEGREES_PER_ELEMENT * lv["elements"] // 2, lv
+        assert lv["M"] <= discretize.DEGREES_PER_ELEMENT * lv["elements"] // 2, lv
 
 
 def test_sub_quadratic_error_includes_the_slow_moment() -> None:
@@ -84,7 +85,8 @@ def test_sub_quadratic_error_includes_the_slow_moment() -> None:
     of V2 and Pin (the slow moment), not eta's own, pre-asymptotic, tail."""
     h = Harvester.build(a=0.5, n=1.5)
     plan = default_plan(h)
-    levels = refine_mod._Levels(h, plan, None)
+    w = discretize.Whitening.of(h)
+    levels = refine_mod._Levels(discretize.HermiteDG(h, plan.mesh(h, w), plan.order, w), plan, None)
     est = refine_mod._hermite_estimate(levels, 8, 10, True, math.inf)
     own = refine_mod.tail_error([levels.cache[(m, 8)].moments["eta"] for m in (6, 8, 10)], [6, 8, 10])[0]
     slow = max(est.hermite[k] / est.moments[k] for k in ("V2", "Pin"))

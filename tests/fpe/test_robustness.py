@@ -7,6 +7,7 @@ import math
 import pytest
 
 from fpe_harvester import Harvester, ParameterError, Status, solve
+from fpe_harvester.fpe import discretize
 from fpe_harvester.fpe import refine as refine_mod
 from fpe_harvester.fpe.discretize import Whitening, solve_level
 from fpe_harvester.fpe.hermite import equivalent_harmonic
@@ -77,7 +78,7 @@ def test_no_solvable_level_gives_empty_stats(monkeypatch: pytest.MonkeyPatch) ->
     def broken(*args, **kwargs):  # noqa: ANN002, ANN003, ANN202
         raise FloatingPointError("simulated breakdown")
 
-    monkeypatch.setattr(refine_mod, "solve_level", broken)
+    monkeypatch.setattr(discretize, "solve_level", broken)
     r = solve(Harvester.build(a=0.5, n=4), "fpe", tol=1e-3)
     assert r.status is Status.NOT_CONVERGED and r.eta is None and "method='mc'" in r.message
 
@@ -111,17 +112,20 @@ def test_predicted_cost_scales_with_block_size() -> None:
             self.seconds = seconds
 
     nb = {m: 4 * math.comb(m + 3, 3) for m in (4, 6, 8)}
+    h = Harvester.build(a=0.5, n=4)
+    w = discretize.Whitening.of(h)
+    disc = discretize.HermiteDG(h, default_plan(h).mesh(h, w), 3, w)
     # one measured level: the asymptotic cubic growth of the dense block LU
     cache = {(6, 8): _Lv(1.0)}
-    assert refine_mod._predicted_seconds(cache, 8, 8, 3) == pytest.approx((nb[8] / nb[6]) ** 3)
-    assert refine_mod._predicted_seconds(cache, 6, 16, 3) == pytest.approx(2.0)
+    assert refine_mod._predicted_seconds(cache, 8, 8, disc) == pytest.approx((nb[8] / nb[6]) ** 3)
+    assert refine_mod._predicted_seconds(cache, 6, 16, disc) == pytest.approx(2.0)
     # measured growth between M = 4 and 6 is used, clipped to [2, 3]
     cache = {(4, 8): _Lv((nb[4] / nb[6]) ** 2.5), (6, 8): _Lv(1.0)}
-    assert refine_mod._predicted_seconds(cache, 8, 8, 3) == pytest.approx((nb[8] / nb[6]) ** 2.5)
+    assert refine_mod._predicted_seconds(cache, 8, 8, disc) == pytest.approx((nb[8] / nb[6]) ** 2.5)
     cache = {(4, 8): _Lv(0.9), (6, 8): _Lv(1.0)}
-    assert refine_mod._predicted_seconds(cache, 8, 8, 3) == pytest.approx((nb[8] / nb[6]) ** 2)
+    assert refine_mod._predicted_seconds(cache, 8, 8, disc) == pytest.approx((nb[8] / nb[6]) ** 2)
     cache = {(4, 8): _Lv(1e-9), (6, 8): _Lv(1.0)}
-    assert refine_mod._predicted_seconds(cache, 8, 8, 3) == pytest.approx((nb[8] / nb[6]) ** 3)
+    assert refine_mod._predicted_seconds(cache, 8, 8, disc) == pytest.approx((nb[8] / nb[6]) ** 3)
 
 
 def test_stalled_hermite_sequence_is_recognized() -> None:
