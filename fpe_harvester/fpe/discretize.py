@@ -193,6 +193,11 @@ class Level:
     def elements(self) -> int:
         return self.mesh.elements
 
+    def info(self) -> dict[str, Any]:
+        """Discretization details for the result's ``info``."""
+        return {"scheme": "x", "M": self.M, "order": self.order, "elements": self.mesh.elements,
+                "L": self.mesh.L, "dofs": self.dofs, "kappa_eq": self.whitening.kappa}
+
     def summary(self) -> dict[str, Any]:
         """JSON-ready description (for the refinement history)."""
         return {

@@ -67,49 +67,59 @@ __all__ = ["KinkFrame", "KinkLevel", "solve_kink_level", "ModePreconditioner"]
 
 @dataclass(frozen=True)
 class KinkFrame:
-    """Gaussian weight :math:`N(b v, \\Sigma)` of (V, xi) and its factor L.
+    """Gaussian weight :math:`N(b v + c x, \\Sigma)` of (V, xi) and its factor L.
 
     Attributes
     ----------
     Sigma : ndarray (2, 2)
         Covariance of the weight (V first), positive definite.
     shift : ndarray (2,)
-        Regression b of (V, xi) on v: the weight is centred on b v (zero: not shifted).
+        b: the weight's centre moves with v (zero: not shifted).
+    xshift : ndarray (2,)
+        c: the weight's centre moves with x (zero: not shifted).
     """
 
     Sigma: np.ndarray
     shift: np.ndarray = field(default_factory=lambda: np.zeros(2))
+    xshift: np.ndarray = field(default_factory=lambda: np.zeros(2))
 
     def __post_init__(self) -> None:
         object.__setattr__(self, "Sigma", np.asarray(self.Sigma, dtype=float).reshape(2, 2))
         object.__setattr__(self, "shift", np.asarray(self.shift, dtype=float).reshape(2))
+        object.__setattr__(self, "xshift", np.asarray(self.xshift, dtype=float).reshape(2))
         if not np.all(np.linalg.eigvalsh(self.Sigma) > 0.0):
             raise ValueError(f"Sigma must be positive definite, got {self.Sigma.tolist()}")
 
     @classmethod
-    def from_moments(cls, h: Harvester, V2: float, Pin: float, v2: float, vV: float,
-                     shifted: bool = False, widen: float = 1.0) -> KinkFrame:
-        """The weight from estimates of the stationary moments.
+    def from_moments(cls, h: Harvester, mo: dict[str, float], shifted: bool = False,
+                     xshifted: float = 0.0) -> KinkFrame:
+        """The weight from estimates ``mo`` of the stationary moments (V2, Pin, v2, vV; with
+        ``xshifted`` also x2, xV, xxi).
 
         The marginal covariance of (V, xi) follows from V2 and Pin by two exact identities:
         :math:`\\langle\\xi^2\\rangle = D/\\tau` and
         :math:`\\langle V\\xi\\rangle = K_c\\langle v\\xi\\rangle/(1/\\tau_p + 1/\\tau)`
         (:math:`d\\langle V\\xi\\rangle/dt = 0`). ``shifted`` centres it on the regression
-        :math:`b = (\\langle vV\\rangle, \\langle v\\xi\\rangle)/\\langle v^2\\rangle` and
-        keeps the conditional covariance; ``widen`` multiplies the covariance.
+        :math:`b = \\langle w v\\rangle/\\langle v^2\\rangle` on v (:math:`\\langle xv\\rangle = 0`);
+        ``xshifted`` (a fraction f in [0, 1]) also on x,
+        :math:`c = \\langle w x\\rangle/\\langle x^2\\rangle`, and removes the fraction f of
+        the variance that the regression on x explains from the covariance.
         """
         p = h.params
-        vxi = Pin / p.sigma
+        vxi = mo["Pin"] / p.sigma
         cov = p.Kc * vxi / (1.0 / p.tau_p + 1.0 / p.tau)
-        Sigma = np.array([[V2, cov], [cov, p.D / p.tau]])
-        b = np.zeros(2)
+        Sigma = np.array([[mo["V2"], cov], [cov, p.D / p.tau]])
+        b, c = np.zeros(2), np.zeros(2)
         if shifted:
-            b = np.array([vV, vxi]) / v2
-            Sigma = Sigma - np.outer(b, b) * v2
+            b = np.array([mo["vV"], vxi]) / mo["v2"]
+            Sigma = Sigma - np.outer(b, b) * mo["v2"]
+        if xshifted:
+            c = np.array([mo["xV"], 0.0]) / mo["x2"]
+            Sigma = Sigma - xshifted * np.outer(c, c) * mo["x2"]
         # keep the weight a proper Gaussian when the estimates are rough
         lam, U = np.linalg.eigh(Sigma)
         lam = np.maximum(lam, 1e-3 * lam.max())
-        return cls((U * lam) @ U.T * widen, b)
+        return cls((U * lam) @ U.T, b, c)
 
     def factor(self, h: Harvester) -> tuple[np.ndarray, float]:
         """``(L, s)``: :math:`L L^T = \\Sigma` with :math:`g^T L = (s, 0)`,
@@ -135,8 +145,13 @@ class _Hierarchy:
     K0m: np.ndarray          # K0, K1 and the parity in the mode basis (R^T H R)
     K1m: np.ndarray
     Pm: np.ndarray
-    a0: float                # a0(v) = a0 - gamma_e v on x > 0
+    K0: sp.csr_matrix        # K0, K1 and K2 in the Hermite basis
+    K1: sp.csr_matrix
+    K2: sp.csr_matrix        # multiplies x (the frame's x shift)
+    K2m: np.ndarray
+    a0: float                # speed of mode i on x > 0: a0 - gamma_e v + kappa x + lam_i
     gamma_e: float
+    kappa: float
 
     @classmethod
     def of(cls, h: Harvester, M: int, frame: KinkFrame) -> _Hierarchy:
@@ -144,21 +159,24 @@ class _Hierarchy:
         hb = HermiteBasis(M, dim=2)
         L, s = frame.factor(h)
         Li = np.linalg.inv(L)
-        b = frame.shift
+        b, c = frame.shift, frame.xshift
         g = np.array([-p.Kv, p.sigma])
         gamma_e = p.gamma - float(g @ b) / p.m
+        kappa = float(g @ c) / p.m
         Bw = np.diag([-1.0 / p.tau_p, -1.0 / p.tau])
         Qw = np.diag([0.0, 2.0 * p.D / p.tau**2])
         Bz = Li @ Bw @ L - np.outer(Li @ b, g @ L) / p.m
-        # z' = Bz z + Li (Bw b + Kc e_V + gamma_e b) v + Li b a/m (x > 0) + noise
+        # w = L z + b v + c x, v' = -a/m - gamma_e v + kappa x + (s/m) z_1 (x > 0):
+        # z' = Bz z + Li (Bw b + Kc e_V - c + gamma_e b) v + Li (Bw c - kappa b) x + Li b a/m + noise
         K0 = hb.generator(Bz, Li @ Qw @ Li.T) + hb.lowering(Li @ b * (h.a / p.m))
-        K1 = hb.lowering(Li @ (Bw @ b + np.array([p.Kc, 0.0]) + gamma_e * b))
+        K1 = hb.lowering(Li @ (Bw @ b + np.array([p.Kc, 0.0]) - c + gamma_e * b))
+        K2 = hb.lowering(Li @ (Bw @ c - kappa * b)).tocsr()
         G = (s / p.m) * hb.multiply(0).toarray()
         lam, R = np.linalg.eigh(G)
         R[np.abs(R) < 1e-15] = 0.0
         par = hb.parity()
         return cls(hb, L, lam, R, R.T @ (K0 @ R), R.T @ (K1 @ R), R.T @ (par[:, None] * R),
-                   -h.a / p.m, gamma_e)
+                   K0.tocsr(), K1.tocsr(), K2, R.T @ (K2 @ R), -h.a / p.m, gamma_e, kappa)
 
 
 @dataclass(frozen=True)
@@ -171,13 +189,14 @@ class _Plane:
     S_S: sp.csr_matrix       # mirror inflow at x = 0 (times the parity)
     S_K0: sp.csr_matrix      # -mass
     S_K1: sp.csr_matrix      # -mass * v
+    S_K2: sp.csr_matrix      # -mass * x
     Mx: sp.csr_matrix
     Dv: sp.csr_matrix
     faces: list[tuple[float, sp.csr_matrix, sp.csr_matrix]]   # (v_j, up, down) per v node
     integrals: dict[str, np.ndarray]
 
 
-def _plane(h: Harvester, mesh: PlaneMesh, p: int, gamma_e: float) -> _Plane:
+def _plane(h: Harvester, mesh: PlaneMesh, p: int, gamma_e: float, kappa: float) -> _Plane:
     """Assemble the scalar matrices of the upwind DG weak form on the half plane x > 0.
 
     Per element K and test function :math:`\\psi`, for every mode (velocity
@@ -210,7 +229,7 @@ def _plane(h: Harvester, mesh: PlaneMesh, p: int, gamma_e: float) -> _Plane:
         tl, tr = X.left_of(node), X.right_of(node)
         Xpos = Xpos + sp.csr_matrix(np.outer(tl - tr, tl))
         Xneg = Xneg + sp.csr_matrix(np.outer(tl - tr, tr))
-    S_I = (-sp.kron(Dx, Mvv) - sp.kron(Mx, (-h.a / m) * Dv - gamma_e * Dvv)
+    S_I = (-sp.kron(Dx, Mvv) - sp.kron(Mx, (-h.a / m) * Dv - gamma_e * Dvv) - kappa * sp.kron(X.mass(power=1), Dv)
            + sp.kron(Xpos, Mv_up) + sp.kron(Xneg, Mv_dn))
     flip = sp.csr_matrix(np.fliplr(np.eye(Vl.size)))
     S_S = -sp.kron(lft, Mv_up @ flip)
@@ -220,21 +239,73 @@ def _plane(h: Harvester, mesh: PlaneMesh, p: int, gamma_e: float) -> _Plane:
         faces.append((float(vj), sp.csr_matrix(np.outer(tb - ta, tb)), sp.csr_matrix(np.outer(tb - ta, ta))))
     Ix, Iv = X.integral(), Vl.integral()
     integrals = {"1": np.kron(Ix, Iv), "v": np.kron(Ix, Vl.integral(1)), "v2": np.kron(Ix, Vl.integral(2)),
-                 "x2": np.kron(X.integral(2), Iv)}
+                 "x2": np.kron(X.integral(2), Iv), "x": np.kron(X.integral(1), Iv),
+                 "xv": np.kron(X.integral(1), Vl.integral(1))}
     return _Plane(X, Vl, S_I.tocsr(), S_S.tocsr(), -sp.kron(Mx, Mv).tocsr(), -sp.kron(Mx, Mvv).tocsr(),
-                  Mx, Dv, faces, integrals)
+                  -sp.kron(X.mass(power=1), Mv).tocsr(), Mx, Dv, faces, integrals)
 
 
-def _mode_transport(pl: _Plane, a0: float, gamma_e: float, lam: np.ndarray) -> list[sp.csr_matrix]:
+def _face_parts(pl: _Plane, hi: _Hierarchy) -> tuple[np.ndarray, np.ndarray]:
+    """x-matrices of the upwind flux of every mode through every face v = v_j: the element
+    masses weighted by the positive and negative part of the mode's speed
+    :math:`a_0 - \\gamma_e v_j + \\kappa x + \\lambda_i` (linear in x along the face), shape
+    ``(nodes, modes, x elements, p + 1, p + 1)``."""
+    speed0 = hi.a0 - hi.gamma_e * pl.Vl.nodes[:, None] + hi.lam[None, :]
+    P, N = pl.X.signed_parts(speed0.ravel(), hi.kappa)
+    shape = (*speed0.shape, *P.shape[1:])
+    return P.reshape(shape), N.reshape(shape)
+
+
+def _mode_transport(pl: _Plane, hi: _Hierarchy, parts: tuple[np.ndarray, np.ndarray]) -> list[sp.csr_matrix]:
     """The scalar transport matrix of every mode: ``S_I`` plus its v-flux terms."""
+    P, N = parts
     out = []
-    for li in lam:
-        vmat = -li * pl.Dv
-        for vj, U, D in pl.faces:
-            speed = a0 - gamma_e * vj + li
-            vmat = vmat + (U * speed if speed > 0.0 else D * speed)
-        out.append((pl.S_I + sp.kron(pl.Mx, vmat)).tocsr())
+    for i, li in enumerate(hi.lam):
+        A = pl.S_I + sp.kron(pl.Mx, -li * pl.Dv)
+        for j, (_, U, D) in enumerate(pl.faces):
+            A = A + sp.kron(sp.block_diag(list(P[j, i])), U) + sp.kron(sp.block_diag(list(N[j, i])), D)
+        out.append(A.tocsr())
     return out
+
+
+class _ModeOperator:
+    """The operator in the mode basis, applied to all modes at once: the mode-independent
+    sparse parts as one sparse-times-dense product, the v faces (whose upwind side depends
+    on the mode) by gathering the traces below and above every v node."""
+
+    def __init__(self, pl: _Plane, hi: _Hierarchy, parts: tuple[np.ndarray, np.ndarray]) -> None:
+        self.pl, self.hi = pl, hi
+        self.S_G = -sp.kron(pl.Mx, pl.Dv).tocsr()
+        nvd, p1 = pl.Vl.size, pl.Vl.p + 1
+        nodes = pl.Vl.nodes
+        # dof of the trace below (top of the element below) and above every v node; -1: none
+        self.below = np.array([j * p1 - 1 if j > 0 else -1 for j in range(nodes.size)])
+        self.above = np.array([j * p1 if j < pl.Vl.elements else -1 for j in range(nodes.size)])
+        self.P, self.N = parts
+        self.p1 = pl.X.p + 1
+        self.nvd = nvd
+
+    def __call__(self, D: np.ndarray) -> np.ndarray:
+        pl, hi = self.pl, self.hi
+        out = pl.S_I @ D + (self.S_G @ D) * hi.lam
+        out += pl.S_K0 @ (D @ hi.K0m.T) + pl.S_K1 @ (D @ hi.K1m.T) + pl.S_S @ (D @ hi.Pm.T)
+        if hi.K2.nnz:
+            out += pl.S_K2 @ (D @ hi.K2m.T)
+        D3 = D.reshape(-1, self.nvd, D.shape[1])
+        O3 = out.reshape(D3.shape)
+        nh = D3.shape[2]
+        for j, (ib, ia) in enumerate(zip(self.below, self.above)):
+            flux = np.zeros((D3.shape[0] // self.p1, self.p1, nh))
+            if ib >= 0:
+                flux += np.einsum("ieka,eai->eki", self.P[j], D3[:, ib, :].reshape(-1, self.p1, nh))
+            if ia >= 0:
+                flux += np.einsum("ieka,eai->eki", self.N[j], D3[:, ia, :].reshape(-1, self.p1, nh))
+            flux = flux.reshape(-1, nh)
+            if ib >= 0:
+                O3[:, ib, :] += flux
+            if ia >= 0:
+                O3[:, ia, :] -= flux
+        return out
 
 
 class ModePreconditioner:
@@ -255,14 +326,59 @@ class ModePreconditioner:
             seen[grp] = True
             blocks = [[hi.Pm[r, c] * pl.S_S for c in grp] for r in grp]
             for k, r in enumerate(grp):
-                blocks[k][k] = blocks[k][k] + T[r] + hi.K0m[r, r] * pl.S_K0 + hi.K1m[r, r] * pl.S_K1
-            self.groups.append((grp, spla.splu(sp.bmat(blocks, format="csc"))))
+                blocks[k][k] = (blocks[k][k] + T[r] + hi.K0m[r, r] * pl.S_K0 + hi.K1m[r, r] * pl.S_K1
+                                + hi.K2m[r, r] * pl.S_K2)
+            # MMD on A^T A: a third of COLAMD's fill, half its solve time (a = 1, M = 8)
+            self.groups.append((grp, spla.splu(sp.bmat(blocks, format="csc"), permc_spec="MMD_ATA")))
 
     def __call__(self, r: np.ndarray) -> np.ndarray:
         out = np.empty_like(r)
         for grp, lu in self.groups:
             out[:, grp] = lu.solve(np.ascontiguousarray(r[:, grp].T).ravel()).reshape(len(grp), -1).T
         return out
+
+
+class CoarseCorrection:
+    """Exact solve of the kink discretization truncated at the low Hermite degree ``Mc``.
+
+    Used after the mode preconditioner (multiplicatively): the modes' solves miss the
+    coupling of the modes by the (V, xi) dynamics, whose slowest part lives in the lowest
+    Hermite degrees. It depends on the mesh, the DG degree and the frame only, so one
+    factorization serves every M of a refinement. Measured at a = 1, M = 8 (144
+    rectangles): 212 GMRES iterations without, 113 with Mc = 2, 85 with Mc = 4 (whose
+    factorization costs more than it saves).
+    """
+
+    def __init__(self, h: Harvester, mesh: PlaneMesh, order: int, frame: KinkFrame, Mc: int = 2) -> None:
+        hi = _Hierarchy.of(h, Mc, frame)
+        pl = _plane(h, mesh, order, hi.gamma_e, hi.kappa)
+        self.hermite = hi.hb
+        nc = hi.hb.size
+        T = _mode_transport(pl, hi, _face_parts(pl, hi))
+        # the Mc-truncated operator in the Hermite basis: transport from the mode basis
+        blocks = sp.block_diag(T, format="csr")
+        perm = np.arange(pl.S_I.shape[0] * nc).reshape(nc, -1).T.ravel()   # (mode, xv) -> (xv, mode)
+        Rk = sp.kron(sp.identity(pl.S_I.shape[0]), sp.csr_matrix(hi.R))
+        A = Rk @ blocks[perm][:, perm] @ Rk.T
+        A = (A + sp.kron(pl.S_K0, hi.K0) + sp.kron(pl.S_K1, hi.K1) + sp.kron(pl.S_K2, hi.K2)
+             + sp.kron(pl.S_S, sp.diags(hi.hb.parity())))
+        # The border u u^T by Sherman-Morrison (a dense row would fill the factors). A is
+        # nearly singular (mass is conserved up to the outflow), so A^{-1} u is large and
+        # the formula cancels digits; a preconditioner needs few.
+        self.lu = spla.splu(A.tocsc(), permc_spec="MMD_ATA")
+        u = np.zeros((pl.S_I.shape[0], nc))
+        u[:, 0] = pl.integrals["1"] / np.linalg.norm(pl.integrals["1"])
+        self.u = u.ravel()
+        self.z = self.lu.solve(self.u)
+        self.nc = nc
+
+    def __call__(self, r: np.ndarray, hi: _Hierarchy) -> np.ndarray:
+        """The correction (mode basis of ``hi``) for the residual ``r`` (mode basis of ``hi``)."""
+        low = np.array([hi.hb.index[tuple(al)] for al in self.hermite.alphas])
+        Rl = hi.R[low]
+        x = self.lu.solve(np.ascontiguousarray(r @ Rl.T).ravel())
+        x -= self.z * (float(self.u @ x) / (1.0 + float(self.u @ self.z)))
+        return x.reshape(-1, self.nc) @ Rl
 
 
 @dataclass(frozen=True)
@@ -299,6 +415,46 @@ class KinkLevel:
     frame: KinkFrame = field(repr=False)
     hierarchy: _Hierarchy = field(repr=False)
     plane: _Plane = field(repr=False)
+    #: The refinement's mesh knob this level was solved at (:class:`~.kinkdisc.KinkDG`).
+    size: int = 1
+
+    @property
+    def elements(self) -> int:
+        """Rectangles of the whole plane (twice the half plane's)."""
+        return 2 * self.mesh.elements
+
+    def info(self) -> dict[str, Any]:
+        """Discretization details for the result's ``info``."""
+        return {"scheme": "xv", "M": self.M, "order": self.order, "elements": self.elements,
+                "layers": self.mesh.layers, "subdivisions": self.mesh.subdivisions, "Lx": self.mesh.Lx,
+                "Lv": self.mesh.Lv, "dofs": self.dofs, "gmres_iterations": self.iterations,
+                "frame_Sigma": self.frame.Sigma.tolist(), "frame_shift": self.frame.shift.tolist(),
+                "frame_xshift": self.frame.xshift.tolist()}
+
+    def fields(self, x: np.ndarray) -> dict[str, np.ndarray]:
+        """x-marginal density and conditional means :math:`\\langle y|x\\rangle`,
+        y = v, V, xi, at points ``x`` (masked where the density is below 1e-9 of its peak)."""
+        X, Vl = self.plane.X, self.plane.Vl
+        x = np.asarray(x, dtype=float)
+        C = self.coef.reshape(X.size, Vl.size, -1)
+        w1 = self.hierarchy.hb.first_moment_weights(self.hierarchy.L)     # (2, n_beta)
+        c0v = C[:, :, 0] @ Vl.integral()                                  # int c0 dv
+        vc0 = C[:, :, 0] @ Vl.integral(1)                                 # int v c0 dv
+        wc = np.einsum("xvb,v,ib->xi", C, Vl.integral(), w1)              # int <w'> c0 dv
+        ax = np.clip(np.abs(x), 0.0, X.nodes[-1])
+        dens = X.evaluate(c0v, ax)
+        sign = np.where(x < 0.0, -1.0, 1.0)
+        b, c = self.frame.shift, self.frame.xshift
+        num = {"v_mean": X.evaluate(vc0, ax),
+               "V_mean": X.evaluate(wc[:, 0] + b[0] * vc0, ax) + c[0] * ax * X.evaluate(c0v, ax),
+               "xi_mean": X.evaluate(wc[:, 1] + b[1] * vc0, ax) + c[1] * ax * X.evaluate(c0v, ax)}
+        dens = np.where(np.abs(x) <= X.nodes[-1], dens, 0.0)
+        mask = dens < 1e-9 * max(float(dens.max()), 1e-300)
+        safe = np.where(mask, 1.0, dens)
+        out: dict[str, np.ndarray] = {"density": dens}
+        for name, val in num.items():
+            out[name] = np.ma.masked_array(np.where(mask, 0.0, sign * val / safe), mask=mask)
+        return out
 
     def summary(self) -> dict[str, Any]:
         """JSON-ready description (for the refinement history)."""
@@ -328,30 +484,32 @@ def _moments(h: Harvester, pl: _Plane, hi: _Hierarchy, frame: KinkFrame, C: np.n
     # The half plane holds half of every (even) integral.
     p = h.params
     I = pl.integrals
-    mass = 2.0 * float(I["1"] @ C[:, 0])
-    C = C / mass
-    v2 = 2.0 * float(I["v2"] @ C[:, 0])
-    x2 = 2.0 * float(I["x2"] @ C[:, 0])
+    C = C / (2.0 * float(I["1"] @ C[:, 0]))
+    v2, x2, xv = (2.0 * float(I[k] @ C[:, 0]) for k in ("v2", "x2", "xv"))
     w1 = hi.hb.first_moment_weights(hi.L)                  # <w' | x, v> c0 = w1 . c
     W2 = hi.hb.second_moment_weights(hi.L)
     vw1 = 2.0 * (w1 @ (C.T @ I["v"]))                      # <v w'>, w' = L z
+    xw1 = 2.0 * (w1 @ (C.T @ I["x"]))                      # <x w'>
     ww1 = 2.0 * np.einsum("ijm,m->ij", W2, C.T @ I["1"])   # <w' w'^T>
-    b = frame.shift
-    # w = w' + b v
-    vw = vw1 + b * v2
-    ww = ww1 + np.outer(b, vw1) + np.outer(vw1, b) + np.outer(b, b) * v2
+    b, c = frame.shift, frame.xshift
+    # w = w' + b v + c x
+    vw = vw1 + b * v2 + c * xv
+    xw = xw1 + b * xv + c * x2
+    ww = (ww1 + np.outer(b, vw1) + np.outer(vw1, b) + np.outer(c, xw1) + np.outer(xw1, c)
+          + np.outer(b, b) * v2 + np.outer(c, c) * x2 + (np.outer(b, c) + np.outer(c, b)) * xv)
     vV, vxi, V2 = vw[0], vw[1], ww[0, 0]
     Pin = p.sigma * vxi
     return {
         "V2": float(V2), "Pin": float(Pin), "eta": float(V2 / (p.R * Pin)), "v2": v2, "vV": float(vV),
-        "vxi": float(vxi), "x2": x2,
+        "vxi": float(vxi), "x2": x2, "xv": xv, "xV": float(xw[0]), "xxi": float(xw[1]),
         "res_V2": float((V2 - p.Kc * p.tau_p * vV) / V2),
         "res_power": float((Pin - p.m * p.gamma * v2 - p.Kv * vV) / Pin),
     }
 
 
 def solve_kink_level(h: Harvester, M: int, mesh: PlaneMesh, order: int, frame: KinkFrame,
-                     rtol: float = 1e-9, guess: KinkLevel | None = None, maxiter: int = 3000) -> KinkLevel:
+                     rtol: float = 1e-9, guess: KinkLevel | None = None, maxiter: int = 1500,
+                     coarse: CoarseCorrection | None = None) -> KinkLevel:
     """Assemble and solve one level (GMRES in the mode basis, :class:`ModePreconditioner`).
 
     The stationary density is the null vector of the operator A (nonsingular only through
@@ -362,20 +520,20 @@ def solve_kink_level(h: Harvester, M: int, mesh: PlaneMesh, order: int, frame: K
     """
     t0 = time.perf_counter()
     hi = _Hierarchy.of(h, M, frame)
-    pl = _plane(h, mesh, order, hi.gamma_e)
-    T = _mode_transport(pl, hi.a0, hi.gamma_e, hi.lam)
+    pl = _plane(h, mesh, order, hi.gamma_e, hi.kappa)
+    parts = _face_parts(pl, hi)
+    T = _mode_transport(pl, hi, parts)
     prec = ModePreconditioner(T, pl, hi)
     n, nh = pl.S_I.shape[0], hi.hb.size
     # bordering in the mode basis: u = w = (integral of the test functions) on beta = 0
     U = np.outer(pl.integrals["1"], hi.R[0])
     unorm = U / np.linalg.norm(U)
 
+    apply_A = _ModeOperator(pl, hi, parts)
+
     def matvec(d: np.ndarray) -> np.ndarray:
         D = d.reshape(n, nh)
-        out = np.empty_like(D)
-        for i, Ti in enumerate(T):
-            out[:, i] = Ti @ D[:, i]
-        out += pl.S_K0 @ (D @ hi.K0m.T) + pl.S_K1 @ (D @ hi.K1m.T) + pl.S_S @ (D @ hi.Pm.T)
+        out = apply_A(D)
         out += unorm * float(np.vdot(unorm, D))
         return out.ravel()
 
@@ -389,16 +547,26 @@ def solve_kink_level(h: Harvester, M: int, mesh: PlaneMesh, order: int, frame: K
         its[0] += 1
 
     A = spla.LinearOperator((n * nh, n * nh), matvec=matvec, dtype=float)
-    P = spla.LinearOperator((n * nh, n * nh), matvec=lambda r: prec(r.reshape(n, nh)).ravel(), dtype=float)
+    cc = coarse if coarse is not None and coarse.hermite.M < M else None
+
+    def apply(r: np.ndarray) -> np.ndarray:
+        R_ = r.reshape(n, nh)
+        y = prec(R_)
+        if cc is not None:
+            y += cc(R_ - matvec(y.ravel()).reshape(n, nh), hi)
+        return y.ravel()
+
+    P = spla.LinearOperator((n * nh, n * nh), matvec=apply, dtype=float)
     rhs = unorm.ravel()
-    d, info = spla.gmres(A, rhs, x0=x0, M=P, rtol=rtol, restart=min(200, maxiter), maxiter=maxiter,
+    restart = min(150, maxiter)
+    d, info = spla.gmres(A, rhs, x0=x0, M=P, rtol=rtol, restart=restart, maxiter=-(-maxiter // restart),
                          callback=count, callback_type="pr_norm")
     if info != 0:
         raise NotConvergedError(f"GMRES did not reach rtol = {rtol:.1e} in {its[0]} iterations "
                                 f"(M = {M}, {mesh.elements} elements)")
     C = d.reshape(n, nh) @ hi.R.T
-    mom = _moments(h, pl, hi, frame, C)
     C = C / (2.0 * float(pl.integrals["1"] @ C[:, 0]))
+    mom = _moments(h, pl, hi, frame, C)
     return KinkLevel(M, order, mesh, C, mom, n * nh, time.perf_counter() - t0, its[0], frame, hi, pl)
 
 

@@ -126,6 +126,37 @@ class DGLine:
         s, _ = self._quadrature()
         return self._blocks(dbasis, basis, s**power * qw[None, :])
 
+    def signed_parts(self, s0: np.ndarray, kappa: float) -> tuple[np.ndarray, np.ndarray]:
+        """Element mass matrices weighted by the positive and the negative part of the
+        linear speed :math:`u(s) = s_0 + \\kappa s`:
+        :math:`\\int_e u^\\pm\\psi_i\\phi_j\\,ds`, exact (each element is split at the root of u).
+
+        Returns two arrays of shape ``(len(s0), elements, p + 1, p + 1)``.
+        """
+        s0 = np.atleast_1d(np.asarray(s0, dtype=float))
+        qx, qw, _, _ = _reference(self.p)
+        vinv = np.linalg.inv(npleg.legvander(lobatto_points(self.p), self.p))
+        lo, hi = self.nodes[:-1], self.nodes[1:]
+        if kappa == 0.0:
+            root = np.where(s0 > 0.0, -np.inf, np.inf)[:, None] * np.ones(lo.size)
+        else:
+            root = (-s0 / kappa)[:, None] * np.ones(lo.size)
+        cut = np.clip(root, lo, hi)                                  # (n, E)
+        out = []
+        for a, b in ((lo + 0.0 * cut, cut), (cut, hi + 0.0 * cut)):
+            pts = a[..., None] + 0.5 * (b - a)[..., None] * (qx + 1.0)  # (n, E, q)
+            w = 0.5 * (b - a)[..., None] * qw
+            ref = 2.0 * (pts - lo[None, :, None]) / (hi - lo)[None, :, None] - 1.0
+            basis = npleg.legvander(ref, self.p) @ vinv               # (n, E, q, p+1)
+            u = s0[:, None, None] + kappa * pts
+            out.append((basis, w, u))
+        pos = np.zeros((s0.size, lo.size, self.p + 1, self.p + 1))
+        neg = np.zeros_like(pos)
+        for basis, w, u in out:
+            pos += np.einsum("neqi,neq,neqj->neij", basis, w * np.maximum(u, 0.0), basis)
+            neg += np.einsum("neqi,neq,neqj->neij", basis, w * np.minimum(u, 0.0), basis)
+        return pos, neg
+
     def integral(self, power: int = 0) -> np.ndarray:
         """:math:`\\int s^{power}\\phi_j\\,ds` for every unknown."""
         _, _, basis, _ = _reference(self.p)
@@ -187,6 +218,9 @@ class PlaneMesh:
         Elements outside the core on each axis (v: on each side of 0), >= 1.
     grading : float
         Exponent g >= 1 of the bulk spacing (short elements next to the core).
+    subdivisions : int
+        Every rectangle of the mesh so defined is cut into s x s equal ones (the
+        refinement's mesh knob), >= 1.
 
     Examples
     --------
@@ -206,6 +240,7 @@ class PlaneMesh:
     bulk_x: int = 6
     bulk_v: int = 5
     grading: float = 2.0
+    subdivisions: int = 1
 
     def __post_init__(self) -> None:
         for name in ("Lx", "Lv", "Ec", "a"):
@@ -224,7 +259,10 @@ class PlaneMesh:
         k = np.arange(self.layers - 1, -1, -1)
         inner = core * self.ratio ** (power * k)
         outer = core + (edge - core) * np.linspace(0.0, 1.0, bulk + 1)[1:] ** self.grading
-        return np.concatenate([[0.0], inner, outer])
+        nodes = np.concatenate([[0.0], inner, outer])
+        s = self.subdivisions
+        cut = nodes[:-1, None] + np.diff(nodes)[:, None] * (np.arange(s) / s)
+        return np.concatenate([cut.ravel(), nodes[-1:]])
 
     def x_nodes(self) -> np.ndarray:
         """Nodes of the x axis, from 0 to Lx."""
@@ -238,8 +276,8 @@ class PlaneMesh:
     @property
     def elements(self) -> int:
         """Number of rectangles of the half plane."""
-        return (self.layers + self.bulk_x) * 2 * (self.layers + self.bulk_v)
+        return (self.layers + self.bulk_x) * 2 * (self.layers + self.bulk_v) * self.subdivisions**2
 
-    def refined(self, factor: int = 2) -> PlaneMesh:
-        """The mesh with ``factor`` times the bulk elements on each axis (same core)."""
-        return dataclasses.replace(self, bulk_x=factor * self.bulk_x, bulk_v=factor * self.bulk_v)
+    def subdivided(self, s: int) -> PlaneMesh:
+        """The mesh with every rectangle cut into s x s equal ones (s = 1: itself)."""
+        return dataclasses.replace(self, subdivisions=check_int("s", s, low=1, high=64))

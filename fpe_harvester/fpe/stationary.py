@@ -21,6 +21,8 @@ on a grid, and the residuals of the exact stationary identities (docs/model.md Â
 
 from __future__ import annotations
 
+import dataclasses
+import time
 from collections.abc import Callable
 from dataclasses import dataclass, field
 
@@ -33,9 +35,11 @@ from ..result import Stats, Status
 from .assemble import _element
 from .discretize import HermiteDG, Level, Whitening
 from .estimate import reported_eta_error
-from .refine import Plan, RefinementResult, refine
+from .kink import KinkLevel
+from .kinkdisc import KinkDG, KinkSettings
+from .refine import Discretization, Plan, RefinementResult, refine
 
-__all__ = ["FPESolution", "stationary", "default_plan"]
+__all__ = ["FPESolution", "stationary", "default_plan", "resolve_scheme", "SCHEMES"]
 
 
 @dataclass(frozen=True)
@@ -73,11 +77,34 @@ class FPESolution:
         """Density and conditional means at arbitrary points ``x`` (inside [-L, L])."""
         if self.level is None:
             raise NotConvergedError(f"no solved level to evaluate: {self.stats.message}")
+        if isinstance(self.level, KinkLevel):
+            return self.level.fields(np.asarray(x, dtype=float))
         return _fields(self.level, np.asarray(x, dtype=float))
 
 
+#: Unknowns allowed to a level of the kink scheme (GMRES in the mode basis holds about 200
+#: vectors of the half plane's unknowns; the memory bound max_gb applies too).
+KINK_MAX_DOFS = 6_000_000
+
+#: The Fokker--Planck schemes (see :func:`stationary`).
+SCHEMES = ("auto", "x", "xv")
+
+
+def resolve_scheme(h: Harvester, scheme: str) -> str:
+    """The scheme ``"x"`` or ``"xv"`` that ``scheme`` means for ``h`` (ParameterError if invalid)."""
+    if scheme not in SCHEMES:
+        raise ParameterError(f"scheme must be one of {', '.join(map(repr, SCHEMES))}, got {scheme!r} "
+                             f"(type {type(scheme).__name__})")
+    if scheme == "auto":
+        return "xv" if h.n == 1.0 else "x"
+    if scheme == "xv" and h.n != 1.0:
+        raise ParameterError(f"scheme='xv' (DG in x and v) is built for the kink n = 1, got n = {h.n!r}; "
+                             "use scheme='x' or 'auto'")
+    return scheme
+
+
 def default_plan(h: Harvester, M: int | None = None, half_elements: int | None = None,
-                 order: int | None = None, theta: float = 30.0) -> Plan:
+                 order: int | None = None, theta: float = 30.0, scheme: str = "x") -> Plan:
     """Discretization settings for ``h``: smooth potentials (n >= 2) on a mesh graded toward
     the walls, n < 2 (kink or non-smooth force at 0) graded toward 0; DG order P3; the
     refinement starts at M = 4 on 8 elements per half.
@@ -87,7 +114,13 @@ def default_plan(h: Harvester, M: int | None = None, half_elements: int | None =
     for n = 1.5, 3, 4 (a = 0.5) P4 is 30-50 % slower (timings of the earlier one-sweep
     block solver). P2 is no gain for the kink either: n = 1, a = 0.5, tol = 1e-3 took 50 s
     (M = 16, 32 elements) against 22 s with P3 (twisted solver).
+
+    The kink scheme (``scheme="xv"``) starts at M = 4 on its base mesh (size 1), DG degree 3.
     """
+    if scheme == "xv":
+        return Plan(M=4 if M is None else M, half_elements=1 if half_elements is None else half_elements,
+                    order=3 if order is None else order, theta=theta, grading=1.0, wall=0.0,
+                    fixed=M is not None and half_elements is not None, max_half_elements=8)
     kink = h.n < 2.0
     return Plan(
         M=4 if M is None else M,
@@ -139,11 +172,11 @@ def _stats(h: Harvester, ref: RefinementResult, tol: float) -> Stats:
     message = (f"converged: estimated relative error on eta {eta_err / abs(mo['eta']):.2g} <= tol = {tol:.2g}"
                if ref.converged else ref.reason + "; the numbers are the best estimate with its error")
     info = {
-        "M": lv.M, "order": lv.order, "elements": lv.mesh.elements, "L": lv.mesh.L, "dofs": lv.dofs,
+        **lv.info(),
         "tol": tol, "error_eta_hermite": est.error_M, "error_eta_mesh": est.error_x,
         "mesh_checked": est.mesh_checked,
         "residual_V2": lv.moments["res_V2"], "residual_power": lv.moments["res_power"],
-        "kappa_eq": lv.whitening.kappa, "seconds": ref.seconds, "history": ref.history,
+        "seconds": ref.seconds, "history": ref.history,
     }
     # eta_err: eta's own refinement estimate, not the bound propagated from V2 and Pin.
     return Stats.from_moments(
@@ -167,6 +200,7 @@ def stationary(
     max_gb: float | None = None,
     grid: int = 401,
     progress: Callable[[str], None] | None = None,
+    scheme: str = "auto",
 ) -> FPESolution:
     """Stationary density and statistics of a single unit with :math:`U = a|x|^n`.
 
@@ -195,6 +229,11 @@ def stationary(
         Points of the output grid (>= 3).
     progress : callable, optional
         Called with a one-line message after each level.
+    scheme : str
+        ``"x"``: DG in x, Hermite functions of (v, V, xi) (:mod:`.discretize`); ``"xv"``:
+        DG in (x, v), Hermite functions of (V, xi) (:mod:`.kink`, only n = 1; there
+        ``half_elements`` is the subdivision of its base mesh, default 1, and ``order``
+        its DG degree); ``"auto"`` (default): ``"xv"`` for n = 1, else ``"x"``.
 
     Returns
     -------
@@ -226,19 +265,32 @@ def stationary(
     if max_gb is not None:
         max_gb = check_real("max_gb", max_gb, low=0.0, low_open=True)
     grid = check_int("grid", grid, low=3)
-    plan = default_plan(h, M, half_elements, order, theta)
-    plan = Plan(**{**plan.__dict__, "max_M": max_M, "max_dofs": max_dofs, "max_seconds": max_seconds,
-                    "max_gb": max_gb})
-    w = Whitening.of(h)
-    ref = refine(HermiteDG(h, plan.mesh(h, w), plan.order, w), tol, plan, progress)
+    scheme = resolve_scheme(h, scheme)
+    plan = default_plan(h, M, half_elements, order, theta, scheme)
+    plan = Plan(**{**plan.__dict__, "max_M": max_M, "max_seconds": max_seconds, "max_gb": max_gb,
+                    "max_dofs": max_dofs if scheme == "x" else max(max_dofs, KINK_MAX_DOFS)})
+    if scheme == "xv":
+        t0 = time.perf_counter()
+        try:
+            disc: Discretization = KinkDG.build(h, KinkSettings(order=plan.order))
+        except (ArithmeticError, ValueError, np.linalg.LinAlgError, NotConvergedError) as exc:
+            ref = RefinementResult(None, False, f"the kink solver's pilot level failed ({exc}); use method='mc'",
+                                   seconds=time.perf_counter() - t0)
+        else:
+            ref = refine(disc, tol, plan, progress)
+            ref = dataclasses.replace(ref, seconds=ref.seconds + disc.pilot_seconds)
+    else:
+        w = Whitening.of(h)
+        ref = refine(HermiteDG(h, plan.mesh(h, w), plan.order, w), tol, plan, progress)
     stats = _stats(h, ref, tol)
     lv = None if ref.best is None else ref.best.level
     if lv is None:
         empty = np.ma.masked_array(np.zeros(0))
         return FPESolution(stats=stats, x=np.zeros(0), density=np.zeros(0), v_mean=empty,
                            V_mean=empty, xi_mean=empty, residuals={}, level=None)
-    x = np.linspace(-lv.mesh.L, lv.mesh.L, grid)
-    f = _fields(lv, x)
+    half_width = lv.mesh.Lx if isinstance(lv, KinkLevel) else lv.mesh.L
+    x = np.linspace(-half_width, half_width, grid)
+    f = lv.fields(x) if isinstance(lv, KinkLevel) else _fields(lv, x)
     return FPESolution(
         stats=stats, x=x, density=f["density"], v_mean=f["v_mean"], V_mean=f["V_mean"],
         xi_mean=f["xi_mean"], residuals={"V2": lv.moments["res_V2"], "power": lv.moments["res_power"]},
