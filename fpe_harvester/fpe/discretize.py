@@ -338,6 +338,7 @@ class HermiteDG:
     order: int
     w: Whitening
     work_exponents: tuple[float, float] = (2.0, 3.0)
+    mesh_check_degree: int = 6
 
     @property
     def algebraic(self) -> bool:

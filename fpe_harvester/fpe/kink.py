@@ -257,14 +257,39 @@ def _face_parts(pl: _Plane, hi: _Hierarchy) -> tuple[np.ndarray, np.ndarray]:
 
 
 def _mode_transport(pl: _Plane, hi: _Hierarchy, parts: tuple[np.ndarray, np.ndarray]) -> list[sp.csr_matrix]:
-    """The scalar transport matrix of every mode: ``S_I`` plus its v-flux terms."""
+    """The scalar transport matrix of every mode: ``S_I``, :math:`\\lambda_i` times the v
+    derivative, and its upwind v-face terms. All modes share one sparsity pattern, so the
+    entries are gathered once and summed per mode by one ``bincount``."""
     P, N = parts
+    p1, nvd = pl.X.p + 1, pl.Vl.size
+    nx_el = pl.X.elements
+    S_I = pl.S_I.tocoo()
+    S_G = (-sp.kron(pl.Mx, pl.Dv)).tocoo()
+    rows, cols = [S_I.row, S_G.row], [S_I.col, S_G.col]
+    # face entries: x block (e, k, l) of P[j, i] or N[j, i] times the v entry (r, c) of U_j or D_j
+    ex, kk, ll = np.meshgrid(np.arange(nx_el), np.arange(p1), np.arange(p1), indexing="ij")
+    xr, xc = (ex * p1 + kk).ravel(), (ex * p1 + ll).ravel()
+    face_vals = []
+    for j, (_, U, D) in enumerate(pl.faces):
+        for V, W in ((U.tocoo(), P[j]), (D.tocoo(), N[j])):
+            for r, c, sgn in zip(V.row, V.col, V.data):
+                rows.append(xr * nvd + r)
+                cols.append(xc * nvd + c)
+                face_vals.append(sgn * W.reshape(W.shape[0], -1))        # (modes, entries)
+    row, col = np.concatenate(rows), np.concatenate(cols)
+    n = pl.S_I.shape[0]
+    pattern = sp.csr_matrix((np.ones(row.size), (row, col)), shape=(n, n))
+    pattern.sum_duplicates()
+    pattern.sort_indices()
+    # position of every gathered entry in the pattern's data array
+    keys = row.astype(np.int64) * n + col
+    uniq, pos = np.unique(keys, return_inverse=True)
+    fv = np.concatenate(face_vals, axis=1)                               # (modes, face entries)
     out = []
     for i, li in enumerate(hi.lam):
-        A = pl.S_I + sp.kron(pl.Mx, -li * pl.Dv)
-        for j, (_, U, D) in enumerate(pl.faces):
-            A = A + sp.kron(sp.block_diag(list(P[j, i])), U) + sp.kron(sp.block_diag(list(N[j, i])), D)
-        out.append(A.tocsr())
+        vals = np.concatenate([S_I.data, li * S_G.data, fv[i]])
+        data = np.bincount(pos, weights=vals, minlength=uniq.size)
+        out.append(sp.csr_matrix((data, pattern.indices.copy(), pattern.indptr.copy()), shape=(n, n)))
     return out
 
 

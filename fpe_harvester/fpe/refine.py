@@ -53,7 +53,8 @@ OBSERVABLES = ("eta", "V2", "Pin", "v2", "vV", "x2")
 #: Share of tol given to the mesh error; the Hermite error gets the rest.
 MESH_SHARE = 0.25
 
-#: Lowest Hermite degree of a mesh check (lower levels say little about the mesh).
+#: Lowest Hermite degree of a mesh check of the 1-D discretization (lower levels say little
+#: about the mesh); a discretization may set its own (``mesh_check_degree``).
 M_CHECK = 6
 
 
@@ -108,6 +109,9 @@ class Discretization(Protocol):
     def describe(self, size: int) -> str:
         """The mesh of ``size`` in words (e.g. '16 elements')."""
         ...
+
+    #: Lowest Hermite degree at which a mesh check is meaningful.
+    mesh_check_degree: int
 
 
 @dataclass(frozen=True)
@@ -356,7 +360,8 @@ def _hermite(levels: _Levels, nh: int, M: int, tol: float, mesh: float, found: l
         if M > levels.disc.max_degree(nh):
             return est, "resolution"
         est = _hermite_estimate(levels, nh, M, algebraic, mesh)
-        if est is not None and M >= M_CHECK + 4 and not math.isfinite(mesh):
+        m_check = levels.disc.mesh_check_degree
+        if est is not None and M >= m_check + 4 and not math.isfinite(mesh):
             est = _mesh_check(levels, est, nh, M - 2, enough=MESH_SHARE * tol)
             mesh = est.error_x / abs(est.moments["eta"])
         if est is not None:
@@ -434,13 +439,13 @@ def _mesh_check(levels: _Levels, est: Estimate, nh: int, Mc: int | None = None,
     """
     M = est.level.M
     if Mc is None:
-        Mc = min(M, max(M - 4, M_CHECK))
+        Mc = min(M, max(M - 4, levels.disc.mesh_check_degree))
     a, b = levels.get(Mc, nh), levels.get(Mc, 2 * nh)
     # A third, coarser mesh gives the observed order, but only at a low degree: at high M
     # a coarse mesh is numerically meaningless for steep potentials.
     coarse = None
     d = abs(a.moments["eta"] - b.moments["eta"]) / abs(a.moments["eta"])
-    if (2.0 * d > enough and Mc <= M_CHECK + 2 and nh % 2 == 0
+    if (2.0 * d > enough and Mc <= levels.disc.mesh_check_degree + 2 and nh % 2 == 0
             and Mc <= levels.disc.max_degree(nh // 2)):
         coarse = levels.get_or_none(Mc, nh // 2)
     meshes = ([coarse] if coarse is not None else []) + [a, b]

@@ -272,7 +272,7 @@ def stationary(
     if scheme == "xv":
         t0 = time.perf_counter()
         try:
-            disc: Discretization = KinkDG.build(h, KinkSettings(order=plan.order))
+            disc: Discretization = KinkDG.build(h, KinkSettings(order=plan.order), tol)
         except (ArithmeticError, ValueError, np.linalg.LinAlgError, NotConvergedError) as exc:
             ref = RefinementResult(None, False, f"the kink solver's pilot level failed ({exc}); use method='mc'",
                                    seconds=time.perf_counter() - t0)
