@@ -59,6 +59,7 @@ import scipy.sparse.linalg as spla
 
 from ..errors import NotConvergedError
 from ..model import Harvester
+from .blocksolve import _blas
 from .hermite import HermiteBasis
 from .plane import DGLine, PlaneMesh
 
@@ -543,6 +544,14 @@ def solve_kink_level(h: Harvester, M: int, mesh: PlaneMesh, order: int, frame: K
     vector with unit mass (up to the outflow). ``guess`` (a lower level on the same mesh
     and frame) starts the iteration.
     """
+    # single-threaded BLAS: the dense products are small (the modes of one degree), and
+    # threads only add overhead and contention
+    with _blas().limit(limits=1, user_api="blas"):
+        return _solve(h, M, mesh, order, frame, rtol, guess, maxiter, coarse)
+
+
+def _solve(h: Harvester, M: int, mesh: PlaneMesh, order: int, frame: KinkFrame, rtol: float,
+           guess: KinkLevel | None, maxiter: int, coarse: CoarseCorrection | None) -> KinkLevel:
     t0 = time.perf_counter()
     hi = _Hierarchy.of(h, M, frame)
     pl = _plane(h, mesh, order, hi.gamma_e, hi.kappa)

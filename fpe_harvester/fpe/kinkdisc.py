@@ -39,6 +39,11 @@ __all__ = ["KinkDG", "kink_domain", "KinkSettings", "COARSE_DEGREE"]
 #: Hermite degree of the coarse correction (:class:`~.kink.CoarseCorrection`).
 COARSE_DEGREE = 2
 
+#: Degrees of the pilot level, tried in turn until one is physical. M = 2 suffices for
+#: a <= 1 (defaults); at a = 2 the harmonic first guess makes it unphysical (V2 < 0) and
+#: M = 4 is needed.
+PILOT_DEGREES = (2, 4, 6)
+
 
 @dataclass(frozen=True)
 class KinkSettings:
@@ -125,10 +130,14 @@ class KinkDG:
         guess = _harmonic_guess(h)
         frame = KinkFrame.from_moments(h, guess, shifted=st.shifted)
         mesh = _base_mesh(h, st, guess)
-        pilot = solve_kink_level(h, 2, mesh, st.order, frame, rtol=1e-6)
-        mo = pilot.moments
-        if min(mo["V2"], mo["Pin"], mo["v2"]) <= 0.0:
-            raise FloatingPointError(f"the pilot level of the kink solver is unphysical ({mo})")
+        for M in PILOT_DEGREES:
+            pilot = solve_kink_level(h, M, mesh, st.order, frame, rtol=1e-6)
+            mo = pilot.moments
+            if min(mo["V2"], mo["Pin"], mo["v2"], mo["x2"]) > 0.0:
+                break
+        else:
+            raise FloatingPointError(f"the pilot levels of the kink solver (M = {PILOT_DEGREES}) are "
+                                     f"unphysical (last: V2 = {mo['V2']:.3g}, Pin = {mo['Pin']:.3g})")
         frame = KinkFrame.from_moments(h, mo, shifted=st.shifted, xshifted=st.xshifted)
         mesh = _base_mesh(h, st, mo)
         return cls(h, mesh, frame, st.order, {k: mo[k] for k in ("eta", "V2", "Pin", "v2", "vV")},

@@ -8,10 +8,10 @@ from typing import ClassVar
 
 import numpy as np
 
-from ..errors import HarvesterError, MethodNotAvailableError, check_int, check_real
+from ..errors import HarvesterError, MethodNotAvailableError, ParameterError, check_int, check_real
 from ..model import Harvester
 from ..result import Stats, Status
-from .stationary import _ring_reason, stationary
+from .stationary import SCHEMES, _ring_reason, stationary
 
 __all__ = ["FokkerPlanck"]
 
@@ -47,6 +47,12 @@ class FokkerPlanck:
         Memory bound (GB) of one discretization level; default half the physical memory.
     progress : bool or callable
         True prints one line per level; a callable receives the lines.
+    scheme : str
+        ``"auto"`` (default): for the kink n = 1 DG in (x, v) with Hermite functions of
+        (V, xi) (``"xv"``, :mod:`~fpe_harvester.fpe.kink`), else DG in x with Hermite
+        functions of (v, V, xi) (``"x"``). ``"x"`` forces the latter for n = 1 too
+        (benchmarks compare them). For ``"xv"``, ``elements`` is not used and ``order`` is
+        the DG degree in x and v.
 
     Examples
     --------
@@ -67,8 +73,12 @@ class FokkerPlanck:
     max_seconds: float | None = None
     max_gb: float | None = None
     progress: bool | Callable[[str], None] = False
+    scheme: str = "auto"
 
     def __post_init__(self) -> None:
+        if self.scheme not in SCHEMES:
+            raise ParameterError(f"scheme must be one of {', '.join(map(repr, SCHEMES))}, got {self.scheme!r} "
+                                 f"(type {type(self.scheme).__name__})")
         object.__setattr__(self, "tol", check_real("tol", self.tol, low=0.0, high=0.1, low_open=True))
         if self.M is not None:
             object.__setattr__(self, "M", check_int("M", self.M, low=2, high=60))
@@ -106,6 +116,7 @@ class FokkerPlanck:
                 h, self.tol, M=self.M, half_elements=None if self.elements is None else self.elements // 2,
                 order=self.order, theta=self.domain, max_M=max(self.max_M, self.M or 0),
                 max_seconds=self.max_seconds, max_gb=self.max_gb, grid=3, progress=progress or None,
+                scheme=self.scheme,
             )
         except HarvesterError:
             raise
