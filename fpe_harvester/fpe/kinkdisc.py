@@ -2,7 +2,7 @@
 
 :class:`KinkDG` is what :func:`~.refine.refine` refines for the kink potential (n = 1):
 Hermite degree M in (V, xi) in steps of 2, and the DG degree p on a fixed (x, v) mesh
-(``size`` s = 1, 2, 4, ...: :math:`p = p_0 + \log_2 s`; one refinement step raises p by
+(``size`` s = 1, 2, 4, ...: :math:`p = p_0 + \\log_2 s`; one refinement step raises p by
 one). The mesh is graded geometrically toward the trap, deep enough that the layers do not
 limit the accuracy (measured, M = 8: four layers of ratio 0.3 against six change eta by
 3e-9 at a = 1 and 1e-7 at a = 2, three against four by 7e-7 at a = 1), so the error left

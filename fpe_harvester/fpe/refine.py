@@ -100,7 +100,7 @@ class Discretization(Protocol):
         ...
 
     def work(self, M: int, size: int) -> tuple[float, float]:
-        """Cost model of a level, ``(w, u)``: the time scales like :math:`w\,u^q`, q in
+        """Cost model of a level, ``(w, u)``: the time scales like :math:`w\\,u^q`, q in
         :attr:`work_exponents` (measured from the solved levels)."""
         ...
 
@@ -532,7 +532,7 @@ def _predicted_seconds(cache: dict[tuple[int, int], LevelLike], M: int, nh: int,
                        ) -> float:
     """Predicted wall time (s) of level (M, nh) from the costliest measured level.
 
-    Cost :math:`w\,u^q` with ``(w, u) = disc.work(M, nh)`` (1-D: elements and the block
+    Cost :math:`w\\,u^q` with ``(w, u) = disc.work(M, nh)`` (1-D: elements and the block
     size :math:`n_b`; the dense block LU gives q = 3 asymptotically, but at moderate M
     assembly and O(n_b^2) work dominate). q is measured from the two costliest levels on
     one mesh and clipped to ``disc.work_exponents`` (timings are noisy on a busy machine;
