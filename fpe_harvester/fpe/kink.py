@@ -535,7 +535,7 @@ def _moments(h: Harvester, pl: _Plane, hi: _Hierarchy, frame: KinkFrame, C: np.n
 
 def solve_kink_level(h: Harvester, M: int, mesh: PlaneMesh, order: int, frame: KinkFrame,
                      rtol: float = 1e-9, guess: KinkLevel | None = None, maxiter: int = 1500,
-                     coarse: CoarseCorrection | None = None) -> KinkLevel:
+                     coarse: CoarseCorrection | None = None, deadline: float | None = None) -> KinkLevel:
     """Assemble and solve one level (GMRES in the mode basis, :class:`ModePreconditioner`).
 
     The stationary density is the null vector of the operator A (nonsingular only through
@@ -547,11 +547,12 @@ def solve_kink_level(h: Harvester, M: int, mesh: PlaneMesh, order: int, frame: K
     # single-threaded BLAS: the dense products are small (the modes of one degree), and
     # threads only add overhead and contention
     with _blas().limit(limits=1, user_api="blas"):
-        return _solve(h, M, mesh, order, frame, rtol, guess, maxiter, coarse)
+        return _solve(h, M, mesh, order, frame, rtol, guess, maxiter, coarse, deadline)
 
 
 def _solve(h: Harvester, M: int, mesh: PlaneMesh, order: int, frame: KinkFrame, rtol: float,
-           guess: KinkLevel | None, maxiter: int, coarse: CoarseCorrection | None) -> KinkLevel:
+           guess: KinkLevel | None, maxiter: int, coarse: CoarseCorrection | None,
+           deadline: float | None) -> KinkLevel:
     t0 = time.perf_counter()
     hi = _Hierarchy.of(h, M, frame)
     pl = _plane(h, mesh, order, hi.gamma_e, hi.kappa)
@@ -579,6 +580,9 @@ def _solve(h: Harvester, M: int, mesh: PlaneMesh, order: int, frame: KinkFrame, 
 
     def count(_: Any) -> None:
         its[0] += 1
+        if deadline is not None and time.perf_counter() > deadline:
+            raise NotConvergedError(f"the time budget ran out in GMRES iteration {its[0]} (M = {M}, "
+                                    f"{mesh.elements} elements)")
 
     A = spla.LinearOperator((n * nh, n * nh), matvec=matvec, dtype=float)
     cc = coarse if coarse is not None and coarse.hermite.M < M else None

@@ -114,6 +114,7 @@ class KinkDG:
     pilot: dict[str, float]
     pilot_seconds: float = 0.0
     rtol: float = 1e-9
+    deadline: float | None = None
     algebraic: bool = True
     work_exponents: tuple[float, float] = (1.0, 2.0)
     #: The mesh error hardly depends on M (a = 1, p = 3 against 4: 1.1e-5 at M = 6, 1.3e-5
@@ -122,16 +123,18 @@ class KinkDG:
     _coarse: dict[int, CoarseCorrection] = field(default_factory=dict, repr=False, compare=False)
 
     @classmethod
-    def build(cls, h: Harvester, settings: KinkSettings | None = None, tol: float = 1e-4) -> KinkDG:
+    def build(cls, h: Harvester, settings: KinkSettings | None = None, tol: float = 1e-4,
+              deadline: float | None = None) -> KinkDG:
         """Frame and domain from a pilot level (see the module docstring); GMRES solves the
-        levels to a relative residual of ``1e-4 tol`` (within [1e-11, 1e-6])."""
+        levels to a relative residual of ``1e-4 tol`` (within [1e-11, 1e-6]) and stops at
+        the wall-clock ``deadline`` (a :func:`time.perf_counter` value) if given."""
         st = settings or KinkSettings()
         t0 = time.perf_counter()
         guess = _harmonic_guess(h)
         frame = KinkFrame.from_moments(h, guess, shifted=st.shifted)
         mesh = _base_mesh(h, st, guess)
         for M in PILOT_DEGREES:
-            pilot = solve_kink_level(h, M, mesh, st.order, frame, rtol=1e-6)
+            pilot = solve_kink_level(h, M, mesh, st.order, frame, rtol=1e-6, deadline=deadline)
             mo = pilot.moments
             if min(mo["V2"], mo["Pin"], mo["v2"], mo["x2"]) > 0.0:
                 break
@@ -141,7 +144,7 @@ class KinkDG:
         frame = KinkFrame.from_moments(h, mo, shifted=st.shifted, xshifted=st.xshifted)
         mesh = _base_mesh(h, st, mo)
         return cls(h, mesh, frame, st.order, {k: mo[k] for k in ("eta", "V2", "Pin", "v2", "vV")},
-                   time.perf_counter() - t0, min(max(1e-4 * tol, 1e-11), 1e-6))
+                   time.perf_counter() - t0, min(max(1e-4 * tol, 1e-11), 1e-6), deadline)
 
     def degree(self, size: int) -> int:
         """DG degree p of the mesh knob ``size`` (1, 2, 4, ...)."""
@@ -150,7 +153,7 @@ class KinkDG:
     def solve(self, M: int, size: int, lower: Any = None) -> KinkLevel:
         guess = lower if isinstance(lower, KinkLevel) else None
         lv = solve_kink_level(self.h, M, self.base, self.degree(size), self.frame, guess=guess, rtol=self.rtol,
-                              coarse=self.coarse(size))
+                              coarse=self.coarse(size), deadline=self.deadline)
         return dataclasses.replace(lv, size=size)
 
     def coarse(self, size: int) -> CoarseCorrection:

@@ -271,12 +271,15 @@ def stationary(
                     "max_dofs": max_dofs if scheme == "x" else max(max_dofs, KINK_MAX_DOFS)})
     if scheme == "xv":
         t0 = time.perf_counter()
+        deadline = None if max_seconds is None else t0 + max_seconds
         try:
-            disc: Discretization = KinkDG.build(h, KinkSettings(order=plan.order), tol)
+            disc: Discretization = KinkDG.build(h, KinkSettings(order=plan.order), tol, deadline)
         except (ArithmeticError, ValueError, np.linalg.LinAlgError, NotConvergedError) as exc:
             ref = RefinementResult(None, False, f"the kink solver's pilot level failed ({exc}); use method='mc'",
                                    seconds=time.perf_counter() - t0)
         else:
+            if max_seconds is not None:  # the pilot's time counts
+                plan = dataclasses.replace(plan, max_seconds=max(max_seconds - disc.pilot_seconds, 1e-3))
             ref = refine(disc, tol, plan, progress)
             ref = dataclasses.replace(ref, seconds=ref.seconds + disc.pilot_seconds)
     else:
