@@ -11,7 +11,7 @@ import numpy as np
 from ..errors import HarvesterError, MethodNotAvailableError, ParameterError, check_int, check_real
 from ..model import Harvester
 from ..result import Stats, Status
-from .stationary import SCHEMES, _ring_reason, stationary
+from .stationary import SCHEMES, _ring_reason, resolve_scheme, stationary
 
 __all__ = ["FokkerPlanck"]
 
@@ -113,7 +113,9 @@ class FokkerPlanck:
             progress = print
         try:
             sol = stationary(
-                h, self.tol, M=self.M, half_elements=None if self.elements is None else self.elements // 2,
+                h, self.tol, M=self.M,
+                half_elements=None if self.elements is None or resolve_scheme(h, self.scheme) == "xv"
+                else self.elements // 2,
                 order=self.order, theta=self.domain, max_M=max(self.max_M, self.M or 0),
                 max_seconds=self.max_seconds, max_gb=self.max_gb, grid=3, progress=progress or None,
                 scheme=self.scheme,

@@ -120,7 +120,7 @@ def default_plan(h: Harvester, M: int | None = None, half_elements: int | None =
     if scheme == "xv":
         return Plan(M=4 if M is None else M, half_elements=1 if half_elements is None else half_elements,
                     order=3 if order is None else order, theta=theta, grading=1.0, wall=0.0,
-                    fixed=M is not None and half_elements is not None, max_half_elements=8)
+                    fixed=M is not None, max_half_elements=8)
     kink = h.n < 2.0
     return Plan(
         M=4 if M is None else M,
@@ -232,8 +232,9 @@ def stationary(
     scheme : str
         ``"x"``: DG in x, Hermite functions of (v, V, xi) (:mod:`.discretize`); ``"xv"``:
         DG in (x, v), Hermite functions of (V, xi) (:mod:`.kink`, only n = 1; there
-        ``half_elements`` is the subdivision of its base mesh, default 1, and ``order``
-        its DG degree); ``"auto"`` (default): ``"xv"`` for n = 1, else ``"x"``.
+        ``order`` is the DG degree on its base mesh, ``half_elements`` the refinement's
+        mesh knob, which raises the degree by log2 of it, default 1; a given ``M`` alone
+        fixes the level); ``"auto"`` (default): ``"xv"`` for n = 1, else ``"x"``.
 
     Returns
     -------

@@ -83,7 +83,7 @@ def test_hermite_convergence_is_geometric_for_smooth_potential() -> None:
 
 @pytest.mark.parametrize("n", [1.0, 3.0, 8.0])
 def test_stationary_identities_hold_to_reported_accuracy(n: float) -> None:
-    r = FokkerPlanck(M=6, elements=16, tol=0.1).solve(Harvester.build(a=0.5, n=n))
+    r = FokkerPlanck(M=6, elements=16, tol=0.1, scheme="x").solve(Harvester.build(a=0.5, n=n))
     rel = r.eta_err / r.eta
     assert abs(r.info["residual_V2"]) <= rel
     assert abs(r.info["residual_power"]) <= rel
@@ -91,10 +91,10 @@ def test_stationary_identities_hold_to_reported_accuracy(n: float) -> None:
 
 
 def test_kink_reports_1e3_error_consistent_with_refinement() -> None:
-    """n = 1 (algebraic convergence): a fixed level reports an error of order 1e-3 that
-    covers the distance to a much finer Hermite truncation."""
+    """n = 1 with the 1-D scheme (algebraic convergence in M): a fixed level reports an
+    error of order 1e-3 that covers the distance to a much finer Hermite truncation."""
     h = Harvester.build(a=0.5, n=1)
-    r = FokkerPlanck(M=6, elements=8, tol=0.1).solve(h)
+    r = FokkerPlanck(M=6, elements=8, tol=0.1, scheme="x").solve(h)
     assert r.status is Status.STABLE
     assert 3e-4 * r.eta < r.eta_err < 1e-2 * r.eta
     finer = _level(h, 10, 4).moments["eta"]
@@ -104,7 +104,7 @@ def test_kink_reports_1e3_error_consistent_with_refinement() -> None:
 
 @pytest.mark.slow
 def test_kink_tol_1e3() -> None:
-    r = solve(Harvester.build(a=0.5, n=1), "fpe", tol=1e-3)
+    r = solve(Harvester.build(a=0.5, n=1), "fpe", tol=1e-3, scheme="x")
     assert r.status is Status.STABLE and r.eta_err <= 1e-3 * r.eta
     finer = _level(Harvester.build(a=0.5, n=1), r.info["M"] + 4, r.info["elements"] // 2)
     assert abs(finer.moments["eta"] - r.eta) <= r.eta_err
