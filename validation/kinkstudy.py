@@ -121,7 +121,7 @@ def sweep_point(h: Harvester, dt: float, *, seed: int, kappa: float, target: flo
         if est.se["eta"] <= target * abs(est.mean["eta"]) or time.perf_counter() - t0 > budget:
             break
     m0, m1 = ens.moments(0), ens.moments(1)
-    slow, crossings, snaps, exhausted = ens.kink_counters[:4]
+    slow, crossings, averaged, exhausted = ens.kink_counters[:4]
     row = {"dt": dt / 2, "dt_coarse": dt, "replicas": ens.replicas, "paths": paths, "t_run": t_run,
            "eta": est.mean["eta"], "eta_se": est.se["eta"], "V2": est.mean["V2"], "V2_se": est.se["V2"],
            "Pin": est.mean["Pin"], "Pin_se": est.se["Pin"], "diff": est.bias["eta"], "diff_se": est.bias_se["eta"],
@@ -130,7 +130,7 @@ def sweep_point(h: Harvester, dt: float, *, seed: int, kappa: float, target: flo
            "stuck": float(np.nanmean(m0["stuck"])), "stuck_coarse": float(np.nanmean(m1["stuck"])),
            "kink_counters": list(ens.kink_counters), "path_steps": ens.path_steps,
            "wall_s": ens.wall_time, "seed": seed}
-    row.update(slow=slow, crossings=crossings, snaps=snaps, exhausted=exhausted)
+    row.update(slow=slow, crossings=crossings, averaged=averaged, exhausted=exhausted)
     return row
 
 
