@@ -29,7 +29,8 @@ from fpe_harvester import Harvester
 from montecarlo import estimate, simulate
 from montecarlo.twin import linearized_stiffness
 
-__all__ = ["fit_weak_order", "fit_difference_order", "pilot_kappa", "sweep_point", "sweep"]
+__all__ = ["fit_weak_order", "fit_difference_order", "pilot_kappa", "sweep_point", "sweep", "fits",
+           "rule_comparison"]
 
 #: Grid of weak orders profiled by the fits.
 P_GRID = np.round(np.arange(0.2, 4.0001, 0.01), 2)
@@ -157,6 +158,47 @@ def fits(rows: list[dict[str, Any]]) -> dict[str, Any]:
     if len(rows) >= 2:
         out["fit_coupled"] = fit_difference_order([r["dt_coarse"] for r in rows], [r["diff"] for r in rows],
                                                   [r["diff_se"] for r in rows])
+    return out
+
+
+def rule_comparison(a: float, dts: tuple[float, ...], *, replicas: int, seed: int, repeats: int = 3,
+                    paths: int = 64, t_burn: float = 30.0, t_run: float = 100.0) -> list[dict[str, Any]]:
+    """The kink rules "hold" (old) and "average" (default) on the same noise, per time step.
+
+    For each dt, ``repeats`` rounds of ``replicas`` each, the two rules interleaved (so that a
+    load change on a shared machine hits both): the held-at-rest fraction of each, the
+    fraction of unit-steps that entered the averaged map, eta(average) - eta(hold) with its
+    error over all replicas (paired: same noise), and the wall-time ratio average/hold (median
+    over the rounds).
+    """
+    h = Harvester.build(a=a, n=1.0)
+    kappa = pilot_kappa(h)
+    out = []
+    for dt in dts:
+        per: dict[str, list] = {"hold": [], "average": []}
+        walls: dict[str, list] = {"hold": [], "average": []}
+        counters: dict[str, np.ndarray] = {"hold": np.zeros(4), "average": np.zeros(4)}
+        for rep in range(repeats):
+            for rule in ("hold", "average"):
+                e = simulate(h, dt=dt, paths=paths, replicas=replicas, t_burn=t_burn, t_run=t_run, seed=seed,
+                             first_replica=rep * replicas, twin=kappa, start="twin", kink_rule=rule)
+                m = e.moments(0)
+                per[rule].append(np.column_stack([m["V2"], m["vxi"], m["stuck"]]))
+                walls[rule].append(e.wall_time)
+                counters[rule] += e.kink_counters
+        hold, avg = np.concatenate(per["hold"]), np.concatenate(per["average"])
+        d = avg[:, 0] / avg[:, 1] - hold[:, 0] / hold[:, 1]
+        steps = hold.shape[0] * paths * (t_burn + t_run) / dt  # the counters include the burn-in
+        out.append({
+            "dt": dt, "replicas": hold.shape[0], "eta_average": float((avg[:, 0] / avg[:, 1]).mean()),
+            "eta_average_minus_hold": float(d.mean()), "se": float(d.std(ddof=1) / math.sqrt(d.size)),
+            "stuck_hold": float(hold[:, 2].mean()), "stuck_average": float(avg[:, 2].mean()),
+            "averaged_entries_per_unit_step": float(counters["average"][2] / steps),
+            "hold_budget_exhausted_per_unit_step": float(counters["hold"][3] / steps),
+            "crossings_per_unit_step": {r: float(counters[r][1] / steps) for r in counters},
+            "wall_s": {r: float(sum(w)) for r, w in walls.items()},
+            "cost_ratio_average_over_hold": float(np.median(np.array(walls["average"]) / np.array(walls["hold"]))),
+            "cost_ratios": [float(x) for x in np.array(walls["average"]) / np.array(walls["hold"])]})
     return out
 
 
