@@ -11,8 +11,9 @@ Private module. The Python side (:mod:`montecarlo.scheme`) builds the coefficien
     ``m, gamma, Kv, Kc, tau_p, sigma, k, a, n, c, threshold, D/tau, rule, a_kink`` where
     ``c`` is the stiffness kept inside the linear flow (``2k``, plus ``2a`` for the harmonic
     potential), ``threshold`` the escape amplitude, ``rule`` the kink's rule for swings
-    shorter than the step (:data:`AVERAGE` or :data:`HOLD`) and ``a_kink`` the strength :math:`an` of the kink part
-    :math:`-an\\,\\mathrm{sign}(x)` integrated exactly by the kink scheme (0 for the others).
+    shorter than the step (:data:`AVERAGE` or :data:`HOLD`) and ``a_kink`` the strength
+    :math:`an` of the kink part :math:`-an\\,\\mathrm{sign}(x)` integrated exactly by the kink
+    scheme (0 for the others).
 ``cf_t`` (harmonic twin, optional)
     ``cf`` of the harmonic ring with on-site stiffness ``kappa_t`` and the same ``k``, run on
     the fine level's noise; its moments are control variates (:mod:`montecarlo.twin`).
@@ -178,10 +179,12 @@ def _average_swing(v: float, V: float, f: float, rem: float, pp: np.ndarray) -> 
 
     Averaged map (docs/model.md §3): each half-swing on side s lasts 2 m w/(a - s F) and
     loses a part of the crossing speed w proportional to that time, so w decays as
-    exp(-gamma u/3) whatever F is (the swing's mean v is 0, so V only relaxes). The unit is
-    placed on its arc at the phase of the swing count elapsed, integrated with that law:
-    deterministic, and uniform in time over the arcs like the exact sequence, whose phase is
-    as sensitive to its inputs. w = 0 is rest, its fixed point.
+    exp(-gamma u/3) whatever F is; V relaxes, driven only by the swing's mean position (its
+    mean v is 0). The unit is placed on its arc at the phase of the swing count elapsed,
+    integrated with that law: deterministic, and uniform in time over the arcs like the exact
+    sequence, whose phase is as sensitive to its inputs. w = 0 is rest, its fixed point.
+    Neglected: the damping within one swing and the swing's feedback through Kv V, relative
+    O(gamma P) and O(Kv Kc P^2) for a swing period P below a quarter of the step.
     """
     m, gamma, Kc, tau_p, a = pp[0], pp[1], pp[3], pp[4], pp[13]
     u = _net_exit_time(f, V, rem, pp)

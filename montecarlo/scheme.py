@@ -128,6 +128,7 @@ def physical_vector(h: Harvester, threshold: float, rule: str = "average",
     kind = scheme_kind(h) if kind is None else kind
     return np.array(
         [p.m, p.gamma, p.Kv, p.Kc, p.tau_p, p.sigma, h.k if h.N > 1 else 0.0, h.a, h.n,
-         linear_stiffness(h), threshold, p.noise_variance, KINK_RULES[rule], h.a * h.n if kind == KIND_KINK else 0.0],
+         linear_stiffness(h), threshold, p.noise_variance, KINK_RULES[rule],
+         h.a * h.n if kind == KIND_KINK else 0.0],
         dtype=float,
     )

@@ -341,7 +341,8 @@ def reference_run(a: float, *, delta: float = 1e-3, schemes: tuple = ((20, "aver
     ss = np.random.SeedSequence(seed)
 
     def work(r: int):
-        gen = np.random.Generator(np.random.PCG64(np.random.SeedSequence(ss.entropy, spawn_key=(first_replica + r,))))
+        child = np.random.SeedSequence(ss.entropy, spawn_key=(first_replica + r,))
+        gen = np.random.Generator(np.random.PCG64(child))
         sums, counts, cnt = np.zeros((L + 1, 6)), np.zeros(L + 1), np.zeros(4, dtype=np.int64)
         _chunk(gen, paths, nburn, nrun, stride, delta, p.tau, p.noise_variance, phys, E, ed, Ks, cfs, pps,
                sums, counts, cnt)
@@ -392,7 +393,8 @@ def main(argv: list[str] | None = None) -> dict[str, Any]:
     ap.add_argument("--a", type=float, nargs="+", default=[0.5, 1.0, 2.0])
     ap.add_argument("--delta", type=float, default=1e-3)
     ap.add_argument("--w-min", type=float, default=1e-3)
-    ap.add_argument("--K", type=int, nargs="+", default=[40, 20, 10, 4], help="scheme steps in units of delta")
+    ap.add_argument("--K", type=int, nargs="+", default=[40, 20, 10, 4],
+                    help="scheme steps in units of delta")
     ap.add_argument("--replicas", type=int, nargs="+", default=[64])
     ap.add_argument("--seed", type=int, default=0)
     ap.add_argument("--out", type=Path, required=True)

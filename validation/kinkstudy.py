@@ -115,8 +115,8 @@ def sweep_point(h: Harvester, dt: float, *, seed: int, kappa: float, target: flo
     t0 = time.perf_counter()
     while True:
         e = simulate(h, dt=dt, paths=paths, replicas=batch, t_burn=t_burn, t_run=t_run, seed=seed,
-                     twin=kappa, start="twin", richardson=True, first_replica=0 if ens is None else ens.replicas,
-                     **kw)
+                     twin=kappa, start="twin", richardson=True,
+                     first_replica=0 if ens is None else ens.replicas, **kw)
         ens = e if ens is None else ens.merge(e)
         est = estimate(ens, h, order=1.0)  # order 1: bias = coarse - fine, the raw difference
         if est.se["eta"] <= target * abs(est.mean["eta"]) or time.perf_counter() - t0 > budget:
@@ -125,7 +125,8 @@ def sweep_point(h: Harvester, dt: float, *, seed: int, kappa: float, target: flo
     slow, crossings, averaged, exhausted = ens.kink_counters[:4]
     row = {"dt": dt / 2, "dt_coarse": dt, "replicas": ens.replicas, "paths": paths, "t_run": t_run,
            "eta": est.mean["eta"], "eta_se": est.se["eta"], "V2": est.mean["V2"], "V2_se": est.se["V2"],
-           "Pin": est.mean["Pin"], "Pin_se": est.se["Pin"], "diff": est.bias["eta"], "diff_se": est.bias_se["eta"],
+           "Pin": est.mean["Pin"], "Pin_se": est.se["Pin"], "diff": est.bias["eta"],
+           "diff_se": est.bias_se["eta"],
            "diff_V2": est.bias["V2"], "diff_V2_se": est.bias_se["V2"], "diff_Pin": est.bias["Pin"],
            "diff_Pin_se": est.bias_se["Pin"], "control": est.control, "vrf": est.reduction.get("eta"),
            "stuck": float(np.nanmean(m0["stuck"])), "stuck_coarse": float(np.nanmean(m1["stuck"])),
@@ -188,6 +189,7 @@ def rule_comparison(a: float, dts: tuple[float, ...], *, replicas: int, seed: in
                 counters[rule] += e.kink_counters
         hold, avg = np.concatenate(per["hold"]), np.concatenate(per["average"])
         d = avg[:, 0] / avg[:, 1] - hold[:, 0] / hold[:, 1]
+        ratios = np.array(walls["average"]) / np.array(walls["hold"])
         steps = hold.shape[0] * paths * (t_burn + t_run) / dt  # the counters include the burn-in
         out.append({
             "dt": dt, "replicas": hold.shape[0], "eta_average": float((avg[:, 0] / avg[:, 1]).mean()),
@@ -197,8 +199,7 @@ def rule_comparison(a: float, dts: tuple[float, ...], *, replicas: int, seed: in
             "hold_budget_exhausted_per_unit_step": float(counters["hold"][3] / steps),
             "crossings_per_unit_step": {r: float(counters[r][1] / steps) for r in counters},
             "wall_s": {r: float(sum(w)) for r, w in walls.items()},
-            "cost_ratio_average_over_hold": float(np.median(np.array(walls["average"]) / np.array(walls["hold"]))),
-            "cost_ratios": [float(x) for x in np.array(walls["average"]) / np.array(walls["hold"])]})
+            "cost_ratio_average_over_hold": float(np.median(ratios)), "cost_ratios": ratios.tolist()})
     return out
 
 
@@ -220,7 +221,7 @@ def main(argv: list[str] | None = None) -> dict[str, Any]:
     ap.add_argument("--label", default="")
     ap.add_argument("--out", type=Path, required=True)
     args = ap.parse_args(argv)
-    per_a = lambda v, i: v[i] if len(v) > 1 else v[0]  # noqa: E731
+    per_a = lambda v, i: v[i] if len(v) > 1 else v[0]
     res: dict[str, Any] = {"label": args.label, "dts_coarse": args.dts, "sweeps": {}}
 
     def log(a: float, partial: dict[str, Any]) -> None:

@@ -76,7 +76,7 @@ def test_default_rule_holds_no_unit_at_rest() -> None:
     kw = dict(dt=0.02, paths=32, replicas=2, t_burn=10.0, t_run=40.0, seed=5)
     avg, hold = simulate(h, **kw), simulate(h, kink_rule="hold", **kw)
     assert np.all(avg.moments(0)["stuck"] == 0.0)
-    slow, crossings, averaged, exhausted = avg.kink_counters
+    _, crossings, averaged, exhausted = avg.kink_counters
     assert averaged > 0 and exhausted == 0 and crossings > 0
     # the old rule holds units at rest once 64 crossings fit in a step: ~6e-3 of the time here
     assert hold.moments(0)["stuck"].mean() > 1e-3 and hold.kink_counters[3] > 0

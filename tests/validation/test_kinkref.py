@@ -22,6 +22,7 @@ def test_conservative_advancement_finds_a_grazing_crossing() -> None:
     assert abs(y[0]) < 1e-14
 
 
+@pytest.mark.slow  # ~15 s of compilation: the driver is not cached (it calls the production kernels)
 def test_reference_agrees_with_the_scheme_on_common_noise() -> None:
     run = reference_run(0.5, delta=2e-3, schemes=((10, "average"),), paths=32, replicas=4, t_burn=10.0,
                         t_run=30.0, seed=4)

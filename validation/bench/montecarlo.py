@@ -502,7 +502,8 @@ def _plot_kink(kink: dict[str, Any], ax: Any) -> None:
         dt = np.array([r["dt_coarse"] for r in rows])
         eta = np.array([r["eta"] for r in rows])
         bars = ax.errorbar(dt, np.abs([r["diff"] for r in rows]) / eta,
-                           yerr=np.array([r["diff_se"] for r in rows]) / eta, fmt="o", capsize=3, label=f"a = {st['a']:g}")
+                           yerr=np.array([r["diff_se"] for r in rows]) / eta, fmt="o", capsize=3,
+                           label=f"a = {st['a']:g}")
         fit = st.get("fit_coupled")
         if fit:
             ax.loglog(dt, abs(fit["c"]) * (1 - 2.0 ** -fit["p"]) * dt ** fit["p"] / eta.mean(), "-", lw=0.8,
