@@ -8,11 +8,12 @@ Private module. The Python side (:mod:`montecarlo.scheme`) builds the coefficien
     constant force; ``cf[12] = h``; ``cf[13] = e^{-h/\\tau}``;
     ``cf[14] = \\sqrt{(D/\\tau)(1 - e^{-2h/\\tau})}``; ``cf[15] = e^{-h/2\\tau}``.
 ``pp`` (physical)
-    ``m, gamma, Kv, Kc, tau_p, sigma, k, a, n, c, threshold, D/tau, snap, a_kink`` where
+    ``m, gamma, Kv, Kc, tau_p, sigma, k, a, n, c, threshold, D/tau, rule, a_kink`` where
     ``c`` is the stiffness kept inside the linear flow (``2k``, plus ``2a`` for the harmonic
-    potential), ``threshold`` the escape amplitude, ``snap`` the kink's sticking rule
-    (:data:`SNAP`) and ``a_kink`` the strength :math:`an` of the kink part
-    :math:`-an\\,\\mathrm{sign}(x)` integrated exactly by the kink scheme (0 for the others).
+    potential), ``threshold`` the escape amplitude, ``rule`` the kink's rule for swings
+    shorter than the step (:data:`AVERAGE` or :data:`HOLD`) and ``a_kink`` the strength
+    :math:`an` of the kink part :math:`-an\\,\\mathrm{sign}(x)` integrated exactly by the kink
+    scheme (0 for the others).
 ``cf_t`` (harmonic twin, optional)
     ``cf`` of the harmonic ring with on-site stiffness ``kappa_t`` and the same ``k``, run on
     the fine level's noise; its moments are control variates (:mod:`montecarlo.twin`).
@@ -27,8 +28,8 @@ a Strang kick around it (smooth n), or, for the kink (1 <= n <= 1 + KINK_WIDTH o
 :mod:`montecarlo.scheme`), its part :math:`-an\\,\\mathrm{sign}(x)` is handled by an exact
 piecewise-linear flow with located zero crossings and the remainder by Strang kicks. Toward
 rest the kink's swings shrink exponentially in time and never stop (docs/model.md §3); once
-they are shorter than the step the scheme holds the unit at rest (:data:`SNAP`) until the
-net force exceeds :math:`an`, a time-step artifact counted as ``stuck``.
+they are much shorter than the step the scheme advances them by the averaged map of their
+amplitude (:data:`AVERAGE`).
 """
 
 from __future__ import annotations
@@ -53,15 +54,14 @@ N_MOM = len(MOMENTS)
 #: of the measured window (the burn-in drift check compares it with the whole).
 ROWS = 3
 
-#: Kink sticking rule: a crossing whose return to x = 0 would take less than SNAP * h stops
-#: the unit at once. The model's swings never stop (docs/model.md §3), so any stop is a
-#: time-step artifact; the default 0 stops a unit only when its swings exhaust the event
-#: budget (MAX_EVENTS crossings in one step). Measured (validation/bench/montecarlo.py), a = 2,
-#: dt = 0.02: SNAP = 1 holds units at rest 22 % of the time and shifts eta by +1.4e-3
-#: relative (2.3 standard errors); with 0 the held fraction is below 1e-5, at up to twice the
-#: kink's cost there (no difference for a <= 1, where units are almost never held). Passed
-#: as ``pp[12]``.
-SNAP = 0.0
+#: Kink rule for swings shorter than the step (``pp[12]``). The model's swings never stop
+#: (docs/model.md §3). AVERAGE (default) advances them with the averaged map of their crossing
+#: speed, w -> w exp(-gamma r/3) (:func:`_average_swing`), once AVG_SWINGS full swings fit in
+#: the time left of a step; HOLD follows them until MAX_EVENTS crossings in one step and then
+#: holds the unit at rest, a time-step artifact (validation/bench/montecarlo.py compares them).
+AVERAGE = 0.0
+HOLD = 1.0
+AVG_SWINGS = 4.0
 MAX_EVENTS = 64
 N_SAMPLE = 8
 N_TAYLOR = 11
@@ -122,7 +122,10 @@ def _first_crossing(cs: np.ndarray, s: float, shift: int, rem: float) -> float:
     """First t in (0, rem] where s x(t) <= 0, or -1. ``shift`` deflates a root at t = 0.
 
     x(t) = t^shift g(t) with s g(0) > 0; the grid brackets the first sign change of g and
-    safeguarded Newton polishes it to round-off.
+    safeguarded Newton polishes it to round-off. A converged Newton iterate is the root
+    whichever side of it round-off leaves it on (the caller sets x = 0 there and continues
+    on the side v points to); only a bracket that collapses without Newton converging returns
+    its far end.
     """
     lo = 0.0
     hi = -1.0
@@ -141,16 +144,81 @@ def _first_crossing(cs: np.ndarray, s: float, shift: int, rem: float) -> float:
             lo = t
         else:
             hi = t
+        if hi - lo <= 1e-15 * rem:
+            break
         dg = _dhorner(cs, 0, t, shift)
         tn = t - g / dg if dg != 0.0 else 0.5 * (lo + hi)
         if not (lo < tn < hi):
             tn = 0.5 * (lo + hi)
-        if abs(tn - t) <= 1e-15 * rem or hi - lo <= 1e-15 * rem:
-            t = tn
-            break
+        elif abs(tn - t) <= 1e-15 * rem:
+            return tn
         t = tn
-    # the returned time must have x on the far side (or at 0) so the next region is consistent
-    return hi if s * _horner(cs, 0, t, shift) > 0.0 else t
+    return hi
+
+
+@njit(cache=True, nogil=True)
+def _net_exit_time(f: float, V: float, rem: float, pp: np.ndarray) -> float:
+    """Time within ``rem`` at which the net force f - Kv V(t) leaves [-a, a] as V decays
+    (V(t) = V e^(-t/tau_p); the net force relaxes monotonically toward f), or ``rem``
+    (0 if it is outside already)."""
+    Kv, tau_p, a = pp[2], pp[4], pp[13]
+    if abs(f - Kv * V) > a:
+        return 0.0
+    net_end = f - Kv * V * math.exp(-rem / tau_p)
+    if abs(net_end) <= a:
+        return rem
+    s = 1.0 if net_end > 0.0 else -1.0
+    u = -tau_p * math.log((f - s * a) / (Kv * V))
+    return min(max(u, 0.0), rem)
+
+
+@njit(cache=True, nogil=True)
+def _average_swing(v: float, V: float, f: float, rem: float, pp: np.ndarray) -> tuple:
+    """Swings from x = 0 at speed v, too short to follow, over ``rem`` or until the net force
+    leaves (-a, a): returns x, v, V and the time u advanced.
+
+    Averaged map (docs/model.md §3): each half-swing on side s lasts 2 m w/(a - s F) and
+    loses a part of the crossing speed w proportional to that time, so w decays as
+    exp(-gamma u/3) whatever F is; V relaxes, driven only by the swing's mean position (its
+    mean v is 0). The unit is placed on its arc at the phase of the swing count elapsed,
+    integrated with that law: deterministic, and uniform in time over the arcs like the exact
+    sequence, whose phase is as sensitive to its inputs. w = 0 is rest, its fixed point.
+    Neglected: the damping within one swing and the swing's feedback through Kv V, relative
+    O(gamma P) and O(Kv Kc P^2) for a swing period P below a quarter of the step.
+    """
+    m, gamma, Kc, tau_p, a = pp[0], pp[1], pp[3], pp[4], pp[13]
+    u = _net_exit_time(f, V, rem, pp)
+    net = f - pp[2] * V
+    V = V * math.exp(-u / tau_p)
+    w = abs(v)
+    if w == 0.0:
+        return 0.0, 0.0, V, u
+    # V = V0 e^(-u/tau_p) + Kc x(u) - (Kc/tau_p) int e^(-(u-t)/tau_p) x(t) dt, with x(t)
+    # replaced by its mean over a swing, 2 m net w(t)^2 / (3 (a^2 - net^2))
+    lam = 1.0 / tau_p - 2.0 * gamma / 3.0
+    decay = math.expm1(lam * u) / lam if lam != 0.0 else u
+    V -= Kc / tau_p * 2.0 * m * net * w * w / (3.0 * (a * a - net * net)) * math.exp(-u / tau_p) * decay
+    s = 1.0 if v > 0.0 else -1.0
+    # swings elapsed: integral of dt / period(w(t)), period(w) = 4 a m w / (a^2 - net^2)
+    grow = math.expm1(gamma * u / 3.0) * 3.0 / gamma if gamma > 0.0 else u
+    cycles = (a * a - net * net) / (4.0 * a * m * w) * grow
+    # beyond 2^52 (or overflowed) the count has no fractional digits left: phase 0
+    phase = cycles - math.floor(cycles) if cycles < 4.5e15 else 0.0
+    w *= math.exp(-gamma * u / 3.0)
+    net = f - pp[2] * V
+    k1, k2 = (a - s * net) / m, (a + s * net) / m
+    if u < rem or k1 <= 0.0 or k2 <= 0.0:
+        # the net force has reached +-a: one arc is unbounded, so the unit is left at the
+        # crossing, moving into the side it is about to leave toward
+        return 0.0, w if net > 0.0 else -w, V, u
+    t1 = 2.0 * w / k1
+    tau = phase * (t1 + 2.0 * w / k2)
+    if tau < t1:
+        x, v = s * tau * (w - 0.5 * k1 * tau), s * (w - k1 * tau)
+    else:
+        tau -= t1
+        x, v = -s * tau * (w - 0.5 * k2 * tau), -s * (w - k2 * tau)
+    return x, v, V + Kc * x, u
 
 
 @njit(cache=True, nogil=True)
@@ -158,13 +226,17 @@ def _kink_unit(x: float, v: float, V: float, stuck: bool, f: float, cf: np.ndarr
                pp: np.ndarray, counters: np.ndarray, cs: np.ndarray) -> tuple:
     """Advance one unit of the n = 1 potential over one D step with external force f.
 
-    The slow path of :func:`_kink_flow`, for units at, held at or near x = 0. Exact
-    piecewise flow: each side of x = 0 is linear with constant force f - a s (a = ``pp[13]``);
-    zero crossings are located on the flow's Taylor series (bracketing + safeguarded Newton);
-    at x = v = 0 the unit is held while the net force |f - Kv V| <= a, and V then decays
-    exactly.
+    The slow path of :func:`_kink_flow`, for units at or near x = 0. Exact piecewise flow:
+    each side of x = 0 is linear with constant force f - a s (a = ``pp[13]``); zero crossings
+    are located on the flow's Taylor series (bracketing + safeguarded Newton). Swings shorter
+    than the step never stop (docs/model.md §3): with the rule ``pp[12]`` = :data:`AVERAGE`,
+    once AVG_SWINGS full swings fit in the time left, the rest of the step is the averaged
+    map :func:`_average_swing`; with :data:`HOLD` they are followed until MAX_EVENTS
+    crossings in one step and the unit is then held at x = v = 0 (``stuck``) while the net
+    force |f - Kv V| <= a, a time-step artifact kept for comparison.
     """
-    m, Kv, tau_p, a = pp[0], pp[2], pp[4], pp[13]
+    m, Kv, a = pp[0], pp[2], pp[13]
+    hold = pp[12] == HOLD
     h = cf[12]
     counters[0] += 1
     t = 0.0
@@ -172,35 +244,23 @@ def _kink_unit(x: float, v: float, V: float, stuck: bool, f: float, cf: np.ndarr
         rem = h - t
         if rem <= 0.0:
             return x, v, V, stuck
-        if stuck and abs(f - Kv * V) > a:
-            stuck = False
-            x, v = 0.0, 0.0
-        if stuck:
-            Vend = V * math.exp(-rem / tau_p)
-            net_end = f - Kv * Vend
-            if abs(net_end) <= a:
-                return 0.0, 0.0, Vend, True
-            # the net force relaxes monotonically toward f and reaches +-a at time u
-            s = 1.0 if net_end > 0.0 else -1.0
-            u = -tau_p * math.log((f - s * a) / (Kv * V))
-            u = min(max(u, 0.0), rem)
-            V = V * math.exp(-u / tau_p)
-            t += u
-            stuck = False
-            x, v = 0.0, 0.0
-            continue
-        shift = 0
         if x != 0.0:
             s = 1.0 if x > 0.0 else -1.0
+            shift = 0
         elif v != 0.0:
             s = 1.0 if v > 0.0 else -1.0
             shift = 1
         else:
-            net = f - Kv * V
-            if abs(net) <= a:
-                stuck = True
-                continue
-            s = 1.0 if net > 0.0 else -1.0
+            if stuck or abs(f - Kv * V) <= a:
+                # at rest: nothing moves until the net force, relaxing with V, reaches +-a;
+                # then the unit leaves at once (|net| = a up to round-off must not re-enter)
+                x, v, V, u = _average_swing(0.0, V, f, rem, pp)
+                if u >= rem:
+                    return x, v, V, stuck
+                t += u
+                rem = h - t
+                stuck = False
+            s = 1.0 if f - Kv * V > 0.0 else -1.0
             shift = 2
         _series(x, v, V, f - a * s, pp, cs)
         tc = _first_crossing(cs, s, shift, rem)
@@ -211,13 +271,13 @@ def _kink_unit(x: float, v: float, V: float, stuck: bool, f: float, cf: np.ndarr
         t += tc
         counters[1] += 1
         net = f - Kv * V
-        if abs(net) < a and 2.0 * m * abs(v) < pp[12] * h * (a - abs(net)):
-            v = 0.0
-            stuck = True
+        if not hold and AVG_SWINGS * 4.0 * a * m * abs(v) < (h - t) * (a * a - net * net):
             counters[2] += 1
-    # event budget exhausted (long chatter): the unit is at or next to x = 0
+            x, v, V, u = _average_swing(v, V, f, h - t, pp)
+            t += u
+    # event budget exhausted (long chatter, HOLD only): the unit is at or next to x = 0
     counters[3] += 1
-    if abs(f - Kv * V) <= a:
+    if hold and abs(f - Kv * V) <= a:
         return 0.0, 0.0, V, True
     return x, v, V, stuck
 
@@ -496,8 +556,8 @@ def _run(gen, P: int, N: int, nburn: int, nrun: int, stride: int, cf_f: np.ndarr
     esc_time : (P,) array
         Time at which path p first had some |x_j| > threshold, or -1.
     counters : (5,) int64 array
-        Kink statistics (slow-path unit steps, crossings, snaps to sticking, exhausted event
-        budgets) and, in slot 4, the number of ring steps taken (all levels).
+        Kink statistics (slow-path unit steps, crossings, averaged-map entries, exhausted
+        event budgets) and, in slot 4, the number of ring steps taken (all levels).
     """
     thr = pp[10]
     sd = math.sqrt(pp[11])

@@ -24,18 +24,25 @@ import scipy.linalg
 
 from fpe_harvester.model import Harvester
 
-from ._kernels import KIND_KICK, KIND_KINK, KIND_LINEAR, SNAP
+from ._kernels import AVERAGE, HOLD, KIND_KICK, KIND_KINK, KIND_LINEAR
 
 __all__ = ["scheme_kind", "linear_stiffness", "step_coefficients", "physical_vector", "SCHEME_NAMES",
-           "KINK_WIDTH"]
+           "KINK_WIDTH", "KINK_RULES"]
 
 SCHEME_NAMES = {
     KIND_LINEAR: "Strang O(h/2) D(h) O(h/2); D exact linear flow (harmonic on-site force)",
     KIND_KICK: "Strang O(h/2) D(h) O(h/2); D = kick(h/2) linear-flow(h) kick(h/2) for -U'(x)",
     KIND_KINK: "Strang O(h/2) D(h) O(h/2); D exact piecewise-linear flow of the kink force "
-    "-a n sign(x) with located zero crossings, held at rest once the swings are shorter than the "
-    "step, and (n > 1) Strang kicks of the remainder -U'(x) + a n sign(x)",
+    "-a n sign(x) with located zero crossings, swings much shorter than the step advanced by the "
+    "averaged map of their amplitude (w -> w exp(-gamma t/3)), and (n > 1) Strang kicks of the "
+    "remainder -U'(x) + a n sign(x)",
 }
+
+#: The kink scheme's rules for swings shorter than the step (:data:`montecarlo._kernels.AVERAGE`):
+#: ``"average"`` (default) advances them by the averaged map of their amplitude; ``"hold"``
+#: follows them until 64 crossings in one step and then holds the unit at rest (a time-step
+#: artifact, kept to compare with).
+KINK_RULES = {"average": AVERAGE, "hold": HOLD}
 
 
 #: Width of the kink scheme's range of n: 1 <= n <= 1 + KINK_WIDTH (see :func:`scheme_kind`).
@@ -110,17 +117,18 @@ def step_coefficients(h: Harvester, dt: float) -> np.ndarray:
     return cf
 
 
-def physical_vector(h: Harvester, threshold: float, snap: float = SNAP,
+def physical_vector(h: Harvester, threshold: float, rule: str = "average",
                     kind: int | None = None) -> np.ndarray:
     """Parameter array ``pp`` of the kernels (layout in :mod:`montecarlo._kernels`).
 
-    ``threshold`` is the escape amplitude, ``snap`` the kink's sticking rule
-    (:data:`montecarlo._kernels.SNAP`), ``kind`` the scheme (default :func:`scheme_kind`).
+    ``threshold`` is the escape amplitude, ``rule`` the kink's rule for swings shorter than
+    the step (a key of :data:`KINK_RULES`), ``kind`` the scheme (default :func:`scheme_kind`).
     """
     p = h.params
     kind = scheme_kind(h) if kind is None else kind
     return np.array(
         [p.m, p.gamma, p.Kv, p.Kc, p.tau_p, p.sigma, h.k if h.N > 1 else 0.0, h.a, h.n,
-         linear_stiffness(h), threshold, p.noise_variance, snap, h.a * h.n if kind == KIND_KINK else 0.0],
+         linear_stiffness(h), threshold, p.noise_variance, KINK_RULES[rule],
+         h.a * h.n if kind == KIND_KINK else 0.0],
         dtype=float,
     )

@@ -23,8 +23,8 @@ import numpy as np
 from fpe_harvester.errors import ParameterError, check_int, check_real
 from fpe_harvester.model import Harvester
 
-from ._kernels import KIND_KICK, KIND_KINK, MOMENTS, N_MOM, ROWS, SNAP, run_chunk
-from .scheme import physical_vector, scheme_kind, step_coefficients
+from ._kernels import KIND_KICK, KIND_KINK, MOMENTS, N_MOM, ROWS, run_chunk
+from .scheme import KINK_RULES, physical_vector, scheme_kind, step_coefficients
 from .twin import initial_cholesky, twin_expectations, twin_harvester, twin_is_stable
 
 __all__ = ["Ensemble", "simulate", "default_threads"]
@@ -61,6 +61,9 @@ class Ensemble:
         (:func:`montecarlo.twin.twin_expectations`); empty without a twin.
     start : str
         ``"rest"`` or ``"twin"`` (the paths start from the twin's stationary law).
+    kink_counters : tuple of int
+        Kink scheme: unit-steps on the slow path (near x = 0), located zero crossings, entries
+        into the averaged swing map, steps that exhausted the event budget (all levels).
     """
 
     sums: np.ndarray
@@ -150,7 +153,7 @@ def simulate(
     sample_every: float = 0.05,
     twin: float | None = None,
     start: str = "rest",
-    snap: float = SNAP,
+    kink_rule: str = "average",
     kind: int | None = None,
 ) -> Ensemble:
     """Simulate independent replicas of ``h`` and return their raw moment sums.
@@ -195,10 +198,11 @@ def simulate(
         then its own twin). The twin always starts from its own law when ``start="twin"``;
         with ``start="rest"`` a twin starts at rest too, and its expectations are then not
         those of :attr:`Ensemble.twin_mean` during the transient.
-    snap : float
-        Kink scheme only: a zero crossing whose return would take less than ``snap * dt``
-        sticks at once, >= 0 (:data:`montecarlo._kernels.SNAP`; 0: only an exhausted event
-        budget sticks). For time-step studies.
+    kink_rule : {"average", "hold"}
+        Kink scheme only: swings much shorter than the step are advanced by the averaged map
+        of their amplitude (``"average"``), or followed until 64 crossings in one step and the
+        unit then held at rest (``"hold"``, a time-step artifact kept to compare with;
+        :data:`montecarlo.scheme.KINK_RULES`).
     kind : int or None
         Scheme (:data:`montecarlo._kernels.KIND_KICK` or ``KIND_KINK``; default
         :func:`montecarlo.scheme.scheme_kind`), for comparing the schemes near n = 1.
@@ -228,7 +232,9 @@ def simulate(
     if seed is not None:
         seed = check_int("seed", seed, low=0)
     sample_every = check_real("sample_every", sample_every, low=0.0)
-    snap = check_real("snap", snap, low=0.0)
+    if kink_rule not in KINK_RULES:
+        raise ParameterError(f"kink_rule must be one of {sorted(KINK_RULES)}, got {kink_rule!r} "
+                             f"(type {type(kink_rule).__name__})")
     if start not in ("rest", "twin"):
         raise ParameterError(f"start must be 'rest' or 'twin', got {start!r} (type {type(start).__name__})")
     if twin is not None:
@@ -252,7 +258,7 @@ def simulate(
         raise ParameterError(f"kind must be None, or {KIND_KICK} (kick) or {KIND_KINK} (kink) for a "
                              f"nonlinear potential, got {kind!r} with n = {h.n:g}")
     kind = scheme_kind(h) if kind is None else kind
-    pp = physical_vector(h, threshold, snap, kind)
+    pp = physical_vector(h, threshold, kink_rule, kind)
     lin = twin_harvester(h, twin) if twin is not None else (h if h.is_linear else None)
     if twin is not None:
         cf_t, pp_t = step_coefficients(lin, dt_f), physical_vector(lin, threshold)
@@ -307,7 +313,8 @@ def simulate(
         kink_counters=tuple(int(v) for v in counters[:4]),
         seed_entropy=int(ss.entropy) if seed is None else seed,
         first_replica=first_replica,
-        notes={"threads": threads, "chunk": chunk, "scheme_kind": kind, "sample_stride": stride},
+        notes={"threads": threads, "chunk": chunk, "scheme_kind": kind, "sample_stride": stride,
+               "kink_rule": kink_rule},
         twin_kappa=twin,
         twin_mean=twin_mean,
         start=start,

@@ -521,7 +521,7 @@ class MonteCarlo:
             "confinement": h.confinement,
         }
         if scheme_kind(h) == KIND_KINK:
-            slow, crossings, snaps, exhausted = ens.kink_counters
+            slow, crossings, averaged, exhausted = ens.kink_counters
             info.update(stuck_fraction=est.mean["stuck"], kink_slow_steps=slow, kink_crossings=crossings,
-                        kink_snaps=snaps, kink_event_budget_exhausted=exhausted)
+                        kink_averaged=averaged, kink_event_budget_exhausted=exhausted)
         return {k: (None if isinstance(v, float) and not math.isfinite(v) else v) for k, v in info.items()}

@@ -22,10 +22,13 @@ Measured in one run:
   error of 1e-4 with and without them, measured in the same run within a budget and, where
   the budget runs out, extrapolated as ``wall * (se / se_needed)^2`` (labelled);
 * error-versus-time curves (``series``) for the combined benchmark (:mod:`.combined`);
-* the kink's time-step law: coupled differences eta(dt) - eta(dt/2) for dt = 0.04 ... 0.005
-  at a = 0.5, 1, 2 with control variates, the fitted order, the stuck fraction and the effect
-  of stopping a unit as soon as its swing would return within a step (``snap = 1``) against
-  the default, which follows the swings until the event budget runs out (same noise).
+* the kink's time-step law (:mod:`validation.kinkstudy`): at a = 0.5, 1, 2, eta at fine steps
+  0.04 ... 0.005 from runs with independent seeds, each Richardson-coupled, and the weak order
+  p of eta(dt) = eta0 + c dt^p fitted to the independent values and to the coupled differences
+  (with chi^2 + 1 intervals), beside the order the solver's Richardson bias uses; the old rule
+  (units held at rest once 64 crossings fit in a step) against the default (averaged swings)
+  at a = 2 on the same noise: held fraction per dt, eta difference, cost ratio; and the scheme
+  minus the independent reference of :mod:`validation.kinkref` on common noise.
 
 ``python -m validation.bench.montecarlo [--quick] [--out DIR]`` writes ``bench_montecarlo.json``
 and ``bench_montecarlo.png``.
@@ -157,17 +160,18 @@ def _equal_error(quick: bool) -> dict[str, Any]:
     rel = _rel_se(eta)
     reached = rel <= TARGET
     t_target = t_total if reached else t_total * (rel / TARGET) ** 2
-    # the engine's own bias at dt: common-noise difference with dt/2 ... dt (order 1 assumed)
+    # the engine's own bias at dt: common-noise difference with dt/2 ... dt, at the kink
+    # scheme's measured order (montecarlo.estimate.BIAS_ORDER)
     eb = simulate(h, dt=2 * dt, paths=paths, replicas=4 if quick else 16, t_burn=t_burn, t_run=t_run,
                   seed=202, richardson=True)
-    est_b = estimate(eb, h, order=1.0)
+    est_b = estimate(eb, h)
     ours = {
         "dt": dt, "eta": float(eta.mean()), "rel_se_eta": rel, "replicas": ens.replicas,
         "wall_s": t_total, "path_steps_per_s": ens.path_steps / ens.wall_time,
         "wall_to_1e-3_s": t_target, "extrapolated": not reached,
         "bias_eta_at_dt_0.02_vs_0.01": est_b.bias["eta"], "bias_eta_se": est_b.bias_se["eta"],
-        "bias_note": "bias of the dt = 0.01 run, estimated (order 1 assumed) from common-noise runs at "
-                     "0.02 and 0.01; relative to eta",
+        "bias_note": "bias of the dt = 0.01 run, estimated (the kink scheme's measured order) from "
+                     "common-noise runs at 0.02 and 0.01; relative to eta",
         "curve": curve,
     }
     ours["rel_bias_eta"] = abs(est_b.bias["eta"]) / ours["eta"]
@@ -249,7 +253,7 @@ def _bias_study(quick: bool) -> dict[str, Any]:
     kw = dict(paths=128 if quick else 1024, replicas=6 if quick else 12, t_burn=20.0,
               t_run=40.0 if quick else 100.0)
     naive = estimate(simulate_naive(h, dt=0.01, seed=31, **kw), h)
-    ours = estimate(simulate(h, dt=0.02, seed=32, richardson=True, **kw), h, order=1.0)
+    ours = estimate(simulate(h, dt=0.02, seed=32, richardson=True, **kw), h)
     out["kink_a2_naive_vs_engine_dt_0.01"] = {
         "naive_eta": naive.mean["eta"], "naive_se": naive.se["eta"],
         "engine_eta": ours.mean["eta"], "engine_se": ours.se["eta"],
@@ -346,49 +350,30 @@ def _control_variates(quick: bool) -> dict[str, Any]:
 
 
 def _kink_dt_study(quick: bool) -> dict[str, Any]:
-    """Kink n = 1: coupled eta(dt) - eta(dt/2) per dt with control variates, fitted order,
-    stuck fraction, and the snap-to-rest rule's effect on the same noise."""
-    from montecarlo.twin import linearized_stiffness
+    """Kink n = 1: the time-step law per a (:mod:`validation.kinkstudy`: independent seeds per
+    dt, coupled differences, both fits), the old rule (units held at rest) against the default
+    (averaged swings) on the same noise, and the scheme against the independent reference
+    (:mod:`validation.kinkref`) on common noise."""
+    from montecarlo.estimate import BIAS_ORDER
+    from validation.kinkref import reference_run, summarize
+    from validation.kinkstudy import rule_comparison, sweep
 
-    out: dict[str, Any] = {}
-    plans = {0.5: ((0.04, 0.02, 0.01, 0.005), (600, 800, 250, 150)),
-             1.0: ((0.04, 0.02, 0.01, 0.005), (600, 800, 250, 150)),
-             2.0: ((0.04, 0.02, 0.01, 0.005), (200, 200, 150, 100))}
-    if quick:
-        plans = {0.5: ((0.04, 0.02), (24, 24)), 2.0: ((0.04, 0.02), (24, 24))}
-    for a, (dts, reps) in plans.items():
-        h = Harvester.build(a=a, n=1.0)
-        pil = simulate(h, dt=0.02, paths=16, replicas=4, t_burn=40.0, t_run=100.0, seed=1)
-        m = pil.moments(0)
-        kappa = linearized_stiffness(h, float(m["xdU"].mean()), float(m["x2"].mean()))
-        rows = []
-        for dt, R in zip(dts, reps):
-            e = simulate(h, dt=dt, paths=64, replicas=R, t_burn=30.0, t_run=100.0, seed=11, twin=kappa,
-                         start="twin", richardson=True)
-            est = estimate(e, h, order=1.0)  # order 1: bias = coarse - fine, the raw difference
-            m0, m1 = e.moments(0), e.moments(1)
-            rows.append({"dt": dt, "dt_fine": dt / 2, "replicas": R, "eta_fine": est.mean["eta"],
-                         "eta_fine_se": est.se["eta"], "diff": est.bias["eta"], "diff_se": est.bias_se["eta"],
-                         "vrf": est.reduction.get("eta"), "stuck_fine": float(np.nanmean(m0["stuck"])),
-                         "stuck_coarse": float(np.nanmean(m1["stuck"])), "wall_s": e.wall_time})
-        good = [r for r in rows if abs(r["diff"]) > 3 * r["diff_se"]]
-        fit = None
-        if len(good) >= 2:
-            logs = np.log([[r["dt"], abs(r["diff"])] for r in good])
-            fit = float(np.polyfit(logs[:, 0], logs[:, 1], 1)[0])
-        snap = []
-        for dt, R in (((0.02, 150), (0.005, 60)) if not quick else ((0.02, 8),)):
-            kw = dict(dt=dt, paths=64, replicas=R, t_burn=30.0, t_run=100.0, seed=12, twin=kappa,
-                      start="twin")
-            # the default stops a unit only on an exhausted event budget; snap = 1 stops it
-            # once its swing would return within one step
-            m1, m0 = simulate(h, snap=1.0, **kw).moments(0), simulate(h, **kw).moments(0)
-            d = m1["V2"] / m1["vxi"] - m0["V2"] / m0["vxi"]
-            snap.append({"dt": dt, "eta_diff_snap1_minus_default": float(d.mean()),
-                         "se": float(d.std(ddof=1) / math.sqrt(R)), "stuck_snap1": float(m1["stuck"].mean()),
-                         "stuck_default": float(m0["stuck"].mean())})
-        out[f"a{a:g}"] = {"twin_kappa": kappa, "rows": rows, "fitted_order_from_resolved_points": fit,
-                          "snap": snap}
+    out: dict[str, Any] = {"bias_order_used": BIAS_ORDER["nonsmooth"],
+                           "law": "eta(dt) = eta0 + c dt^p; Richardson bias (coarse - fine) / (2^p - 1)"}
+    plans = {0.5: ((0.08, 0.04), 3e-4, 10.0)} if quick else {
+        0.5: ((0.08, 0.04, 0.02, 0.01), 1e-4, 90.0), 1.0: ((0.08, 0.04, 0.02, 0.01), 1e-4, 90.0),
+        2.0: ((0.08, 0.04, 0.02, 0.01), 2e-3, 120.0)}
+    for i, (a, (dts, target, budget)) in enumerate(plans.items()):
+        out[f"a{a:g}"] = sweep(a, dts, seed=3000 + 100 * i, target=target, budget=budget)
+    out["rules_a2"] = rule_comparison(2.0, (0.02,) if quick else (0.04, 0.02, 0.01, 0.005),
+                                      replicas=4 if quick else 16, repeats=1 if quick else 3, seed=3500)
+    if not quick:
+        out["reference"] = {}
+        for a in (0.5, 2.0):
+            run = reference_run(a, delta=1e-3, schemes=((40, "average"), (20, "average"), (10, "average"),
+                                                        (20, "hold")), replicas=64, seed=3600)
+            out["reference"][f"a{a:g}"] = {**summarize(run), "wall_s": run["wall_s"], "delta": run["delta"],
+                                          "w_min": run["w_min"], "replicas": run["replicas"]}
     return out
 
 
@@ -398,12 +383,14 @@ def series(quick: bool, res: dict[str, Any]) -> list[dict[str, Any]]:
     n = 3 ring; references from this run's most precise values (the kink's time-step study at
     dt = 0.02/0.01 with its bias estimate, the ring's run at 1e-4)."""
     cases = {"n1_single": (dict(a=0.5, n=1.0), None), "n3_ring": (dict(a=0.5, n=3.0, N=3, k=-0.5), None)}
-    rows = res.get("kink_dt", {}).get("a0.5", {}).get("rows", [])
+    kink = res.get("kink_dt", {})
+    rows = kink.get("a0.5", {}).get("rows", [])
     if rows:
-        best = min(rows, key=lambda r: r["eta_fine_se"])
-        rel = math.hypot(best["eta_fine_se"], best["diff"]) / best["eta_fine"]
+        best = min(rows, key=lambda r: r["eta_se"])
+        bias = best["diff"] / (2.0 ** kink["bias_order_used"] - 1.0)
+        rel = math.hypot(best["eta_se"], bias) / best["eta"]
         cases["n1_single"] = (cases["n1_single"][0], (
-            best["eta_fine"], rel, f"Monte Carlo, dt = {best['dt_fine']:g}, {best['replicas']} x 64 paths, "
+            best["eta"], rel, f"Monte Carlo, dt = {best['dt']:g}, {best['replicas']} x 64 paths, "
             "bias estimate folded in"))
     ring = res.get("control_variates", {}).get("N3_n3_a0.5_k-0.5", {}).get("to_1e-4_control")
     if ring and ring.get("eta"):
@@ -456,7 +443,7 @@ def _plot(res: dict[str, Any], path: Path) -> None:
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    fig, (ax1, ax2, ax3) = plt.subplots(1, 3, figsize=(15, 3.8))
+    fig, (ax1, ax2, ax3, ax4) = plt.subplots(1, 4, figsize=(20, 3.8))
     eq = res["equal_error"]
     curve = eq["engine"]["curve"]
     ax1.loglog([c["wall_s"] for c in curve], [c["rel_se_eta"] for c in curve], "o-", label="engine (se)")
@@ -497,12 +484,41 @@ def _plot(res: dict[str, Any], path: Path) -> None:
         ax3.set_xscale("log")
         ax3.legend(fontsize=7)
         ax3.set_title("control variates (harmonic twin)")
+    _plot_kink(res.get("kink_dt", {}), ax4)
     thr = res["throughput"]
     fig.suptitle("Monte Carlo: " + ", ".join(f"{k} {v['path_steps_per_s']:.2g}/s" for k, v in thr.items()),
                  fontsize=8)
     fig.tight_layout()
     fig.savefig(path, dpi=110)
     plt.close(fig)
+
+
+def _plot_kink(kink: dict[str, Any], ax: Any) -> None:
+    """|eta(dt) - eta(dt/2)| / eta per a with the fitted order, and the old rule's held fraction."""
+    for key, st in kink.items():
+        if not key.startswith("a") or "rows" not in st:
+            continue
+        rows = st["rows"]
+        dt = np.array([r["dt_coarse"] for r in rows])
+        eta = np.array([r["eta"] for r in rows])
+        bars = ax.errorbar(dt, np.abs([r["diff"] for r in rows]) / eta,
+                           yerr=np.array([r["diff_se"] for r in rows]) / eta, fmt="o", capsize=3,
+                           label=f"a = {st['a']:g}")
+        fit = st.get("fit_coupled")
+        if fit:
+            ax.loglog(dt, abs(fit["c"]) * (1 - 2.0 ** -fit["p"]) * dt ** fit["p"] / eta.mean(), "-", lw=0.8,
+                      color=bars[0].get_color(),
+                      label=f"  p = {fit['p']:.2f} [{fit['p_lo']:.2f}, {fit['p_hi']:.2f}]")
+    rules = kink.get("rules_a2", [])
+    if rules:
+        ax.loglog([r["dt"] for r in rules], [max(r["stuck_hold"], 1e-7) for r in rules], "k--", marker="x",
+                  label="held at rest, old rule (a = 2)")
+    ax.set_xscale("log")
+    ax.set_yscale("log")
+    ax.set_xlabel("coarse dt")
+    ax.set_ylabel("|eta(dt) - eta(dt/2)| / eta; held fraction")
+    ax.set_title(f"kink n = 1 (Richardson uses p = {kink.get('bias_order_used', float('nan')):g})")
+    ax.legend(fontsize=6)
 
 
 if __name__ == "__main__":  # pragma: no cover
