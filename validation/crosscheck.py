@@ -112,6 +112,17 @@ def _fpe_vs_exact(ctx: Context, a: float) -> list[CheckResult]:
                     rel_floor=1e-12, quick=ctx.quick)
 
 
+def _kink_density(ctx: Context, sec: Section) -> list[CheckResult]:
+    """The kink's (x, v) density near its trap, Fokker-Planck against Monte Carlo
+    (:mod:`validation.kinkdensity`); quick mode a = 0.5 only."""
+    from .kinkdensity import kink_density_figure
+
+    ctx.require("fpe", "mc")
+    fig, lines = kink_density_figure(ctx.out, ctx.quick, (0.5,) if ctx.quick else (0.5, 2.0))
+    sec.figures.append(fig)
+    return [expect(label, _SECTION, ok, detail) for label, ok, detail in lines]
+
+
 def _fourier_vs_dense(ctx: Context, rng: np.random.Generator, N: int) -> list[CheckResult]:
     """Exact (Fourier modes) vs the dense 4N x 4N Lyapunov solve, random parameters and k."""
     out = []
@@ -178,6 +189,7 @@ def run(ctx: Context) -> Section:
         sec.checks += ctx.check(f"fpe vs exact: a = {a:g}", _SECTION, lambda a=a: _fpe_vs_exact(ctx, a))
     for n, a in grid:
         sec.checks += ctx.check(f"fpe vs mc: n = {n:g}, a = {a:g}", _SECTION, lambda n=n, a=a: _fpe_vs_mc(ctx, n, a))
+    sec.checks += ctx.check("kink density near the trap", _SECTION, lambda: _kink_density(ctx, sec))
     for prefix in ("exact vs mc", "fpe vs mc"):
         note = systematic_offset([c for c in sec.checks if c.name.startswith(prefix) and c.name.endswith(": eta")])
         if note:

@@ -443,6 +443,8 @@ class KinkLevel:
     plane: _Plane = field(repr=False)
     #: The refinement's mesh knob this level was solved at (:class:`~.kinkdisc.KinkDG`).
     size: int = 1
+    #: The oscillator's mass m (for energies).
+    mass: float = 1.0
 
     @property
     def elements(self) -> int:
@@ -504,6 +506,41 @@ class KinkLevel:
             out[i] = Vl.evaluate(rows[i], vv[i])
         inside = (ax <= X.nodes[-1])[:, None] & (np.abs(v) <= Vl.nodes[-1])[None, :]
         return np.where(inside, out, 0.0)
+
+    def energy_cdf(self, eps: np.ndarray, nodes: int = 24) -> np.ndarray:
+        """Probability :math:`P(E < \\varepsilon)` of the mechanical energy
+        :math:`E = m v^2/2 + a|x|` below each ``eps`` (> 0) [energy units].
+
+        The region :math:`E < \\varepsilon` of the plane is mapped onto a square,
+        :math:`x = \\pm(\\varepsilon/a)(1 - u^2)`, :math:`v = \\sqrt{2\\varepsilon/m}\\,u t`
+        (:math:`dx\\,dv = 2(\\varepsilon/a)\\sqrt{2\\varepsilon/m}\\,u^2\\,du\\,dt`), and
+        integrated with ``nodes`` x ``nodes`` Gauss--Legendre points; the density is piecewise
+        polynomial, so the rule is exact only where the region lies inside one element
+        (elsewhere its error is of the order of the density's jump across element edges).
+        Near the origin the density vanishes like :math:`E^{\\beta - 3/2}` or diverges like
+        it (:math:`P(E < \\varepsilon) \\sim \\varepsilon^\\beta`); below the innermost layer of
+        the mesh (:meth:`~.plane.PlaneMesh.x_nodes`) a level can only follow it polynomially.
+        """
+        eps = np.atleast_1d(np.asarray(eps, dtype=float))
+        if np.any(~np.isfinite(eps)) or np.any(eps <= 0.0):
+            raise ValueError(f"eps must be positive and finite, got {eps!r}")
+        a, m = self.mesh.a, self.mass
+        g, wg = np.polynomial.legendre.leggauss(nodes)
+        u, wu = 0.5 * (g + 1.0), 0.5 * wg                                  # u in [0, 1]
+        X, Vl = self.plane.X, self.plane.Vl
+        c0 = self.coef[:, 0].reshape(X.size, Vl.size)
+        xs = (eps[:, None] / a) * (1.0 - u[None, :] ** 2)                  # (n_eps, nodes)
+        rows = X.evaluate(c0, np.clip(xs.ravel(), 0.0, X.nodes[-1])).reshape(eps.size, nodes, -1)
+        out = np.empty(eps.size)
+        for i, e in enumerate(eps):
+            sv = math.sqrt(2.0 * e / m)
+            acc = 0.0
+            for k in range(nodes):
+                v = np.clip(sv * u[k] * g, -Vl.nodes[-1], Vl.nodes[-1])
+                dens = Vl.evaluate(rows[i, k], v) * (xs[i, k] <= X.nodes[-1])
+                acc += wu[k] * u[k] ** 2 * float(wg @ dens)
+            out[i] = 2.0 * 2.0 * (e / a) * sv * acc                        # both half planes
+        return out
 
 
 def _moments(h: Harvester, pl: _Plane, hi: _Hierarchy, frame: KinkFrame, C: np.ndarray) -> dict[str, float]:
@@ -605,7 +642,8 @@ def _solve(h: Harvester, M: int, mesh: PlaneMesh, order: int, frame: KinkFrame, 
     C = d.reshape(n, nh) @ hi.R.T
     C = C / (2.0 * float(pl.integrals["1"] @ C[:, 0]))
     mom = _moments(h, pl, hi, frame, C)
-    return KinkLevel(M, order, mesh, C, mom, n * nh, time.perf_counter() - t0, its[0], frame, hi, pl)
+    return KinkLevel(M, order, mesh, C, mom, n * nh, time.perf_counter() - t0, its[0], frame, hi, pl,
+                     mass=h.params.m)
 
 
 def _embed(level: KinkLevel, hi: _Hierarchy) -> np.ndarray:

@@ -168,3 +168,21 @@ def test_domain_grows_with_the_drive() -> None:
     assert Lv == pytest.approx(4.5) and Lx == pytest.approx(4.5**2 / 4)
     Lx2, Lv2 = kink_domain(h.replace(sigma=2.0), v2=0.018, sF=2.0)
     assert Lv2 > Lv and Lx2 > Lx
+
+
+def test_energy_cdf_integrates_the_marginal(small: tuple[Harvester, KinkDG]) -> None:
+    """P(E < eps) by the mapped Gauss rule against a brute-force grid sum of the (x, v)
+    marginal over the region m v^2/2 + a|x| < eps; and P -> 1 once the region holds the mass."""
+    h, disc = small
+    lv = disc.solve(4, 1)
+    eps = 0.3
+    xs = np.linspace(-eps / h.a, eps / h.a, 801)
+    vs = np.linspace(-math.sqrt(2 * eps), math.sqrt(2 * eps), 801)
+    p = lv.marginal(xs, vs)
+    inside = 0.5 * vs[None, :] ** 2 + h.a * np.abs(xs[:, None]) < eps
+    brute = float(np.sum(p * inside)) * (xs[1] - xs[0]) * (vs[1] - vs[0])
+    P = lv.energy_cdf(np.array([1e-3, 0.03, eps, 3.0]), nodes=48)
+    assert P[2] == pytest.approx(brute, rel=5e-3)
+    assert np.all(np.diff(P) > 0) and P[-1] == pytest.approx(1.0, abs=2e-3)
+    with pytest.raises(ValueError, match="eps must be positive"):
+        lv.energy_cdf(np.array([0.0]))
