@@ -339,6 +339,8 @@ class HermiteDG:
     w: Whitening
     work_exponents: tuple[float, float] = (2.0, 3.0)
     mesh_check_degree: int = 6
+    advice: str = ("the Hermite expansion around the equivalent harmonic unit does not resolve this "
+                   "density; use method='mc', or fix M and half_elements to inspect the levels")
 
     @property
     def algebraic(self) -> bool:

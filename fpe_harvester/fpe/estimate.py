@@ -23,13 +23,15 @@ viscous damping the oscillations toward rest at the kink decay only exponentiall
 so the Hermite coefficients decay algebraically. The algebraic tail above then applies to
 every moment, and the error of eta is at least the larger relative tail of V2 and Pin: eta
 mixes a fast moment (V2 ~ <vV>) with a slow one (Pin ~ <v^2>), and its own sequence shows a
-pre-asymptotic exponent. Measured for n = 1, a = 0.5 on 8 elements per half: eta at
-M = 4..18 looks like a clean power law (q = 2.2, fitted at M = 10, 12, 14, it predicts the
-levels at M = 16 and 18 to 1e-6), yet its limit by that law, 0.61029, is 3.6e-4 too high:
-:math:`\\langle v^2\\rangle` converges with q ~ 1 and dominates the tail (Monte Carlo:
-0.61006 +- 0.00009). Richardson extrapolation in M was therefore dropped: extrapolating
-each moment on its own power law gave errors that did not bound the change to the next
-level (n = 1.5, a = 1: 0.387893 +- 2.8e-5 at M = 14, 0.387850 +- 1.4e-5 at M = 16).
+pre-asymptotic exponent. Measured for n = 1, a = 0.5 on 8 elements per half (the 1-D scheme):
+eta at M = 4..18 looks like a clean power law (q = 2.2, fitted at M = 10, 12, 14, it predicts
+the levels at M = 16 and 18 to 1e-6) with limit 0.61029, while :math:`\langle v^2\rangle`
+converges with q ~ 1; that limit happens to agree with the kink scheme's certified
+0.610303 +- 4e-5 and with Monte Carlo's time-step extrapolation 0.61026 +- 4e-5, but per-moment
+extrapolation gave error bars that did not bound the change to the next level (n = 1.5,
+a = 1: 0.387893 +- 2.8e-5 at M = 14, 0.387850 +- 1.4e-5 at M = 16), and an extrapolation
+whose error cannot be bounded is not shipped: Richardson in M was dropped. At n = 1 the
+default is the kink scheme (:mod:`.kink`), whose Hermite series runs only in (V, xi).
 
 *Mesh* (:func:`mesh_error`): Richardson from three meshes of sizes :math:`s_0 < s_1 < s_2`
 (any ratios) with the observed order capped at the DG order p + 1.

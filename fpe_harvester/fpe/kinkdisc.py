@@ -126,6 +126,9 @@ class KinkDG:
     rtol: float = 1e-9
     deadline: float | None = None
     algebraic: bool = True
+    advice: str = ("the Hermite expansion in (V, xi) does not resolve this density (at a strong kink "
+                   "the law of V is multi-scale: trapped units near V = 0, running ones far out); use "
+                   "method='mc', or fix M to inspect the levels")
     work_exponents: tuple[float, float] = (1.0, 2.0)
     #: The mesh error hardly depends on M (a = 1, p = 3 against 4: 1.1e-5 at M = 6, 1.3e-5
     #: at M = 8), so the mesh is checked at a low degree.

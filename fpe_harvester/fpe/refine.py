@@ -86,6 +86,8 @@ class Discretization(Protocol):
     order: int
     #: Hermite errors with algebraic tails (potentials with n < 2, see :mod:`.estimate`).
     algebraic: bool
+    #: What a user can do when no level gives an error estimate (ends the stop message).
+    advice: str
 
     def solve(self, M: int, size: int, lower: LevelLike | None = None) -> LevelLike:
         """Solve level (M, size); ``lower`` is a solved lower degree on the same mesh."""
@@ -492,8 +494,7 @@ def _stopped(why: str, found: list[Estimate], levels: _Levels, tol: float) -> Re
             pass
         else:
             good = [est] if est.relative < 1.0 else []
-    advice = ("the Hermite expansion around the equivalent harmonic unit does not resolve this "
-              "density; use method='mc', or fix M and elements to inspect the levels")
+    advice = levels.disc.advice
     if not good:
         reason = f"tol = {tol:.2g} not reached and no error estimate: {why}; {advice}"
         return RefinementResult(None, False, reason, levels.history(), levels.elapsed)
