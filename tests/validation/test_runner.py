@@ -12,7 +12,13 @@ from validation.report import Section
 
 def _passing(ctx):
     sec = Section("ok", "Passing step")
-    sec.checks.append(expect("fine", "Passing step", True, "ok"))
+    sec.checks += [expect(f"fine {i}", "Passing step", True, "ok") for i in range(40)]
+    return sec
+
+
+def _few_passing(ctx):
+    sec = Section("few", "Few checks")
+    sec.checks.append(expect("fine", "Few checks", True, "ok"))
     return sec
 
 
@@ -42,8 +48,19 @@ def test_validate_writes_both_reports(tmp_path):
     # the closing identities section reports every solver that produced nothing as skipped ...
     skips = [c.name for c in rep.skipped]
     assert skips == ["identities [exact]", "identities [fpe]", "identities [mc]"]
-    # ... which a quick run may do, a full run may not
+    # ... which a quick run may do (3 of 43 checks), a full run may not
     assert runner.exit_code(rep, quick=True) == 0 and runner.exit_code(rep, quick=False) == 1
+
+
+def test_a_quick_run_fails_when_too_few_checks_ran(tmp_path):
+    """1 check ran and 3 were skipped: 25 % ran, below QUICK_MIN_RAN."""
+    rep = runner.validate(quick=True, out=tmp_path, steps=[(_few_passing, "Few checks")])
+    assert not rep.failed and len(rep.skipped) == 3
+    assert runner.exit_code(rep, quick=True) == 1
+    rep.sections[0].checks += [expect(f"more {i}", "Few checks", True, "ok") for i in range(26)]
+    assert runner.exit_code(rep, quick=True) == 0        # 27 of 30 ran: exactly 90 %
+    rep.sections[0].checks.pop()
+    assert runner.exit_code(rep, quick=True) == 1        # 26 of 29
 
 
 def test_a_crashing_step_becomes_a_failed_check(tmp_path):
@@ -87,7 +104,7 @@ def test_cli_exit_code(monkeypatch, tmp_path, capsys, steps, quick, code):
     assert (tmp_path / "report.html").is_file()
     if any(title == "Skipping step" for _, title in steps):
         assert "SKIP    never ran" in out and "check(s) SKIPPED" in out
-        assert ("allowed in a quick run" in out) == quick
+        assert ("a quick run fails below 90%" in out) == quick
 
 
 def test_cli_negative_seed_is_a_clean_error(monkeypatch, tmp_path, capsys):
