@@ -88,11 +88,25 @@ def identity_checks(label: str, r: Stats, h: Harvester, section: str = _SECTION)
     ]
 
 
+def _mc_within_cap(ctx: Context, h: Harvester, names: tuple[str, ...] = _COMPARED) -> Stats:
+    """Monte Carlo run whose error bars on every compared quantity fit the cap of the check
+    (4 errors <= :data:`MAX_REL_TOL`): the run's ``tol`` bounds only eta's error, and V2's
+    and Pin's are often 2-3 times larger, so a run whose widest bar exceeds 0.9 of the cap
+    is repeated with ``tol`` scaled down by the excess (same seed, cached)."""
+    mc = ctx.solve(h, "mc")
+    cap = MAX_REL_TOL[ctx.quick] / 4.0
+    rel = [abs(e / v) for q in names for v, e in [mc.value(q)] if v and e is not None and math.isfinite(e)]
+    if mc.eta is None or not rel or max(rel) <= 0.9 * cap:
+        return mc
+    tol = ctx.mc_options["tol"] * 0.9 * cap / max(rel)
+    return ctx.solve(h, "mc", tol=tol)
+
+
 def _exact_vs_mc(ctx: Context, N: int, k: float) -> list[CheckResult]:
     ctx.require("mc")
     h = Harvester.build(a=0.5, n=2, N=N, k=k)
     ex = ctx.solve(h, "exact")
-    mc = ctx.solve(h, "mc")
+    mc = _mc_within_cap(ctx, h)
     return _compare(f"exact vs mc: N = {N}, k = {k:g}", mc, ex, quick=ctx.quick)
 
 
@@ -100,7 +114,7 @@ def _fpe_vs_mc(ctx: Context, n: float, a: float) -> list[CheckResult]:
     ctx.require("fpe", "mc")
     h = Harvester.build(a=a, n=n)
     fp = ctx.solve(h, "fpe")
-    mc = ctx.solve(h, "mc")
+    mc = _mc_within_cap(ctx, h)
     return _compare(f"fpe vs mc: n = {n:g}, a = {a:g}", fp, mc, quick=ctx.quick)
 
 
