@@ -50,7 +50,7 @@ from .model import Harvester, Params
 from .result import QUANTITIES, Stats, Status
 from .solve import choose_method, solve
 
-__all__ = ["Optimum", "maximize_noisy", "optimize", "default_bounds", "OVER"]
+__all__ = ["Optimum", "maximize_noisy", "optimize", "default_bounds", "OVER", "refine_grid_maximum"]
 
 #: Fields an optimization may vary (the ring size N is an integer: a sweep, not an optimum).
 OVER = ("a", "n", "k", *(f for f in Params.__dataclass_fields__))
@@ -330,23 +330,56 @@ def default_bounds(h: Harvester, over: str) -> tuple[float, float]:
     return (kd, 0.0) if h.is_linear else (3.0 * kd, 0.0)
 
 
+def refine_grid_maximum(f: Callable[[float], float], grid: np.ndarray, values: np.ndarray,
+                        xatol: float = 1e-10) -> tuple[float, float, int]:
+    """Maximum of a deterministic ``f`` from its ``values`` on an increasing ``grid``: the best
+    grid point, then a bounded scalar search (Brent) in the two cells around it when it is
+    interior, kept only if it improves on the grid.
+
+    Parameters
+    ----------
+    f : callable
+        The objective; ``-inf`` where it has no value (e.g. no stationary state).
+    grid, values : ndarray
+        The grid and ``f`` on it (``-inf`` or NaN where undefined).
+    xatol : float
+        Absolute tolerance of the search relative to ``max(1, |x|)``.
+
+    Returns
+    -------
+    (x_opt, f_opt, index)
+        ``index`` is the best grid point's (0 or ``len(grid) - 1``: the maximum is at an end of
+        the interval and no search was made).
+
+    Examples
+    --------
+    >>> g = np.linspace(-1.0, 1.0, 11)
+    >>> x, y, i = refine_grid_maximum(lambda x: -(x - 0.123) ** 2, g, -(g - 0.123) ** 2)
+    >>> round(x, 6), i
+    (0.123, 6)
+    """
+    from scipy.optimize import minimize_scalar
+
+    vals = np.where(np.isnan(values), -np.inf, values)
+    best = int(np.argmax(vals))
+    x_opt, y_opt = float(grid[best]), float(vals[best])
+    if 0 < best < len(grid) - 1 and math.isfinite(y_opt):
+        found = minimize_scalar(lambda x: -f(float(x)), bounds=(float(grid[best - 1]), float(grid[best + 1])),
+                                method="bounded", options={"xatol": xatol * max(1.0, abs(x_opt))})
+        if -found.fun >= y_opt:
+            x_opt, y_opt = float(found.x), float(-found.fun)
+    return x_opt, y_opt, best
+
+
 def _optimize_exact(h: Harvester, over: str, maximize: str, lo: float, hi: float, points: int) -> Optimum:
     """Deterministic objective (exact solver): grid, then a bounded scalar search in the best cell."""
-    from scipy.optimize import minimize_scalar
 
     def value(x: float) -> float:
         v = solve(h.replace(**{over: x}), "exact").value(maximize)[0]
         return -math.inf if v is None else float(v)
 
     grid = np.linspace(lo, hi, max(points, 41))
-    vals = np.array([value(float(x)) for x in grid])
-    best = int(np.argmax(vals))
-    x_opt, y_opt = float(grid[best]), float(vals[best])
-    if 0 < best < len(grid) - 1:
-        found = minimize_scalar(lambda x: -value(x), bounds=(grid[best - 1], grid[best + 1]), method="bounded",
-                                options={"xatol": 1e-10 * max(1.0, abs(x_opt))})
-        if -found.fun >= y_opt:
-            x_opt, y_opt = float(found.x), float(-found.fun)
+    x_opt, y_opt, best = refine_grid_maximum(value, grid, np.array([value(float(x)) for x in grid]))
     info = {"bounds": [lo, hi], "grid_points": len(grid)}
     if not math.isfinite(y_opt):
         return Optimum(over, maximize, None, None, None, None, status=Status.NOT_CONVERGED, method="exact",

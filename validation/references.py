@@ -2,9 +2,10 @@
 
 * :func:`mp_mode_moments`, :func:`mp_ring_moments`: a 40-digit Lyapunov solve (mpmath) of each
   mode, built from the exact binary values of the inputs;
-* :func:`rational_eta`: the closed form evaluated in exact rational arithmetic
-  (:class:`fractions.Fraction`) where the mode stiffnesses are rational;
-* :func:`mp_closed_form`: the closed form in mpmath (many digits, no exponent limit), the
+* :func:`closed_form_mode`: the closed form of one mode, written once, in any arithmetic;
+* :func:`rational_eta`: it in exact rational arithmetic (:class:`fractions.Fraction`) where
+  the mode stiffnesses are rational;
+* :func:`mp_closed_form`: it in mpmath (many digits, no exponent limit), the
   reference for the exact solver over the whole double range (the formula itself is checked
   against :func:`mp_mode_moments` at moderate parameters: an identity between rational
   functions that holds there holds everywhere).
@@ -19,7 +20,7 @@ import mpmath
 
 from fpe_harvester.model import Harvester, Params
 
-__all__ = ["mp_closed_form", "mp_mode_moments", "mp_ring_moments", "rational_eta"]
+__all__ = ["closed_form_mode", "mp_closed_form", "mp_mode_moments", "mp_ring_moments", "rational_eta"]
 
 
 def mp_mode_moments(kappa: Any, p: Params, dps: int = 40) -> dict[str, Any]:
@@ -76,26 +77,53 @@ def mp_ring_moments(h: Harvester, dps: int = 40, zero_below: float = 0.0) -> dic
         return out
 
 
-def rational_eta(kappas: list[Fraction], p: Params | None = None) -> tuple[Fraction, Fraction]:
-    """``(V2, eta)`` of a ring in exact rational arithmetic, from rational mode stiffnesses.
+def closed_form_mode(kap: Any, m: Any, g: Any, Kv: Any, Kc: Any, s: Any, tau: Any, D: Any, tp: Any) -> dict[str, Any]:
+    """Stationary moments of one harmonic mode of stiffness ``kap`` from the closed form, in
+    the arithmetic of its arguments (:class:`fractions.Fraction`, mpmath ``mpf``, float or
+    numpy arrays: only +, -, *, / are used). ``x2`` is None at ``kap == 0`` (infinite).
 
-    Same closed form as :func:`fpe_harvester.exact.mode_moments`, evaluated with
-    :class:`fractions.Fraction` (the default parameters are integers, so no rounding at all).
+    With :math:`d_1 = (\tau + \tau_p)(m + \gamma m\tau + \kappa\tau^2) + K_cK_v\tau^2\tau_p`
+    and :math:`d_2 = (1 + \gamma\tau_p)(\gamma m + K_cK_v\tau_p) + \gamma\kappa\tau_p^2`:
+    :math:`P_{in} = D\sigma^2(\tau + \tau_p)/d_1`, :math:`\langle vV\rangle = DK_c\sigma^2
+    \tau_p(\gamma\tau\tau_p + \tau + \tau_p)/(d_1d_2)`, :math:`V_2 = K_c\tau_p\langle vV\rangle`.
     """
+    KK = Kc * Kv
+    d1 = (tau + tp) * (m + g * m * tau + kap * tau**2) + KK * tau**2 * tp
+    d2 = (1 + g * tp) * (g * m + KK * tp) + g * kap * tp**2
+    vV = D * Kc * s**2 * tp * (g * tau * tp + tau + tp) / (d1 * d2)
+    x2_num = (KK * g * tau**2 * tp**2 + KK * tau**2 * tp + g**2 * m * tau**2 * tp + g**2 * m * tau * tp**2
+              + g * m * (tau + tp) ** 2 + m * (tau + tp) + (g * tau + 1) * kap * tp**2 * (tau + tp))
+    return {"vV": vV, "V2": Kc * tp * vV, "Pin": D * s**2 * (tau + tp) / d1,
+            "v2": D * s**2 * (KK * tp**3 + m * (tau + tp) * (1 + g * tp) + kap * tp**2 * (tau + tp)) / (m * d1 * d2),
+            "x2": D * s**2 * x2_num / (kap * d1 * d2) if not _is_zero(kap) else None}
+
+
+def _is_zero(kap: Any) -> bool:
+    try:
+        return bool(kap == 0)
+    except ValueError:                      # an array: no element may be zero for x2
+        return bool((kap == 0).any())
+
+
+def _physical(p: Params, convert: Any) -> tuple[Any, ...]:
+    """``m, gamma, Kv, Kc, sigma, tau, D, tau_p`` converted (e.g. to Fraction or mpf)."""
+    return tuple(convert(getattr(p, n)) for n in ("m", "gamma", "Kv", "Kc", "sigma", "tau", "D", "tau_p"))
+
+
+def rational_eta(kappas: list[Fraction], p: Params | None = None) -> tuple[Fraction, Fraction]:
+    """``(V2, eta)`` of a ring in exact rational arithmetic, from rational mode stiffnesses
+    (:func:`closed_form_mode` with :class:`fractions.Fraction`: the default parameters are
+    integers, so no rounding at all)."""
     p = p or Params()
-    m, g, Kv, Kc, s, tau, D, tp, R = (Fraction(x) for x in (p.m, p.gamma, p.Kv, p.Kc, p.sigma,
-                                                               p.tau, p.D, p.tau_p, p.R))
+    phys = _physical(p, Fraction)
     V2 = Pin = Fraction(0)
     for kap in kappas:
-        d1 = m * tau + m * tp + g * m * tau**2 + g * m * tau * tp + Kc * Kv * tau**2 * tp
-        d1 += kap * tau**2 * (tau + tp)
-        d2 = g * m + g**2 * m * tp + Kc * Kv * tp + Kc * Kv * g * tp**2 + g * kap * tp**2
-        c = g * tau * tp + tau + tp
-        V2 += D * Kc**2 * s**2 * tp**2 * c / (d1 * d2)
-        Pin += D * s**2 * (tau + tp) / d1
+        mom = closed_form_mode(kap, *phys)
+        V2 += mom["V2"]
+        Pin += mom["Pin"]
     n = len(kappas)
     V2, Pin = V2 / n, Pin / n
-    return V2, V2 / (R * Pin)
+    return V2, V2 / (Fraction(p.R) * Pin)
 
 
 def mp_closed_form(h: Harvester, dps: int = 60, marginal: float = 0.0) -> dict[str, Any]:
@@ -122,28 +150,19 @@ def mp_closed_form(h: Harvester, dps: int = 60, marginal: float = 0.0) -> dict[s
     """
     p = h.params
     with mpmath.workdps(dps):
-        m, g, Kv, Kc, s, tau, D, tp, R = (mpmath.mpf(x) for x in (p.m, p.gamma, p.Kv, p.Kc, p.sigma, p.tau,
-                                                                    p.D, p.tau_p, p.R))
+        phys = _physical(p, mpmath.mpf)
         a, k = mpmath.mpf(h.a), mpmath.mpf(h.k)
         s2 = [mpmath.sin(mpmath.pi * min(q, h.N - q) / h.N) ** 2 for q in range(h.N)]
         kappa = [2 * a + 4 * k * x for x in s2]
         scale = [2 * a + 4 * abs(k) * x for x in s2]
-        KK = Kc * Kv
         acc = {key: mpmath.mpf(0) for key in ("V2", "Pin", "v2", "vV", "x2")}
         for kap, sc in zip(kappa, scale):
             if abs(kap) <= marginal * sc:
                 kap = mpmath.mpf(0)
-            d1 = (tau + tp) * (m + g * m * tau + kap * tau**2) + KK * tau**2 * tp
-            d2 = (1 + g * tp) * (g * m + KK * tp) + g * kap * tp**2
-            vV = D * Kc * s**2 * tp * (g * tau * tp + tau + tp) / (d1 * d2)
-            acc["vV"] += vV
-            acc["V2"] += Kc * tp * vV
-            acc["Pin"] += D * s**2 * (tau + tp) / d1
-            acc["v2"] += D * s**2 * (KK * tp**3 + m * (tau + tp) * (1 + g * tp) + kap * tp**2 * (tau + tp)) / (
-                m * d1 * d2)
-            x2_num = (KK * g * tau**2 * tp**2 + KK * tau**2 * tp + g**2 * m * tau**2 * tp + g**2 * m * tau * tp**2
-                      + g * m * (tau + tp) ** 2 + m * (tau + tp) + (g * tau + 1) * kap * tp**2 * (tau + tp))
-            acc["x2"] += D * s**2 * x2_num / (kap * d1 * d2) if kap != 0 else mpmath.inf
+            mom = closed_form_mode(kap, *phys)
+            for key in acc:
+                acc[key] += mpmath.inf if mom[key] is None else mom[key]
+        R = mpmath.mpf(p.R)
         out: dict[str, Any] = {key: val / h.N for key, val in acc.items()}
         out["eta"] = out["V2"] / (R * out["Pin"])
         out["kappa"], out["scale"] = kappa, scale

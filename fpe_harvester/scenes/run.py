@@ -28,7 +28,7 @@ import numpy as np
 from ..errors import HarvesterError, MethodNotAvailableError, ParameterError, check_int
 from ..exact import Exact, exact_stats, k_di
 from ..model import Harvester
-from ..optimum import optimize
+from ..optimum import optimize, refine_grid_maximum
 from ..result import QUANTITIES, Stats, Status
 from ..solve import choose_method, solve
 from .cache import PointCache, atomic_path, point_key, point_seed, stats_from_dict, write_text_atomic
@@ -281,15 +281,13 @@ def _optimize_rows(scene: Scene, runner: _Runner, points: list[dict[str, float]]
         at_bound = "low" if best == 0 and len(grid) > 1 else "high" if best == len(grid) - 1 > 0 else None
         exact = isinstance(res[best], Stats) and res[best].method == "exact"
         if at_bound is None and len(grid) > 1 and exact:
-            def loss(x: float) -> float:
-                value = Exact().solve(h0.replace(**{opt.over: x})).value(opt.maximize)[0]
-                return np.inf if value is None else -value
+            def value(x: float) -> float:
+                v = Exact().solve(h0.replace(**{opt.over: x})).value(opt.maximize)[0]
+                return -np.inf if v is None else v
 
-            from scipy.optimize import minimize_scalar
-
-            found = minimize_scalar(loss, bounds=bracket, method="bounded",
-                                    options={"xatol": 1e-10 * max(1.0, abs(x_opt))})
-            x_opt, bracket = float(found.x), [float(found.x), float(found.x)]
+            grid_vals = np.array([-np.inf if v is None else v for v in vals])
+            x_opt = refine_grid_maximum(value, grid, grid_vals)[0]
+            bracket = [x_opt, x_opt]
         info["optimize"].update(at_bound=at_bound, bracket=bracket)
         final = runner.evaluate([h0.replace(**{opt.over: x_opt})])[0]
         row = _row(scene, index, {**p, opt.over: x_opt}, h0, final, info)
