@@ -82,10 +82,10 @@ def closed_form_mode(kap: Any, m: Any, g: Any, Kv: Any, Kc: Any, s: Any, tau: An
     the arithmetic of its arguments (:class:`fractions.Fraction`, mpmath ``mpf``, float or
     numpy arrays: only +, -, *, / are used). ``x2`` is None at ``kap == 0`` (infinite).
 
-    With :math:`d_1 = (\tau + \tau_p)(m + \gamma m\tau + \kappa\tau^2) + K_cK_v\tau^2\tau_p`
-    and :math:`d_2 = (1 + \gamma\tau_p)(\gamma m + K_cK_v\tau_p) + \gamma\kappa\tau_p^2`:
-    :math:`P_{in} = D\sigma^2(\tau + \tau_p)/d_1`, :math:`\langle vV\rangle = DK_c\sigma^2
-    \tau_p(\gamma\tau\tau_p + \tau + \tau_p)/(d_1d_2)`, :math:`V_2 = K_c\tau_p\langle vV\rangle`.
+    With :math:`d_1 = (\\tau + \\tau_p)(m + \\gamma m\\tau + \\kappa\\tau^2) + K_cK_v\\tau^2\\tau_p`
+    and :math:`d_2 = (1 + \\gamma\\tau_p)(\\gamma m + K_cK_v\\tau_p) + \\gamma\\kappa\\tau_p^2`:
+    :math:`P_{in} = D\\sigma^2(\\tau + \\tau_p)/d_1`, :math:`\\langle vV\\rangle = DK_c\\sigma^2
+    \\tau_p(\\gamma\\tau\\tau_p + \\tau + \\tau_p)/(d_1d_2)`, :math:`V_2 = K_c\\tau_p\\langle vV\\rangle`.
     """
     KK = Kc * Kv
     d1 = (tau + tp) * (m + g * m * tau + kap * tau**2) + KK * tau**2 * tp
