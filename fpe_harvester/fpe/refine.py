@@ -494,7 +494,11 @@ def _stopped(why: str, found: list[Estimate], levels: _Levels, tol: float) -> Re
             pass
         else:
             good = [est] if est.relative < 1.0 else []
-    advice = levels.disc.advice
+    budget = levels.plan.max_seconds
+    if budget is not None and ("time budget" in why or levels.elapsed >= 0.95 * budget):
+        advice = f"the time budget stopped it: raise max_seconds (now {budget:g} s), or use method='mc'"
+    else:
+        advice = levels.disc.advice
     if not good:
         reason = f"tol = {tol:.2g} not reached and no error estimate: {why}; {advice}"
         return RefinementResult(None, False, reason, levels.history(), levels.elapsed)

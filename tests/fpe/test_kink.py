@@ -186,3 +186,14 @@ def test_energy_cdf_integrates_the_marginal(small: tuple[Harvester, KinkDG]) -> 
     assert np.all(np.diff(P) > 0) and P[-1] == pytest.approx(1.0, abs=2e-3)
     with pytest.raises(ValueError, match="eps must be positive"):
         lv.energy_cdf(np.array([0.0]))
+
+
+def test_weight_belongs_to_the_one_dimensional_scheme() -> None:
+    from fpe_harvester.fpe import stationary
+    from fpe_harvester.fpe.discretize import Whitening
+
+    h = Harvester.build(a=0.5, n=1)
+    with pytest.raises(ParameterError, match="weight is the Gaussian weight of scheme 'x'"):
+        stationary(h, weight=Whitening.of(h))
+    with pytest.raises(ParameterError, match="weight must be a Whitening"):
+        stationary(Harvester.build(a=0.5, n=3), weight="wide")

@@ -131,6 +131,13 @@ def test_error_bar_checks_fail_when_the_promise_breaks(tmp_path):
 
     assert Bound("x", 1e-3, reported=1e-4, actual=1e-5, ref_err=1e-7, status="stable", seconds=0.0).holds
     assert not Bound("x", 1e-3, reported=1e-5, actual=1e-4, ref_err=1e-7, status="stable", seconds=0.0).holds
+    # a stable result must have met its tol; only stable and not-converged results carry a bound
+    assert not Bound("x", 1e-3, reported=2e-3, actual=1e-5, ref_err=1e-7, status="stable", seconds=0.0).holds
+    assert Bound("x", 1e-3, reported=2e-3, actual=1e-5, ref_err=1e-7, status="not_converged", seconds=0.0).holds
+    assert not Bound("x", 1e-3, reported=1e-4, actual=1e-5, ref_err=1e-7, status="unstable", seconds=0.0).holds
+    # a statistical reference counts REF_SIGMAS of its standard errors
+    assert Bound("x", 1e-3, reported=1e-4, actual=3e-4, ref_err=1e-4, status="stable", seconds=0.0,
+                 ref_sigmas=3.0).holds
     # a reference that is wrong by far more than the errors: every bound check fails
     h = Harvester.build(a=0.5, n=3.0)
     wrong_ref = solve(h.replace(a=0.55), "fpe", tol=1e-3)
