@@ -95,7 +95,7 @@ def test_bad_arguments_exit_2_one_line(capsys, argv, match):
     ],
 )
 def test_extreme_and_misplaced_arguments_are_one_line_errors(capsys, argv, match):
-    """The inputs of issue 15: each a one-line error naming the argument, exit code 2, no traceback."""
+    """Inputs out of range or malformed: each a one-line error naming the argument, exit code 2, no traceback."""
     code = main(argv)
     err = capsys.readouterr().err
     assert code == 2, err
