@@ -320,6 +320,9 @@ class Context:
         Results solved so far in this run (reused by the identity checks).
     seed : int
         Base seed of every Monte Carlo run (>= 0), so a run is reproducible.
+    bench : pathlib.Path or None
+        Folder written by ``python -m validation.bench.* --out DIR`` (the exhaustive
+        benchmarks), whose output the report includes; None: none.
     """
 
     quick: bool
@@ -327,6 +330,7 @@ class Context:
     cache: SolveCache
     seed: int = 2017
     deadline: float | None = None
+    bench: Path | None = None
 
     def check(self, name: str, section: str, fn: Callable[[], list[CheckResult] | CheckResult],
               cap: float | None = None) -> list[CheckResult]:

@@ -19,7 +19,7 @@ from collections.abc import Callable, Sequence
 from datetime import datetime, timezone
 from pathlib import Path
 
-from fpe_harvester.errors import check_int
+from fpe_harvester.errors import ParameterError, check_int
 from fpe_harvester.result import Status
 from fpe_harvester.solve import METHODS
 
@@ -87,6 +87,7 @@ def validate(
     seed: int = 2017,
     steps: Sequence[tuple[str | Callable[[Context], Section], str]] | None = None,
     progress: Callable[[str], None] | None = None,
+    bench: Path | str | None = None,
 ) -> Report:
     """Run the validation steps and write ``report.md`` and ``report.html`` into ``out``.
 
@@ -103,6 +104,10 @@ def validate(
         ``"module:function"`` that function.
     progress : callable, optional
         Called with the title of each step before it starts.
+    bench : path, optional
+        Folder written by ``python -m validation.bench.fpe --out DIR`` (and the other
+        benchmark modules): their exhaustive results are included in the report. The
+        report's own benchmark section always runs the short benchmarks.
 
     Returns
     -------
@@ -110,11 +115,14 @@ def validate(
         All sections and checks; ``report.failed`` says whether any check failed.
     """
     seed = check_int("seed", seed, low=0)
+    if bench is not None and not Path(bench).is_dir():
+        raise ParameterError(f"bench must be a folder written by python -m validation.bench.*, got {str(bench)!r}")
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
     t_start = time.perf_counter()
     ctx = Context(quick=quick, out=out.resolve(), cache=SolveCache(), seed=seed,
-                  deadline=t_start + QUICK_BUDGET if quick else None)
+                  deadline=t_start + QUICK_BUDGET if quick else None,
+                  bench=None if bench is None else Path(bench).resolve())
     report = Report("fpe-harvester validation report" + (" (quick)" if quick else ""))
     report.meta.update({
         "date (UTC)": datetime.now(timezone.utc).strftime("%Y-%m-%d %H:%M:%S"),
@@ -183,7 +191,7 @@ def exit_code(report: Report, quick: bool) -> int:
 
 
 def run_cli(quick: bool = False, out: Path | str = "validation_report", seed: int = 2017,
-            progress: bool = True) -> int:
+            progress: bool = True, bench: Path | str | None = None) -> int:
     """Run :func:`validate` over :data:`STEPS`, print the pass/fail summary.
 
     Returns the exit code (:func:`exit_code`): 1 if any check failed or, in a full run, was
@@ -205,7 +213,7 @@ def run_cli(quick: bool = False, out: Path | str = "validation_report", seed: in
         started.append(title)
 
     t0 = time.perf_counter()
-    report = validate(quick=quick, out=out, seed=seed, steps=steps, progress=tick)
+    report = validate(quick=quick, out=out, seed=seed, steps=steps, progress=tick, bench=bench)
     if bar is not None:
         bar.update(bar.total - bar.n)
         bar.close()
@@ -231,6 +239,8 @@ def build_parser() -> argparse.ArgumentParser:
                    help="output folder (default ./validation_report)")
     p.add_argument("--seed", type=int, default=2017, help="base Monte Carlo seed (default 2017)")
     p.add_argument("--no-progress", action="store_true", help="no progress bar")
+    p.add_argument("--bench", default=None, metavar="DIR",
+                   help="include the output of python -m validation.bench.* --out DIR")
     return p
 
 
@@ -246,4 +256,8 @@ def main(argv: Sequence[str] | None = None) -> int:
         print(f"python -m validation: error: --out {args.out!r}: cannot create the output folder "
               f"({exc.strerror or exc})", file=sys.stderr)
         return 2
-    return run_cli(quick=args.quick, out=args.out, seed=args.seed, progress=not args.no_progress)
+    if args.bench is not None and not Path(args.bench).is_dir():
+        print(f"python -m validation: error: --bench {args.bench!r}: not a folder", file=sys.stderr)
+        return 2
+    return run_cli(quick=args.quick, out=args.out, seed=args.seed, progress=not args.no_progress,
+                   bench=args.bench)

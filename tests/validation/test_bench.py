@@ -28,3 +28,32 @@ def test_bench_main_parses_runs_and_drops(tmp_path, capsys):
     with pytest.raises(SystemExit):
         bench_main(run, "Toy benchmark.", argv=["--help"])
     assert "Toy benchmark." in capsys.readouterr().out
+
+
+def test_the_report_includes_an_exhaustive_benchmark_run(tmp_path):
+    """harvester validate --bench DIR: the JSON's error/time pairs, targets and figures of
+    python -m validation.bench.X --out DIR enter the benchmark section, labelled as not this run."""
+    import json
+    import types
+
+    from validation.bench import combined
+    from validation.checks import Context, SolveCache
+    from validation.report import Section, Table
+
+    (tmp_path / "bench_toy.json").write_text(json.dumps({"case": {"time_s": 2.0, "eta_rel_error": 1e-4,
+                                                                  "time_target_s": 1.0}}))
+    (tmp_path / "bench_toy.png").write_bytes(b"\x89PNG")
+    mod = types.SimpleNamespace(STEM="bench_toy", __name__="validation.bench.toy")
+    ctx = Context(quick=False, out=tmp_path, cache=SolveCache(), bench=tmp_path)
+    sec, targets = Section("b", "B"), Table("t", ("benchmark", "measurement", "time [s]", "target [s]", "met"))
+    combined._include(ctx, mod, sec, targets)
+    assert len(sec.tables) == 1 and sec.tables[0].rows[0][2] == "0.0001"
+    assert "not this run" in sec.tables[0].title and "not this run" in sec.figures[0].caption
+    assert targets.rows and targets.rows[0][-1] == "NO"
+
+
+def test_validate_refuses_a_missing_bench_folder(tmp_path, capsys):
+    from fpe_harvester.cli import main
+
+    assert main(["validate", "--quick", "--bench", str(tmp_path / "nowhere"), "--out", str(tmp_path)]) == 2
+    assert "--bench" in capsys.readouterr().err

@@ -188,6 +188,31 @@ def _plot(ctx: Context, series: list[dict[str, Any]]) -> Figure:
                        f"exactly 0 is drawn at 1e-17). References: {refs}.")
 
 
+def _include(ctx: Context, mod: Any, sec: Section, targets: Table) -> None:
+    """The exhaustive run of benchmark ``mod`` found in ``ctx.bench`` (its JSON and figures)."""
+    if ctx.bench is None:
+        return
+    path = ctx.bench / f"{mod.STEM}.json"
+    if not path.exists():
+        sec.text.append(f"No exhaustive run of {mod.__name__} in {ctx.bench} ({path.name} missing).")
+        return
+    import datetime
+
+    data = json.loads(path.read_text())
+    stamp = datetime.datetime.fromtimestamp(path.stat().st_mtime, datetime.timezone.utc)
+    when = stamp.strftime("%Y-%m-%d %H:%M UTC")
+    origin = f"exhaustive run of python -m {mod.__name__}, written {when} (not this run)"
+    for label, t, target in _targets(data):
+        targets.rows.append((f"{mod.STEM} ({origin})", label, f"{t:.4g}", f"{target:.4g}",
+                             "yes" if t <= target else "NO"))
+    for png in sorted(ctx.bench.glob(f"{mod.STEM}*.png")):
+        sec.figures.append(Figure(png.resolve(), f"{mod.STEM}: {png.stem}, {origin}"))
+    pairs = list(error_time_pairs(data))
+    sec.tables.append(Table(f"{mod.STEM}, {origin}: error/time pairs", ("quantity", "wall time [s]", "error"),
+                            [(lbl, f"{t:.4g}", f"{e:.3g}") for lbl, t, e in pairs[:80]],
+                            note=f"All measurements: {path}."))
+
+
 def _run_one(ctx: Context, module: str, solver: str, sec: Section,
              curves: list[dict[str, Any]], targets: Table) -> list[CheckResult]:
     try:
@@ -196,8 +221,9 @@ def _run_one(ctx: Context, module: str, solver: str, sec: Section,
         return [skipped(f"benchmark {module}", _SECTION, f"module not available ({exc})")]
     out = ctx.out / "bench"
     out.mkdir(parents=True, exist_ok=True)
-    data = mod.run(quick=ctx.quick, out=out)
+    data = mod.run(quick=True, out=out)
     name = mod.STEM
+    _include(ctx, mod, sec, targets)
     pairs = list(error_time_pairs(data))
     curves.extend(data.get("series", []))
     for label, t, target in _targets(data):
@@ -214,7 +240,9 @@ def _run_one(ctx: Context, module: str, solver: str, sec: Section,
 
 
 def run(ctx: Context) -> Section:
-    """Run every benchmark module (quick mode in CI) and draw the combined plot."""
+    """Run every benchmark module's short version and draw the combined plot; include the
+    exhaustive runs written by ``python -m validation.bench.* --out DIR`` when the run was given
+    ``DIR`` (``harvester validate --bench DIR``)."""
     sec = Section("benchmarks", _SECTION)
     curves: list[dict[str, Any]] = []
     targets = Table("Speed targets (reported, not failed)", ("benchmark", "measurement", "time [s]", "target [s]",
@@ -228,7 +256,11 @@ def run(ctx: Context) -> Section:
         sec.tables.insert(0, targets)
     sec.text.append(
         "Each benchmark module measures its own solver and baselines (numpy Euler-Maruyama loop, scipy dense "
-        "Lyapunov) in this run. The combined figure shows, for four problems, the actual error of eta (against "
+        "Lyapunov) in this run, in its short version (the exhaustive sweeps, 1e-6 for every case and long Monte "
+        "Carlo extrapolations, are python -m validation.bench.fpe, .montecarlo, .exact; harvester validate "
+        "--bench DIR includes their latest output, labelled with its date)."
+        + (f" Included: {ctx.bench}." if ctx.bench else " None included in this run.")
+        + " The combined figure shows, for four problems, the actual error of eta (against "
         "the best reference of that problem) versus wall time, one line per method; each module's own table "
         "lists every error/time pair it reports (reported errors included)."
     )
