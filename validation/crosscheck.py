@@ -133,6 +133,21 @@ def _fpe_vs_exact(ctx: Context, a: float) -> list[CheckResult]:
                     rel_floor=1e-12, quick=ctx.quick)
 
 
+def table_checks(ctx: Context) -> list[CheckResult]:
+    """Every stable result of this run so far whose system has an entry in the project's
+    reference table (:mod:`validation.reftable`), against it within 4 combined errors."""
+    from .reftable import CASES, compare
+
+    by_system = {case.h: case.label for case in CASES}
+    out = []
+    for h, method, r in ctx.cache.results():
+        label = by_system.get(h)
+        if label is None or method == "exact" or not r.ok:
+            continue
+        out += [expect(f"{name} [{method}]", _SECTION, ok, detail) for name, ok, detail in compare(label, r)]
+    return out
+
+
 def _kink_density(ctx: Context, sec: Section) -> list[CheckResult]:
     """The kink's (x, v) density near its trap, Fokker-Planck against Monte Carlo
     (:mod:`validation.kinkdensity`); quick mode a = 0.5 only."""
@@ -213,6 +228,7 @@ def run(ctx: Context) -> Section:
     for n, a in grid:
         sec.checks += ctx.check(f"fpe vs mc: n = {n:g}, a = {a:g}", _SECTION, lambda n=n, a=a: _fpe_vs_mc(ctx, n, a))
     sec.checks += ctx.check("kink density near the trap", _SECTION, lambda: _kink_density(ctx, sec))
+    sec.checks += ctx.check("reference table", _SECTION, lambda: table_checks(ctx))
     for prefix in ("exact vs mc", "fpe vs mc"):
         note = systematic_offset([c for c in sec.checks if c.name.startswith(prefix) and c.name.endswith(": eta")])
         if note:
