@@ -35,7 +35,7 @@ import math
 import numpy as np
 
 from fpe_harvester.errors import ParameterError, check_real
-from fpe_harvester.exact import mode_moments
+from fpe_harvester.exact.moments import closure_mismatch
 from fpe_harvester.model import Harvester, mode_sin2
 
 from .scheme import step_coefficients
@@ -199,15 +199,6 @@ def initial_cholesky(lin: Harvester, dt: float) -> np.ndarray:
     return np.linalg.cholesky(C)
 
 
-def _closure_mismatch(h: Harvester, log_kappa: float) -> float:
-    """ln<xU'> - ln(kappa <x^2>) for Gaussian x of the twin's variance (0 at the closure)."""
-    kap = twin_harvester(h, math.exp(log_kappa)).mode_stiffness()
-    s2 = float(np.mean(mode_moments(kap, h.params)["x2"]))
-    n, a = h.n, h.a
-    c_n = a * n * 2.0 ** (n / 2) * math.gamma((n + 1) / 2) / math.sqrt(math.pi)
-    return math.log(c_n) + 0.5 * n * math.log(s2) - math.log(s2) - log_kappa
-
-
 def linearized_stiffness(h: Harvester, xdU: float | None = None, x2: float | None = None) -> float | None:
     """Equivalent on-site stiffness :math:`\\kappa = \\langle xU'(x)\\rangle / \\langle x^2\\rangle`.
 
@@ -249,10 +240,10 @@ def linearized_stiffness(h: Harvester, xdU: float | None = None, x2: float | Non
     lo = math.log(low) + 1e-9 if low > 0 else math.log(2.0 * h.a) - 40.0
     hi = math.log(max(2.0 * h.a, low)) + 40.0
     grid = np.linspace(lo, hi, 321)
-    vals = np.array([_closure_mismatch(h, t) for t in grid])
+    vals = np.array([closure_mismatch(h, t) for t in grid])
     sign = np.nonzero(np.diff(np.sign(vals)) != 0)[0]
     if sign.size != 1:
         return None
     i = int(sign[0])
-    kappa = math.exp(brentq(lambda t: _closure_mismatch(h, t), grid[i], grid[i + 1], xtol=1e-13))
+    kappa = math.exp(brentq(lambda t: closure_mismatch(h, t), grid[i], grid[i + 1], xtol=1e-13))
     return kappa if twin_is_stable(h, kappa) else None

@@ -30,9 +30,11 @@ and ring averages are the means over modes of the single-unit moments.
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 
-from ..model import Harvester, Params
+from ..model import Harvester, Params, mode_sin2
 from ..wide import Float, Wide
 
 __all__ = [
@@ -44,6 +46,7 @@ __all__ = [
     "ring_drift_matrix",
     "dense_covariance",
     "ring_moments",
+    "closure_mismatch",
 ]
 
 
@@ -175,3 +178,28 @@ def ring_moments(kappa: np.ndarray, params: Params) -> dict[str, np.ndarray]:
     mom = {key: val.mean(axis=-1).to_float() for key, val in wide_mode_moments(Wide.of(kap), params).items()}
     mom["x2"] = np.where(np.all(kap > 0, axis=-1), mom["x2"], np.inf)
     return mom
+
+
+def closure_mismatch(h: Harvester, log_kappa: float) -> float:
+    """Mismatch of the Gaussian closure (statistical linearization) at on-site stiffness
+    :math:`\\kappa = e^{\\text{log\\_kappa}}`, for :math:`U = a|x|^n` and ``h``'s ring:
+
+    .. math::
+
+        \\mu(\\kappa) = \\ln\\frac{\\langle xU'(x)\\rangle}{\\kappa\\langle x^2\\rangle}
+        = \\ln c_n + (\\tfrac n2 - 1)\\ln s^2(\\kappa) - \\ln\\kappa,\\qquad
+        c_n = a n\\,2^{n/2}\\Gamma(\\tfrac{n+1}{2})/\\sqrt\\pi,
+
+    with x Gaussian of the variance :math:`s^2` of the harmonic ring of on-site stiffness
+    :math:`\\kappa` (mode stiffnesses :math:`\\kappa + 4k\\sin^2(\\pi q/N)`, the mean over modes;
+    one unit for N = 1), from the closed form (a numerical Lyapunov solve loses positivity at
+    extreme :math:`\\kappa`). Its root is the equivalent stiffness; the Fokker--Planck frame
+    (:func:`fpe_harvester.fpe.hermite.equivalent_harmonic`) and the Monte Carlo twin
+    (:func:`montecarlo.twin.linearized_stiffness`) both solve it.
+    """
+    kappa = math.exp(log_kappa)
+    kap = kappa + 4.0 * h.k * mode_sin2(h.N) if h.N > 1 else np.array([kappa])
+    s2 = float(np.mean(mode_moments(kap, h.params)["x2"]))
+    n, a = h.n, h.a
+    c_n = a * n * 2.0 ** (n / 2) * math.gamma((n + 1) / 2) / math.sqrt(math.pi)
+    return math.log(c_n) + (0.5 * n - 1.0) * math.log(s2) - log_kappa

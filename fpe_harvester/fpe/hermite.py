@@ -248,15 +248,13 @@ def equivalent_harmonic(h: Harvester) -> tuple[float, np.ndarray]:
     """
     from scipy.optimize import brentq
 
-    from ..exact import lyapunov_covariance, mode_moments
+    from ..exact import lyapunov_covariance
+    from ..exact.moments import closure_mismatch
 
     a, n = h.a, h.n
-    c_n = a * n * 2.0 ** (n / 2) * math.gamma((n + 1) / 2) / math.sqrt(math.pi)
 
     def mismatch(log_kappa: float) -> float:
-        # closed form: the numerical Lyapunov solve loses positivity at extreme kappa
-        s2 = float(mode_moments(math.exp(log_kappa), h.params)["x2"])
-        return math.log(c_n) + (n / 2 - 1.0) * math.log(s2) - log_kappa
+        return closure_mismatch(h, log_kappa)
 
     if n == 2.0:
         kappa = 2.0 * a
