@@ -6,7 +6,9 @@ Private module. The Python side (:mod:`montecarlo.scheme`) builds the coefficien
     ``cf[0:9]`` the 3x3 propagator :math:`E = e^{Ah}` of the linear part of (x, v, V),
     row-major; ``cf[9:12]`` its response :math:`g = \\int_0^h e^{As}b\\,ds` to a unit
     constant force; ``cf[12] = h``; ``cf[13] = e^{-h/\\tau}``;
-    ``cf[14] = \\sqrt{(D/\\tau)(1 - e^{-2h/\\tau})}``; ``cf[15] = e^{-h/2\\tau}``.
+    ``cf[14] = \\sqrt{(D/\\tau)(1 - e^{-2h/\\tau})}``; ``cf[15] = e^{-h/2\\tau}``;
+    ``cf[16:25]``, ``cf[25:28]``: E and g of the substep ``h /`` :data:`MAX_SUBSTEPS` (the
+    stiff-wall substeps build ``h/K`` from it by squaring, :func:`_substep_path`).
 ``pp`` (physical)
     ``m, gamma, Kv, Kc, tau_p, sigma, k, a, n, c, threshold, D/tau, rule, a_kink`` where
     ``c`` is the stiffness kept inside the linear flow (``2k``, plus ``2a`` for the harmonic
@@ -24,7 +26,8 @@ frozen; consecutive half steps of ``O`` merge, so the loop runs ``D(h) O(h)`` an
 after ``D`` (xi-dependent observables get the exact half-step factor ``e^{-h/2tau}``).
 Inside ``D`` the neighbours' positions enter as a constant force evaluated at the
 predicted midpoint; the on-site force is either part of the exact linear flow (n = 2),
-a Strang kick around it (smooth n), or, for the kink (1 <= n <= 1 + KINK_WIDTH of
+a Strang kick around it (smooth n; where a steep wall makes :math:`h^2U''/m` large the
+step of that path is split into substeps, :data:`STIFF_LIMIT`), or, for the kink (1 <= n <= 1 + KINK_WIDTH of
 :mod:`montecarlo.scheme`), its part :math:`-an\\,\\mathrm{sign}(x)` is handled by an exact
 piecewise-linear flow with located zero crossings and the remainder by Strang kicks. Toward
 rest the kink's swings shrink exponentially in time and never stop (docs/model.md §3); once
@@ -42,6 +45,16 @@ from numba import njit
 KIND_LINEAR = 0
 KIND_KICK = 1
 KIND_KINK = 2
+
+#: Stiff walls (smooth scheme, n > 2): a path whose stiffest unit has
+#: :math:`h^2 U''(x_e)/m > ` STIFF_LIMIT (x_e the farther of x and x + h v at the start of a
+#: step) takes that step as K equal
+#: substeps (K the smallest power of 2 that brings it below, at most MAX_SUBSTEPS), the
+#: neighbours' force held at its value for the whole step. The kick-drift-kick step is
+#: unstable for :math:`h^2 U''/m > 4`; with n = 12, 16 the tails of the law (and the first
+#: steps from a Gaussian start) reach it at dt = 0.01 and paths blew up (0.5 %, 2.6 %).
+STIFF_LIMIT = 1.0
+MAX_SUBSTEPS = 1024
 
 #: Moments accumulated per level, in this order: the system's (``xdU`` is
 #: :math:`x\\,U'(x)`, for the statistical linearization) and, prefixed ``t_``, the harmonic
@@ -360,6 +373,52 @@ def _kink_flow(x, v, V, stuck, f, w, cf, pp, counters, cs) -> None:
 
 
 @njit(cache=True, nogil=True)
+def _substeps(x: float, v: float, h: float, xstar: float, pp: np.ndarray) -> int:
+    """Substeps a unit at (x, v) needs within a step h: :math:`h^2 U''(x_e)/m` at the farther of
+    x and x + h v (U'' = a n (n-1)|x|^(n-2), growing with |x|); 1 below ``xstar``, where it is
+    STIFF_LIMIT."""
+    xe = max(abs(x), abs(x + h * v))
+    if xe <= xstar:
+        return 1
+    a, n = pp[7], pp[8]
+    stiff = h * h * a * n * (n - 1.0) * xe ** (n - 2.0) / pp[0]
+    K = 1
+    while stiff > STIFF_LIMIT * K * K and K < MAX_SUBSTEPS:
+        K *= 2
+    return K
+
+
+@njit(cache=True, nogil=True)
+def _substep_path(x, v, V, F, fext, p: int, K: int, cf: np.ndarray, pp: np.ndarray) -> None:
+    """Kick-drift-kick of path p as K substeps h/K (neighbours' force fext held)."""
+    N = x.shape[0]
+    E = cf[16:25].copy()
+    g = cf[25:28].copy()
+    s = MAX_SUBSTEPS // K
+    while s > 1:                      # e^{A 2t} = (e^{At})^2, g_2t = e^{At} g_t + g_t
+        E2 = np.empty(9)
+        g2 = np.empty(3)
+        for r in range(3):
+            g2[r] = E[3 * r] * g[0] + E[3 * r + 1] * g[1] + E[3 * r + 2] * g[2] + g[r]
+            for c in range(3):
+                E2[3 * r + c] = E[3 * r] * E[c] + E[3 * r + 1] * E[3 + c] + E[3 * r + 2] * E[6 + c]
+        E, g = E2, g2
+        s //= 2
+    hk = 0.5 * cf[12] / K / pp[0]
+    for j in range(N):
+        xx, vv, VV, FF, fp = x[j, p], v[j, p], V[j, p], F[j, p], fext[j, p]
+        for _ in range(K):
+            vv += hk * FF
+            x0, v0, V0 = xx, vv, VV
+            xx = E[0] * x0 + E[1] * v0 + E[2] * V0 + g[0] * fp
+            vv = E[3] * x0 + E[4] * v0 + E[5] * V0 + g[1] * fp
+            VV = E[6] * x0 + E[7] * v0 + E[8] * V0 + g[2] * fp
+            FF = _kick_force(xx, pp)
+            vv += hk * FF
+        x[j, p], v[j, p], V[j, p], F[j, p] = xx, vv, VV, FF
+
+
+@njit(cache=True, nogil=True)
 def _d_step(x, v, V, xi, F, stuck, xm, fext, w, cf, pp, kind, counters, cs) -> None:
     """Deterministic flow D(h) of P rings of N units with xi frozen; arrays (N, P), in place.
 
@@ -371,6 +430,31 @@ def _d_step(x, v, V, xi, F, stuck, xm, fext, w, cf, pp, kind, counters, cs) -> N
     h = cf[12]
     # the kink scheme kicks only the smooth remainder of a near-kink potential (n > 1)
     kicks = kind == KIND_KICK or (kind == KIND_KINK and pp[8] != 1.0)
+    # stiff walls: paths to redo as substeps, with their state at the start of the step
+    n_stiff = 0
+    xstar = math.inf
+    if kind == KIND_KICK and pp[8] > 2.0:
+        xstar = (STIFF_LIMIT * pp[0] / (h * h * pp[7] * pp[8] * (pp[8] - 1.0))) ** (1.0 / (pp[8] - 2.0))
+    if xstar < pp[10]:  # stiffness reachable before the escape amplitude: scan the paths
+        for p in range(P):
+            for j in range(N):
+                if max(abs(x[j, p]), abs(x[j, p] + h * v[j, p])) > xstar:
+                    n_stiff += 1
+                    break
+    if n_stiff > 0:
+        sp = np.empty(n_stiff, dtype=np.int64)
+        sk = np.empty(n_stiff, dtype=np.int64)
+        s0 = np.empty((4, N, n_stiff))
+        i = 0
+        for p in range(P):
+            K = 1
+            for j in range(N):
+                K = max(K, _substeps(x[j, p], v[j, p], h, xstar, pp))
+            if K > 1:
+                sp[i], sk[i] = p, K
+                for j in range(N):
+                    s0[0, j, i], s0[1, j, i], s0[2, j, i], s0[3, j, i] = x[j, p], v[j, p], V[j, p], F[j, p]
+                i += 1
     if kicks:
         _kick(x, v, F, h, pp, False)
     if N > 1:
@@ -384,6 +468,17 @@ def _d_step(x, v, V, xi, F, stuck, xm, fext, w, cf, pp, kind, counters, cs) -> N
         _linear_flow(x, v, V, fext, cf)
     if kicks:
         _kick(x, v, F, h, pp, True)
+    for i in range(n_stiff):
+        p = sp[i]
+        for j in range(N):
+            x[j, p], v[j, p], V[j, p], F[j, p] = s0[0, j, i], s0[1, j, i], s0[2, j, i], s0[3, j, i]
+        if N > 1:  # neighbours at their midpoints predicted from the start of the step
+            for j in range(N):
+                xm[j, p] = x[j, p] + 0.5 * h * v[j, p]
+            sigma, k = pp[5], pp[6]
+            for j in range(N):
+                fext[j, p] = sigma * xi[j, p] + k * (xm[(j + N - 1) % N, p] + xm[(j + 1) % N, p])
+        _substep_path(x, v, V, F, fext, p, sk[i], cf, pp)
 
 
 @njit(cache=True, nogil=True)
@@ -577,6 +672,15 @@ def _run(gen, P: int, N: int, nburn: int, nrun: int, stride: int, cf_f: np.ndarr
     fext = np.zeros((N, P))
     esc_time[:] = -1.0
     _start(gen, chol, sd, xf, vf, Vf, xif)
+    if kind == KIND_KICK and pp[8] > 2.0:
+        # a Gaussian start can land deep in a steep wall, where even MAX_SUBSTEPS substeps
+        # are unstable: such draws start at the deepest resolvable |x| (the burn-in forgets it)
+        hc = cf_c[12] if coupled else cf_f[12]
+        xcap = (STIFF_LIMIT * MAX_SUBSTEPS**2 * pp[0] / (hc * hc * pp[7] * pp[8] * (pp[8] - 1.0))) \
+            ** (1.0 / (pp[8] - 2.0))
+        for j in range(N):
+            for p in range(P):
+                xf[j, p] = min(max(xf[j, p], -xcap), xcap)
     for j in range(N):
         for p in range(P):
             xc[j, p], vc[j, p], Vc[j, p], xic[j, p] = xf[j, p], vf[j, p], Vf[j, p], xif[j, p]

@@ -24,7 +24,7 @@ import scipy.linalg
 
 from fpe_harvester.model import Harvester
 
-from ._kernels import AVERAGE, HOLD, KIND_KICK, KIND_KINK, KIND_LINEAR
+from ._kernels import AVERAGE, HOLD, KIND_KICK, KIND_KINK, KIND_LINEAR, MAX_SUBSTEPS
 
 __all__ = ["scheme_kind", "linear_stiffness", "step_coefficients", "physical_vector", "SCHEME_NAMES",
            "KINK_WIDTH", "KINK_RULES"]
@@ -107,7 +107,10 @@ def step_coefficients(h: Harvester, dt: float) -> np.ndarray:
     M[2, 2] = -1.0 / p.tau_p
     M[1, 3] = 1.0 / p.m
     P = scipy.linalg.expm(M * dt)
-    cf = np.zeros(16)
+    Ps = scipy.linalg.expm(M * (dt / MAX_SUBSTEPS))
+    cf = np.zeros(28)
+    cf[16:25] = Ps[:3, :3].ravel()
+    cf[25:28] = Ps[:3, 3]
     cf[0:9] = P[:3, :3].ravel()
     cf[9:12] = P[:3, 3]
     cf[12] = dt

@@ -332,7 +332,7 @@ def reference_run(a: float, *, delta: float = 1e-3, schemes: tuple = ((20, "aver
     E = scipy.linalg.expm(M * delta)[:3]
     ed = _eigen_data(h)
     Ks = np.array([K for K, _ in schemes], dtype=np.int64)
-    cfs = np.array([step_coefficients(h, K * delta) for K, _ in schemes]).reshape(len(schemes), 16)
+    cfs = np.array([step_coefficients(h, K * delta) for K, _ in schemes]).reshape(len(schemes), -1)
     pps = np.array([physical_vector(h, 1e300, rule) for _, rule in schemes]).reshape(len(schemes), 14)
     nburn = int(round(t_burn / delta))
     nrun = int(round(t_run / delta))

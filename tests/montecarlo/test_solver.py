@@ -191,11 +191,26 @@ def test_marginal_does_not_hide_non_convergence() -> None:
 
 
 def test_confined_system_blowing_up_is_not_converged() -> None:
-    # n = 8 at dt = 0.5: the kick scheme is unstable, the paths overflow during burn-in
-    r = solve(Harvester.build(a=2.0, n=8), "mc", seed=2, dt=0.5, t_run=50.0, progress=False)
+    # n = 8 at dt = 0.5: the stiff-wall substeps keep every path (the bias is large, and said)
+    h = Harvester.build(a=2.0, n=8)
+    r = solve(h, "mc", seed=2, dt=0.5, t_run=50.0, progress=False)
+    assert r.info["escaped_paths"] == 0 and r.eta is not None and "lower dt" in r.message
+    # every path leaves |x| < 0.3 during burn-in: reported as a blow-up, with no numbers
+    r = solve(h, "mc", seed=2, dt=0.5, t_run=50.0, escape=0.3, progress=False)
     assert r.status is Status.NOT_CONVERGED
     assert "blew up" in r.message and "Lower dt" in r.message
     assert r.eta is None
+
+
+@pytest.mark.parametrize("n", [12.0, 16.0])
+def test_steep_walls_keep_every_path(n: float) -> None:
+    """n = 12, 16 at the default step: no confined path escapes (the kick-drift-kick step is
+    split where h^2 U''/m > 1), and eta agrees with Fokker-Planck within 3 combined errors."""
+    h = Harvester.build(a=0.5, n=n)
+    r = solve(h, "mc", seed=3, tol=3e-3, progress=False)
+    f = solve(h, "fpe", tol=1e-4)
+    assert r.info["escaped_paths"] == 0, r.message
+    assert abs(r.eta - f.eta) <= 3 * math.hypot(r.eta_err, f.eta_err), (r.eta, r.eta_err, f.eta)
 
 
 def test_transient_left_by_a_short_burn_in_is_detected() -> None:
