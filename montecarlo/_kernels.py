@@ -27,7 +27,8 @@ after ``D`` (xi-dependent observables get the exact half-step factor ``e^{-h/2ta
 Inside ``D`` the neighbours' positions enter as a constant force evaluated at the
 predicted midpoint; the on-site force is either part of the exact linear flow (n = 2),
 a Strang kick around it (smooth n; where a steep wall makes :math:`h^2U''/m` large the
-step of that path is split into substeps, :data:`STIFF_LIMIT`), or, for the kink (1 <= n <= 1 + KINK_WIDTH of
+step of that path is split into substeps, :data:`STIFF_LIMIT`), or, for the kink
+(1 <= n <= 1 + KINK_WIDTH of
 :mod:`montecarlo.scheme`), its part :math:`-an\\,\\mathrm{sign}(x)` is handled by an exact
 piecewise-linear flow with located zero crossings and the remainder by Strang kicks. Toward
 rest the kink's swings shrink exponentially in time and never stop (docs/model.md §3); once
