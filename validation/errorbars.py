@@ -148,16 +148,11 @@ class Bound:
 
 def _mc_reference(n: float, a: float) -> Stats:
     """The long Monte Carlo run of validation/data for the kink at ``a``, as a result."""
-    import json
-    from pathlib import Path
+    from .kinkref import recorded_reference
 
-    if n != 1.0:
-        raise RuntimeError(f"no recorded Monte Carlo reference for n = {n:g}")
-    data = json.loads((Path(__file__).parent / "data" / "kink_mc_reference_values.json").read_text())
-    key = f"a{a:g}"
-    if key not in data:
-        raise RuntimeError(f"no recorded Monte Carlo reference for n = 1, a = {a:g}")
-    d = data[key]
+    d = recorded_reference(a) if n == 1.0 else None
+    if d is None:
+        raise RuntimeError(f"no recorded Monte Carlo reference for n = {n:g}, a = {a:g}")
     return Stats(status=Status.STABLE, message=d["message"], method="mc", eta=d["eta"], eta_err=d["eta_err"],
                  V2=d["V2"], V2_err=d["V2_err"], Pin=d["Pin"], Pin_err=d["Pin_err"])
 

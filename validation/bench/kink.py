@@ -30,6 +30,7 @@ from fpe_harvester import Harvester
 from fpe_harvester.fpe import stationary
 from fpe_harvester.fpe.kinkdisc import KinkDG, KinkSettings
 from validation.bench.cli import bench_main, save_benchmark
+from validation.kinkref import recorded_reference
 
 __all__ = ["STEM", "TARGETS", "run", "convergence", "table"]
 
@@ -113,18 +114,6 @@ def _monte_carlo(h: Harvester, rel: float, max_time: float) -> dict[str, Any] | 
     return {"seconds": time.perf_counter() - t0, "eta": r.eta, "eta_err": r.eta_err, "status": r.status.value}
 
 
-def _mc_reference(a: float) -> dict[str, Any] | None:
-    """The long Monte Carlo reference of the kink at ``a`` (validation/data), if recorded."""
-    import json
-
-    path = pathlib.Path(__file__).resolve().parents[1] / "data" / "kink_mc_reference_values.json"
-    try:
-        data = json.loads(path.read_text())
-    except OSError:
-        return None
-    return data.get(f"a{a:g}")
-
-
 def run(quick: bool = False, out: pathlib.Path | None = None) -> dict:
     """Measure the kink scheme (see the module docstring).
 
@@ -153,7 +142,7 @@ def run(quick: bool = False, out: pathlib.Path | None = None) -> dict:
         if not quick:
             case["previous_scheme"] = _run(h, 1e-3, 300.0, scheme="x")
             case["monte_carlo"] = mc = _monte_carlo(h, 3e-3, 600.0)
-        long_mc = None if quick else _mc_reference(a)
+        long_mc = None if quick else recorded_reference(a)
         if long_mc is not None:
             case["monte_carlo_reference"] = {k: long_mc[k] for k in ("eta", "eta_err", "V2", "V2_err", "Pin",
                                                                       "Pin_err", "seed", "dt")}
