@@ -11,7 +11,11 @@ Per a in {0.5, 1, 2} (defaults otherwise), one run:
 * fixed levels: eta against M (p = 3), against p (M = 8) and against the number of layers
   (M = 8, p = 3), and the energy of the Hermite coefficients per degree along the drive F
   (:math:`\\beta_1`) and across it (:math:`\\beta_2`), in the core box of the trap and
-  outside it. This is the measurement of where the accuracy is lost.
+  outside it. This is the measurement of where the accuracy is lost;
+* the concentration of the law of V at V = 0 from Monte Carlo states
+  (:func:`validation.kinkdensity.v_concentration`): at a = 2 it is a spike,
+  :math:`P(|V| < \\delta\\,\\mathrm{sd}) \\sim \\delta^{0.3}`, which the Hermite series in V cannot
+  follow.
 
 ``python -m validation.bench.kink [--quick] [--out DIR]`` runs it and writes
 ``bench_kink.json`` and ``bench_kink.png``; ``python -m validation.bench.fpe`` includes it.
@@ -30,6 +34,7 @@ from fpe_harvester import Harvester
 from fpe_harvester.fpe import stationary
 from fpe_harvester.fpe.kinkdisc import KinkDG, KinkSettings
 from validation.bench.cli import bench_main, save_benchmark
+from validation.kinkdensity import v_concentration
 from validation.kinkref import recorded_reference
 
 __all__ = ["STEM", "TARGETS", "run", "convergence", "table"]
@@ -153,6 +158,8 @@ def run(quick: bool = False, out: pathlib.Path | None = None) -> dict:
             if long_mc is not None:
                 r["vs_monte_carlo_reference"] = _against(r, long_mc, "long Monte Carlo reference (validation/data)")
         case["convergence"] = convergence(a, quick)
+        if not quick:
+            case["v_concentration"] = v_concentration(h)
         cases[f"a={a:g}"] = case
     result = {"quick": quick, "cases": cases, "summary": _summary(cases)}
     save_benchmark(result, out, STEM, _plot)
@@ -179,6 +186,12 @@ def table(result: dict) -> str:
             lines.append(f"{name:8} {key:>6} {r['status']:>13} {r['seconds']:7.2f} {r['M'] or 0:3d} "
                          f"{r['order'] or 0:2d} {r['eta'] or float('nan'):10.7f} {rel:9.1e} {act:9.1e} {mc:9.1e}")
     lines.append(f"reported error bounds the actual one: {result['summary']['reported_bounds_actual']}")
+    for name, case in result["cases"].items():
+        vc = case.get("v_concentration")
+        if vc:
+            frac = ", ".join(f"{f:.3g}" for f in vc["fraction"])
+            lines.append(f"{name}: P(|V| < delta sd(V)) for delta = {vc['delta_sd']}: {frac}; "
+                         f"exponents {[round(b, 2) for b in vc['exponent']]} (1 = smooth)")
     return "\n".join(lines)
 
 
