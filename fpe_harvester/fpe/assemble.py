@@ -54,6 +54,9 @@ class XMatrices:
     mass, mass_u, mass_x, deriv : sparse
         :math:`\\int\\psi_i\\phi_j`, :math:`\\int u\\,\\psi_i\\phi_j`, :math:`\\int x\\,\\psi_i\\phi_j`,
         :math:`\\int\\psi_i'\\phi_j`.
+    mass_du : sparse
+        :math:`\\int u'\\,\\psi_i\\phi_j` (a weight centred on a mean that follows the force,
+        :func:`dg_operator`'s ``K3``).
     xplus, xminus : sparse
         Face matrices multiplying :math:`F^+` and :math:`F^-` in the upwind flux.
     xreflect : sparse or None
@@ -62,6 +65,9 @@ class XMatrices:
         mirror image, see :func:`dg_operator`); None on a full mesh.
     integral, x2, x1 : ndarray
         :math:`\\int\\phi_j`, :math:`\\int x^2\\phi_j`, :math:`\\int x\\phi_j`.
+    u1, u2, xu : ndarray
+        :math:`\\int u\\,\\phi_j`, :math:`\\int u^2\\phi_j`, :math:`\\int x u\\,\\phi_j` (moments of
+        a weight whose mean follows the force).
     basis : skfem.Basis
         The DG basis (for evaluating fields on a grid).
     order : int
@@ -83,6 +89,10 @@ class XMatrices:
     order: int
     perm: np.ndarray
     xreflect: sp.csr_matrix | None = None
+    mass_du: sp.csr_matrix | None = None
+    u1: np.ndarray | None = None
+    u2: np.ndarray | None = None
+    xu: np.ndarray | None = None
 
     @property
     def copies(self) -> float:
@@ -106,7 +116,8 @@ def _element_major(basis: Basis) -> np.ndarray:
 
 
 def assemble_x(mesh_nodes: np.ndarray, order: int, u: Callable[[np.ndarray], np.ndarray],
-               intorder: int | None = None, reflect: bool = False) -> XMatrices:
+               intorder: int | None = None, reflect: bool = False,
+               du: Callable[[np.ndarray], np.ndarray] | None = None) -> XMatrices:
     """Assemble the scalar DG matrices on a 1-D mesh.
 
     Parameters
@@ -122,6 +133,8 @@ def assemble_x(mesh_nodes: np.ndarray, order: int, u: Callable[[np.ndarray], np.
     reflect : bool
         The nodes cover the half :math:`[0, L]` of a mirror-symmetric problem: the left
         boundary x = 0 gets inflow from the mirror image (``xreflect``) instead of none.
+    du : callable, optional
+        Its derivative :math:`u'(x)`: also assemble ``mass_du``, ``u1``, ``u2`` and ``xu``.
     """
     from skfem import MeshLine
 
@@ -138,6 +151,12 @@ def assemble_x(mesh_nodes: np.ndarray, order: int, u: Callable[[np.ndarray], np.
     integral = asm(LinearForm(lambda b, w: b), basis)
     x2 = asm(LinearForm(lambda b, w: w.x[0] ** 2 * b), basis)
     x1 = asm(LinearForm(lambda b, w: w.x[0] * b), basis)
+    curved = {}
+    if du is not None:
+        curved = {"u1": asm(LinearForm(lambda b, w: u(w.x[0]) * b), basis),
+                  "u2": asm(LinearForm(lambda b, w: u(w.x[0]) ** 2 * b), basis),
+                  "xu": asm(LinearForm(lambda b, w: w.x[0] * u(w.x[0]) * b), basis)}
+        mass_du = asm(BilinearForm(lambda a, b, w: du(w.x[0]) * a * b), basis)
 
     # Interior nodes: side 0 is the element whose outward normal is n. The upwind flux in
     # direction n is (nF)^+ c_0 + (nF)^- c_1, added to side 0 and subtracted from side 1;
@@ -181,6 +200,7 @@ def assemble_x(mesh_nodes: np.ndarray, order: int, u: Callable[[np.ndarray], np.
         xminus=p2(xminus, True),
         integral=integral[perm], x2=x2[perm], x1=x1[perm], basis=basis, order=order, perm=perm,
         xreflect=None if xreflect is None else p2(xreflect, True),
+        mass_du=p2(mass_du) if du is not None else None, **{k: v[perm] for k, v in curved.items()},
     )
 
 
@@ -221,7 +241,8 @@ def upwind_parts(F: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
 
 def dg_operator(X: XMatrices, F: np.ndarray, K0: sp.spmatrix, K1: sp.spmatrix,
                 K2: sp.spmatrix | None = None, parity: np.ndarray | None = None,
-                upwind: tuple[np.ndarray, np.ndarray] | None = None) -> sp.csr_matrix:
+                upwind: tuple[np.ndarray, np.ndarray] | None = None,
+                K3: tuple[float, sp.spmatrix] | None = None) -> sp.csr_matrix:
     """The global DG operator :math:`A` (see module docstring), x outer, alpha inner.
 
     ``K2`` (optional) multiplies x, from a weight centred on a conditional mean linear in x
@@ -234,6 +255,10 @@ def dg_operator(X: XMatrices, F: np.ndarray, K0: sp.spmatrix, K1: sp.spmatrix,
     :math:`X_{reflect} \\otimes F^+ S`.
 
     ``upwind`` is :func:`upwind_parts` of F if the caller has it already.
+
+    ``K3 = (r, K)`` (optional) is a drift that a weight centred on a mean following the force
+    adds in proportion to :math:`\\psi'(x) = r\\,u'(x) - 1`: :math:`-(r M_{u'} - M) \\otimes K`
+    (needs ``X.mass_du``).
     """
     Fp, Fm = upwind_parts(F) if upwind is None else upwind
     A = (
@@ -245,6 +270,10 @@ def dg_operator(X: XMatrices, F: np.ndarray, K0: sp.spmatrix, K1: sp.spmatrix,
     )
     if K2 is not None and K2.nnz:
         A = A - sp.kron(X.mass_x, K2)
+    if K3 is not None and K3[1].nnz:
+        if X.mass_du is None:
+            raise ValueError("a weight whose mean follows the force needs X.mass_du (assemble_x(..., du=...))")
+        A = A - sp.kron(K3[0] * X.mass_du - X.mass, K3[1])
     if X.xreflect is not None:
         if parity is None:
             raise ValueError("a half mesh (X.xreflect) needs the parity (-1)^|alpha| of the Hermite indices")

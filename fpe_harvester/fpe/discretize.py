@@ -29,7 +29,7 @@ from typing import Any
 import numpy as np
 import scipy.sparse as sp
 
-from ..model import Harvester
+from ..model import Harvester, Potential
 from .assemble import XMatrices, assemble_x, dg_operator, upwind_parts
 from .blocksolve import BlockTridiagonal
 from .hermite import HermiteBasis, equivalent_harmonic, linear_drift
@@ -37,6 +37,11 @@ from .mesh import XMesh
 
 __all__ = ["Whitening", "Level", "solve_level", "assemble_level", "hierarchy_matrices", "x_matrices",
            "HermiteDG", "level_gigabytes", "DEGREES_PER_ELEMENT"]
+
+#: Noise correlation time from which the conditional weight's centre of xi follows the force
+#: (:meth:`Whitening.of`, ``curved``; n > 2). Measured (n = 3, a = 0.5, tol 1e-4): see
+#: :meth:`Whitening.of`.
+CURVED_TAU = 10.0
 
 #: Highest Hermite degree per element of the half mesh. Beyond it the levels are not
 #: resolved and may be wrong while looking physical. Measured on 8 elements per half: M = 16
@@ -63,6 +68,15 @@ class Whitening:
         Regression of (v, V, xi) on x, :math:`b = \\langle x y\\rangle / \\langle x^2\\rangle`
         (:math:`b_v = 0`: :math:`\\langle x v\\rangle = 0` in a stationary state). The weight
         is centred on :math:`b x`, the conditional mean of the equivalent harmonic unit.
+    curve : ndarray (3,)
+        c: the weight's centre follows the force, :math:`b x + c\\,\\psi(x)` with
+        :math:`\\psi(x) = U'(x)/\\kappa - x` (zero for n = 2; default c = 0: centred on b x).
+        With :math:`c = b_\\xi e_\\xi` the centre of xi is :math:`b_\\xi U'(x)/\\kappa`, which for
+        slow noise (:math:`\\tau \\gg 1/\\gamma`) is the quasi-static force balance
+        :math:`\\sigma\\xi \\approx U'(x)`, where a centre linear in x is off by many
+        conditional standard deviations at the walls.
+    potential : Potential or None
+        The potential of a curved centre (None when ``curve`` is zero).
 
     Notes
     -----
@@ -79,9 +93,11 @@ class Whitening:
     kappa: float
     x2: float
     shift: np.ndarray = field(default_factory=lambda: np.zeros(3))
+    curve: np.ndarray = field(default_factory=lambda: np.zeros(3))
+    potential: Potential | None = None
 
     @classmethod
-    def of(cls, h: Harvester, conditional: bool | None = None) -> Whitening:
+    def of(cls, h: Harvester, conditional: bool | None = None, curved: bool | None = None) -> Whitening:
         """Weight of harvester ``h``: conditional on x or marginal.
 
         ``conditional=None`` picks the measured better choice: conditional for
@@ -91,6 +107,10 @@ class Whitening:
         the conditional weight makes the Hermite sequence irregular (M = 14 and 88 s against
         M = 12 and 36 s) because a mean linear in x is a poor guess at steep walls; for the
         kink (n = 1, a = 2) it turns an unphysical low level into a wild sequence.
+
+        ``curved`` centres xi on :math:`b_\\xi U'(x)/\\kappa` instead of :math:`b_\\xi x`
+        (``curve``; conditional weights of n > 2 only). ``None`` picks it where it measures
+        better: slow noise, :math:`\\tau \\ge` :data:`CURVED_TAU` (see the constant).
         """
         kappa, P = equivalent_harmonic(h)
         x2 = float(P[0, 0])
@@ -104,10 +124,29 @@ class Whitening:
         # the transport variable (F tridiagonal in the v index).
         b[0] = 0.0
         cond = P[1:, 1:] - np.outer(b, b) * x2
-        return cls(cond, np.linalg.cholesky(cond), kappa, x2, b)
+        if curved is None:
+            curved = h.params.tau >= CURVED_TAU
+        c = np.array([0.0, 0.0, b[2]]) if curved and h.n > 2.0 else np.zeros(3)
+        return cls(cond, np.linalg.cholesky(cond), kappa, x2, b, c, h.potential if np.any(c) else None)
 
     def __post_init__(self) -> None:
         object.__setattr__(self, "shift", np.asarray(self.shift, dtype=float))
+        object.__setattr__(self, "curve", np.asarray(self.curve, dtype=float))
+        if np.any(self.curve != 0.0) and self.potential is None:
+            raise ValueError("a curved centre (curve != 0) needs the potential")
+
+    @property
+    def curved(self) -> bool:
+        """True if the centre follows the force (``curve`` not zero)."""
+        return bool(np.any(self.curve != 0.0))
+
+    def psi(self, x: np.ndarray) -> np.ndarray:
+        """:math:`\\psi(x) = U'(x)/\\kappa - x`, the part of the centre not linear in x (zero
+        where the centre is not curved)."""
+        x = np.asarray(x, dtype=float)
+        if self.potential is None:
+            return np.zeros_like(x)
+        return self.potential.dU(x) / self.kappa - x
 
     @property
     def temperature(self) -> float:
@@ -120,30 +159,37 @@ class Whitening:
 
 
 def hierarchy_matrices(h: Harvester, M: int, w: Whitening) -> tuple[HermiteBasis, np.ndarray, sp.csr_matrix,
-                                                                      sp.csr_matrix, sp.csr_matrix]:
-    """Hermite basis and the matrices ``F, K0, K1, K2`` of the hierarchy at degree M.
+                                                                      sp.csr_matrix, sp.csr_matrix, sp.csr_matrix]:
+    """Hermite basis and the matrices ``F, K0, K1, K2, K3`` of the hierarchy at degree M.
 
-    The expansion variable is :math:`z = L^{-1}(y - b x)` (``w.shift`` = b, :math:`b_v = 0`).
+    The expansion variable is :math:`z = L^{-1}(y - b x - c\\,\\psi(x))` (``w.shift`` = b,
+    ``w.curve`` = c, :math:`b_v = c_v = 0`, :math:`\\psi = U'/\\kappa - x = -m u/\\kappa - x`).
     From :math:`\\dot y = B y + e\\,u(x)` + noise and :math:`\\dot x = v = e_v^T y`,
 
     .. math::
 
-        \\dot z = L^{-1}(B - b e_v^T) L\\, z + L^{-1} e\\, u(x) + L^{-1} B b\\, x + \\text{noise},
+        \\dot z = L^{-1}(B - b e_v^T) L\\, z + L^{-1}(e - \\tfrac{m}{\\kappa} B c)\\, u(x)
+        + L^{-1} B (b - c)\\, x - \\psi'(x)\\, L^{-1} c\\, e_v^T L\\, z + \\text{noise},
 
     so :math:`B_z = L^{-1}(B - b e_v^T) L`, :math:`Q_z = L^{-1} Q L^{-T}`, the nonlinear
-    force enters along :math:`L^{-1} e` (``K1``, multiplied by u(x)), the shift along
-    :math:`L^{-1} B b` (``K2``, multiplied by x), and :math:`v = L_{00} z_0` gives the flux
-    matrix :math:`F = L_{00} J_0`. With ``b = 0``, ``K2`` is zero.
+    force enters along :math:`L^{-1}(e - \\tfrac{m}{\\kappa} B c)` (``K1``, multiplied by u(x)),
+    the shift along :math:`L^{-1} B (b - c)` (``K2``, multiplied by x), the curved centre as
+    the linear drift :math:`-L^{-1} c\\, e_v^T L` (``K3``, multiplied by
+    :math:`\\psi'(x) = -\\tfrac{m}{\\kappa} u'(x) - 1`), and :math:`v = L_{00} z_0` gives the
+    flux matrix :math:`F = L_{00} J_0`. With ``b = c = 0``, ``K2`` and ``K3`` are zero.
     """
     hb = HermiteBasis(M)
     B, e, Q = linear_drift(h)
     Li = np.linalg.inv(w.chol)
-    b = w.shift
+    b, c = w.shift, w.curve
+    ev = np.array([1.0, 0.0, 0.0])
+    r = h.params.m / w.kappa
     F = w.chol[0, 0] * hb.multiply(0).toarray()
-    K0 = hb.generator(Li @ (B - np.outer(b, [1.0, 0.0, 0.0])) @ w.chol, Li @ Q @ Li.T)
-    K1 = hb.lowering(Li @ e)
-    K2 = hb.lowering(Li @ B @ b)
-    return hb, F, K0, K1, K2
+    K0 = hb.generator(Li @ (B - np.outer(b, ev)) @ w.chol, Li @ Q @ Li.T)
+    K1 = hb.lowering(Li @ (e - r * B @ c))
+    K2 = hb.lowering(Li @ B @ (b - c))
+    K3 = hb.generator(-Li @ np.outer(c, ev) @ w.chol, np.zeros((3, 3))) if w.curved else sp.csr_matrix((hb.size,) * 2)
+    return hb, F, K0, K1, K2, K3
 
 
 @dataclass(frozen=True)
@@ -212,11 +258,12 @@ def assemble_level(h: Harvester, M: int, mesh: XMesh, order: int, w: Whitening, 
     """Hermite basis, flux matrix F, scalar x-matrices, the global DG operator A and the
     upwind parts :math:`(F^+, F^-)` of one level, on the whole mesh or (``half``) on
     :math:`[0, L]` with the mirror condition at 0."""
-    hb, F, K0, K1, K2 = hierarchy_matrices(h, M, w)
-    X = x_matrices(h, mesh, order, half)
+    hb, F, K0, K1, K2, K3 = hierarchy_matrices(h, M, w)
+    X = x_matrices(h, mesh, order, half, curved=w.curved)
     parity = hb.parity() if half else None
     upwind = upwind_parts(F)
-    return hb, F, X, dg_operator(X, F, K0, K1, K2, parity, upwind), upwind
+    curve = (-h.params.m / w.kappa, K3) if w.curved else None
+    return hb, F, X, dg_operator(X, F, K0, K1, K2, parity, upwind, K3=curve), upwind
 
 
 #: Scalar DG matrices of recently used (mesh, order, potential): the refinement solves
@@ -226,16 +273,19 @@ _X_CACHE_SIZE = 16
 _X_LOCK = threading.Lock()  # scenes may solve points in threads
 
 
-def x_matrices(h: Harvester, mesh: XMesh, order: int, half: bool = False) -> XMatrices:
+def x_matrices(h: Harvester, mesh: XMesh, order: int, half: bool = False, curved: bool = False) -> XMatrices:
     """:func:`~.assemble.assemble_x` for the force :math:`-U'(x)/m` of ``h``, cached (read-only);
-    on the half mesh :math:`[0, L]` with a mirror at 0 if ``half``."""
+    on the half mesh :math:`[0, L]` with a mirror at 0 if ``half``; with the matrices of a
+    weight whose centre follows the force if ``curved`` (:math:`u' = -U''/m`, n > 2)."""
     nodes = mesh.half_nodes() if half else mesh.nodes()
-    key = (nodes.tobytes(), order, h.potential, h.params.m, half)
+    key = (nodes.tobytes(), order, h.potential, h.params.m, half, curved)
     with _X_LOCK:
         X = _X_CACHE.get(key)
     if X is None:
         m, pot = h.params.m, h.potential
-        X = assemble_x(nodes, order, lambda x: -pot.dU(x) / m, reflect=half)
+        a, n = pot.a, pot.n
+        du = (lambda x: -a * n * (n - 1.0) * np.abs(x) ** (n - 2.0) / m) if curved else None
+        X = assemble_x(nodes, order, lambda x: -pot.dU(x) / m, reflect=half, du=du)
         with _X_LOCK:
             while len(_X_CACHE) >= _X_CACHE_SIZE:
                 _X_CACHE.pop(next(iter(_X_CACHE)))
@@ -247,12 +297,20 @@ def _moments(h: Harvester, X: XMatrices, hb: HermiteBasis, C: np.ndarray, w: Whi
     # On a half mesh the (even) integrands count once more from the mirror image.
     p = h.params
     C = X.copies * C
-    # y = y' + b x with y' = L z: <y_i y_j> = <y'_i y'_j> + b_i <x y'_j> + b_j <x y'_i> + b_i b_j <x^2>.
+    # y = y' + b x + c psi(x) with y' = L z and psi = -r u - x (r = m / kappa):
+    # <y y^T> = <y' y'^T> + (s y'^T + y' s^T) + <s s^T>, s = (b - c) x - r c u.
     W = hb.second_moment_weights(w.chol)
     Y = np.einsum("ijm,km->ijk", W, C) @ X.integral
-    xy = hb.first_moment_weights(w.chol) @ (C.T @ X.x1)
-    b = w.shift
+    w1 = hb.first_moment_weights(w.chol)
+    b = w.shift - w.curve
+    xy = w1 @ (C.T @ X.x1)
     Y = Y + np.outer(b, xy) + np.outer(xy, b) + np.outer(b, b) * float(C[:, 0] @ X.x2)
+    if w.curved:
+        r = p.m / w.kappa
+        cu = -r * w.curve
+        uy = w1 @ (C.T @ X.u1)
+        Y = (Y + np.outer(cu, uy) + np.outer(uy, cu) + np.outer(cu, cu) * float(C[:, 0] @ X.u2)
+             + (np.outer(b, cu) + np.outer(cu, b)) * float(C[:, 0] @ X.xu))
     v2, vV, vxi, V2 = Y[0, 0], Y[0, 1], Y[0, 2], Y[1, 1]
     Pin = p.sigma * vxi
     res_V2 = (V2 - p.Kc * p.tau_p * vV) / V2

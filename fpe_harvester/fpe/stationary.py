@@ -151,10 +151,11 @@ def _fields(lv: Level, x: np.ndarray) -> dict[str, np.ndarray]:
     mask = dens < 1e-9 * max(float(dens.max()), 1e-300)
     safe = np.where(mask, 1.0, dens)
     out = {"density": dens}
-    shift = lv.whitening.shift
+    w = lv.whitening
+    centre = np.multiply.outer(np.asarray(x, dtype=float), w.shift) + np.multiply.outer(w.psi(x), w.curve)
     for i, name in enumerate(("v_mean", "V_mean", "xi_mean")):
-        # <y|x> = <y'|x> + b x (the weight is centred on b x)
-        mean = num[:, i] / safe + shift[i] * np.asarray(x, dtype=float)
+        # <y|x> = <y'|x> + b x + c psi(x) (the weight's centre)
+        mean = num[:, i] / safe + centre[:, i]
         out[name] = np.ma.masked_array(np.where(mask, 0.0, mean), mask=mask)
     return out
 

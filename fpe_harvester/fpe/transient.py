@@ -251,7 +251,7 @@ def transient(
     grid = check_int("grid", grid, low=3)
     interval = t_end / 100 if interval is None else check_real("interval", interval, low=0.0, low_open=True)
 
-    w = Whitening.of(h)
+    w = Whitening.of(h, curved=False)
     mesh = default_plan(h, theta=theta).mesh(h, w, half_elements)
     # The start is a centred Gaussian and the dynamics are mirror-symmetric, so the density
     # stays symmetric: the half mesh [0, L] with the mirror condition at 0 (see
