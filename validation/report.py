@@ -15,7 +15,7 @@ from pathlib import Path
 
 from .checks import CheckResult, Outcome
 
-__all__ = ["Table", "Figure", "Section", "Report", "write_markdown", "write_html", "summary_text"]
+__all__ = ["Table", "Figure", "Section", "Report", "write_markdown", "write_html", "summary_text", "slowest_checks"]
 
 
 @dataclass
@@ -217,11 +217,35 @@ def write_html(report: Report, path: Path) -> Path:
     return path
 
 
+#: How many of the slowest checks the terminal summary lists.
+SLOWEST = 8
+
+
+def slowest_checks(report: Report, k: int = SLOWEST) -> list[str]:
+    """Lines naming the ``k`` slowest computations of the run (where the wall time goes).
+
+    Checks made by one computation (for example eta, V2 and Pin of one cross-check) share its
+    time; they count once, under the first check's name, with the number of checks made."""
+    groups: dict[tuple[str, float], list[str]] = {}
+    for c in report.checks:
+        if c.seconds > 0.0:
+            groups.setdefault((c.section, c.seconds), []).append(c.name)
+    top = sorted(groups.items(), key=lambda kv: -kv[0][1])[:k]
+    if not top:
+        return []
+    lines = ["", f"slowest computations ({len(top)} of {len(groups)})", f"{'time [s]':>8}  check"]
+    for (_, sec), names in top:
+        more = f" (+{len(names) - 1} more checks)" if len(names) > 1 else ""
+        lines.append(f"{sec:8.1f}  {names[0]}{more}")
+    return lines
+
+
 def summary_text(report: Report, width: int = 110, show_passed: bool = False) -> str:
     """Plain-text pass/fail summary for the terminal.
 
     A table of pass/fail/skip counts per section, then every failed and skipped check (and,
-    with ``show_passed``, every passed one), failures first.
+    with ``show_passed``, every passed one), failures first, then the slowest computations
+    (:func:`slowest_checks`).
     """
     order = {Outcome.FAIL: 0, Outcome.SKIP: 1, Outcome.PASS: 2}
     title_w = min(max([7, *(len(s.title) for s in report.sections)]), 50)
@@ -240,6 +264,7 @@ def summary_text(report: Report, width: int = 110, show_passed: bool = False) ->
         for c in checks:
             detail = c.detail if len(c.detail) <= room else c.detail[: room - 3] + "..."
             lines.append(f"{c.outcome.value:6}  {c.name[:name_w]:{name_w}}  {detail}")
+    lines += slowest_checks(report)
     counts = report.counts()
     lines.append("")
     lines.append(f"{counts.get('PASS', 0)} passed, {counts.get('FAIL', 0)} failed, {counts.get('SKIP', 0)} skipped")

@@ -7,7 +7,7 @@ import base64
 import pytest
 
 from validation.checks import Outcome, agree, expect, skipped
-from validation.report import Figure, Report, Section, Table, summary_text, write_html, write_markdown
+from validation.report import Figure, Report, Section, Table, slowest_checks, summary_text, write_html, write_markdown
 
 
 @pytest.fixture
@@ -70,3 +70,20 @@ def test_table_rejects_ragged_rows():
 
 def test_outcome_values():
     assert [o.value for o in Outcome] == ["PASS", "FAIL", "SKIP"]
+
+
+def test_summary_names_the_slowest_computations_once_each():
+    """Checks of one computation share its time and count once; the slowest come first."""
+    from dataclasses import replace
+
+    rep = Report("timing")
+    sec = Section("s", "S")
+    sec.checks += [replace(expect(f"fast {i}", "S", True, "ok"), seconds=0.1 * (i + 1)) for i in range(3)]
+    sec.checks += [replace(expect(f"slow: {q}", "S", True, "ok"), seconds=42.0) for q in ("eta", "V2", "Pin")]
+    sec.checks.append(expect("untimed", "S", True, "ok"))
+    rep.sections.append(sec)
+    lines = slowest_checks(rep, k=2)
+    assert "2 of 4" in lines[1]
+    assert lines[3].split() == ["42.0", "slow:", "eta", "(+2", "more", "checks)"]
+    assert lines[4].split()[:2] == ["0.3", "fast"]
+    assert "slowest computations" in summary_text(rep)
