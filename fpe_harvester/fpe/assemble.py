@@ -20,6 +20,12 @@ with zero inflow at :math:`\\pm L`. Every term is a Kronecker product of an x-ma
         - M_u \\otimes K_1 - M_x \\otimes K_2 .
 
 Unknowns are ordered element by element, x outer and :math:`\\alpha` inner.
+
+For :math:`U = a|x|^n` with non-integer n the force :math:`u \\propto |x|^{n-1}\\mathrm{sign}\\,x`
+is not a polynomial on an element touching x = 0, and Gauss--Legendre quadrature converges
+slowly there. With ``singular = n - 1`` the term :math:`M_u` on those elements uses the
+Gauss--Jacobi rule of the weight :math:`|x|^{n-1}` (:func:`jacobi_rule`), exact for
+:math:`|x|^{n-1}` times a polynomial.
 """
 
 from __future__ import annotations
@@ -42,7 +48,7 @@ from skfem import (
     asm,
 )
 
-__all__ = ["XMatrices", "assemble_x", "split_flux", "upwind_parts", "dg_operator"]
+__all__ = ["XMatrices", "assemble_x", "jacobi_rule", "split_flux", "upwind_parts", "dg_operator"]
 
 
 @dataclass(frozen=True)
@@ -115,8 +121,63 @@ def _element_major(basis: Basis) -> np.ndarray:
     return basis.element_dofs[:, order].T.ravel()
 
 
+def jacobi_rule(points: int, exponent: float, h: float = 1.0) -> tuple[np.ndarray, np.ndarray]:
+    """Gauss--Jacobi rule of the weight :math:`x^s` on :math:`[0, h]`.
+
+    .. math::
+
+        \\int_0^h x^s f(x)\\,dx = \\sum_i w_i f(x_i)
+
+    exactly for polynomials f of degree up to ``2 * points - 1``.
+
+    Parameters
+    ----------
+    points : int
+        Number of nodes, >= 1.
+    exponent : float
+        :math:`s > -1`.
+    h : float
+        Length of the interval, > 0.
+
+    Returns
+    -------
+    x, w : ndarray
+        Nodes in (0, h) and weights.
+
+    Examples
+    --------
+    >>> x, w = jacobi_rule(2, 0.5)
+    >>> round(float(w @ x**2), 12) == round(1 / 3.5, 12)
+    True
+    """
+    from scipy.special import roots_jacobi
+
+    t, w = roots_jacobi(points, 0.0, exponent)  # weight (1 + t)^s on [-1, 1]
+    scale = (0.5 * h) ** (exponent + 1.0)
+    return 0.5 * h * (1.0 + t), w * scale
+
+
+def _singular_mass(mesh, order: int, u: Callable[[np.ndarray], np.ndarray], singular: float) -> sp.spmatrix:
+    """:math:`\\int u\\,\\psi_i\\phi_j` on the elements with a node at x = 0 by Gauss--Jacobi
+    with the weight :math:`|x|^s`: nodes and weights of :func:`jacobi_rule` on the reference
+    interval, the weights divided by :math:`t^s`, so that scikit-fem's sum of
+    :math:`w_i |J| u(x_i)` is the rule for :math:`|x|^s \\cdot (u/|x|^s)`."""
+    t, w = jacobi_rule(order + 4, singular)
+    p, cells = mesh.p[0], mesh.t
+    out = None
+    for end in (0, 1):  # the reference point t = 0 (left node) or t = 1 (right node) sits at x = 0
+        elems = np.flatnonzero(np.abs(p[cells[end]]) <= 1e-14 * np.abs(p).max())
+        if elems.size == 0:
+            continue
+        pts = t if end == 0 else 1.0 - t
+        basis = Basis(mesh, _element(order), quadrature=(pts[None, :], w / t**singular), elements=elems)
+        part = asm(BilinearForm(lambda a, b, w_: u(w_.x[0]) * a * b), basis)
+        out = part if out is None else out + part
+    return out
+
+
 def assemble_x(mesh_nodes: np.ndarray, order: int, u: Callable[[np.ndarray], np.ndarray],
-               intorder: int | None = None, reflect: bool = False,
+               intorder: int | None = None, reflect: bool = False, singular: float | None = None,
                du: Callable[[np.ndarray], np.ndarray] | None = None) -> XMatrices:
     """Assemble the scalar DG matrices on a 1-D mesh.
 
@@ -133,6 +194,10 @@ def assemble_x(mesh_nodes: np.ndarray, order: int, u: Callable[[np.ndarray], np.
     reflect : bool
         The nodes cover the half :math:`[0, L]` of a mirror-symmetric problem: the left
         boundary x = 0 gets inflow from the mirror image (``xreflect``) instead of none.
+    singular : float, optional
+        Exponent :math:`s > -1` of a factor :math:`|x|^s` of u at x = 0 (``n - 1`` for
+        :math:`U = a|x|^n`): the elements touching 0 (0 must be a node) integrate
+        :math:`M_u` by Gauss--Jacobi, exact when :math:`u/|x|^s` is a polynomial there.
     du : callable, optional
         Its derivative :math:`u'(x)`: also assemble ``mass_du``, ``u1``, ``u2`` and ``xu``.
     """
@@ -145,7 +210,18 @@ def assemble_x(mesh_nodes: np.ndarray, order: int, u: Callable[[np.ndarray], np.
     perm = _element_major(basis)
 
     mass = asm(BilinearForm(lambda a, b, w: a * b), basis)
-    mass_u = asm(BilinearForm(lambda a, b, w: u(w.x[0]) * a * b), basis)
+    if singular is None:
+        mass_u = asm(BilinearForm(lambda a, b, w: u(w.x[0]) * a * b), basis)
+    else:
+        if not singular > -1.0:
+            raise ValueError(f"singular must be an exponent > -1, got {singular!r}")
+        at0 = np.abs(mesh.p[0, mesh.t]).min(axis=0) <= 1e-14 * np.abs(mesh.p).max()
+        if not at0.any():
+            raise ValueError("singular needs a node at x = 0")
+        mass_u = _singular_mass(mesh, order, u, singular)
+        if not at0.all():
+            rest = Basis(mesh, _element(order), intorder=q, elements=np.flatnonzero(~at0))
+            mass_u = mass_u + asm(BilinearForm(lambda a, b, w: u(w.x[0]) * a * b), rest)
     mass_x = asm(BilinearForm(lambda a, b, w: w.x[0] * a * b), basis)
     deriv = asm(BilinearForm(lambda a, b, w: a * b.grad[0]), basis)
     integral = asm(LinearForm(lambda b, w: b), basis)

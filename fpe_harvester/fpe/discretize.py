@@ -285,14 +285,19 @@ def x_matrices(h: Harvester, mesh: XMesh, order: int, half: bool = False, curved
     on the half mesh :math:`[0, L]` with a mirror at 0 if ``half``; with the matrices of a
     weight whose centre follows the force if ``curved`` (:math:`u' = -U''/m`, n > 2)."""
     nodes = mesh.half_nodes() if half else mesh.nodes()
-    key = (nodes.tobytes(), order, h.potential, h.params.m, half, curved)
+    key = (nodes.tobytes(), order, h.potential, h.params.m, half, mesh.geometric, curved)
     with _X_LOCK:
         X = _X_CACHE.get(key)
     if X is None:
         m, pot = h.params.m, h.potential
+        # On geometric layers the force |x|^(n-1) is integrated by Gauss-Jacobi on the
+        # element at 0 and by a longer Gauss-Legendre rule on the layers, whose ends are
+        # 1/ratio apart (x^(n-1) is far from a polynomial there).
+        singular = h.n - 1.0 if mesh.geometric and h.n != round(h.n) else None
         a, n = pot.a, pot.n
         du = (lambda x: -a * n * (n - 1.0) * np.abs(x) ** (n - 2.0) / m) if curved else None
-        X = assemble_x(nodes, order, lambda x: -pot.dU(x) / m, reflect=half, du=du)
+        X = assemble_x(nodes, order, lambda x: -pot.dU(x) / m, reflect=half, singular=singular,
+                       intorder=2 * order + 16 if mesh.geometric else None, du=du)
         with _X_LOCK:
             while len(_X_CACHE) >= _X_CACHE_SIZE:
                 _X_CACHE.pop(next(iter(_X_CACHE)))
@@ -416,16 +421,16 @@ class HermiteDG:
 
     def unknowns(self, M: int, size: int) -> int:
         """Unknowns of the whole mesh (twice those of the half mesh that is solved)."""
-        return 2 * size * _block_size(M, self.order)
+        return 2 * (size + self.base.layers) * _block_size(M, self.order)
 
     def gigabytes(self, M: int, size: int) -> float:
-        return level_gigabytes(M, size, self.order)
+        return level_gigabytes(M, size + self.base.layers, self.order)
 
     def max_degree(self, size: int) -> int:
         return int(DEGREES_PER_ELEMENT * size)
 
     def work(self, M: int, size: int) -> tuple[float, float]:
-        return float(size), float(_block_size(M, self.order))
+        return float(size + self.base.layers), float(_block_size(M, self.order))
 
     def describe(self, size: int) -> str:
-        return f"{2 * size} elements"
+        return f"{2 * (size + self.base.layers)} elements"

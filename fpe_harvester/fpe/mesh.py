@@ -10,8 +10,20 @@ effective temperatures above the bottom,
 with :math:`\\kappa, \\langle x^2\\rangle` from the equivalent harmonic unit (for n = 2,
 :math:`T_{eff} = 2a\\langle x^2\\rangle` and the density at L is :math:`e^{-\\Theta}` of its peak).
 Nodes :math:`x_i = L\\,g(i/N_h)` on each half with :math:`g(t) = t^\\beta`: :math:`\\beta > 1`
-grades elements toward the kink at 0 (force not smooth there for n < 2), and a second,
-wall-side refinement for steep potentials clusters nodes near the edge.
+grades elements toward the kink at 0 (force not smooth there for n < 2; the *algebraic*
+mesh), and a second, wall-side refinement for steep potentials clusters nodes near the edge.
+
+The *geometric* mesh for 1 < n < 2 keeps :math:`\\beta = 1` and splits the element
+:math:`[0, x_1]` next to 0 into ``layers`` elements whose nodes form a geometric sequence,
+
+.. math::
+
+    0,\\; x_1\\sigma^{N_\\ell},\\; x_1\\sigma^{N_\\ell - 1},\\; \\dots,\\; x_1\\sigma,\\; x_1,
+    \\qquad \\sigma \\approx 0.15,
+
+so that the element touching 0, where the force :math:`\\propto |x|^{n-1}` is not smooth, is
+:math:`\\sigma^{N_\\ell}` times shorter than the bulk elements and the error it carries falls
+geometrically with :math:`N_\\ell` (Babuska and Guo's hp grading toward a point singularity).
 """
 
 from __future__ import annotations
@@ -52,6 +64,11 @@ class XMesh:
         Weight ``w >= 0`` of the wall term (0: uniform in x apart from the grading).
     grading : float
         :math:`\\beta` in [1, 6].
+    layers : int
+        Geometric layers :math:`N_\\ell \\ge 0` splitting the first element of each half
+        (0: none).
+    ratio : float
+        Ratio :math:`\\sigma` of successive layers, in (0, 1).
 
     Examples
     --------
@@ -67,6 +84,8 @@ class XMesh:
     theta: float = 30.0
     wall: float = 0.25
     grading: float = 1.0
+    layers: int = 0
+    ratio: float = 0.15
 
     def __post_init__(self) -> None:
         object.__setattr__(self, "L", check_real("L", self.L, low=0.0, low_open=True))
@@ -76,6 +95,9 @@ class XMesh:
         object.__setattr__(self, "theta", check_real("theta", self.theta, low=0.0, low_open=True))
         object.__setattr__(self, "wall", check_real("wall", self.wall, low=0.0))
         object.__setattr__(self, "grading", check_real("grading", self.grading, low=1.0, high=6.0))
+        object.__setattr__(self, "layers", check_int("layers", self.layers, low=0, high=60))
+        object.__setattr__(self, "ratio", check_real("ratio", self.ratio, low=0.0, high=1.0, low_open=True,
+                                                     high_open=True))
 
     def nodes(self) -> np.ndarray:
         """Sorted node coordinates, including -L, 0 and L."""
@@ -89,6 +111,9 @@ class XMesh:
         t = np.linspace(0.0, 1.0, self.half_elements + 1) ** self.grading
         half = np.interp(t * sf[-1], sf, xf)
         half[0], half[-1] = 0.0, self.L
+        if self.layers:
+            inner = half[1] * self.ratio ** np.arange(self.layers, 0, -1)
+            half = np.concatenate([[0.0], inner, half[1:]])
         return half
 
     def skfem(self) -> MeshLine:
@@ -97,9 +122,14 @@ class XMesh:
 
     @property
     def elements(self) -> int:
-        """Total number of elements."""
-        return 2 * self.half_elements
+        """Total number of elements (the layers included)."""
+        return 2 * (self.half_elements + self.layers)
+
+    @property
+    def geometric(self) -> bool:
+        """True if the element next to 0 is split into geometric layers."""
+        return self.layers > 0
 
     def with_elements(self, half_elements: int) -> XMesh:
-        """The same node map with another number of elements per half."""
+        """The same node map with another number of (bulk) elements per half; the layers stay."""
         return dataclasses.replace(self, half_elements=half_elements)

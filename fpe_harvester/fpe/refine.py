@@ -145,6 +145,11 @@ class Plan:
     max_gb : float or None
         Memory bound of one level's factorization in GB (:func:`level_gigabytes`); default
         (None): half the physical memory.
+    layers : int
+        Geometric layers toward x = 0 splitting the first element of each half (0: none,
+        the algebraic mesh); see :class:`~.mesh.XMesh`.
+    ratio : float
+        Ratio of successive geometric layers, in (0, 1).
     """
 
     M: int
@@ -159,6 +164,8 @@ class Plan:
     max_dofs: int = 600_000
     max_seconds: float | None = None
     max_gb: float | None = None
+    layers: int = 0
+    ratio: float = 0.15
 
     @property
     def memory_limit(self) -> float:
@@ -170,7 +177,7 @@ class Plan:
         weight ``w``, ``half_elements`` (default the plan's) elements per half."""
         nh = self.half_elements if half_elements is None else half_elements
         return XMesh(w.domain(h, self.theta), nh, n=h.n, scale=math.sqrt(w.x2), theta=self.theta,
-                     wall=self.wall, grading=self.grading)
+                     wall=self.wall, grading=self.grading, layers=self.layers, ratio=self.ratio)
 
 
 @dataclass(frozen=True)

@@ -11,7 +11,7 @@ import numpy as np
 from ..errors import HarvesterError, MethodNotAvailableError, ParameterError, check_int, check_real
 from ..model import Harvester
 from ..result import Stats, Status
-from .stationary import SCHEMES, _ring_reason, resolve_scheme, stationary
+from .stationary import MESHES, SCHEMES, _ring_reason, resolve_scheme, stationary
 
 __all__ = ["FokkerPlanck"]
 
@@ -53,6 +53,9 @@ class FokkerPlanck:
         functions of (v, V, xi) (``"x"``). ``"x"`` forces the latter for n = 1 too
         (benchmarks compare them). For ``"xv"``, ``elements`` is not used and ``order`` is
         the DG degree in x and v.
+    mesh : str
+        x mesh of scheme ``"x"`` for n < 2: ``"auto"`` (default, the algebraic one),
+        ``"algebraic"`` or ``"geometric"`` (see :func:`~fpe_harvester.fpe.stationary`).
 
     Examples
     --------
@@ -74,11 +77,15 @@ class FokkerPlanck:
     max_gb: float | None = None
     progress: bool | Callable[[str], None] = False
     scheme: str = "auto"
+    mesh: str = "auto"
 
     def __post_init__(self) -> None:
         if self.scheme not in SCHEMES:
             raise ParameterError(f"scheme must be one of {', '.join(map(repr, SCHEMES))}, got {self.scheme!r} "
                                  f"(type {type(self.scheme).__name__})")
+        if self.mesh not in MESHES:
+            raise ParameterError(f"mesh must be one of {', '.join(map(repr, MESHES))}, got {self.mesh!r} "
+                                 f"(type {type(self.mesh).__name__})")
         object.__setattr__(self, "tol", check_real("tol", self.tol, low=0.0, high=0.1, low_open=True))
         if self.M is not None:
             object.__setattr__(self, "M", check_int("M", self.M, low=2, high=60))
@@ -118,7 +125,7 @@ class FokkerPlanck:
                 else self.elements // 2,
                 order=self.order, theta=self.domain, max_M=max(self.max_M, self.M or 0),
                 max_seconds=self.max_seconds, max_gb=self.max_gb, grid=3, progress=progress or None,
-                scheme=self.scheme,
+                scheme=self.scheme, mesh=self.mesh,
             )
         except HarvesterError:
             raise

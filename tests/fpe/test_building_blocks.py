@@ -11,7 +11,7 @@ import scipy.sparse.linalg as spla
 
 from fpe_harvester import Harvester, ParameterError
 from fpe_harvester.fpe import HermiteBasis, XMesh
-from fpe_harvester.fpe.assemble import assemble_x, split_flux
+from fpe_harvester.fpe.assemble import assemble_x, jacobi_rule, split_flux
 from fpe_harvester.fpe.blocksolve import BlockTridiagonal
 from fpe_harvester.fpe.hermite import equivalent_harmonic
 
@@ -81,6 +81,56 @@ def test_mesh_has_node_at_zero_and_is_symmetric() -> None:
     assert np.all(np.diff(nodes) > 0)
     h = np.diff(nodes)
     assert h[7] < h[0]  # graded toward the kink
+
+
+def test_geometric_layers_split_the_element_at_zero() -> None:
+    base = XMesh(2.0, 4, n=1.5, scale=1.0, theta=1.0, wall=0.0)
+    mesh = XMesh(2.0, 4, n=1.5, scale=1.0, theta=1.0, wall=0.0, layers=3, ratio=0.15)
+    half, x1 = mesh.half_nodes(), base.half_nodes()[1]
+    assert np.allclose(half, [0.0, x1 * 0.15**3, x1 * 0.15**2, x1 * 0.15, *base.half_nodes()[1:]])
+    assert mesh.elements == 2 * (4 + 3) and mesh.geometric and not base.geometric
+    nodes = mesh.nodes()
+    assert 0.0 in nodes and np.allclose(nodes, -nodes[::-1])
+    assert mesh.with_elements(8).layers == 3
+
+
+@pytest.mark.parametrize("s", [0.02, 0.25, 0.5, 0.75, 0.98])
+@pytest.mark.parametrize("h", [1.0, 0.37])
+def test_gauss_jacobi_rule_is_exact_for_power_times_polynomial(s: float, h: float) -> None:
+    """int_0^h x^s x^k dx = h^(s+k+1)/(s+k+1) for k <= 2 * points - 1."""
+    x, w = jacobi_rule(5, s, h)
+    assert np.all((x > 0.0) & (x < h))
+    for k in range(10):
+        assert w @ x**k == pytest.approx(h ** (s + k + 1) / (s + k + 1), rel=1e-13), k
+
+
+def test_singular_assembly_is_exact_for_the_force_at_zero() -> None:
+    """M_u with Gauss-Jacobi on the elements touching 0: for the projections c_k of x^k
+    (exact in P3), c_k^T M_u c_l = int u x^(k+l) dx, in closed form for u = -n|x|^(n-1) sign x
+    on [-1, 1]; Gauss-Legendre with as many points misses it by far more."""
+    n = 1.5
+    u = lambda x: -n * np.abs(x) ** (n - 1.0) * np.sign(x)  # noqa: E731
+    nodes = np.array([-1.0, -0.2, 0.0, 0.2, 1.0])
+    errors = {}
+    for singular in (n - 1.0, None):
+        X = assemble_x(nodes, 3, u, intorder=40, singular=singular)
+        c = [X.basis.project(lambda x, k=k: x[0] ** k)[X.perm] for k in range(4)]
+        err = 0.0
+        for k in range(4):
+            for l in range(4):
+                m = k + l
+                exact = -2.0 * n / (n + m) if m % 2 else 0.0
+                err = max(err, abs(c[k] @ X.mass_u @ c[l] - exact))
+        errors[singular] = err
+    assert errors[n - 1.0] < 1e-12
+    assert errors[None] > 1e3 * errors[n - 1.0]
+
+
+def test_singular_assembly_needs_a_node_at_zero() -> None:
+    with pytest.raises(ValueError, match="node at x = 0"):
+        assemble_x(np.array([-1.0, -0.3, 0.4, 1.0]), 3, lambda x: x, singular=0.5)
+    with pytest.raises(ValueError, match="exponent > -1"):
+        assemble_x(np.array([-1.0, 0.0, 1.0]), 3, lambda x: x, singular=-1.5)
 
 
 def test_mesh_rejects_bad_input() -> None:

@@ -57,3 +57,16 @@ def test_validate_refuses_a_missing_bench_folder(tmp_path, capsys):
 
     assert main(["validate", "--quick", "--bench", str(tmp_path / "nowhere"), "--out", str(tmp_path)]) == 2
     assert "--bench" in capsys.readouterr().err
+
+
+def test_xmesh_series_converges_on_both_meshes_and_plots(tmp_path):
+    """The x-mesh benchmark's fixed-M series (M = 4, small meshes): the error against the
+    reference falls with the elements on both meshes, and the figure is written."""
+    from validation.bench import xmesh
+
+    series = xmesh.mesh_series(4, (4, 8, 16))
+    for mesh in xmesh.MESHES:
+        errors = [p["error"] for p in series[mesh]]
+        assert errors[-1] < errors[0], (mesh, errors)
+    xmesh._plot({"mesh_series": [series]}, tmp_path / "x.png")
+    assert (tmp_path / "x.png").stat().st_size > 0
