@@ -57,6 +57,14 @@ KIND_KINK = 2
 STIFF_LIMIT = 1.0
 MAX_SUBSTEPS = 1024
 
+#: Joint step (``cf[CF_JOINT] = 1``): ``cf[CF_JOINT + 1:+17]`` the 4x4 propagator of
+#: (x, v, V, xi), ``[+17:+21]`` its response to a unit constant force on v, ``[+21:+37]`` the
+#: noise factor L (increment = L z, z four standard normals), ``[+37]`` the noise covariance
+#: of (v, xi), ``[+38]`` the regression coefficient of the xi increment on the x increment
+#: (:func:`montecarlo.scheme.step_coefficients`).
+CF_JOINT = 28
+CF_SIZE = CF_JOINT + 39
+
 #: Moments accumulated per level, in this order: the system's (``xdU`` is
 #: :math:`x\\,U'(x)`, for the statistical linearization) and, prefixed ``t_``, the harmonic
 #: twin's (fine level only; zero without a twin).
@@ -483,10 +491,99 @@ def _d_step(x, v, V, xi, F, stuck, xm, fext, w, cf, pp, kind, counters, cs) -> N
 
 
 @njit(cache=True, nogil=True)
-def _measure(x, v, V, xi, stuck, F, w, cf, pp, kind, acc) -> float:
+def _noise(cf, z, eps) -> None:
+    """Joint step's noise increments eps = L z per unit; z, eps (4, N, P)."""
+    _, N, P = z.shape
+    o = CF_JOINT + 21
+    for r in range(4):
+        l0, l1, l2, l3 = cf[o + 4 * r], cf[o + 4 * r + 1], cf[o + 4 * r + 2], cf[o + 4 * r + 3]
+        for j in range(N):
+            for p in range(P):
+                eps[r, j, p] = l0 * z[0, j, p] + l1 * z[1, j, p] + l2 * z[2, j, p] + l3 * z[3, j, p]
+
+
+@njit(cache=True, nogil=True)
+def _compose(cf, e1, e2, out) -> None:
+    """Noise increment of two joint steps ``cf`` in a row, out = P e1 + e2: the coarse level's
+    increment from the fine level's two (exact for the linear flow)."""
+    _, N, P = e1.shape
+    o = CF_JOINT + 1
+    for r in range(4):
+        p0, p1, p2, p3 = cf[o + 4 * r], cf[o + 4 * r + 1], cf[o + 4 * r + 2], cf[o + 4 * r + 3]
+        for j in range(N):
+            for p in range(P):
+                out[r, j, p] = p0 * e1[0, j, p] + p1 * e1[1, j, p] + p2 * e1[2, j, p] + p3 * e1[3, j, p] \
+                    + e2[r, j, p]
+
+
+@njit(cache=True, nogil=True)
+def _joint_flow(x, v, V, xi, f, eps, cf, rbm, rbx) -> None:
+    """Exact Gaussian transition of (x, v, V, xi) under the linear drift, constant force f.
+
+    Also stores what the measurement needs for its estimate of v xi: ``rbm`` the conditional
+    mean of v xi given the state before the flow (mean v times mean xi plus their noise
+    covariance), ``rbx`` the mean of xi minus the regression coefficient times the mean of x.
+    """
+    N, P = x.shape
+    o = CF_JOINT + 1
+    a00, a01, a02, a03 = cf[o], cf[o + 1], cf[o + 2], cf[o + 3]
+    a10, a11, a12, a13 = cf[o + 4], cf[o + 5], cf[o + 6], cf[o + 7]
+    a20, a21, a22, a23 = cf[o + 8], cf[o + 9], cf[o + 10], cf[o + 11]
+    a33 = cf[o + 15]
+    g0, g1, g2 = cf[o + 16], cf[o + 17], cf[o + 18]
+    qvxi, beta = cf[CF_JOINT + 37], cf[CF_JOINT + 38]
+    for j in range(N):
+        for p in range(P):
+            x0, v0, V0, s0, fp = x[j, p], v[j, p], V[j, p], xi[j, p], f[j, p]
+            mx = a00 * x0 + a01 * v0 + a02 * V0 + a03 * s0 + g0 * fp
+            mv = a10 * x0 + a11 * v0 + a12 * V0 + a13 * s0 + g1 * fp
+            mV = a20 * x0 + a21 * v0 + a22 * V0 + a23 * s0 + g2 * fp
+            ms = a33 * s0
+            x[j, p] = mx + eps[0, j, p]
+            v[j, p] = mv + eps[1, j, p]
+            V[j, p] = mV + eps[2, j, p]
+            xi[j, p] = ms + eps[3, j, p]
+            rbm[j, p] = mv * ms + qvxi
+            rbx[j, p] = ms - beta * mx
+
+
+@njit(cache=True, nogil=True)
+def _d_step_joint(x, v, V, xi, F, xm, fext, eps, cf, pp, kind, rbm, rbx) -> None:
+    """One whole step of the joint scheme: kick(h/2), exact linear flow of (x, v, V, xi) with
+    noise increment ``eps``, kick(h/2); the neighbours' force enters as a constant at their
+    predicted midpoints, as in :func:`_d_step`."""
+    N, P = x.shape
+    h = cf[12]
+    kicks = kind == KIND_KICK
+    if kicks:
+        _kick(x, v, F, h, pp, False)
+    k = pp[6]
+    for j in range(N):
+        for p in range(P):
+            fext[j, p] = 0.0
+    if N > 1:
+        for j in range(N):
+            for p in range(P):
+                xm[j, p] = x[j, p] + 0.5 * h * v[j, p]
+        for j in range(N):
+            jm = (j + N - 1) % N
+            jp = (j + 1) % N
+            for p in range(P):
+                fext[j, p] = k * (xm[jm, p] + xm[jp, p])
+    _joint_flow(x, v, V, xi, fext, eps, cf, rbm, rbx)
+    if kicks:
+        _kick(x, v, F, h, pp, True)
+
+
+@njit(cache=True, nogil=True)
+def _measure(x, v, V, xi, stuck, F, w, cf, pp, kind, acc, rbm, rbx) -> float:
     """Add the moments of the live paths (weight w = 1) to acc[0:7]; return unit-steps counted.
 
     ``F`` holds -U'(x) at the current x for the smooth kind (the last kick computed it).
+    After a joint step, v xi is replaced by its conditional expectation given the state
+    before the step and the x reached (``rbm``, ``rbx`` of :func:`_joint_flow`): the same
+    mean, without the variance D/tau of xi itself, which made the plain product useless
+    for tau << 1.
     """
     N, P = x.shape
     half = cf[15]
@@ -501,6 +598,13 @@ def _measure(x, v, V, xi, stuck, F, w, cf, pp, kind, acc) -> float:
             s3 += wp * x[j, p] * x[j, p]
             s4 += wp * v[j, p] * xi[j, p]
             s5 += wp * stuck[j, p]
+    if cf[CF_JOINT] == 1.0:
+        s4 = 0.0
+        hk = 0.5 * cf[12] / pp[0] if kind == KIND_KICK else 0.0
+        beta = cf[CF_JOINT + 38]
+        for j in range(N):
+            for p in range(P):
+                s4 += w[p] * (rbm[j, p] + hk * F[j, p] * (rbx[j, p] + beta * x[j, p]))
     if kind == KIND_KICK:
         for j in range(N):
             for p in range(P):
@@ -526,7 +630,7 @@ def _measure(x, v, V, xi, stuck, F, w, cf, pp, kind, acc) -> float:
 
 
 @njit(cache=True, nogil=True)
-def _measure_twin(x, v, V, xi, w, cf, acc, nn) -> None:
+def _measure_twin(x, v, V, xi, w, cf, acc, nn, rbm) -> None:
     """Add the twin's moments (``t_*`` of :data:`MOMENTS`, ``nn`` the system's n) to acc[7:18].
 
     Second moments and a few fourth moments and :math:`|x|^n`: the twin is Gaussian, so
@@ -553,6 +657,12 @@ def _measure_twin(x, v, V, xi, w, cf, acc, nn) -> None:
             s[8] += wp * (ax if nn == 1.0 else ax**nn)
             s[9] += wp * VV * vv
             s[10] += wp * VV * vxi
+    if cf[CF_JOINT] == 1.0:
+        # the twin is harmonic (no kick): v xi given the state before the step is rbm
+        s[4] = 0.0
+        for j in range(N):
+            for p in range(P):
+                s[4] += w[p] * rbm[j, p]
     s[4] *= half
     s[10] *= half
     for i in range(11):
@@ -662,12 +772,22 @@ def _run(gen, P: int, N: int, nburn: int, nrun: int, stride: int, cf_f: np.ndarr
     xc, vc, Vc = np.zeros((N, P)), np.zeros((N, P)), np.zeros((N, P))
     xic, Fc = np.zeros((N, P)), np.zeros((N, P))
     xt, vt, Vt, Ft = np.zeros((N, P)), np.zeros((N, P)), np.zeros((N, P)), np.zeros((N, P))
+    # the twin's own xi (joint step; the frozen-xi step drives the twin with the system's)
+    xit = np.zeros((N, P))
     sf = np.zeros((N, P), dtype=np.bool_)
     sc = np.zeros((N, P), dtype=np.bool_)
     st = np.zeros((N, P), dtype=np.bool_)
     xm = np.zeros((N, P))
-    z1 = np.zeros((N, P))
-    z2 = np.zeros((N, P))
+    joint = cf_f[CF_JOINT] == 1.0
+    nz = 4 if joint else 1
+    z1 = np.zeros((nz, N, P))
+    z2 = np.zeros((nz, N, P))
+    ne = 4 if joint else 0
+    eps1, eps2 = np.zeros((ne, N, P)), np.zeros((ne, N, P))
+    epsc, epst = np.zeros((ne, N, P)), np.zeros((ne, N, P))
+    rbm_f, rbx_f = np.zeros((N, P)), np.zeros((N, P))
+    rbm_c, rbx_c = np.zeros((N, P)), np.zeros((N, P))
+    rbm_t, rbx_t = np.zeros((N, P)), np.zeros((N, P))
     w = np.ones(P)
     cs = np.zeros((3, N_TAYLOR + 1))
     fext = np.zeros((N, P))
@@ -685,7 +805,7 @@ def _run(gen, P: int, N: int, nburn: int, nrun: int, stride: int, cf_f: np.ndarr
     for j in range(N):
         for p in range(P):
             xc[j, p], vc[j, p], Vc[j, p], xic[j, p] = xf[j, p], vf[j, p], Vf[j, p], xif[j, p]
-            xt[j, p], vt[j, p], Vt[j, p] = xf[j, p], vf[j, p], Vf[j, p]
+            xt[j, p], vt[j, p], Vt[j, p], xit[j, p] = xf[j, p], vf[j, p], Vf[j, p], xif[j, p]
             if kind != KIND_LINEAR:
                 Ff[j, p] = _kick_force(xf[j, p], pp)
                 Fc[j, p] = Ff[j, p]
@@ -704,45 +824,56 @@ def _run(gen, P: int, N: int, nburn: int, nrun: int, stride: int, cf_f: np.ndarr
         meas = step >= nburn and (step - nburn) % stride == 0
         first = step < half
         t_end = (step + 1) * h
-        if coupled:
-            counters[4] += 3 * live
-            for j in range(N):
-                for p in range(P):
-                    z1[j, p] = gen.standard_normal()
-                    z2[j, p] = gen.standard_normal()
-        else:
-            counters[4] += live
-            for j in range(N):
-                for p in range(P):
-                    z1[j, p] = gen.standard_normal()
+        counters[4] += (3 if coupled else 1) * live
+        for j in range(N):
+            for p in range(P):
+                for r in range(nz):
+                    z1[r, j, p] = gen.standard_normal()
+                if coupled:
+                    for r in range(nz):
+                        z2[r, j, p] = gen.standard_normal()
+        xi_t = xit if joint else xif
         for sub in range(2 if coupled else 1):
-            _d_step(xf, vf, Vf, xif, Ff, sf, xm, fext, w, cf_f, pp, kind, counters, cs)
-            if twin:
-                _d_step(xt, vt, Vt, xif, Ft, st, xm, fext, w, cf_t, pp_t, KIND_LINEAR, counters, cs)
-            if coupled and sub == 1:
-                _d_step(xc, vc, Vc, xic, Fc, sc, xm, fext, w, cf_c, pp, kind, counters, cs)
-                _check_escape(xc, vc, Vc, xic, Fc, sc, w, thr, t_end, esc_time)
+            zz = z1 if sub == 0 else z2
+            if joint:
+                ee = eps1 if sub == 0 else eps2
+                _noise(cf_f, zz, ee)
+                _d_step_joint(xf, vf, Vf, xif, Ff, xm, fext, ee, cf_f, pp, kind, rbm_f, rbx_f)
+                if twin:
+                    _noise(cf_t, zz, epst)
+                    _d_step_joint(xt, vt, Vt, xit, Ft, xm, fext, epst, cf_t, pp_t, KIND_LINEAR, rbm_t, rbx_t)
+                if coupled and sub == 1:
+                    _compose(cf_f, eps1, eps2, epsc)
+                    _d_step_joint(xc, vc, Vc, xic, Fc, xm, fext, epsc, cf_c, pp, kind, rbm_c, rbx_c)
+                    _check_escape(xc, vc, Vc, xic, Fc, sc, w, thr, t_end, esc_time)
+            else:
+                _d_step(xf, vf, Vf, xif, Ff, sf, xm, fext, w, cf_f, pp, kind, counters, cs)
+                if twin:
+                    _d_step(xt, vt, Vt, xif, Ft, st, xm, fext, w, cf_t, pp_t, KIND_LINEAR, counters, cs)
+                if coupled and sub == 1:
+                    _d_step(xc, vc, Vc, xic, Fc, sc, xm, fext, w, cf_c, pp, kind, counters, cs)
+                    _check_escape(xc, vc, Vc, xic, Fc, sc, w, thr, t_end, esc_time)
             _check_escape(xf, vf, Vf, xif, Ff, sf, w, thr, t_end - (0.5 * h if coupled and sub == 0 else 0.0),
                           esc_time)
             if meas:
-                n0 = _measure(xf, vf, Vf, xif, sf, Ff, w, cf_f, pp, kind, sums[0])
+                n0 = _measure(xf, vf, Vf, xif, sf, Ff, w, cf_f, pp, kind, sums[0], rbm_f, rbx_f)
                 counts[0] += n0
                 if twin:
-                    _measure_twin(xt, vt, Vt, xif, w, cf_f, sums[0], pp[8])
+                    _measure_twin(xt, vt, Vt, xi_t, w, cf_f if not joint else cf_t, sums[0], pp[8], rbm_t)
                 if first:
-                    counts[2] += _measure(xf, vf, Vf, xif, sf, Ff, w, cf_f, pp, kind, sums[2])
+                    counts[2] += _measure(xf, vf, Vf, xif, sf, Ff, w, cf_f, pp, kind, sums[2], rbm_f, rbx_f)
                     if twin:
-                        _measure_twin(xt, vt, Vt, xif, w, cf_f, sums[2], pp[8])
+                        _measure_twin(xt, vt, Vt, xi_t, w, cf_f if not joint else cf_t, sums[2], pp[8], rbm_t)
                 if coupled and sub == 1:
-                    counts[1] += _measure(xc, vc, Vc, xic, sc, Fc, w, cf_c, pp, kind, sums[1])
-            zz = z1 if sub == 0 else z2
+                    counts[1] += _measure(xc, vc, Vc, xic, sc, Fc, w, cf_c, pp, kind, sums[1], rbm_c, rbx_c)
+            if not joint:
+                for j in range(N):
+                    for p in range(P):
+                        xif[j, p] = cf_f[13] * xif[j, p] + cf_f[14] * zz[0, j, p]
+        if coupled and not joint:
             for j in range(N):
                 for p in range(P):
-                    xif[j, p] = cf_f[13] * xif[j, p] + cf_f[14] * zz[j, p]
-        if coupled:
-            for j in range(N):
-                for p in range(P):
-                    xic[j, p] = cf_c[13] * xic[j, p] + cf_c[14] * (w1 * z1[j, p] + w2 * z2[j, p])
+                    xic[j, p] = cf_c[13] * xic[j, p] + cf_c[14] * (w1 * z1[0, j, p] + w2 * z2[0, j, p])
 
 
 def run_chunk(gen, P: int, N: int, nburn: int, nrun: int, stride: int, cf_f: np.ndarray,

@@ -24,7 +24,7 @@ from fpe_harvester.errors import ParameterError, check_int, check_real
 from fpe_harvester.model import Harvester
 
 from ._kernels import KIND_KICK, KIND_KINK, MOMENTS, N_MOM, ROWS, run_chunk
-from .scheme import KINK_RULES, physical_vector, scheme_kind, step_coefficients
+from .scheme import KINK_RULES, physical_vector, scheme_kind, step_coefficients, uses_joint_step
 from .twin import initial_cholesky, twin_expectations, twin_harvester, twin_is_stable
 
 __all__ = ["Ensemble", "simulate", "default_threads"]
@@ -252,20 +252,22 @@ def simulate(
     ss = np.random.SeedSequence(seed)
     levels = 2 if richardson else 1
     dt_f = 0.5 * dt if richardson else dt
-    cf_f = step_coefficients(h, dt_f)
-    cf_c = step_coefficients(h, dt)
     if kind is not None and (h.is_linear or kind not in (KIND_KICK, KIND_KINK)):
         raise ParameterError(f"kind must be None, or {KIND_KICK} (kick) or {KIND_KINK} (kink) for a "
                              f"nonlinear potential, got {kind!r} with n = {h.n:g}")
     kind = scheme_kind(h) if kind is None else kind
     pp = physical_vector(h, threshold, kink_rule, kind)
+    # both levels take the same step, chosen at the coarse one
+    joint = uses_joint_step(h, dt, threshold, kind)
+    cf_f = step_coefficients(h, dt_f, joint)
+    cf_c = step_coefficients(h, dt, joint)
     lin = twin_harvester(h, twin) if twin is not None else (h if h.is_linear else None)
     if twin is not None:
-        cf_t, pp_t = step_coefficients(lin, dt_f), physical_vector(lin, threshold)
-        twin_mean = twin_expectations(lin, dt_f, h.n)
+        cf_t, pp_t = step_coefficients(lin, dt_f, joint), physical_vector(lin, threshold)
+        twin_mean = twin_expectations(lin, dt_f, h.n, joint)
     else:
         cf_t, pp_t, twin_mean = cf_f, pp, {}
-    chol = initial_cholesky(lin, dt_f) if start == "twin" else np.zeros((0, 0))
+    chol = initial_cholesky(lin, dt_f, joint) if start == "twin" else np.zeros((0, 0))
     sizes = _chunks(paths, chunk)
     tasks = [(r, c) for r in range(replicas) for c in range(len(sizes))]
 
@@ -314,7 +316,7 @@ def simulate(
         seed_entropy=int(ss.entropy) if seed is None else seed,
         first_replica=first_replica,
         notes={"threads": threads, "chunk": chunk, "scheme_kind": kind, "sample_stride": stride,
-               "kink_rule": kink_rule},
+               "kink_rule": kink_rule, "joint_step": joint},
         twin_kappa=twin,
         twin_mean=twin_mean,
         start=start,
