@@ -57,13 +57,16 @@ KIND_KINK = 2
 STIFF_LIMIT = 1.0
 MAX_SUBSTEPS = 1024
 
-#: Joint step (``cf[CF_JOINT] = 1``): ``cf[CF_JOINT + 1:+17]`` the 4x4 propagator of
-#: (x, v, V, xi), ``[+17:+21]`` its response to a unit constant force on v, ``[+21:+37]`` the
-#: noise factor L (increment = L z, z four standard normals), ``[+37]`` the noise covariance
-#: of (v, xi), ``[+38]`` the regression coefficient of the xi increment on the x increment
-#: (:func:`montecarlo.scheme.step_coefficients`).
+#: Joint step (``cf[CF_JOINT] = 1``): from ``o = CF_JOINT + 1``, ``cf[o:o+16]`` the 4x4
+#: propagator of (x, v, V, xi), ``[o+16:o+20]`` its response to a unit constant force on v,
+#: ``[o+20:o+36]`` the noise factor L (increment = L z, z four standard normals), ``[o+36]``
+#: the noise covariance of (v, xi), ``[o+37]`` the regression coefficient of the xi increment
+#: on the x increment (:func:`montecarlo.scheme.step_coefficients`).
+#: Block ``i = 1 ..`` log2(MAX_SUBSTEPS) after it holds the same entries (from the propagator
+#: on) for the substep ``h / 2^i`` of the stiff walls.
 CF_JOINT = 28
-CF_SIZE = CF_JOINT + 39
+JOINT_BLOCK = 38
+CF_SIZE = CF_JOINT + 1 + JOINT_BLOCK * (1 + 10)
 
 #: Moments accumulated per level, in this order: the system's (``xdU`` is
 #: :math:`x\\,U'(x)`, for the statistical linearization) and, prefixed ``t_``, the harmonic
@@ -516,45 +519,102 @@ def _compose(cf, e1, e2, out) -> None:
                     + e2[r, j, p]
 
 
+@njit(cache=True, nogil=True, inline="always")
+def _joint_unit(y0, y1, y2, y3, fp, e0, e1, e2, e3, c: np.ndarray, o: int) -> tuple:
+    """One unit through the joint transition whose propagator starts at ``c[o]`` (layout of
+    :data:`CF_JOINT`'s entries): returns x, v, V, xi, the conditional mean of v xi given the
+    state before (mean v times mean xi plus their noise covariance) and the mean of xi minus
+    the regression coefficient times the mean of x."""
+    mx = c[o] * y0 + c[o + 1] * y1 + c[o + 2] * y2 + c[o + 3] * y3 + c[o + 16] * fp
+    mv = c[o + 4] * y0 + c[o + 5] * y1 + c[o + 6] * y2 + c[o + 7] * y3 + c[o + 17] * fp
+    mV = c[o + 8] * y0 + c[o + 9] * y1 + c[o + 10] * y2 + c[o + 11] * y3 + c[o + 18] * fp
+    ms = c[o + 15] * y3
+    return (mx + e0, mv + e1, mV + e2, ms + e3, mv * ms + c[o + 36], ms - c[o + 37] * mx)
+
+
 @njit(cache=True, nogil=True)
 def _joint_flow(x, v, V, xi, f, eps, cf, rbm, rbx) -> None:
-    """Exact Gaussian transition of (x, v, V, xi) under the linear drift, constant force f.
-
-    Also stores what the measurement needs for its estimate of v xi: ``rbm`` the conditional
-    mean of v xi given the state before the flow (mean v times mean xi plus their noise
-    covariance), ``rbx`` the mean of xi minus the regression coefficient times the mean of x.
-    """
+    """Exact Gaussian transition of (x, v, V, xi) under the linear drift, constant force f;
+    ``rbm``, ``rbx`` as returned by :func:`_joint_unit`."""
     N, P = x.shape
     o = CF_JOINT + 1
-    a00, a01, a02, a03 = cf[o], cf[o + 1], cf[o + 2], cf[o + 3]
-    a10, a11, a12, a13 = cf[o + 4], cf[o + 5], cf[o + 6], cf[o + 7]
-    a20, a21, a22, a23 = cf[o + 8], cf[o + 9], cf[o + 10], cf[o + 11]
-    a33 = cf[o + 15]
-    g0, g1, g2 = cf[o + 16], cf[o + 17], cf[o + 18]
-    qvxi, beta = cf[CF_JOINT + 37], cf[CF_JOINT + 38]
     for j in range(N):
         for p in range(P):
-            x0, v0, V0, s0, fp = x[j, p], v[j, p], V[j, p], xi[j, p], f[j, p]
-            mx = a00 * x0 + a01 * v0 + a02 * V0 + a03 * s0 + g0 * fp
-            mv = a10 * x0 + a11 * v0 + a12 * V0 + a13 * s0 + g1 * fp
-            mV = a20 * x0 + a21 * v0 + a22 * V0 + a23 * s0 + g2 * fp
-            ms = a33 * s0
-            x[j, p] = mx + eps[0, j, p]
-            v[j, p] = mv + eps[1, j, p]
-            V[j, p] = mV + eps[2, j, p]
-            xi[j, p] = ms + eps[3, j, p]
-            rbm[j, p] = mv * ms + qvxi
-            rbx[j, p] = ms - beta * mx
+            x[j, p], v[j, p], V[j, p], xi[j, p], rbm[j, p], rbx[j, p] = _joint_unit(
+                x[j, p], v[j, p], V[j, p], xi[j, p], f[j, p], eps[0, j, p], eps[1, j, p], eps[2, j, p],
+                eps[3, j, p], cf, o)
 
 
 @njit(cache=True, nogil=True)
-def _d_step_joint(x, v, V, xi, F, xm, fext, eps, cf, pp, kind, rbm, rbx) -> None:
+def _joint_substeps(x, v, V, xi, F, fext, pvx, p: int, K: int, cf: np.ndarray, pp: np.ndarray,
+                    gen) -> None:
+    """Path p's step as K joint substeps h/K (kick-flow-kick, neighbours' force fext held),
+    with fresh normals: the step's own increment is not split, so this path leaves the common
+    noise of the other level and of the twin for this step (their laws stay exact)."""
+    N = x.shape[0]
+    o = CF_JOINT + 1 + JOINT_BLOCK * int(round(math.log2(K)))
+    hk = 0.5 * cf[12] / K / pp[0]
+    beta = cf[o + 37]
+    e = np.empty(4)
+    for j in range(N):
+        xx, vv, VV, ss, FF, fp = x[j, p], v[j, p], V[j, p], xi[j, p], F[j, p], fext[j, p]
+        rm = rx = 0.0
+        for _ in range(K):
+            z0, z1, z2, z3 = gen.standard_normal(), gen.standard_normal(), gen.standard_normal(), \
+                gen.standard_normal()
+            for r in range(4):
+                lo = o + 20 + 4 * r
+                e[r] = cf[lo] * z0 + cf[lo + 1] * z1 + cf[lo + 2] * z2 + cf[lo + 3] * z3
+            vv += hk * FF
+            xx, vv, VV, ss, rm, rx = _joint_unit(xx, vv, VV, ss, fp, e[0], e[1], e[2], e[3], cf, o)
+            FF = _kick_force(xx, pp)
+            vv += hk * FF
+        x[j, p], v[j, p], V[j, p], xi[j, p], F[j, p] = xx, vv, VV, ss, FF
+        pvx[j, p] = rm + hk * FF * (rx + beta * xx)
+
+
+@njit(cache=True, nogil=True)
+def _d_step_joint(x, v, V, xi, F, xm, fext, eps, cf, pp, kind, rbm, rbx, pvx, w, gen) -> None:
     """One whole step of the joint scheme: kick(h/2), exact linear flow of (x, v, V, xi) with
     noise increment ``eps``, kick(h/2); the neighbours' force enters as a constant at their
-    predicted midpoints, as in :func:`_d_step`."""
+    predicted midpoints, and stiff walls split a path's step, as in :func:`_d_step`.
+
+    ``pvx`` receives each unit's estimate of v xi for the measurement: its conditional
+    expectation given the state before the flow and the x reached (the same mean as v xi,
+    without the variance D/tau of xi itself, which made the plain product useless for
+    tau << 1).
+    """
     N, P = x.shape
     h = cf[12]
     kicks = kind == KIND_KICK
+    n_stiff = 0
+    xstar = math.inf
+    if kicks and pp[8] > 2.0:
+        xstar = (STIFF_LIMIT * pp[0] / (h * h * pp[7] * pp[8] * (pp[8] - 1.0))) ** (1.0 / (pp[8] - 2.0))
+    if xstar < pp[10]:
+        for p in range(P):
+            for j in range(N):
+                if w[p] > 0.0 and max(abs(x[j, p]), abs(x[j, p] + h * v[j, p])) > xstar:
+                    n_stiff += 1
+                    break
+    if n_stiff > 0:
+        sp = np.empty(n_stiff, dtype=np.int64)
+        sk = np.empty(n_stiff, dtype=np.int64)
+        s0 = np.empty((5, N, n_stiff))
+        i = 0
+        for p in range(P):
+            if w[p] == 0.0:
+                continue
+            K = 1
+            for j in range(N):
+                K = max(K, _substeps(x[j, p], v[j, p], h, xstar, pp))
+            if K > 1:
+                sp[i], sk[i] = p, K
+                for j in range(N):
+                    s0[0, j, i], s0[1, j, i], s0[2, j, i] = x[j, p], v[j, p], V[j, p]
+                    s0[3, j, i], s0[4, j, i] = xi[j, p], F[j, p]
+                i += 1
+        n_stiff = i
     if kicks:
         _kick(x, v, F, h, pp, False)
     k = pp[6]
@@ -573,17 +633,34 @@ def _d_step_joint(x, v, V, xi, F, xm, fext, eps, cf, pp, kind, rbm, rbx) -> None
     _joint_flow(x, v, V, xi, fext, eps, cf, rbm, rbx)
     if kicks:
         _kick(x, v, F, h, pp, True)
+        hk = 0.5 * h / pp[0]
+        beta = cf[CF_JOINT + 38]
+        for j in range(N):
+            for p in range(P):
+                pvx[j, p] = rbm[j, p] + hk * F[j, p] * (rbx[j, p] + beta * x[j, p])
+    else:
+        for j in range(N):
+            for p in range(P):
+                pvx[j, p] = rbm[j, p]
+    for i in range(n_stiff):
+        p = sp[i]
+        for j in range(N):
+            x[j, p], v[j, p], V[j, p] = s0[0, j, i], s0[1, j, i], s0[2, j, i]
+            xi[j, p], F[j, p] = s0[3, j, i], s0[4, j, i]
+        if N > 1:
+            for j in range(N):
+                xm[j, p] = x[j, p] + 0.5 * h * v[j, p]
+            for j in range(N):
+                fext[j, p] = k * (xm[(j + N - 1) % N, p] + xm[(j + 1) % N, p])
+        _joint_substeps(x, v, V, xi, F, fext, pvx, p, sk[i], cf, pp, gen)
 
 
 @njit(cache=True, nogil=True)
-def _measure(x, v, V, xi, stuck, F, w, cf, pp, kind, acc, rbm, rbx) -> float:
+def _measure(x, v, V, xi, stuck, F, w, cf, pp, kind, acc, pvx) -> float:
     """Add the moments of the live paths (weight w = 1) to acc[0:7]; return unit-steps counted.
 
     ``F`` holds -U'(x) at the current x for the smooth kind (the last kick computed it).
-    After a joint step, v xi is replaced by its conditional expectation given the state
-    before the step and the x reached (``rbm``, ``rbx`` of :func:`_joint_flow`): the same
-    mean, without the variance D/tau of xi itself, which made the plain product useless
-    for tau << 1.
+    After a joint step, v xi is replaced by the estimate ``pvx`` of :func:`_d_step_joint`.
     """
     N, P = x.shape
     half = cf[15]
@@ -600,11 +677,9 @@ def _measure(x, v, V, xi, stuck, F, w, cf, pp, kind, acc, rbm, rbx) -> float:
             s5 += wp * stuck[j, p]
     if cf[CF_JOINT] == 1.0:
         s4 = 0.0
-        hk = 0.5 * cf[12] / pp[0] if kind == KIND_KICK else 0.0
-        beta = cf[CF_JOINT + 38]
         for j in range(N):
             for p in range(P):
-                s4 += w[p] * (rbm[j, p] + hk * F[j, p] * (rbx[j, p] + beta * x[j, p]))
+                s4 += w[p] * pvx[j, p]
     if kind == KIND_KICK:
         for j in range(N):
             for p in range(P):
@@ -630,7 +705,7 @@ def _measure(x, v, V, xi, stuck, F, w, cf, pp, kind, acc, rbm, rbx) -> float:
 
 
 @njit(cache=True, nogil=True)
-def _measure_twin(x, v, V, xi, w, cf, acc, nn, rbm) -> None:
+def _measure_twin(x, v, V, xi, w, cf, acc, nn, pvx) -> None:
     """Add the twin's moments (``t_*`` of :data:`MOMENTS`, ``nn`` the system's n) to acc[7:18].
 
     Second moments and a few fourth moments and :math:`|x|^n`: the twin is Gaussian, so
@@ -658,11 +733,10 @@ def _measure_twin(x, v, V, xi, w, cf, acc, nn, rbm) -> None:
             s[9] += wp * VV * vv
             s[10] += wp * VV * vxi
     if cf[CF_JOINT] == 1.0:
-        # the twin is harmonic (no kick): v xi given the state before the step is rbm
         s[4] = 0.0
         for j in range(N):
             for p in range(P):
-                s[4] += w[p] * rbm[j, p]
+                s[4] += w[p] * pvx[j, p]
     s[4] *= half
     s[10] *= half
     for i in range(11):
@@ -785,9 +859,8 @@ def _run(gen, P: int, N: int, nburn: int, nrun: int, stride: int, cf_f: np.ndarr
     ne = 4 if joint else 0
     eps1, eps2 = np.zeros((ne, N, P)), np.zeros((ne, N, P))
     epsc, epst = np.zeros((ne, N, P)), np.zeros((ne, N, P))
-    rbm_f, rbx_f = np.zeros((N, P)), np.zeros((N, P))
-    rbm_c, rbx_c = np.zeros((N, P)), np.zeros((N, P))
-    rbm_t, rbx_t = np.zeros((N, P)), np.zeros((N, P))
+    rbm, rbx = np.zeros((N, P)), np.zeros((N, P))
+    pvx_f, pvx_c, pvx_t = np.zeros((N, P)), np.zeros((N, P)), np.zeros((N, P))
     w = np.ones(P)
     cs = np.zeros((3, N_TAYLOR + 1))
     fext = np.zeros((N, P))
@@ -838,13 +911,14 @@ def _run(gen, P: int, N: int, nburn: int, nrun: int, stride: int, cf_f: np.ndarr
             if joint:
                 ee = eps1 if sub == 0 else eps2
                 _noise(cf_f, zz, ee)
-                _d_step_joint(xf, vf, Vf, xif, Ff, xm, fext, ee, cf_f, pp, kind, rbm_f, rbx_f)
+                _d_step_joint(xf, vf, Vf, xif, Ff, xm, fext, ee, cf_f, pp, kind, rbm, rbx, pvx_f, w, gen)
                 if twin:
                     _noise(cf_t, zz, epst)
-                    _d_step_joint(xt, vt, Vt, xit, Ft, xm, fext, epst, cf_t, pp_t, KIND_LINEAR, rbm_t, rbx_t)
+                    _d_step_joint(xt, vt, Vt, xit, Ft, xm, fext, epst, cf_t, pp_t, KIND_LINEAR, rbm, rbx, pvx_t,
+                                  w, gen)
                 if coupled and sub == 1:
                     _compose(cf_f, eps1, eps2, epsc)
-                    _d_step_joint(xc, vc, Vc, xic, Fc, xm, fext, epsc, cf_c, pp, kind, rbm_c, rbx_c)
+                    _d_step_joint(xc, vc, Vc, xic, Fc, xm, fext, epsc, cf_c, pp, kind, rbm, rbx, pvx_c, w, gen)
                     _check_escape(xc, vc, Vc, xic, Fc, sc, w, thr, t_end, esc_time)
             else:
                 _d_step(xf, vf, Vf, xif, Ff, sf, xm, fext, w, cf_f, pp, kind, counters, cs)
@@ -856,16 +930,16 @@ def _run(gen, P: int, N: int, nburn: int, nrun: int, stride: int, cf_f: np.ndarr
             _check_escape(xf, vf, Vf, xif, Ff, sf, w, thr, t_end - (0.5 * h if coupled and sub == 0 else 0.0),
                           esc_time)
             if meas:
-                n0 = _measure(xf, vf, Vf, xif, sf, Ff, w, cf_f, pp, kind, sums[0], rbm_f, rbx_f)
+                n0 = _measure(xf, vf, Vf, xif, sf, Ff, w, cf_f, pp, kind, sums[0], pvx_f)
                 counts[0] += n0
                 if twin:
-                    _measure_twin(xt, vt, Vt, xi_t, w, cf_f if not joint else cf_t, sums[0], pp[8], rbm_t)
+                    _measure_twin(xt, vt, Vt, xi_t, w, cf_f if not joint else cf_t, sums[0], pp[8], pvx_t)
                 if first:
-                    counts[2] += _measure(xf, vf, Vf, xif, sf, Ff, w, cf_f, pp, kind, sums[2], rbm_f, rbx_f)
+                    counts[2] += _measure(xf, vf, Vf, xif, sf, Ff, w, cf_f, pp, kind, sums[2], pvx_f)
                     if twin:
-                        _measure_twin(xt, vt, Vt, xi_t, w, cf_f if not joint else cf_t, sums[2], pp[8], rbm_t)
+                        _measure_twin(xt, vt, Vt, xi_t, w, cf_f if not joint else cf_t, sums[2], pp[8], pvx_t)
                 if coupled and sub == 1:
-                    counts[1] += _measure(xc, vc, Vc, xic, sc, Fc, w, cf_c, pp, kind, sums[1], rbm_c, rbx_c)
+                    counts[1] += _measure(xc, vc, Vc, xic, sc, Fc, w, cf_c, pp, kind, sums[1], pvx_c)
             if not joint:
                 for j in range(N):
                     for p in range(P):

@@ -24,10 +24,10 @@ import scipy.linalg
 
 from fpe_harvester.model import Harvester
 
-from ._kernels import AVERAGE, CF_JOINT, CF_SIZE, HOLD, KIND_KICK, KIND_KINK, KIND_LINEAR, MAX_SUBSTEPS, STIFF_LIMIT
+from ._kernels import AVERAGE, CF_JOINT, CF_SIZE, HOLD, JOINT_BLOCK, KIND_KICK, KIND_KINK, KIND_LINEAR, MAX_SUBSTEPS
 
 __all__ = ["scheme_kind", "linear_stiffness", "step_coefficients", "physical_vector", "SCHEME_NAMES",
-           "KINK_WIDTH", "KINK_RULES", "JOINT_STEPS", "uses_joint_step", "joint_matrices",
+           "KINK_WIDTH", "KINK_RULES", "JOINT_STEPS", "uses_joint_step", "joint_step_refusal", "joint_matrices",
            "noise_factor"]
 
 SCHEME_NAMES = {
@@ -90,21 +90,22 @@ def linear_stiffness(h: Harvester) -> float:
     return c
 
 
-def uses_joint_step(h: Harvester, dt: float, threshold: float = math.inf, kind: int | None = None) -> bool:
-    """Whether a run of ``h`` with coarse step ``dt`` takes the joint step (:data:`JOINT_STEPS`).
+def joint_step_refusal(h: Harvester, kind: int | None = None) -> str | None:
+    """Why the joint step cannot serve ``h``, or None if it can.
 
-    Only the harmonic and the smooth kick schemes have it: the kink scheme keeps xi frozen over
-    its piecewise flow, and so do potentials n > 2 whose wall is steep enough within the escape
-    ``threshold`` for the stiff-wall substeps (:data:`montecarlo._kernels.STIFF_LIMIT`), which
-    split a step with xi held. Both are stated in the Monte Carlo result's scheme name.
+    Only the harmonic and the smooth kick schemes have it: the kink scheme (n near 1) keeps xi
+    frozen over its piecewise flow with located zero crossings.
     """
     kind = scheme_kind(h) if kind is None else kind
-    if kind == KIND_KINK or not h.params.tau < JOINT_STEPS * dt:
-        return False
-    if kind == KIND_KICK and h.n > 2.0:
-        xstar = (STIFF_LIMIT * h.params.m / (dt * dt * h.a * h.n * (h.n - 1.0))) ** (1.0 / (h.n - 2.0))
-        return bool(xstar >= threshold)
-    return True
+    if kind == KIND_KINK:
+        return "the kink scheme (n near 1) integrates its piecewise flow with xi frozen"
+    return None
+
+
+def uses_joint_step(h: Harvester, dt: float, kind: int | None = None) -> bool:
+    """Whether a run of ``h`` with coarse step ``dt`` takes the joint step by default:
+    tau < :data:`JOINT_STEPS` dt, and :func:`joint_step_refusal` has no objection."""
+    return bool(h.params.tau < JOINT_STEPS * dt and joint_step_refusal(h, kind) is None)
 
 
 def _drift_matrix(h: Harvester) -> np.ndarray:
@@ -227,13 +228,18 @@ def step_coefficients(h: Harvester, dt: float, joint: bool = False) -> np.ndarra
     cf[14] = math.sqrt(p.noise_variance * -math.expm1(-2.0 * dt / p.tau))
     cf[15] = math.exp(-0.5 * dt / p.tau)
     if joint:
-        Pj, gj, Q = joint_matrices(h, dt)
         cf[CF_JOINT] = 1.0
-        cf[CF_JOINT + 1:CF_JOINT + 17] = Pj.ravel()
-        cf[CF_JOINT + 17:CF_JOINT + 21] = gj
-        cf[CF_JOINT + 21:CF_JOINT + 37] = noise_factor(Q).ravel()
-        cf[CF_JOINT + 37] = Q[1, 3]
-        cf[CF_JOINT + 38] = Q[0, 3] / Q[0, 0]
+        # block 0: the step; block i: the stiff walls' substep dt/2^i (only the kick scheme
+        # with n > 2 takes substeps)
+        blocks = 1 + (int(round(math.log2(MAX_SUBSTEPS))) if scheme_kind(h) == KIND_KICK and h.n > 2 else 0)
+        for i in range(blocks):
+            Pj, gj, Q = joint_matrices(h, dt / 2**i)
+            o = CF_JOINT + 1 + JOINT_BLOCK * i
+            cf[o:o + 16] = Pj.ravel()
+            cf[o + 16:o + 20] = gj
+            cf[o + 20:o + 36] = noise_factor(Q).ravel()
+            cf[o + 36] = Q[1, 3]
+            cf[o + 37] = Q[0, 3] / Q[0, 0]
         # the measured xi is the one after the step: no half-step factor
         cf[15] = 1.0
     return cf

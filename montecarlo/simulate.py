@@ -24,7 +24,7 @@ from fpe_harvester.errors import ParameterError, check_int, check_real
 from fpe_harvester.model import Harvester
 
 from ._kernels import KIND_KICK, KIND_KINK, MOMENTS, N_MOM, ROWS, run_chunk
-from .scheme import KINK_RULES, physical_vector, scheme_kind, step_coefficients, uses_joint_step
+from .scheme import KINK_RULES, joint_step_refusal, physical_vector, scheme_kind, step_coefficients, uses_joint_step
 from .twin import initial_cholesky, twin_expectations, twin_harvester, twin_is_stable
 
 __all__ = ["Ensemble", "simulate", "default_threads"]
@@ -155,6 +155,7 @@ def simulate(
     start: str = "rest",
     kink_rule: str = "average",
     kind: int | None = None,
+    joint: bool | None = None,
 ) -> Ensemble:
     """Simulate independent replicas of ``h`` and return their raw moment sums.
 
@@ -206,6 +207,12 @@ def simulate(
     kind : int or None
         Scheme (:data:`montecarlo._kernels.KIND_KICK` or ``KIND_KINK``; default
         :func:`montecarlo.scheme.scheme_kind`), for comparing the schemes near n = 1.
+    joint : bool or None
+        Advance (x, v, V, xi) together by the exact Gaussian transition of the linear drift
+        (True) or with xi frozen over each step (False). None (default): joint when
+        tau < :data:`montecarlo.scheme.JOINT_STEPS` dt, where freezing xi is wrong
+        (:func:`montecarlo.scheme.uses_joint_step`). True raises where the scheme has no joint
+        step (:func:`montecarlo.scheme.joint_step_refusal`).
 
     Returns
     -------
@@ -258,7 +265,13 @@ def simulate(
     kind = scheme_kind(h) if kind is None else kind
     pp = physical_vector(h, threshold, kink_rule, kind)
     # both levels take the same step, chosen at the coarse one
-    joint = uses_joint_step(h, dt, threshold, kind)
+    if joint is None:
+        joint = uses_joint_step(h, dt, kind)
+    elif joint:
+        why = joint_step_refusal(h, kind)
+        if why is not None:
+            raise ParameterError(f"joint=True is not available here: {why}")
+    joint = bool(joint)
     cf_f = step_coefficients(h, dt_f, joint)
     cf_c = step_coefficients(h, dt, joint)
     lin = twin_harvester(h, twin) if twin is not None else (h if h.is_linear else None)

@@ -504,7 +504,10 @@ class MonteCarlo:
             "seed": ens.seed_entropy,
             "threads": ens.notes.get("threads"),
             "batch": self._batch(),
-            "scheme": SCHEME_NAMES[scheme_kind(h)],
+            "scheme": SCHEME_NAMES[scheme_kind(h)] + (
+                "; joint step: (x, v, V, xi) by the exact Gaussian transition of the linear drift, "
+                "kicks around it" if ens.notes.get("joint_step") else ""),
+            "joint_step": bool(ens.notes.get("joint_step")),
             "rng": _RNG,
             "bias_eta": est.bias["eta"],
             "bias_eta_se": est.bias_se["eta"],
