@@ -46,20 +46,23 @@ def test_noise_covariance_matches_van_loan_where_it_is_well_conditioned(tau: flo
 @pytest.mark.parametrize("tau", [1e-8, 1e-4, 1e-2, 1.0, 100.0])
 def test_joint_twin_of_a_unit_has_the_exact_moments(tau: float) -> None:
     # the joint step is the exact transition of a harmonic unit: its stationary moments are
-    # the continuous-time ones at any step, whatever tau is against it
+    # the continuous-time ones at any step, whatever tau is against it (to round-off, which
+    # grows like the xi variance D/tau against the others: 3e-9 at tau = 1e-8)
     lin = Harvester.build(a=0.5, tau=tau)
     exact = {key: float(val[0]) for key, val in mode_moments(lin.mode_stiffness(), lin.params).items()}
     t = twin_expectations(lin, 0.05, joint=True)
     for name in ("V2", "vV", "v2", "x2", "vxi"):
-        assert t[name] == pytest.approx(exact[name], rel=1e-9), name
+        assert t[name] == pytest.approx(exact[name], rel=1e-9 if tau >= 1e-4 else 1e-7), name
 
 
 def test_white_noise_limit_is_continuous() -> None:
-    # tau -> 0 at fixed D: the step's matrices converge (white noise of intensity 2D on v)
+    # tau -> 0 at fixed D: the step's matrices converge like tau/dt, to the white-noise step
+    # (intensity 2D on v: the v increment's variance is 2 D sigma^2 dt/m^2 less the damping)
     mats = [joint_matrices(Harvester.build(a=0.5, tau=tau), 0.02) for tau in (1e-4, 1e-6, 1e-8)]
-    for (P1, _, Q1), (P2, _, Q2) in zip(mats, mats[1:]):
-        assert np.abs(P1[:3, :3] - P2[:3, :3]).max() < 1e-3
-        assert abs(Q1[1, 1] - Q2[1, 1]) < 1e-3 * Q2[1, 1]
+    d = [np.abs(Q1[:3, :3] - Q2[:3, :3]).max() + np.abs(P1[:3, :3] - P2[:3, :3]).max()
+         for (P1, _, Q1), (P2, _, Q2) in zip(mats, mats[1:])]
+    assert d[0] < 0.02 * mats[-1][2][1, 1]
+    assert d[1] < 0.02 * d[0]
     assert mats[-1][2][1, 1] == pytest.approx(2.0 * 0.02, rel=0.05)
 
 
@@ -79,7 +82,8 @@ def test_twin_at_fast_noise_matches_its_expectations() -> None:
     for name in TWIN_MOMENTS:
         x = m["t_" + name]
         se = x.std(ddof=1) / math.sqrt(x.size)
-        assert abs(x.mean() - e.twin_mean[name]) < 4 * se, name
+        # at tau << dt the estimate of v xi is all but deterministic: round-off allowed
+        assert abs(x.mean() - e.twin_mean[name]) < 4 * se + 1e-12 * abs(x.mean()), name
 
 
 def test_fast_noise_harmonic_unit_matches_exact() -> None:
