@@ -29,7 +29,7 @@ from fpe_harvester.result import Stats, Status
 
 from .estimate import Estimate, bias_order, estimate
 from .plan import FALLBACK_NOTE, burn_in, relaxation_time
-from .scheme import KIND_KINK, SCHEME_NAMES, scheme_kind
+from .scheme import KIND_KINK, SCHEME_NAMES, joint_step_refusal, scheme_kind
 from .simulate import Ensemble, default_threads, simulate
 from .twin import linearized_stiffness
 
@@ -143,6 +143,11 @@ class MonteCarlo:
         exactly known moments as control variates (:mod:`montecarlo.control`); the paths then
         start from the twin's stationary law. Used whenever a stable twin exists and no path
         escaped; ``info["variance_reduction"]`` gives the factor. Default True.
+    joint : bool or None
+        Step of the linear part (:func:`montecarlo.simulate`): True advances (x, v, V, xi)
+        together by their exact Gaussian transition, False holds xi frozen over a step. None
+        (default): joint when tau < 10 dt, where freezing xi is wrong
+        (:data:`montecarlo.scheme.JOINT_STEPS`). The kink scheme (n near 1) has no joint step.
 
     Examples
     --------
@@ -170,6 +175,7 @@ class MonteCarlo:
     threads: int | None = None
     batch: int | None = None
     control: bool = True
+    joint: bool | None = None
 
     def __post_init__(self) -> None:
         if self.seed is not None:
@@ -192,10 +198,11 @@ class MonteCarlo:
         object.__setattr__(self, "max_time", check_real("max_time", self.max_time, low=0.0, low_open=True))
         if self.escape is not None:
             object.__setattr__(self, "escape", check_real("escape", self.escape, low=0.0, low_open=True))
-        for flag in ("progress", "richardson", "control"):
+        for flag in ("progress", "richardson", "control", "joint"):
             value = getattr(self, flag)
-            if not isinstance(value, bool) and not (flag == "progress" and value is None):
-                choices = "True, False or None" if flag == "progress" else "True or False"
+            optional = flag in ("progress", "joint")
+            if not isinstance(value, bool) and not (optional and value is None):
+                choices = "True, False or None" if optional else "True or False"
                 raise ParameterError(f"{flag} must be {choices}, got {value!r} "
                                      f"(type {type(value).__name__})")
         if self.threads is not None:
@@ -204,8 +211,8 @@ class MonteCarlo:
             object.__setattr__(self, "batch", check_int("batch", self.batch, low=1))
 
     def unsupported_reason(self, h: Harvester) -> str | None:
-        """Always None: Monte Carlo handles every harvester."""
-        return None
+        """None: Monte Carlo handles every harvester (with ``joint=True``, those that have a joint step)."""
+        return joint_step_refusal(h) if self.joint else None
 
     def threshold(self, h: Harvester) -> float:
         """Escape threshold used for ``h`` (see ``escape``)."""
@@ -248,7 +255,7 @@ class MonteCarlo:
             if self.control and math.isfinite(pil_burn):
                 pilot = simulate(h, dt=dt, paths=16, replicas=max(2, self._batch()),
                                  t_burn=pil_burn, t_run=t_run0, seed=seed, threshold=self.threshold(h),
-                                 threads=self.threads, first_replica=_PILOT_FIRST)
+                                 threads=self.threads, first_replica=_PILOT_FIRST, joint=self.joint)
                 m = pilot.moments(0)
                 ok = np.isfinite(m["xdU"]) & np.isfinite(m["x2"])
                 if ok.any() and m["x2"][ok].mean() > 0 and m["xdU"][ok].mean() > 0:
@@ -291,7 +298,7 @@ class MonteCarlo:
         return simulate(h, dt=plan.dt, paths=plan.paths, replicas=replicas, t_burn=plan.t_burn,
                         t_run=plan.t_run, seed=self.seed, richardson=self.richardson,
                         threshold=self.threshold(h), threads=self.threads, first_replica=first,
-                        twin=plan.twin, start=plan.start)
+                        twin=plan.twin, start=plan.start, joint=self.joint)
 
     def _restart_reason(self, h: Harvester, plan: Plan, est: Estimate) -> tuple[str, Plan] | None:
         """After a batch: a finer step or a longer burn-in, if the data ask for one.

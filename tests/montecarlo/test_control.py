@@ -58,7 +58,12 @@ def test_simulated_twin_matches_its_discrete_expectations_not_the_continuous_one
         se = x.std(ddof=1) / math.sqrt(x.size)
         assert abs(x.mean() - e.twin_mean[name]) < 4 * se, name
     se = m["t_vxi"].std(ddof=1) / math.sqrt(24)
-    assert abs(m["t_vxi"].mean() - cont["vxi"]) > 10 * se
+    if joint:
+        # the joint step's only bias in a harmonic ring is the neighbours' force held at its
+        # predicted midpoint: far smaller, within the standard error here
+        assert abs(e.twin_mean["vxi"] - cont["vxi"]) < 1e-3 * cont["vxi"]
+    else:
+        assert abs(m["t_vxi"].mean() - cont["vxi"]) > 10 * se
 
 
 @pytest.mark.parametrize("joint", [False, True])
