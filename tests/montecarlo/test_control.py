@@ -146,3 +146,15 @@ def test_solver_uses_the_twin_and_agrees_with_plain_runs() -> None:
     assert not plain.info["control_variates"] and plain.info["variance_reduction"] is None
     assert abs(cv.eta - plain.eta) < 4 * math.hypot(cv.eta_err, plain.eta_err)
     assert cv.info["eta_standard_error"] < plain.info["eta_standard_error"]
+
+
+def test_regression_leaves_out_a_control_constant_to_round_off(rng) -> None:
+    # a control whose spread is round-off (the twin's v xi estimate at tau << dt) and whose
+    # mean is off mu by round-off must not inflate the error through the lever term
+    c = rng.normal(size=(64, 1))
+    y = 1.0 + 2.0 * c + 0.1 * rng.normal(size=(64, 1))
+    flat = 0.5 + 1e-16 * rng.normal(size=(64, 1))
+    ref = regression_estimate(y, c, np.zeros(1))
+    r = regression_estimate(y, np.hstack([c, flat]), np.array([0.0, 0.5 + 1e-14]))
+    assert r.mean[0] == pytest.approx(ref.mean[0], rel=1e-12)
+    assert r.cov[0, 0] == pytest.approx(ref.cov[0, 0] * (64 - 2) / (64 - 3), rel=1e-9)
