@@ -17,6 +17,7 @@ Its exact flow over a step h is :math:`E = e^{Ah}` and
 
 from __future__ import annotations
 
+import functools
 import math
 
 import numpy as np
@@ -151,14 +152,16 @@ def joint_matrices(h: Harvester, dt: float) -> tuple[np.ndarray, np.ndarray, np.
     return joint_chain(h, dt, 1)[0]
 
 
-def joint_chain(h: Harvester, dt: float, count: int) -> list[tuple[np.ndarray, np.ndarray, np.ndarray]]:
+@functools.lru_cache(maxsize=64)
+def joint_chain(h: Harvester, dt: float, count: int) -> tuple[tuple[np.ndarray, np.ndarray, np.ndarray], ...]:
     """:func:`joint_matrices` at the steps ``dt / 2^i``, i = 0 .. count - 1, in one doubling pass.
 
     From a step t0 with :math:`\\|A\\|t_0 \\le 10^{-3}` (Van Loan's exponential of the
     augmented drift, exact to round-off there), each doubling is
     :math:`P(2t) = P(t)^2`, :math:`g(2t) = P(t)g(t) + g(t)`,
     :math:`Q(2t) = Q(t) + P(t)Q(t)P(t)^T`: scaling and squaring, which keeps every term a sum
-    of positive parts (Q) at any tau.
+    of positive parts (Q) at any tau. Cached (a solve asks for the same steps several times;
+    the arrays are read-only).
     """
     p = h.params
     A = _drift_matrix(h)
@@ -182,12 +185,15 @@ def joint_chain(h: Harvester, dt: float, count: int) -> list[tuple[np.ndarray, n
             E = scipy.linalg.expm(aug)
             P, g = E[:4, :4], E[:4, 4]
         if i < count:
-            out.append((P.copy(), g.copy(), 0.5 * (Q + Q.T)))
+            entry = (P.copy(), g.copy(), 0.5 * (Q + Q.T))
+            for arr in entry:
+                arr.flags.writeable = False
+            out.append(entry)
         if i > 0:
             Q = Q + P @ Q @ P.T
             g = P @ g + g
             P = P @ P
-    return out[::-1]
+    return tuple(out[::-1])
 
 
 def _van_loan_block(A: np.ndarray, q: float, t: float) -> np.ndarray:
