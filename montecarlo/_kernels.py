@@ -20,7 +20,17 @@ Private module. The Python side (:mod:`montecarlo.scheme`) builds the coefficien
     ``cf`` of the harmonic ring with on-site stiffness ``kappa_t`` and the same ``k``, run on
     the fine level's noise; its moments are control variates (:mod:`montecarlo.twin`).
 
-One step is the Strang splitting ``O(h/2) D(h) O(h/2)`` of the generator into the exact
+Two steps exist. The joint step (``cf[CF_JOINT] = 1``, the harmonic and smooth kick schemes
+when tau < 10 dt, :func:`montecarlo.scheme.uses_joint_step`) is ``K(h/2) L(h) K(h/2)``: L the
+exact Gaussian transition of the linear part of (x, v, V, xi) including the Ornstein--Uhlenbeck
+noise (mean map and noise factor from :func:`montecarlo.scheme.joint_chain`, four normals per
+unit), K the kicks of -U'(x); the neighbours' force is a constant at their predicted midpoints,
+stiff walls split a path's step into joint substeps with fresh normals
+(:func:`_d_step_joint`), and v xi is measured by its conditional expectation. The coarse level
+of a Richardson pair gets the exact composition of the fine level's two noise increments, and
+the twin its own factor applied to the same normals (its xi increment is the system's).
+
+The frozen-xi step is the Strang splitting ``O(h/2) D(h) O(h/2)`` of the generator into the exact
 Ornstein--Uhlenbeck flow ``O`` of xi and the deterministic flow ``D`` of (x, v, V) with xi
 frozen; consecutive half steps of ``O`` merge, so the loop runs ``D(h) O(h)`` and measures
 after ``D`` (xi-dependent observables get the exact half-step factor ``e^{-h/2tau}``).

@@ -1,5 +1,11 @@
 """Coefficients of the splitting integrator (the Python half of :mod:`montecarlo._kernels`).
 
+Two steps: the joint step advances the linear part of (x, v, V, xi), noise included, by its
+exact Gaussian transition (:func:`joint_matrices`), valid at any tau relative to the step and
+taken when tau < :data:`JOINT_STEPS` dt; the frozen-xi step below holds xi over a step between
+exact Ornstein--Uhlenbeck updates and needs dt well below tau (at tau = 1e-2 the solver had to
+halve dt to 6e-4). The kink scheme (:func:`scheme_kind`) has only the frozen-xi step.
+
 The linear part of one unit's (x, v, V) dynamics with xi frozen is
 
 .. math::
