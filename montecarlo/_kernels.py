@@ -924,11 +924,12 @@ def _run(gen, P: int, N: int, nburn: int, nrun: int, stride: int, cf_f: np.ndarr
                 _d_step_joint(xf, vf, Vf, xif, Ff, xm, fext, ee, cf_f, pp, kind, rbm, rbx, pvx_f, w, gen)
                 if twin:
                     _noise(cf_t, zz, epst)
-                    _d_step_joint(xt, vt, Vt, xit, Ft, xm, fext, epst, cf_t, pp_t, KIND_LINEAR, rbm, rbx, pvx_t,
-                                  w, gen)
+                    _d_step_joint(xt, vt, Vt, xit, Ft, xm, fext, epst, cf_t, pp_t, KIND_LINEAR, rbm, rbx,
+                                  pvx_t, w, gen)
                 if coupled and sub == 1:
                     _compose(cf_f, eps1, eps2, epsc)
-                    _d_step_joint(xc, vc, Vc, xic, Fc, xm, fext, epsc, cf_c, pp, kind, rbm, rbx, pvx_c, w, gen)
+                    _d_step_joint(xc, vc, Vc, xic, Fc, xm, fext, epsc, cf_c, pp, kind, rbm, rbx, pvx_c, w,
+                                  gen)
                     _check_escape(xc, vc, Vc, xic, Fc, sc, w, thr, t_end, esc_time)
             else:
                 _d_step(xf, vf, Vf, xif, Ff, sf, xm, fext, w, cf_f, pp, kind, counters, cs)

@@ -31,11 +31,12 @@ import scipy.linalg
 
 from fpe_harvester.model import Harvester
 
-from ._kernels import AVERAGE, CF_JOINT, CF_SIZE, HOLD, JOINT_BLOCK, KIND_KICK, KIND_KINK, KIND_LINEAR, MAX_SUBSTEPS
+from ._kernels import (AVERAGE, CF_JOINT, CF_SIZE, HOLD, JOINT_BLOCK, KIND_KICK, KIND_KINK, KIND_LINEAR,
+                       MAX_SUBSTEPS)
 
 __all__ = ["scheme_kind", "linear_stiffness", "step_coefficients", "physical_vector", "SCHEME_NAMES",
-           "KINK_WIDTH", "KINK_RULES", "JOINT_STEPS", "uses_joint_step", "joint_step_refusal", "joint_matrices", "joint_chain",
-           "noise_factor"]
+           "KINK_WIDTH", "KINK_RULES", "JOINT_STEPS", "uses_joint_step", "joint_step_refusal",
+           "joint_matrices", "joint_chain", "noise_factor"]
 
 SCHEME_NAMES = {
     KIND_LINEAR: "Strang O(h/2) D(h) O(h/2); D exact linear flow (harmonic on-site force)",

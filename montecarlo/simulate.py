@@ -24,7 +24,8 @@ from fpe_harvester.errors import ParameterError, check_int, check_real
 from fpe_harvester.model import Harvester
 
 from ._kernels import KIND_KICK, KIND_KINK, MOMENTS, N_MOM, ROWS, run_chunk
-from .scheme import KINK_RULES, joint_step_refusal, physical_vector, scheme_kind, step_coefficients, uses_joint_step
+from .scheme import (KINK_RULES, joint_step_refusal, physical_vector, scheme_kind, step_coefficients,
+                     uses_joint_step)
 from .twin import initial_cholesky, twin_expectations, twin_harvester, twin_is_stable
 
 __all__ = ["Ensemble", "simulate", "default_threads"]

@@ -75,7 +75,8 @@ def twin_is_stable(h: Harvester, kappa: float) -> bool:
     return bool(np.all(twin_harvester(h, kappa).mode_stiffness() > 0.0)) if kappa > 0 else False
 
 
-def scheme_matrices(lin: Harvester, dt: float, joint: bool = False) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+def scheme_matrices(lin: Harvester, dt: float,
+                    joint: bool = False) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Per-mode one-step matrices of the kernel's harmonic scheme.
 
     Parameters
