@@ -908,13 +908,23 @@ def _run(gen, P: int, N: int, nburn: int, nrun: int, stride: int, cf_f: np.ndarr
         first = step < half
         t_end = (step + 1) * h
         counters[4] += (3 if coupled else 1) * live
-        for j in range(N):
-            for p in range(P):
-                for r in range(nz):
-                    z1[r, j, p] = gen.standard_normal()
-                if coupled:
-                    for r in range(nz):
-                        z2[r, j, p] = gen.standard_normal()
+        if joint:
+            for j in range(N):
+                for p in range(P):
+                    for r in range(4):
+                        z1[r, j, p] = gen.standard_normal()
+                    if coupled:
+                        for r in range(4):
+                            z2[r, j, p] = gen.standard_normal()
+        elif coupled:
+            for j in range(N):
+                for p in range(P):
+                    z1[0, j, p] = gen.standard_normal()
+                    z2[0, j, p] = gen.standard_normal()
+        else:
+            for j in range(N):
+                for p in range(P):
+                    z1[0, j, p] = gen.standard_normal()
         xi_t = xit if joint else xif
         for sub in range(2 if coupled else 1):
             zz = z1 if sub == 0 else z2

@@ -47,7 +47,9 @@ class Ensemble:
     ----------
     sums : ndarray, shape (replicas, levels + 1, len(MOMENTS))
         Sums over measured unit-steps of the moments :data:`montecarlo._kernels.MOMENTS`
-        (``v xi`` already at the Strang point; the twin's ``t_*`` at level 0 only), per level;
+        (``v xi`` already at the Strang point, or after a joint step its conditional expectation
+        given the state before the step and the x reached; the twin's ``t_*`` at level 0 only),
+        per level;
         the last row is level 0 over the first half of the measured window.
     counts : ndarray, shape (replicas, levels + 1)
         Number of unit-steps summed (fewer than ``paths * N * t_run/dt`` when paths escaped).
