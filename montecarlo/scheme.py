@@ -279,7 +279,7 @@ def step_coefficients(h: Harvester, dt: float, joint: bool = False) -> np.ndarra
             cf[o + 16:o + 20] = gj
             cf[o + 20:o + 36] = noise_factor(Q).ravel()
             cf[o + 36] = Q[1, 3]
-            cf[o + 37] = Q[0, 3] / Q[0, 0]
+            cf[o + 37] = Q[0, 3] / Q[0, 0] if Q[0, 0] > 0.0 else 0.0
         # the measured xi is the one after the step: no half-step factor
         cf[15] = 1.0
     return cf
