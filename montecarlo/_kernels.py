@@ -813,11 +813,12 @@ def _start(gen, chol, sd, x, v, V, xi) -> None:
 
 
 @njit(cache=True, nogil=True)
-def _run(gen, P: int, N: int, nburn: int, nrun: int, stride: int, cf_f: np.ndarray,
+def _run_frozen(gen, P: int, N: int, nburn: int, nrun: int, stride: int, cf_f: np.ndarray,
          cf_c: np.ndarray, pp: np.ndarray, kind: int, coupled: bool, cf_t: np.ndarray,
          pp_t: np.ndarray, twin: bool, chol: np.ndarray, sums: np.ndarray, counts: np.ndarray,
          esc_time: np.ndarray, counters: np.ndarray) -> None:
-    """Simulate P independent rings of N units and accumulate their time averages.
+    """Simulate P independent rings of N units with the frozen-xi step and accumulate their
+    time averages (:func:`_run_joint` has the same arguments and outputs for the joint step).
 
     Parameters
     ----------
@@ -856,23 +857,118 @@ def _run(gen, P: int, N: int, nburn: int, nrun: int, stride: int, cf_f: np.ndarr
     xc, vc, Vc = np.zeros((N, P)), np.zeros((N, P)), np.zeros((N, P))
     xic, Fc = np.zeros((N, P)), np.zeros((N, P))
     xt, vt, Vt, Ft = np.zeros((N, P)), np.zeros((N, P)), np.zeros((N, P)), np.zeros((N, P))
-    # the twin's own xi (joint step; the frozen-xi step drives the twin with the system's)
-    xit = np.zeros((N, P))
     sf = np.zeros((N, P), dtype=np.bool_)
     sc = np.zeros((N, P), dtype=np.bool_)
     st = np.zeros((N, P), dtype=np.bool_)
     xm = np.zeros((N, P))
-    joint = cf_f[CF_JOINT] == 1.0
-    nz = 4 if joint else 1
-    z1 = np.zeros((nz, N, P))
-    z2 = np.zeros((nz, N, P))
-    ne = 4 if joint else 0
-    eps1, eps2 = np.zeros((ne, N, P)), np.zeros((ne, N, P))
-    epsc, epst = np.zeros((ne, N, P)), np.zeros((ne, N, P))
+    z1 = np.zeros((N, P))
+    z2 = np.zeros((N, P))
+    w = np.ones(P)
+    cs = np.zeros((3, N_TAYLOR + 1))
+    fext = np.zeros((N, P))
+    esc_time[:] = -1.0
+    _start(gen, chol, sd, xf, vf, Vf, xif)
+    if kind == KIND_KICK and pp[8] > 2.0:
+        # a Gaussian start can land deep in a steep wall, where even MAX_SUBSTEPS substeps
+        # are unstable: such draws start at the deepest resolvable |x| (the burn-in forgets it)
+        hc = cf_c[12] if coupled else cf_f[12]
+        xcap = (STIFF_LIMIT * MAX_SUBSTEPS**2 * pp[0] / (hc * hc * pp[7] * pp[8] * (pp[8] - 1.0))) \
+            ** (1.0 / (pp[8] - 2.0))
+        for j in range(N):
+            for p in range(P):
+                xf[j, p] = min(max(xf[j, p], -xcap), xcap)
+    for j in range(N):
+        for p in range(P):
+            xc[j, p], vc[j, p], Vc[j, p], xic[j, p] = xf[j, p], vf[j, p], Vf[j, p], xif[j, p]
+            xt[j, p], vt[j, p], Vt[j, p] = xf[j, p], vf[j, p], Vf[j, p]
+            if kind != KIND_LINEAR:
+                Ff[j, p] = _kick_force(xf[j, p], pp)
+                Fc[j, p] = Ff[j, p]
+    h = cf_c[12] if coupled else cf_f[12]
+    # the two fine half-step normals combine into the coarse normal exactly
+    w1 = cf_f[13] * cf_f[14] / cf_c[14]
+    w2 = cf_f[14] / cf_c[14]
+    half = nburn + nrun // 2
+    for step in range(nburn + nrun):
+        live = 0
+        for p in range(P):
+            if w[p] > 0.0:
+                live += 1
+        if live == 0:
+            break
+        meas = step >= nburn and (step - nburn) % stride == 0
+        first = step < half
+        t_end = (step + 1) * h
+        if coupled:
+            counters[4] += 3 * live
+            for j in range(N):
+                for p in range(P):
+                    z1[j, p] = gen.standard_normal()
+                    z2[j, p] = gen.standard_normal()
+        else:
+            counters[4] += live
+            for j in range(N):
+                for p in range(P):
+                    z1[j, p] = gen.standard_normal()
+        for sub in range(2 if coupled else 1):
+            _d_step(xf, vf, Vf, xif, Ff, sf, xm, fext, w, cf_f, pp, kind, counters, cs)
+            if twin:
+                _d_step(xt, vt, Vt, xif, Ft, st, xm, fext, w, cf_t, pp_t, KIND_LINEAR, counters, cs)
+            if coupled and sub == 1:
+                _d_step(xc, vc, Vc, xic, Fc, sc, xm, fext, w, cf_c, pp, kind, counters, cs)
+                _check_escape(xc, vc, Vc, xic, Fc, sc, w, thr, t_end, esc_time)
+            _check_escape(xf, vf, Vf, xif, Ff, sf, w, thr, t_end - (0.5 * h if coupled and sub == 0 else 0.0),
+                          esc_time)
+            if meas:
+                n0 = _measure(xf, vf, Vf, xif, sf, Ff, w, cf_f, pp, kind, sums[0], xm)
+                counts[0] += n0
+                if twin:
+                    _measure_twin(xt, vt, Vt, xif, w, cf_f, sums[0], pp[8], xm)
+                if first:
+                    counts[2] += _measure(xf, vf, Vf, xif, sf, Ff, w, cf_f, pp, kind, sums[2], xm)
+                    if twin:
+                        _measure_twin(xt, vt, Vt, xif, w, cf_f, sums[2], pp[8], xm)
+                if coupled and sub == 1:
+                    counts[1] += _measure(xc, vc, Vc, xic, sc, Fc, w, cf_c, pp, kind, sums[1], xm)
+            zz = z1 if sub == 0 else z2
+            for j in range(N):
+                for p in range(P):
+                    xif[j, p] = cf_f[13] * xif[j, p] + cf_f[14] * zz[j, p]
+        if coupled:
+            for j in range(N):
+                for p in range(P):
+                    xic[j, p] = cf_c[13] * xic[j, p] + cf_c[14] * (w1 * z1[j, p] + w2 * z2[j, p])
+
+
+@njit(cache=True, nogil=True)
+def _run_joint(gen, P: int, N: int, nburn: int, nrun: int, stride: int, cf_f: np.ndarray,
+               cf_c: np.ndarray, pp: np.ndarray, kind: int, coupled: bool, cf_t: np.ndarray,
+               pp_t: np.ndarray, twin: bool, chol: np.ndarray, sums: np.ndarray, counts: np.ndarray,
+               esc_time: np.ndarray, counters: np.ndarray) -> None:
+    """:func:`_run_frozen` (same arguments and outputs) with the joint step.
+
+    Four normals per unit and fine step; the coarse level takes the exact composition of the
+    fine level's two increments (:func:`_compose`), the twin its own noise factor applied to the
+    same normals, with its own xi (the same process as the system's: the factors share the xi
+    row).
+    """
+    thr = pp[10]
+    sd = math.sqrt(pp[11])
+    xf, vf, Vf = np.zeros((N, P)), np.zeros((N, P)), np.zeros((N, P))
+    xif, Ff = np.zeros((N, P)), np.zeros((N, P))
+    xc, vc, Vc = np.zeros((N, P)), np.zeros((N, P)), np.zeros((N, P))
+    xic, Fc = np.zeros((N, P)), np.zeros((N, P))
+    xt, vt, Vt, Ft = np.zeros((N, P)), np.zeros((N, P)), np.zeros((N, P)), np.zeros((N, P))
+    xit = np.zeros((N, P))
+    sf = np.zeros((N, P), dtype=np.bool_)
+    sc = np.zeros((N, P), dtype=np.bool_)
+    xm = np.zeros((N, P))
+    z1, z2 = np.zeros((4, N, P)), np.zeros((4, N, P))
+    eps1, eps2 = np.zeros((4, N, P)), np.zeros((4, N, P))
+    epsc, epst = np.zeros((4, N, P)), np.zeros((4, N, P))
     rbm, rbx = np.zeros((N, P)), np.zeros((N, P))
     pvx_f, pvx_c, pvx_t = np.zeros((N, P)), np.zeros((N, P)), np.zeros((N, P))
     w = np.ones(P)
-    cs = np.zeros((3, N_TAYLOR + 1))
     fext = np.zeros((N, P))
     esc_time[:] = -1.0
     _start(gen, chol, sd, xf, vf, Vf, xif)
@@ -893,9 +989,6 @@ def _run(gen, P: int, N: int, nburn: int, nrun: int, stride: int, cf_f: np.ndarr
                 Ff[j, p] = _kick_force(xf[j, p], pp)
                 Fc[j, p] = Ff[j, p]
     h = cf_c[12] if coupled else cf_f[12]
-    # the two fine half-step normals combine into the coarse normal exactly
-    w1 = cf_f[13] * cf_f[14] / cf_c[14]
-    w2 = cf_f[14] / cf_c[14]
     half = nburn + nrun // 2
     for step in range(nburn + nrun):
         live = 0
@@ -908,73 +1001,46 @@ def _run(gen, P: int, N: int, nburn: int, nrun: int, stride: int, cf_f: np.ndarr
         first = step < half
         t_end = (step + 1) * h
         counters[4] += (3 if coupled else 1) * live
-        if joint:
-            for j in range(N):
-                for p in range(P):
+        for j in range(N):
+            for p in range(P):
+                for r in range(4):
+                    z1[r, j, p] = gen.standard_normal()
+                if coupled:
                     for r in range(4):
-                        z1[r, j, p] = gen.standard_normal()
-                    if coupled:
-                        for r in range(4):
-                            z2[r, j, p] = gen.standard_normal()
-        elif coupled:
-            for j in range(N):
-                for p in range(P):
-                    z1[0, j, p] = gen.standard_normal()
-                    z2[0, j, p] = gen.standard_normal()
-        else:
-            for j in range(N):
-                for p in range(P):
-                    z1[0, j, p] = gen.standard_normal()
-        xi_t = xit if joint else xif
+                        z2[r, j, p] = gen.standard_normal()
         for sub in range(2 if coupled else 1):
             zz = z1 if sub == 0 else z2
-            if joint:
-                ee = eps1 if sub == 0 else eps2
-                _noise(cf_f, zz, ee)
-                _d_step_joint(xf, vf, Vf, xif, Ff, xm, fext, ee, cf_f, pp, kind, rbm, rbx, pvx_f, w, gen)
-                if twin:
-                    _noise(cf_t, zz, epst)
-                    _d_step_joint(xt, vt, Vt, xit, Ft, xm, fext, epst, cf_t, pp_t, KIND_LINEAR, rbm, rbx,
-                                  pvx_t, w, gen)
-                if coupled and sub == 1:
-                    _compose(cf_f, eps1, eps2, epsc)
-                    _d_step_joint(xc, vc, Vc, xic, Fc, xm, fext, epsc, cf_c, pp, kind, rbm, rbx, pvx_c, w,
-                                  gen)
-                    _check_escape(xc, vc, Vc, xic, Fc, sc, w, thr, t_end, esc_time)
-            else:
-                _d_step(xf, vf, Vf, xif, Ff, sf, xm, fext, w, cf_f, pp, kind, counters, cs)
-                if twin:
-                    _d_step(xt, vt, Vt, xif, Ft, st, xm, fext, w, cf_t, pp_t, KIND_LINEAR, counters, cs)
-                if coupled and sub == 1:
-                    _d_step(xc, vc, Vc, xic, Fc, sc, xm, fext, w, cf_c, pp, kind, counters, cs)
-                    _check_escape(xc, vc, Vc, xic, Fc, sc, w, thr, t_end, esc_time)
+            ee = eps1 if sub == 0 else eps2
+            _noise(cf_f, zz, ee)
+            _d_step_joint(xf, vf, Vf, xif, Ff, xm, fext, ee, cf_f, pp, kind, rbm, rbx, pvx_f, w, gen)
+            if twin:
+                _noise(cf_t, zz, epst)
+                _d_step_joint(xt, vt, Vt, xit, Ft, xm, fext, epst, cf_t, pp_t, KIND_LINEAR, rbm, rbx, pvx_t,
+                              w, gen)
+            if coupled and sub == 1:
+                _compose(cf_f, eps1, eps2, epsc)
+                _d_step_joint(xc, vc, Vc, xic, Fc, xm, fext, epsc, cf_c, pp, kind, rbm, rbx, pvx_c, w, gen)
+                _check_escape(xc, vc, Vc, xic, Fc, sc, w, thr, t_end, esc_time)
             _check_escape(xf, vf, Vf, xif, Ff, sf, w, thr, t_end - (0.5 * h if coupled and sub == 0 else 0.0),
                           esc_time)
             if meas:
-                n0 = _measure(xf, vf, Vf, xif, sf, Ff, w, cf_f, pp, kind, sums[0], pvx_f)
-                counts[0] += n0
+                counts[0] += _measure(xf, vf, Vf, xif, sf, Ff, w, cf_f, pp, kind, sums[0], pvx_f)
                 if twin:
-                    _measure_twin(xt, vt, Vt, xi_t, w, cf_f if not joint else cf_t, sums[0], pp[8], pvx_t)
+                    _measure_twin(xt, vt, Vt, xit, w, cf_t, sums[0], pp[8], pvx_t)
                 if first:
                     counts[2] += _measure(xf, vf, Vf, xif, sf, Ff, w, cf_f, pp, kind, sums[2], pvx_f)
                     if twin:
-                        _measure_twin(xt, vt, Vt, xi_t, w, cf_f if not joint else cf_t, sums[2], pp[8], pvx_t)
+                        _measure_twin(xt, vt, Vt, xit, w, cf_t, sums[2], pp[8], pvx_t)
                 if coupled and sub == 1:
                     counts[1] += _measure(xc, vc, Vc, xic, sc, Fc, w, cf_c, pp, kind, sums[1], pvx_c)
-            if not joint:
-                for j in range(N):
-                    for p in range(P):
-                        xif[j, p] = cf_f[13] * xif[j, p] + cf_f[14] * zz[0, j, p]
-        if coupled and not joint:
-            for j in range(N):
-                for p in range(P):
-                    xic[j, p] = cf_c[13] * xic[j, p] + cf_c[14] * (w1 * z1[0, j, p] + w2 * z2[0, j, p])
 
 
 def run_chunk(gen, P: int, N: int, nburn: int, nrun: int, stride: int, cf_f: np.ndarray,
               cf_c: np.ndarray, pp: np.ndarray, kind: int, coupled: bool, cf_t: np.ndarray,
               pp_t: np.ndarray, twin: bool, chol: np.ndarray, sums: np.ndarray,
               counts: np.ndarray, esc_time: np.ndarray, counters: np.ndarray) -> None:
-    """Run :func:`_run` (arguments as there) on a scratch block sized for this chunk."""
-    _run(gen, P, N, nburn, nrun, stride, cf_f, cf_c, pp, kind, coupled, cf_t, pp_t, twin, chol,
-         sums, counts, esc_time, counters)
+    """Run :func:`_run_frozen` or :func:`_run_joint` (arguments as there; ``cf_f`` says which)
+    on a scratch block sized for this chunk."""
+    run = _run_joint if cf_f[CF_JOINT] == 1.0 else _run_frozen
+    run(gen, P, N, nburn, nrun, stride, cf_f, cf_c, pp, kind, coupled, cf_t, pp_t, twin, chol,
+        sums, counts, esc_time, counters)
