@@ -29,7 +29,8 @@ from fpe_harvester.result import Stats, Status
 
 from .estimate import Estimate, bias_order, estimate
 from .plan import FALLBACK_NOTE, burn_in, relaxation_time
-from .scheme import KIND_KINK, SCHEME_NAMES, joint_step_refusal, scheme_kind, uses_joint_step
+from .scheme import (JOINT_STEPS, KIND_KINK, KINK_WIDTH, SCHEME_NAMES, joint_step_refusal, scheme_kind,
+                     uses_joint_step)
 from .simulate import Ensemble, default_threads, simulate
 from .twin import linearized_stiffness
 
@@ -217,8 +218,22 @@ class MonteCarlo:
             object.__setattr__(self, "batch", check_int("batch", self.batch, low=1))
 
     def unsupported_reason(self, h: Harvester) -> str | None:
-        """None: Monte Carlo handles every harvester (with ``joint=True``, those that have a joint step)."""
-        return joint_step_refusal(h) if self.joint else None
+        """None, or why this solver refuses ``h``: ``joint=True`` where there is no joint step,
+        and the kink scheme (xi held over a step) where tau is shorter than the step can be made:
+        below ``JOINT_STEPS`` times the finest automatic step, or below an explicit ``dt``."""
+        if self.joint:
+            return joint_step_refusal(h)
+        if scheme_kind(h) != KIND_KINK:
+            return None
+        tau = h.params.tau
+        if self.dt is None and tau < JOINT_STEPS * _DT_MIN:
+            return (f"tau = {tau:g} is too short for the kink scheme (n = {h.n:g} <= 1 + {KINK_WIDTH:g}), "
+                    f"which holds xi over a step: it needs tau >= {JOINT_STEPS * _DT_MIN:g} "
+                    f"({JOINT_STEPS:g} x the finest automatic step {_DT_MIN:g}), or an explicit dt <= tau")
+        if self.dt is not None and tau < self.dt:
+            return (f"tau = {tau:g} is shorter than dt = {self.dt:g}: the kink scheme (n = {h.n:g}) holds xi "
+                    f"over a step; use dt <= tau")
+        return None
 
     def threshold(self, h: Harvester) -> float:
         """Escape threshold used for ``h`` (see ``escape``)."""

@@ -9,7 +9,7 @@ import pytest
 import scipy.linalg
 
 from fpe_harvester import Harvester, Status, solve
-from fpe_harvester.errors import ParameterError
+from fpe_harvester.errors import MethodNotAvailableError, ParameterError
 from fpe_harvester.exact import mode_moments
 from montecarlo import simulate
 from montecarlo.scheme import joint_matrices, noise_factor, uses_joint_step
@@ -106,3 +106,15 @@ def test_fast_noise_cubic_unit_agrees_with_fokker_planck() -> None:
     assert mc.status is Status.STABLE, mc.message
     assert mc.info["joint_step"]
     assert abs(mc.eta - fp.eta) < 4 * math.hypot(mc.eta_err, fp.eta_err), (mc.eta, mc.eta_err, fp.eta)
+
+
+def test_kink_refuses_a_tau_shorter_than_its_step() -> None:
+    # the kink scheme keeps xi frozen over a step: at tau = 1e-4 it had returned eta ~ 6e4
+    # (not converged, paths escaping); it now says why it cannot run
+    h = Harvester.build(a=0.5, n=1, tau=1e-4)
+    with pytest.raises(MethodNotAvailableError, match="tau = 0.0001 is too short for the kink scheme"):
+        solve(h, "mc", progress=False)
+    with pytest.raises(MethodNotAvailableError, match="shorter than dt = 0.001"):
+        solve(h, "mc", dt=1e-3, progress=False)
+    with pytest.raises(MethodNotAvailableError, match="integrates its piecewise flow with xi frozen"):
+        solve(h, "mc", joint=True, progress=False)
