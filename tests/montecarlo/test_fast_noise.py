@@ -87,8 +87,9 @@ def test_twin_at_fast_noise_matches_its_expectations() -> None:
         assert abs(x.mean() - e.twin_mean[name]) < 4 * se + 1e-12 * abs(x.mean()), name
 
 
-def test_fast_noise_harmonic_unit_matches_exact() -> None:
-    h = Harvester.build(a=0.5, n=2, tau=1e-4)
+@pytest.mark.parametrize(("N", "k"), [(1, 0.0), (3, -0.2)])
+def test_fast_noise_harmonic_unit_matches_exact(N: int, k: float) -> None:
+    h = Harvester.build(a=0.5, n=2, N=N, k=k, tau=1e-4)
     ex = solve(h, "exact")
     mc = solve(h, "mc", seed=3, **FAST)
     assert mc.status is Status.STABLE, mc.message
