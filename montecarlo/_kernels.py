@@ -20,7 +20,17 @@ Private module. The Python side (:mod:`montecarlo.scheme`) builds the coefficien
     ``cf`` of the harmonic ring with on-site stiffness ``kappa_t`` and the same ``k``, run on
     the fine level's noise; its moments are control variates (:mod:`montecarlo.twin`).
 
-One step is the Strang splitting ``O(h/2) D(h) O(h/2)`` of the generator into the exact
+Two steps exist. The joint step (``cf[CF_JOINT] = 1``, the harmonic and smooth kick schemes
+when tau < 10 dt, :func:`montecarlo.scheme.uses_joint_step`) is ``K(h/2) L(h) K(h/2)``: L the
+exact Gaussian transition of the linear part of (x, v, V, xi) including the Ornstein--Uhlenbeck
+noise (mean map and noise factor from :func:`montecarlo.scheme.joint_chain`, four normals per
+unit), K the kicks of -U'(x); the neighbours' force is a constant at their predicted midpoints,
+stiff walls split a path's step into joint substeps with fresh normals
+(:func:`_d_step_joint`), and v xi is measured by its conditional expectation. The coarse level
+of a Richardson pair gets the exact composition of the fine level's two noise increments, and
+the twin its own factor applied to the same normals (its xi increment is the system's).
+
+The frozen-xi step is the Strang splitting ``O(h/2) D(h) O(h/2)`` of the generator into the exact
 Ornstein--Uhlenbeck flow ``O`` of xi and the deterministic flow ``D`` of (x, v, V) with xi
 frozen; consecutive half steps of ``O`` merge, so the loop runs ``D(h) O(h)`` and measures
 after ``D`` (xi-dependent observables get the exact half-step factor ``e^{-h/2tau}``).
@@ -56,6 +66,17 @@ KIND_KINK = 2
 #: steps from a Gaussian start) reach it at dt = 0.01 and paths blew up (0.5 %, 2.6 %).
 STIFF_LIMIT = 1.0
 MAX_SUBSTEPS = 1024
+
+#: Joint step (``cf[CF_JOINT] = 1``): from ``o = CF_JOINT + 1``, ``cf[o:o+16]`` the 4x4
+#: propagator of (x, v, V, xi), ``[o+16:o+20]`` its response to a unit constant force on v,
+#: ``[o+20:o+36]`` the noise factor L (increment = L z, z four standard normals), ``[o+36]``
+#: the noise covariance of (v, xi), ``[o+37]`` the regression coefficient of the xi increment
+#: on the x increment (:func:`montecarlo.scheme.step_coefficients`).
+#: Block ``i = 1 ..`` log2(MAX_SUBSTEPS) after it holds the same entries (from the propagator
+#: on) for the substep ``h / 2^i`` of the stiff walls.
+CF_JOINT = 28
+JOINT_BLOCK = 38
+CF_SIZE = CF_JOINT + 1 + JOINT_BLOCK * (1 + 10)
 
 #: Moments accumulated per level, in this order: the system's (``xdU`` is
 #: :math:`x\\,U'(x)`, for the statistical linearization) and, prefixed ``t_``, the harmonic
@@ -483,10 +504,173 @@ def _d_step(x, v, V, xi, F, stuck, xm, fext, w, cf, pp, kind, counters, cs) -> N
 
 
 @njit(cache=True, nogil=True)
-def _measure(x, v, V, xi, stuck, F, w, cf, pp, kind, acc) -> float:
+def _noise(cf, z, eps) -> None:
+    """Joint step's noise increments eps = L z per unit; z, eps (4, N, P)."""
+    _, N, P = z.shape
+    o = CF_JOINT + 21
+    for r in range(4):
+        l0, l1, l2, l3 = cf[o + 4 * r], cf[o + 4 * r + 1], cf[o + 4 * r + 2], cf[o + 4 * r + 3]
+        for j in range(N):
+            for p in range(P):
+                eps[r, j, p] = l0 * z[0, j, p] + l1 * z[1, j, p] + l2 * z[2, j, p] + l3 * z[3, j, p]
+
+
+@njit(cache=True, nogil=True)
+def _compose(cf, e1, e2, out) -> None:
+    """Noise increment of two joint steps ``cf`` in a row, out = P e1 + e2: the coarse level's
+    increment from the fine level's two (exact for the linear flow)."""
+    _, N, P = e1.shape
+    o = CF_JOINT + 1
+    for r in range(4):
+        p0, p1, p2, p3 = cf[o + 4 * r], cf[o + 4 * r + 1], cf[o + 4 * r + 2], cf[o + 4 * r + 3]
+        for j in range(N):
+            for p in range(P):
+                out[r, j, p] = p0 * e1[0, j, p] + p1 * e1[1, j, p] + p2 * e1[2, j, p] + p3 * e1[3, j, p] \
+                    + e2[r, j, p]
+
+
+@njit(cache=True, nogil=True, inline="always")
+def _joint_unit(y0, y1, y2, y3, fp, e0, e1, e2, e3, c: np.ndarray, o: int) -> tuple:
+    """One unit through the joint transition whose propagator starts at ``c[o]`` (layout of
+    :data:`CF_JOINT`'s entries): returns x, v, V, xi, the conditional mean of v xi given the
+    state before (mean v times mean xi plus their noise covariance) and the mean of xi minus
+    the regression coefficient times the mean of x."""
+    mx = c[o] * y0 + c[o + 1] * y1 + c[o + 2] * y2 + c[o + 3] * y3 + c[o + 16] * fp
+    mv = c[o + 4] * y0 + c[o + 5] * y1 + c[o + 6] * y2 + c[o + 7] * y3 + c[o + 17] * fp
+    mV = c[o + 8] * y0 + c[o + 9] * y1 + c[o + 10] * y2 + c[o + 11] * y3 + c[o + 18] * fp
+    ms = c[o + 15] * y3
+    return (mx + e0, mv + e1, mV + e2, ms + e3, mv * ms + c[o + 36], ms - c[o + 37] * mx)
+
+
+@njit(cache=True, nogil=True)
+def _joint_flow(x, v, V, xi, f, eps, cf, rbm, rbx) -> None:
+    """Exact Gaussian transition of (x, v, V, xi) under the linear drift, constant force f;
+    ``rbm``, ``rbx`` as returned by :func:`_joint_unit`."""
+    N, P = x.shape
+    o = CF_JOINT + 1
+    for j in range(N):
+        for p in range(P):
+            x[j, p], v[j, p], V[j, p], xi[j, p], rbm[j, p], rbx[j, p] = _joint_unit(
+                x[j, p], v[j, p], V[j, p], xi[j, p], f[j, p], eps[0, j, p], eps[1, j, p], eps[2, j, p],
+                eps[3, j, p], cf, o)
+
+
+@njit(cache=True, nogil=True)
+def _joint_substeps(x, v, V, xi, F, fext, pvx, p: int, K: int, cf: np.ndarray, pp: np.ndarray,
+                    gen) -> None:
+    """Path p's step as K joint substeps h/K (kick-flow-kick, neighbours' force fext held),
+    with fresh normals: the step's own increment is not split, so this path leaves the common
+    noise of the other level and of the twin for this step (their laws stay exact)."""
+    N = x.shape[0]
+    o = CF_JOINT + 1 + JOINT_BLOCK * int(round(math.log2(K)))
+    hk = 0.5 * cf[12] / K / pp[0]
+    beta = cf[o + 37]
+    e = np.empty(4)
+    for j in range(N):
+        xx, vv, VV, ss, FF, fp = x[j, p], v[j, p], V[j, p], xi[j, p], F[j, p], fext[j, p]
+        rm = rx = 0.0
+        for _ in range(K):
+            z0, z1, z2, z3 = gen.standard_normal(), gen.standard_normal(), gen.standard_normal(), \
+                gen.standard_normal()
+            for r in range(4):
+                lo = o + 20 + 4 * r
+                e[r] = cf[lo] * z0 + cf[lo + 1] * z1 + cf[lo + 2] * z2 + cf[lo + 3] * z3
+            vv += hk * FF
+            xx, vv, VV, ss, rm, rx = _joint_unit(xx, vv, VV, ss, fp, e[0], e[1], e[2], e[3], cf, o)
+            FF = _kick_force(xx, pp)
+            vv += hk * FF
+        x[j, p], v[j, p], V[j, p], xi[j, p], F[j, p] = xx, vv, VV, ss, FF
+        pvx[j, p] = rm + hk * FF * (rx + beta * xx)
+
+
+@njit(cache=True, nogil=True)
+def _d_step_joint(x, v, V, xi, F, xm, fext, eps, cf, pp, kind, rbm, rbx, pvx, w, gen) -> None:
+    """One whole step of the joint scheme: kick(h/2), exact linear flow of (x, v, V, xi) with
+    noise increment ``eps``, kick(h/2); the neighbours' force enters as a constant at their
+    predicted midpoints, and stiff walls split a path's step, as in :func:`_d_step`.
+
+    ``pvx`` receives each unit's estimate of v xi for the measurement: its conditional
+    expectation given the state before the flow and the x reached (the same mean as v xi,
+    without the variance D/tau of xi itself, which made the plain product useless for
+    tau << 1).
+    """
+    N, P = x.shape
+    h = cf[12]
+    kicks = kind == KIND_KICK
+    n_stiff = 0
+    xstar = math.inf
+    if kicks and pp[8] > 2.0:
+        xstar = (STIFF_LIMIT * pp[0] / (h * h * pp[7] * pp[8] * (pp[8] - 1.0))) ** (1.0 / (pp[8] - 2.0))
+    if xstar < pp[10]:
+        for p in range(P):
+            for j in range(N):
+                if w[p] > 0.0 and max(abs(x[j, p]), abs(x[j, p] + h * v[j, p])) > xstar:
+                    n_stiff += 1
+                    break
+    if n_stiff > 0:
+        sp = np.empty(n_stiff, dtype=np.int64)
+        sk = np.empty(n_stiff, dtype=np.int64)
+        s0 = np.empty((5, N, n_stiff))
+        i = 0
+        for p in range(P):
+            if w[p] == 0.0:
+                continue
+            K = 1
+            for j in range(N):
+                K = max(K, _substeps(x[j, p], v[j, p], h, xstar, pp))
+            if K > 1:
+                sp[i], sk[i] = p, K
+                for j in range(N):
+                    s0[0, j, i], s0[1, j, i], s0[2, j, i] = x[j, p], v[j, p], V[j, p]
+                    s0[3, j, i], s0[4, j, i] = xi[j, p], F[j, p]
+                i += 1
+        n_stiff = i
+    if kicks:
+        _kick(x, v, F, h, pp, False)
+    k = pp[6]
+    for j in range(N):
+        for p in range(P):
+            fext[j, p] = 0.0
+    if N > 1:
+        for j in range(N):
+            for p in range(P):
+                xm[j, p] = x[j, p] + 0.5 * h * v[j, p]
+        for j in range(N):
+            jm = (j + N - 1) % N
+            jp = (j + 1) % N
+            for p in range(P):
+                fext[j, p] = k * (xm[jm, p] + xm[jp, p])
+    _joint_flow(x, v, V, xi, fext, eps, cf, rbm, rbx)
+    if kicks:
+        _kick(x, v, F, h, pp, True)
+        hk = 0.5 * h / pp[0]
+        beta = cf[CF_JOINT + 38]
+        for j in range(N):
+            for p in range(P):
+                pvx[j, p] = rbm[j, p] + hk * F[j, p] * (rbx[j, p] + beta * x[j, p])
+    else:
+        for j in range(N):
+            for p in range(P):
+                pvx[j, p] = rbm[j, p]
+    for i in range(n_stiff):
+        p = sp[i]
+        for j in range(N):
+            x[j, p], v[j, p], V[j, p] = s0[0, j, i], s0[1, j, i], s0[2, j, i]
+            xi[j, p], F[j, p] = s0[3, j, i], s0[4, j, i]
+        if N > 1:
+            for j in range(N):
+                xm[j, p] = x[j, p] + 0.5 * h * v[j, p]
+            for j in range(N):
+                fext[j, p] = k * (xm[(j + N - 1) % N, p] + xm[(j + 1) % N, p])
+        _joint_substeps(x, v, V, xi, F, fext, pvx, p, sk[i], cf, pp, gen)
+
+
+@njit(cache=True, nogil=True)
+def _measure(x, v, V, xi, stuck, F, w, cf, pp, kind, acc, pvx) -> float:
     """Add the moments of the live paths (weight w = 1) to acc[0:7]; return unit-steps counted.
 
     ``F`` holds -U'(x) at the current x for the smooth kind (the last kick computed it).
+    After a joint step, v xi is replaced by the estimate ``pvx`` of :func:`_d_step_joint`.
     """
     N, P = x.shape
     half = cf[15]
@@ -501,6 +685,11 @@ def _measure(x, v, V, xi, stuck, F, w, cf, pp, kind, acc) -> float:
             s3 += wp * x[j, p] * x[j, p]
             s4 += wp * v[j, p] * xi[j, p]
             s5 += wp * stuck[j, p]
+    if cf[CF_JOINT] == 1.0:
+        s4 = 0.0
+        for j in range(N):
+            for p in range(P):
+                s4 += w[p] * pvx[j, p]
     if kind == KIND_KICK:
         for j in range(N):
             for p in range(P):
@@ -526,7 +715,7 @@ def _measure(x, v, V, xi, stuck, F, w, cf, pp, kind, acc) -> float:
 
 
 @njit(cache=True, nogil=True)
-def _measure_twin(x, v, V, xi, w, cf, acc, nn) -> None:
+def _measure_twin(x, v, V, xi, w, cf, acc, nn, pvx) -> None:
     """Add the twin's moments (``t_*`` of :data:`MOMENTS`, ``nn`` the system's n) to acc[7:18].
 
     Second moments and a few fourth moments and :math:`|x|^n`: the twin is Gaussian, so
@@ -553,6 +742,11 @@ def _measure_twin(x, v, V, xi, w, cf, acc, nn) -> None:
             s[8] += wp * (ax if nn == 1.0 else ax**nn)
             s[9] += wp * VV * vv
             s[10] += wp * VV * vxi
+    if cf[CF_JOINT] == 1.0:
+        s[4] = 0.0
+        for j in range(N):
+            for p in range(P):
+                s[4] += w[p] * pvx[j, p]
     s[4] *= half
     s[10] *= half
     for i in range(11):
@@ -619,11 +813,12 @@ def _start(gen, chol, sd, x, v, V, xi) -> None:
 
 
 @njit(cache=True, nogil=True)
-def _run(gen, P: int, N: int, nburn: int, nrun: int, stride: int, cf_f: np.ndarray,
+def _run_frozen(gen, P: int, N: int, nburn: int, nrun: int, stride: int, cf_f: np.ndarray,
          cf_c: np.ndarray, pp: np.ndarray, kind: int, coupled: bool, cf_t: np.ndarray,
          pp_t: np.ndarray, twin: bool, chol: np.ndarray, sums: np.ndarray, counts: np.ndarray,
          esc_time: np.ndarray, counters: np.ndarray) -> None:
-    """Simulate P independent rings of N units and accumulate their time averages.
+    """Simulate P independent rings of N units with the frozen-xi step and accumulate their
+    time averages (:func:`_run_joint` has the same arguments and outputs for the joint step).
 
     Parameters
     ----------
@@ -725,16 +920,16 @@ def _run(gen, P: int, N: int, nburn: int, nrun: int, stride: int, cf_f: np.ndarr
             _check_escape(xf, vf, Vf, xif, Ff, sf, w, thr, t_end - (0.5 * h if coupled and sub == 0 else 0.0),
                           esc_time)
             if meas:
-                n0 = _measure(xf, vf, Vf, xif, sf, Ff, w, cf_f, pp, kind, sums[0])
+                n0 = _measure(xf, vf, Vf, xif, sf, Ff, w, cf_f, pp, kind, sums[0], xm)
                 counts[0] += n0
                 if twin:
-                    _measure_twin(xt, vt, Vt, xif, w, cf_f, sums[0], pp[8])
+                    _measure_twin(xt, vt, Vt, xif, w, cf_f, sums[0], pp[8], xm)
                 if first:
-                    counts[2] += _measure(xf, vf, Vf, xif, sf, Ff, w, cf_f, pp, kind, sums[2])
+                    counts[2] += _measure(xf, vf, Vf, xif, sf, Ff, w, cf_f, pp, kind, sums[2], xm)
                     if twin:
-                        _measure_twin(xt, vt, Vt, xif, w, cf_f, sums[2], pp[8])
+                        _measure_twin(xt, vt, Vt, xif, w, cf_f, sums[2], pp[8], xm)
                 if coupled and sub == 1:
-                    counts[1] += _measure(xc, vc, Vc, xic, sc, Fc, w, cf_c, pp, kind, sums[1])
+                    counts[1] += _measure(xc, vc, Vc, xic, sc, Fc, w, cf_c, pp, kind, sums[1], xm)
             zz = z1 if sub == 0 else z2
             for j in range(N):
                 for p in range(P):
@@ -745,10 +940,107 @@ def _run(gen, P: int, N: int, nburn: int, nrun: int, stride: int, cf_f: np.ndarr
                     xic[j, p] = cf_c[13] * xic[j, p] + cf_c[14] * (w1 * z1[j, p] + w2 * z2[j, p])
 
 
+@njit(cache=True, nogil=True)
+def _run_joint(gen, P: int, N: int, nburn: int, nrun: int, stride: int, cf_f: np.ndarray,
+               cf_c: np.ndarray, pp: np.ndarray, kind: int, coupled: bool, cf_t: np.ndarray,
+               pp_t: np.ndarray, twin: bool, chol: np.ndarray, sums: np.ndarray, counts: np.ndarray,
+               esc_time: np.ndarray, counters: np.ndarray) -> None:
+    """:func:`_run_frozen` (same arguments and outputs) with the joint step.
+
+    Four normals per unit and fine step; the coarse level takes the exact composition of the
+    fine level's two increments (:func:`_compose`), the twin its own noise factor applied to the
+    same normals, with its own xi (the same process as the system's: the factors share the xi
+    row).
+    """
+    thr = pp[10]
+    sd = math.sqrt(pp[11])
+    xf, vf, Vf = np.zeros((N, P)), np.zeros((N, P)), np.zeros((N, P))
+    xif, Ff = np.zeros((N, P)), np.zeros((N, P))
+    xc, vc, Vc = np.zeros((N, P)), np.zeros((N, P)), np.zeros((N, P))
+    xic, Fc = np.zeros((N, P)), np.zeros((N, P))
+    xt, vt, Vt, Ft = np.zeros((N, P)), np.zeros((N, P)), np.zeros((N, P)), np.zeros((N, P))
+    xit = np.zeros((N, P))
+    sf = np.zeros((N, P), dtype=np.bool_)
+    sc = np.zeros((N, P), dtype=np.bool_)
+    xm = np.zeros((N, P))
+    z1, z2 = np.zeros((4, N, P)), np.zeros((4, N, P))
+    eps1, eps2 = np.zeros((4, N, P)), np.zeros((4, N, P))
+    epsc, epst = np.zeros((4, N, P)), np.zeros((4, N, P))
+    rbm, rbx = np.zeros((N, P)), np.zeros((N, P))
+    pvx_f, pvx_c, pvx_t = np.zeros((N, P)), np.zeros((N, P)), np.zeros((N, P))
+    w = np.ones(P)
+    fext = np.zeros((N, P))
+    esc_time[:] = -1.0
+    _start(gen, chol, sd, xf, vf, Vf, xif)
+    if kind == KIND_KICK and pp[8] > 2.0:
+        # a Gaussian start can land deep in a steep wall, where even MAX_SUBSTEPS substeps
+        # are unstable: such draws start at the deepest resolvable |x| (the burn-in forgets it)
+        hc = cf_c[12] if coupled else cf_f[12]
+        xcap = (STIFF_LIMIT * MAX_SUBSTEPS**2 * pp[0] / (hc * hc * pp[7] * pp[8] * (pp[8] - 1.0))) \
+            ** (1.0 / (pp[8] - 2.0))
+        for j in range(N):
+            for p in range(P):
+                xf[j, p] = min(max(xf[j, p], -xcap), xcap)
+    for j in range(N):
+        for p in range(P):
+            xc[j, p], vc[j, p], Vc[j, p], xic[j, p] = xf[j, p], vf[j, p], Vf[j, p], xif[j, p]
+            xt[j, p], vt[j, p], Vt[j, p], xit[j, p] = xf[j, p], vf[j, p], Vf[j, p], xif[j, p]
+            if kind != KIND_LINEAR:
+                Ff[j, p] = _kick_force(xf[j, p], pp)
+                Fc[j, p] = Ff[j, p]
+    h = cf_c[12] if coupled else cf_f[12]
+    half = nburn + nrun // 2
+    for step in range(nburn + nrun):
+        live = 0
+        for p in range(P):
+            if w[p] > 0.0:
+                live += 1
+        if live == 0:
+            break
+        meas = step >= nburn and (step - nburn) % stride == 0
+        first = step < half
+        t_end = (step + 1) * h
+        counters[4] += (3 if coupled else 1) * live
+        for j in range(N):
+            for p in range(P):
+                for r in range(4):
+                    z1[r, j, p] = gen.standard_normal()
+                if coupled:
+                    for r in range(4):
+                        z2[r, j, p] = gen.standard_normal()
+        for sub in range(2 if coupled else 1):
+            zz = z1 if sub == 0 else z2
+            ee = eps1 if sub == 0 else eps2
+            _noise(cf_f, zz, ee)
+            _d_step_joint(xf, vf, Vf, xif, Ff, xm, fext, ee, cf_f, pp, kind, rbm, rbx, pvx_f, w, gen)
+            if twin:
+                _noise(cf_t, zz, epst)
+                _d_step_joint(xt, vt, Vt, xit, Ft, xm, fext, epst, cf_t, pp_t, KIND_LINEAR, rbm, rbx, pvx_t,
+                              w, gen)
+            if coupled and sub == 1:
+                _compose(cf_f, eps1, eps2, epsc)
+                _d_step_joint(xc, vc, Vc, xic, Fc, xm, fext, epsc, cf_c, pp, kind, rbm, rbx, pvx_c, w, gen)
+                _check_escape(xc, vc, Vc, xic, Fc, sc, w, thr, t_end, esc_time)
+            _check_escape(xf, vf, Vf, xif, Ff, sf, w, thr, t_end - (0.5 * h if coupled and sub == 0 else 0.0),
+                          esc_time)
+            if meas:
+                counts[0] += _measure(xf, vf, Vf, xif, sf, Ff, w, cf_f, pp, kind, sums[0], pvx_f)
+                if twin:
+                    _measure_twin(xt, vt, Vt, xit, w, cf_t, sums[0], pp[8], pvx_t)
+                if first:
+                    counts[2] += _measure(xf, vf, Vf, xif, sf, Ff, w, cf_f, pp, kind, sums[2], pvx_f)
+                    if twin:
+                        _measure_twin(xt, vt, Vt, xit, w, cf_t, sums[2], pp[8], pvx_t)
+                if coupled and sub == 1:
+                    counts[1] += _measure(xc, vc, Vc, xic, sc, Fc, w, cf_c, pp, kind, sums[1], pvx_c)
+
+
 def run_chunk(gen, P: int, N: int, nburn: int, nrun: int, stride: int, cf_f: np.ndarray,
               cf_c: np.ndarray, pp: np.ndarray, kind: int, coupled: bool, cf_t: np.ndarray,
               pp_t: np.ndarray, twin: bool, chol: np.ndarray, sums: np.ndarray,
               counts: np.ndarray, esc_time: np.ndarray, counters: np.ndarray) -> None:
-    """Run :func:`_run` (arguments as there) on a scratch block sized for this chunk."""
-    _run(gen, P, N, nburn, nrun, stride, cf_f, cf_c, pp, kind, coupled, cf_t, pp_t, twin, chol,
-         sums, counts, esc_time, counters)
+    """Run :func:`_run_frozen` or :func:`_run_joint` (arguments as there; ``cf_f`` says which)
+    on a scratch block sized for this chunk."""
+    run = _run_joint if cf_f[CF_JOINT] == 1.0 else _run_frozen
+    run(gen, P, N, nburn, nrun, stride, cf_f, cf_c, pp, kind, coupled, cf_t, pp_t, twin, chol,
+        sums, counts, esc_time, counters)

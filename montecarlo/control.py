@@ -34,6 +34,9 @@ __all__ = ["Regression", "regression_estimate", "MIN_DOF"]
 #: the estimated coefficients cost more variance than they remove.
 MIN_DOF = 12
 
+#: Relative spread over replicas below which a control counts as constant (round-off).
+_FLAT = 1e-9
+
 
 @dataclass(frozen=True)
 class Regression:
@@ -104,14 +107,19 @@ def regression_estimate(Y: np.ndarray, C: np.ndarray, mu: np.ndarray) -> Regress
     Cc = C - cbar
     # scale the controls to unit spread so that lstsq's rank cut is relative
     scale = np.sqrt((Cc**2).sum(axis=0))
-    scale = np.where(scale > 0, scale, 1.0)
+    # a control that does not vary beyond round-off carries no information, and its mean's
+    # round-off offset from mu would look like many of its standard errors: left out (e.g. the
+    # twin's v xi estimate, deterministic when tau << dt)
+    flat = scale <= _FLAT * np.sqrt(R) * np.maximum(np.abs(cbar), np.abs(mu))
+    Cc = np.where(flat, 0.0, Cc)
+    scale = np.where((scale > 0) & ~flat, scale, 1.0)
     coef_s, *_ = np.linalg.lstsq(Cc / scale, Yc, rcond=1e-10)
     coef = (coef_s / scale[:, None]).T
     resid = Yc - Cc @ coef.T
     sigma = resid.T @ resid / dof
-    d = (cbar - mu) / scale
+    d = np.where(flat, 0.0, cbar - mu) / scale
     S = (Cc / scale).T @ (Cc / scale)
     lever = float(d @ np.linalg.lstsq(S, d, rcond=1e-10)[0])
-    mean = ybar - coef @ (cbar - mu)
+    mean = ybar - coef @ np.where(flat, 0.0, cbar - mu)
     return Regression(mean=mean, cov=sigma * (1.0 / R + lever), plain_mean=ybar, plain_cov=plain_cov,
                       coef=coef, dof=dof)

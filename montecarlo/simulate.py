@@ -24,7 +24,8 @@ from fpe_harvester.errors import ParameterError, check_int, check_real
 from fpe_harvester.model import Harvester
 
 from ._kernels import KIND_KICK, KIND_KINK, MOMENTS, N_MOM, ROWS, run_chunk
-from .scheme import KINK_RULES, physical_vector, scheme_kind, step_coefficients
+from .scheme import (KINK_RULES, joint_step_refusal, physical_vector, scheme_kind, step_coefficients,
+                     uses_joint_step)
 from .twin import initial_cholesky, twin_expectations, twin_harvester, twin_is_stable
 
 __all__ = ["Ensemble", "simulate", "default_threads"]
@@ -46,7 +47,9 @@ class Ensemble:
     ----------
     sums : ndarray, shape (replicas, levels + 1, len(MOMENTS))
         Sums over measured unit-steps of the moments :data:`montecarlo._kernels.MOMENTS`
-        (``v xi`` already at the Strang point; the twin's ``t_*`` at level 0 only), per level;
+        (``v xi`` already at the Strang point, or after a joint step its conditional expectation
+        given the state before the step and the x reached; the twin's ``t_*`` at level 0 only),
+        per level;
         the last row is level 0 over the first half of the measured window.
     counts : ndarray, shape (replicas, levels + 1)
         Number of unit-steps summed (fewer than ``paths * N * t_run/dt`` when paths escaped).
@@ -155,6 +158,7 @@ def simulate(
     start: str = "rest",
     kink_rule: str = "average",
     kind: int | None = None,
+    joint: bool | None = None,
 ) -> Ensemble:
     """Simulate independent replicas of ``h`` and return their raw moment sums.
 
@@ -206,6 +210,12 @@ def simulate(
     kind : int or None
         Scheme (:data:`montecarlo._kernels.KIND_KICK` or ``KIND_KINK``; default
         :func:`montecarlo.scheme.scheme_kind`), for comparing the schemes near n = 1.
+    joint : bool or None
+        Advance (x, v, V, xi) together by the exact Gaussian transition of the linear drift
+        (True) or with xi frozen over each step (False). None (default): joint when
+        tau < :data:`montecarlo.scheme.JOINT_STEPS` dt, where freezing xi is wrong
+        (:func:`montecarlo.scheme.uses_joint_step`). True raises where the scheme has no joint
+        step (:func:`montecarlo.scheme.joint_step_refusal`).
 
     Returns
     -------
@@ -252,20 +262,28 @@ def simulate(
     ss = np.random.SeedSequence(seed)
     levels = 2 if richardson else 1
     dt_f = 0.5 * dt if richardson else dt
-    cf_f = step_coefficients(h, dt_f)
-    cf_c = step_coefficients(h, dt)
     if kind is not None and (h.is_linear or kind not in (KIND_KICK, KIND_KINK)):
         raise ParameterError(f"kind must be None, or {KIND_KICK} (kick) or {KIND_KINK} (kink) for a "
                              f"nonlinear potential, got {kind!r} with n = {h.n:g}")
     kind = scheme_kind(h) if kind is None else kind
     pp = physical_vector(h, threshold, kink_rule, kind)
+    # both levels take the same step, chosen at the coarse one
+    if joint is None:
+        joint = uses_joint_step(h, dt, kind)
+    elif joint:
+        why = joint_step_refusal(h, kind)
+        if why is not None:
+            raise ParameterError(f"joint=True is not available here: {why}")
+    joint = bool(joint)
+    cf_f = step_coefficients(h, dt_f, joint)
+    cf_c = step_coefficients(h, dt, joint)
     lin = twin_harvester(h, twin) if twin is not None else (h if h.is_linear else None)
     if twin is not None:
-        cf_t, pp_t = step_coefficients(lin, dt_f), physical_vector(lin, threshold)
-        twin_mean = twin_expectations(lin, dt_f, h.n)
+        cf_t, pp_t = step_coefficients(lin, dt_f, joint), physical_vector(lin, threshold)
+        twin_mean = twin_expectations(lin, dt_f, h.n, joint)
     else:
         cf_t, pp_t, twin_mean = cf_f, pp, {}
-    chol = initial_cholesky(lin, dt_f) if start == "twin" else np.zeros((0, 0))
+    chol = initial_cholesky(lin, dt_f, joint) if start == "twin" else np.zeros((0, 0))
     sizes = _chunks(paths, chunk)
     tasks = [(r, c) for r in range(replicas) for c in range(len(sizes))]
 
@@ -314,7 +332,7 @@ def simulate(
         seed_entropy=int(ss.entropy) if seed is None else seed,
         first_replica=first_replica,
         notes={"threads": threads, "chunk": chunk, "scheme_kind": kind, "sample_stride": stride,
-               "kink_rule": kink_rule},
+               "kink_rule": kink_rule, "joint_step": joint},
         twin_kappa=twin,
         twin_mean=twin_mean,
         start=start,

@@ -29,7 +29,8 @@ from fpe_harvester.result import Stats, Status
 
 from .estimate import Estimate, bias_order, estimate
 from .plan import FALLBACK_NOTE, burn_in, relaxation_time
-from .scheme import KIND_KINK, SCHEME_NAMES, scheme_kind
+from .scheme import (JOINT_STEPS, KIND_KINK, KINK_WIDTH, SCHEME_NAMES, joint_step_refusal, scheme_kind,
+                     uses_joint_step)
 from .simulate import Ensemble, default_threads, simulate
 from .twin import linearized_stiffness
 
@@ -45,6 +46,11 @@ _PILOT_FIRST = 2**40
 _PATH_TIME = 140.0
 #: Coarsest and finest automatic time step, and the share of tol the bias may take.
 _DT_START, _DT_MIN, _BIAS_SHARE = 0.02, 0.02 / 32, 1.0 / 3.0
+#: Coarsest automatic time step where the joint step runs: its linear part is exact, so only
+#: the kicks of -U'(x) leave a bias. Measured for n = 3, a = 0.5 (coupled Richardson estimate
+#: at dt/2): 1.7e-5, 6.7e-5, 2.7e-4 relative at dt = 0.02, 0.04, 0.08 and tau = 1e-4, against
+#: 9e-5 for the frozen-xi step at tau = 1, dt = 0.02. The usual halving follows if it is larger.
+_DT_START_JOINT = 0.04
 #: Restarts allowed for a longer burn-in, and the drift that triggers one (in standard
 #: errors, and relative to tol).
 _BURN_RESTARTS, _DRIFT_SIGMAS, _DRIFT_SHARE = 3, 3.0, 1.0 / 3.0
@@ -104,8 +110,9 @@ class MonteCarlo:
         ``richardson``) the time-step bias estimate, added in quadrature. Default 1e-2.
     dt : float or None
         Time step, > 0 (model time units). With ``richardson`` the reported numbers come
-        from ``dt/2`` and ``dt`` gives the bias estimate. None (default): 0.02, halved after
-        the first batch (down to 0.02/32) while the bias estimate exceeds a third of ``tol``.
+        from ``dt/2`` and ``dt`` gives the bias estimate. None (default): 0.02 (0.04 where the
+        joint step runs, see ``joint``), halved after the first batch (down to 0.02/32) while
+        the bias estimate exceeds a third of ``tol``.
     paths : int or None
         Paths (rings) per replica, >= 2. None: 64 for ``tol`` < 5e-3, else 16 (the first
         batch of ``min_replicas`` then usually meets ``tol`` already); fewer when a path's
@@ -143,6 +150,11 @@ class MonteCarlo:
         exactly known moments as control variates (:mod:`montecarlo.control`); the paths then
         start from the twin's stationary law. Used whenever a stable twin exists and no path
         escaped; ``info["variance_reduction"]`` gives the factor. Default True.
+    joint : bool or None
+        Step of the linear part (:func:`montecarlo.simulate`): True advances (x, v, V, xi)
+        together by their exact Gaussian transition, False holds xi frozen over a step. None
+        (default): joint when tau < 10 dt, where freezing xi is wrong
+        (:data:`montecarlo.scheme.JOINT_STEPS`). The kink scheme (n near 1) has no joint step.
 
     Examples
     --------
@@ -170,6 +182,7 @@ class MonteCarlo:
     threads: int | None = None
     batch: int | None = None
     control: bool = True
+    joint: bool | None = None
 
     def __post_init__(self) -> None:
         if self.seed is not None:
@@ -192,10 +205,11 @@ class MonteCarlo:
         object.__setattr__(self, "max_time", check_real("max_time", self.max_time, low=0.0, low_open=True))
         if self.escape is not None:
             object.__setattr__(self, "escape", check_real("escape", self.escape, low=0.0, low_open=True))
-        for flag in ("progress", "richardson", "control"):
+        for flag in ("progress", "richardson", "control", "joint"):
             value = getattr(self, flag)
-            if not isinstance(value, bool) and not (flag == "progress" and value is None):
-                choices = "True, False or None" if flag == "progress" else "True or False"
+            optional = flag in ("progress", "joint")
+            if not isinstance(value, bool) and not (optional and value is None):
+                choices = "True, False or None" if optional else "True or False"
                 raise ParameterError(f"{flag} must be {choices}, got {value!r} "
                                      f"(type {type(value).__name__})")
         if self.threads is not None:
@@ -204,7 +218,21 @@ class MonteCarlo:
             object.__setattr__(self, "batch", check_int("batch", self.batch, low=1))
 
     def unsupported_reason(self, h: Harvester) -> str | None:
-        """Always None: Monte Carlo handles every harvester."""
+        """None, or why this solver refuses ``h``: ``joint=True`` where there is no joint step,
+        and the kink scheme (xi held over a step) where tau is shorter than the step can be made:
+        below ``JOINT_STEPS`` times the finest automatic step, or below an explicit ``dt``."""
+        if self.joint:
+            return joint_step_refusal(h)
+        if scheme_kind(h) != KIND_KINK:
+            return None
+        tau = h.params.tau
+        if self.dt is None and tau < JOINT_STEPS * _DT_MIN:
+            return (f"tau = {tau:g} is too short for the kink scheme (n = {h.n:g} <= 1 + {KINK_WIDTH:g}), "
+                    f"which holds xi over a step: it needs tau >= {JOINT_STEPS * _DT_MIN:g} "
+                    f"({JOINT_STEPS:g} x the finest automatic step {_DT_MIN:g}), or an explicit dt <= tau")
+        if self.dt is not None and tau < self.dt:
+            return (f"tau = {tau:g} is shorter than dt = {self.dt:g}: the kink scheme (n = {h.n:g}) holds xi "
+                    f"over a step; use dt <= tau")
         return None
 
     def threshold(self, h: Harvester) -> float:
@@ -230,7 +258,10 @@ class MonteCarlo:
             raise ParameterError(f"a = {h.a!r}: Monte Carlo needs the unit stiffness 2a in the double "
                                  f"range, a <= {0.5 * sys.float_info.max:.6g}")
         seed = 0 if self.seed is None else self.seed
-        dt = self.dt or _DT_START
+        dt = self.dt
+        if dt is None:
+            joint = uses_joint_step(h, _DT_START_JOINT) if self.joint is None else self.joint
+            dt = _DT_START_JOINT if joint else _DT_START
         notes: dict[str, Any] = {}
         harmonic = classify(h)[0] if h.is_linear else None
         twin = None
@@ -248,7 +279,7 @@ class MonteCarlo:
             if self.control and math.isfinite(pil_burn):
                 pilot = simulate(h, dt=dt, paths=16, replicas=max(2, self._batch()),
                                  t_burn=pil_burn, t_run=t_run0, seed=seed, threshold=self.threshold(h),
-                                 threads=self.threads, first_replica=_PILOT_FIRST)
+                                 threads=self.threads, first_replica=_PILOT_FIRST, joint=self.joint)
                 m = pilot.moments(0)
                 ok = np.isfinite(m["xdU"]) & np.isfinite(m["x2"])
                 if ok.any() and m["x2"][ok].mean() > 0 and m["xdU"][ok].mean() > 0:
@@ -291,7 +322,7 @@ class MonteCarlo:
         return simulate(h, dt=plan.dt, paths=plan.paths, replicas=replicas, t_burn=plan.t_burn,
                         t_run=plan.t_run, seed=self.seed, richardson=self.richardson,
                         threshold=self.threshold(h), threads=self.threads, first_replica=first,
-                        twin=plan.twin, start=plan.start)
+                        twin=plan.twin, start=plan.start, joint=self.joint)
 
     def _restart_reason(self, h: Harvester, plan: Plan, est: Estimate) -> tuple[str, Plan] | None:
         """After a batch: a finer step or a longer burn-in, if the data ask for one.
@@ -504,7 +535,10 @@ class MonteCarlo:
             "seed": ens.seed_entropy,
             "threads": ens.notes.get("threads"),
             "batch": self._batch(),
-            "scheme": SCHEME_NAMES[scheme_kind(h)],
+            "scheme": SCHEME_NAMES[scheme_kind(h)] + (
+                "; joint step: (x, v, V, xi) by the exact Gaussian transition of the linear drift, "
+                "kicks around it" if ens.notes.get("joint_step") else ""),
+            "joint_step": bool(ens.notes.get("joint_step")),
             "rng": _RNG,
             "bias_eta": est.bias["eta"],
             "bias_eta_se": est.bias_se["eta"],

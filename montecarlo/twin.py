@@ -38,7 +38,7 @@ from fpe_harvester.errors import ParameterError, check_real
 from fpe_harvester.exact.moments import closure_mismatch
 from fpe_harvester.model import Harvester, mode_sin2
 
-from .scheme import step_coefficients
+from .scheme import joint_matrices, step_coefficients
 
 __all__ = [
     "TWIN_MOMENTS",
@@ -75,7 +75,8 @@ def twin_is_stable(h: Harvester, kappa: float) -> bool:
     return bool(np.all(twin_harvester(h, kappa).mode_stiffness() > 0.0)) if kappa > 0 else False
 
 
-def scheme_matrices(lin: Harvester, dt: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+def scheme_matrices(lin: Harvester, dt: float,
+                    joint: bool = False) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Per-mode one-step matrices of the kernel's harmonic scheme.
 
     Parameters
@@ -84,6 +85,10 @@ def scheme_matrices(lin: Harvester, dt: float) -> tuple[np.ndarray, np.ndarray, 
         A harmonic ring (n = 2).
     dt : float
         Time step, > 0.
+    joint : bool
+        The joint step (:func:`montecarlo.scheme.joint_matrices`): (x, v, V, xi) advance
+        together, M is its propagator plus the neighbours' force at the predicted midpoint,
+        Q its full noise covariance, and the state is measured after the step (T = I).
 
     Returns
     -------
@@ -97,11 +102,17 @@ def scheme_matrices(lin: Harvester, dt: float) -> tuple[np.ndarray, np.ndarray, 
     if not lin.is_linear:
         raise ParameterError(f"scheme_matrices needs a harmonic ring (n = 2), got n = {lin.n!r}")
     dt = check_real("dt", dt, low=0.0, low_open=True)
+    k = lin.k if lin.N > 1 else 0.0
+    cq = 2.0 - 4.0 * mode_sin2(lin.N)
+    if joint:
+        P, g, Q = joint_matrices(lin, dt)
+        M = np.repeat(P[None], lin.N, axis=0)
+        M[:, :, 0] += (k * cq)[:, None] * g
+        M[:, :, 1] += (0.5 * dt * k * cq)[:, None] * g
+        return M, np.repeat(np.eye(4)[None], lin.N, axis=0), Q
     cf = step_coefficients(lin, dt)
     E = cf[0:9].reshape(3, 3)
     g = cf[9:12]
-    k = lin.k if lin.N > 1 else 0.0
-    cq = 2.0 - 4.0 * mode_sin2(lin.N)
     T = np.zeros((lin.N, 4, 4))
     T[:, :3, :3] = E
     T[:, :3, 0] += (k * cq)[:, None] * g
@@ -115,7 +126,7 @@ def scheme_matrices(lin: Harvester, dt: float) -> tuple[np.ndarray, np.ndarray, 
     return M, T, Q
 
 
-def stationary_covariances(lin: Harvester, dt: float) -> np.ndarray:
+def stationary_covariances(lin: Harvester, dt: float, joint: bool = False) -> np.ndarray:
     """Stationary covariance (N, 4, 4) of each mode's state before a step (discrete Lyapunov).
 
     Raises :class:`ParameterError` when some mode of the discrete scheme is not stable
@@ -123,7 +134,7 @@ def stationary_covariances(lin: Harvester, dt: float) -> np.ndarray:
     """
     import scipy.linalg
 
-    M, _, Q = scheme_matrices(lin, dt)
+    M, _, Q = scheme_matrices(lin, dt, joint)
     out = np.empty_like(M)
     for q in range(lin.N):
         rho = float(np.max(np.abs(np.linalg.eigvals(M[q]))))
@@ -135,7 +146,7 @@ def stationary_covariances(lin: Harvester, dt: float) -> np.ndarray:
     return out
 
 
-def twin_expectations(lin: Harvester, dt: float, n: float = 2.0) -> dict[str, float]:
+def twin_expectations(lin: Harvester, dt: float, n: float = 2.0, joint: bool = False) -> dict[str, float]:
     """Exact expected values of the twin's measured moments (:data:`TWIN_MOMENTS`) at step dt.
 
     The second moments differ from the continuous-time values of
@@ -153,6 +164,10 @@ def twin_expectations(lin: Harvester, dt: float, n: float = 2.0) -> dict[str, fl
         Its time step, > 0.
     n : float
         Exponent of the ``absxn`` moment (the system's n), >= 1.
+    joint : bool
+        The twin runs the joint step (:func:`scheme_matrices`). Its transition is then exact
+        for a single unit, so the second moments are the continuous-time ones; in a ring the
+        neighbours' force at the predicted midpoint leaves an O(dt^2) bias.
 
     Examples
     --------
@@ -161,10 +176,10 @@ def twin_expectations(lin: Harvester, dt: float, n: float = 2.0) -> dict[str, fl
     >>> abs(e["V2"] * 143 / 20 - 1) < 1e-5
     True
     """
-    P = stationary_covariances(lin, dt)
-    _, T, _ = scheme_matrices(lin, dt)
+    P = stationary_covariances(lin, dt, joint)
+    _, T, _ = scheme_matrices(lin, dt, joint)
     S = np.einsum("qij,qjk,qlk->qil", T, P, T).mean(axis=0)
-    half = math.exp(-0.5 * dt / lin.params.tau)
+    half = 1.0 if joint else math.exp(-0.5 * dt / lin.params.tau)
     n = check_real("n", n, low=1.0)
     absxn = S[0, 0] ** (0.5 * n) * 2.0 ** (0.5 * n) * math.gamma(0.5 * (n + 1)) / math.sqrt(math.pi)
     out = {
@@ -179,13 +194,13 @@ def twin_expectations(lin: Harvester, dt: float, n: float = 2.0) -> dict[str, fl
     return {key: float(val) for key, val in out.items()}
 
 
-def initial_cholesky(lin: Harvester, dt: float) -> np.ndarray:
+def initial_cholesky(lin: Harvester, dt: float, joint: bool = False) -> np.ndarray:
     """Lower Cholesky factor (4N x 4N) of the twin ring's stationary law before a step.
 
     State ordered unit by unit, (x_j, v_j, V_j, xi_j). The unit-space covariance is the
     block-circulant :math:`C_{jl} = N^{-1}\\sum_q P_q \\cos(2\\pi q (j - l)/N)`.
     """
-    P = stationary_covariances(lin, dt)
+    P = stationary_covariances(lin, dt, joint)
     N = lin.N
     q = np.arange(N)
     lag = np.arange(N)

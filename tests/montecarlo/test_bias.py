@@ -24,28 +24,44 @@ def _coupled_differences(h: Harvester, dts: tuple[float, ...], seed: int, **kw) 
 
 
 def test_harmonic_bias_is_second_order() -> None:
+    # the frozen-xi step (the default at tau = 1 for dt < 0.1)
     h = Harvester.build(a=0.5)
     dts = (0.4, 0.2, 0.1)
-    diff, err, _ = _coupled_differences(h, dts, seed=11, paths=64, replicas=8, t_burn=20.0, t_run=50.0)
+    diff, err, _ = _coupled_differences(h, dts, seed=11, paths=64, replicas=8, t_burn=20.0, t_run=50.0,
+                                        joint=False)
     assert np.all(np.abs(diff) > 4 * err)
     order = np.polyfit(np.log(dts), np.log(np.abs(diff)), 1)[0]
     assert 1.7 < order < 2.3, order
 
 
+@pytest.mark.parametrize("tau", [1.0, 1e-4])
+def test_joint_step_has_no_bias_on_a_harmonic_unit(tau: float) -> None:
+    # the joint step is the exact transition of a harmonic unit: eta(dt/2) - eta(dt) on common
+    # noise vanishes at steps where the frozen-xi step's difference is 20 standard errors
+    h = Harvester.build(a=0.5, tau=tau)
+    diff, err, _ = _coupled_differences(h, (0.4,), seed=11, paths=64, replicas=8, t_burn=20.0, t_run=50.0,
+                                        joint=True)
+    assert abs(diff[0]) < 4 * err[0], (diff, err)
+
+
 def test_richardson_bias_estimate_matches_actual_error() -> None:
-    # at a coarse step the bias is large; the folded estimate must account for it
+    # at a coarse step the bias is large; the folded estimate must account for it (the
+    # frozen-xi step: the joint step is exact for a harmonic unit)
     h = Harvester.build(a=0.5)
-    r = solve(h, "mc", seed=4, dt=0.4, tol=0.05, paths=64, t_run=50.0, min_replicas=8, progress=False)
+    r = solve(h, "mc", seed=4, dt=0.4, tol=0.05, paths=64, t_run=50.0, min_replicas=8, progress=False,
+              joint=False)
     exact = 20 / 39
     assert abs(r.info["bias_eta"]) > 2 * r.info["eta_standard_error"]
     assert abs(r.eta - exact) < 4 * r.eta_err
     assert abs((r.eta - r.info["bias_eta"]) - exact) < abs(r.eta - exact)
 
 
-def test_smooth_nonlinear_bias_is_second_order() -> None:
+@pytest.mark.parametrize("joint", [False, True])
+def test_smooth_nonlinear_bias_is_second_order(joint: bool) -> None:
     h = Harvester.build(a=0.5, n=4, N=3, k=-0.3)
     dts = (0.2, 0.1)
-    diff, err, _ = _coupled_differences(h, dts, seed=5, paths=64, replicas=6, t_burn=20.0, t_run=40.0)
+    diff, err, _ = _coupled_differences(h, dts, seed=5, paths=64, replicas=6, t_burn=20.0, t_run=40.0,
+                                        joint=joint)
     assert np.all(np.abs(diff) > 3 * err)
     ratio = diff[0] / diff[1]
     assert 2.5 < ratio < 6.5, ratio

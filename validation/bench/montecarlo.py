@@ -21,6 +21,9 @@ Measured in one run:
   twin's cost (interleaved timings, median ratio), and the solver's wall time to a relative
   error of 1e-4 with and without them, measured in the same run within a budget and, where
   the budget runs out, extrapolated as ``wall * (se / se_needed)^2`` (labelled);
+* cost and bias against the noise's correlation time tau = 1e-4, 1e-2, 1, 100 (n = 3): the
+  solver to 1e-3 against the Fokker--Planck value, which step ran (joint below tau = 10 dt),
+  and the coupled time-step differences of the default and the frozen-xi step;
 * error-versus-time curves (``series``) for the combined benchmark (:mod:`.combined`);
 * the kink's time-step law (:mod:`validation.kinkstudy`): at a = 0.5, 1, 2, eta at fine steps
   0.04 ... 0.005 from runs with independent seeds, each Richardson-coupled, and the weak order
@@ -264,6 +267,56 @@ def _bias_study(quick: bool) -> dict[str, Any]:
     return out
 
 
+#: Correlation times of the noise study (:func:`_tau_study`), n = 3, a = 0.5.
+TAUS = (1e-4, 1e-2, 1.0, 100.0)
+
+
+def _coupled_diff(h: Harvester, quick: bool, seed: int, joint: bool | None) -> dict[str, Any]:
+    """eta(0.01) - eta(0.02) on common noise (``joint`` as in :func:`montecarlo.simulate`)."""
+    e = simulate(h, dt=0.02, paths=64, replicas=6 if quick else 16, t_burn=20.0, t_run=50.0, seed=seed,
+                 richardson=True, joint=joint)
+    m0, m1 = e.moments(0), e.moments(1)
+    d = m0["V2"] / m0["vxi"] - m1["V2"] / m1["vxi"]
+    # V2 too: with xi frozen at tau << dt the plain v xi has the variance D/tau and eta per
+    # replica is meaningless
+    dv = m0["V2"] - m1["V2"]
+    return {"joint_step": bool(e.notes["joint_step"]), "dt": 0.02, "diff": float(d.mean()),
+            "diff_se": float(d.std(ddof=1) / math.sqrt(d.size)),
+            "rel_diff": float(d.mean() / (m0["V2"] / m0["vxi"]).mean()),
+            "rel_diff_V2": float(dv.mean() / m0["V2"].mean()),
+            "rel_diff_V2_se": float(dv.std(ddof=1) / math.sqrt(dv.size) / m0["V2"].mean()),
+            "wall_s": e.wall_time}
+
+
+def _tau_study(quick: bool) -> dict[str, Any]:
+    """Cost and bias against the noise's correlation time tau, n = 3, a = 0.5, single unit.
+
+    Per tau: the solver to a relative error of 1e-3 (1e-2 quick) within a budget (wall time,
+    replicas, dt, which step ran, status), against the Fokker--Planck value (tol 1e-5), and the
+    coupled difference eta(0.01) - eta(0.02) on common noise of the default step at dt = 0.02
+    and, where that is the joint step, of the frozen-xi step too (its bias at tau << dt).
+    """
+    tol, budget = (1e-2, 30.0) if quick else (1e-3, 300.0)
+    out: dict[str, Any] = {"tol": tol, "budget_s": budget}
+    for i, tau in enumerate(TAUS):
+        h = Harvester.build(a=0.5, n=3, tau=tau)
+        fp = solve(h, "fpe", tol=1e-5)
+        r = solve(h, "mc", seed=40 + i, tol=tol, max_time=budget, progress=False)
+        row: dict[str, Any] = {
+            "fpe_eta": fp.eta, "fpe_eta_err": fp.eta_err, "fpe_status": fp.status.value,
+            "mc_eta": r.eta, "mc_eta_err": r.eta_err, "mc_status": r.status.value,
+            "wall_s": r.info["wall_time"], "replicas": r.info["replicas"], "dt": r.info["dt"],
+            "joint_step": r.info["joint_step"], "bias_eta": r.info["bias_eta"],
+            "variance_reduction": r.info["variance_reduction"]}
+        if r.eta is not None and fp.eta is not None:
+            row["mc_minus_fpe_in_combined_errors"] = (r.eta - fp.eta) / math.hypot(r.eta_err, fp.eta_err)
+        row["coupled_diff"] = _coupled_diff(h, quick, 60 + i, None)
+        if row["coupled_diff"]["joint_step"]:
+            row["coupled_diff_frozen"] = _coupled_diff(h, quick, 60 + i, False)
+        out[f"tau_{tau:g}"] = row
+    return out
+
+
 #: Cases of the control-variate study: label -> Harvester.build arguments.
 CV_CASES = {
     "N1_n1_a0.5": dict(a=0.5, n=1.0),
@@ -430,6 +483,7 @@ def run(quick: bool = False, out: Path | None = None) -> dict[str, Any]:
     }
     res["equal_error"] = _equal_error(quick)
     res["bias"] = _bias_study(quick)
+    res["noise_correlation_time"] = _tau_study(quick)
     res["control_variates"] = _control_variates(quick)
     res["kink_dt"] = _kink_dt_study(quick)
     res["series"] = series(quick, res)

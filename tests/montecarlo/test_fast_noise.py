@@ -1,0 +1,121 @@
+"""The joint step: exact linear transition of (x, v, V, xi), from slow noise to the white-noise limit."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+import scipy.linalg
+
+from fpe_harvester import Harvester, Status, solve
+from fpe_harvester.errors import MethodNotAvailableError, ParameterError
+from fpe_harvester.exact import mode_moments
+from montecarlo import simulate
+from montecarlo.scheme import joint_matrices, noise_factor, uses_joint_step
+from montecarlo.twin import TWIN_MOMENTS, twin_expectations
+
+FAST = dict(tol=0.01, paths=64, t_run=50.0, min_replicas=8, progress=False)
+
+
+def _van_loan(h: Harvester, dt: float) -> np.ndarray:
+    """Noise covariance of the linear step by Van Loan's formula over the whole step."""
+    p = h.params
+    A = np.zeros((4, 4))
+    A[0, 1], A[1, 0], A[1, 1], A[1, 2], A[1, 3] = 1.0, -2 * h.a / p.m, -p.gamma, -p.Kv / p.m, p.sigma / p.m
+    A[2, 1], A[2, 2], A[3, 3] = p.Kc, -1.0 / p.tau_p, -1.0 / p.tau
+    C = np.zeros((8, 8))
+    C[:4, :4] = -A * dt
+    C[3, 7] = 2.0 * p.D / p.tau**2 * dt
+    C[4:, 4:] = A.T * dt
+    F = scipy.linalg.expm(C)
+    return F[4:, 4:].T @ F[:4, 4:]
+
+
+@pytest.mark.parametrize("tau", [0.3, 1.0, 5.0])
+def test_noise_covariance_matches_van_loan_where_it_is_well_conditioned(tau: float) -> None:
+    h = Harvester.build(a=0.7, tau=tau, D=2.0)
+    P, _, Q = joint_matrices(h, 0.05)
+    ref = _van_loan(h, 0.05)
+    assert np.abs(Q - ref).max() < 1e-12 * np.abs(ref).max()
+    L = noise_factor(Q)
+    assert np.abs(L @ L.T - Q).max() < 1e-13 * np.abs(Q).max()
+    assert np.all(L[3, 1:] == 0.0)
+
+
+@pytest.mark.parametrize("tau", [1e-8, 1e-4, 1e-2, 1.0, 100.0])
+def test_joint_twin_of_a_unit_has_the_exact_moments(tau: float) -> None:
+    # the joint step is the exact transition of a harmonic unit: its stationary moments are
+    # the continuous-time ones at any step, whatever tau is against it (to round-off, which
+    # grows like the xi variance D/tau against the others: 2e-7 at tau = 1e-8, where Q is
+    # doubled 30 times from a step of 1e-3 / |A|)
+    lin = Harvester.build(a=0.5, tau=tau)
+    exact = {key: float(val[0]) for key, val in mode_moments(lin.mode_stiffness(), lin.params).items()}
+    t = twin_expectations(lin, 0.05, joint=True)
+    for name in ("V2", "vV", "v2", "x2", "vxi"):
+        assert t[name] == pytest.approx(exact[name], rel=1e-9 if tau >= 1e-4 else 1e-6), name
+
+
+def test_white_noise_limit_is_continuous() -> None:
+    # tau -> 0 at fixed D: the step's matrices converge like tau/dt, to the white-noise step
+    # (intensity 2D on v: the v increment's variance is 2 D sigma^2 dt/m^2 less the damping)
+    mats = [joint_matrices(Harvester.build(a=0.5, tau=tau), 0.02) for tau in (1e-4, 1e-6, 1e-8)]
+    d = [np.abs(Q1[:3, :3] - Q2[:3, :3]).max() + np.abs(P1[:3, :3] - P2[:3, :3]).max()
+         for (P1, _, Q1), (P2, _, Q2) in zip(mats, mats[1:])]
+    assert d[0] < 0.02 * mats[-1][2][1, 1]
+    assert d[1] < 0.02 * d[0]
+    assert mats[-1][2][1, 1] == pytest.approx(2.0 * 0.02, rel=0.05)
+
+
+def test_step_choice_and_refusal() -> None:
+    assert uses_joint_step(Harvester.build(a=0.5, n=3, tau=1e-4), 0.02)
+    assert not uses_joint_step(Harvester.build(a=0.5, n=3, tau=1.0), 0.02)
+    assert not uses_joint_step(Harvester.build(a=0.5, n=1, tau=1e-4), 0.02)
+    with pytest.raises(ParameterError, match="joint=True is not available here: the kink scheme"):
+        simulate(Harvester.build(a=0.5, n=1, tau=1e-4), dt=0.02, paths=2, replicas=1, t_run=1.0, joint=True)
+
+
+def test_twin_at_fast_noise_matches_its_expectations() -> None:
+    h = Harvester.build(a=0.5, n=3, tau=1e-4)
+    e = simulate(h, dt=0.02, paths=64, replicas=16, t_burn=0.0, t_run=50.0, seed=8, twin=1.2, start="twin")
+    assert e.notes["joint_step"]
+    m = e.moments(0)
+    for name in TWIN_MOMENTS:
+        x = m["t_" + name]
+        se = x.std(ddof=1) / math.sqrt(x.size)
+        # at tau << dt the estimate of v xi is all but deterministic: round-off allowed
+        assert abs(x.mean() - e.twin_mean[name]) < 4 * se + 1e-12 * abs(x.mean()), name
+
+
+@pytest.mark.parametrize(("N", "k"), [(1, 0.0), (3, -0.2)])
+def test_fast_noise_harmonic_unit_matches_exact(N: int, k: float) -> None:
+    h = Harvester.build(a=0.5, n=2, N=N, k=k, tau=1e-4)
+    ex = solve(h, "exact")
+    mc = solve(h, "mc", seed=3, **FAST)
+    assert mc.status is Status.STABLE, mc.message
+    assert mc.info["joint_step"]
+    for name in ("eta", "V2", "Pin", "v2", "vV"):
+        value, err = mc.value(name)
+        ref = getattr(ex, name)
+        assert abs(value - ref) < 4 * err + 1e-12 * abs(value), (name, value, err, ref)
+
+
+def test_fast_noise_cubic_unit_agrees_with_fokker_planck() -> None:
+    h = Harvester.build(a=0.5, n=3, tau=1e-4)
+    fp = solve(h, "fpe", tol=1e-5)
+    mc = solve(h, "mc", seed=5, **FAST)
+    assert mc.status is Status.STABLE, mc.message
+    assert mc.info["joint_step"]
+    assert abs(mc.eta - fp.eta) < 4 * math.hypot(mc.eta_err, fp.eta_err), (mc.eta, mc.eta_err, fp.eta)
+
+
+def test_kink_refuses_a_tau_shorter_than_its_step() -> None:
+    # the kink scheme keeps xi frozen over a step: at tau = 1e-4 it had returned eta ~ 6e4
+    # (not converged, paths escaping); it now says why it cannot run
+    h = Harvester.build(a=0.5, n=1, tau=1e-4)
+    with pytest.raises(MethodNotAvailableError, match="tau = 0.0001 is too short for the kink scheme"):
+        solve(h, "mc", progress=False)
+    with pytest.raises(MethodNotAvailableError, match="shorter than dt = 0.001"):
+        solve(h, "mc", dt=1e-3, progress=False)
+    with pytest.raises(MethodNotAvailableError, match="integrates its piecewise flow with xi frozen"):
+        solve(h, "mc", joint=True, progress=False)
