@@ -813,6 +813,28 @@ def _start(gen, chol, sd, x, v, V, xi) -> None:
 
 
 @njit(cache=True, nogil=True)
+def _clamp_start(x: np.ndarray, kind: int, pp: np.ndarray, h: float) -> None:
+    """A Gaussian start can land deep in a steep wall, where even MAX_SUBSTEPS substeps of a
+    step h are unstable: such draws start at the deepest resolvable |x| (the burn-in forgets it)."""
+    if kind == KIND_KICK and pp[8] > 2.0:
+        xcap = (STIFF_LIMIT * MAX_SUBSTEPS**2 * pp[0] / (h * h * pp[7] * pp[8] * (pp[8] - 1.0))) \
+            ** (1.0 / (pp[8] - 2.0))
+        for j in range(x.shape[0]):
+            for p in range(x.shape[1]):
+                x[j, p] = min(max(x[j, p], -xcap), xcap)
+
+
+@njit(cache=True, nogil=True)
+def _live(w: np.ndarray) -> int:
+    """Paths still running (weight > 0; an escaped path has weight 0)."""
+    n = 0
+    for p in range(w.size):
+        if w[p] > 0.0:
+            n += 1
+    return n
+
+
+@njit(cache=True, nogil=True)
 def _run_frozen(gen, P: int, N: int, nburn: int, nrun: int, stride: int, cf_f: np.ndarray,
          cf_c: np.ndarray, pp: np.ndarray, kind: int, coupled: bool, cf_t: np.ndarray,
          pp_t: np.ndarray, twin: bool, chol: np.ndarray, sums: np.ndarray, counts: np.ndarray,
@@ -868,15 +890,7 @@ def _run_frozen(gen, P: int, N: int, nburn: int, nrun: int, stride: int, cf_f: n
     fext = np.zeros((N, P))
     esc_time[:] = -1.0
     _start(gen, chol, sd, xf, vf, Vf, xif)
-    if kind == KIND_KICK and pp[8] > 2.0:
-        # a Gaussian start can land deep in a steep wall, where even MAX_SUBSTEPS substeps
-        # are unstable: such draws start at the deepest resolvable |x| (the burn-in forgets it)
-        hc = cf_c[12] if coupled else cf_f[12]
-        xcap = (STIFF_LIMIT * MAX_SUBSTEPS**2 * pp[0] / (hc * hc * pp[7] * pp[8] * (pp[8] - 1.0))) \
-            ** (1.0 / (pp[8] - 2.0))
-        for j in range(N):
-            for p in range(P):
-                xf[j, p] = min(max(xf[j, p], -xcap), xcap)
+    _clamp_start(xf, kind, pp, cf_c[12] if coupled else cf_f[12])
     for j in range(N):
         for p in range(P):
             xc[j, p], vc[j, p], Vc[j, p], xic[j, p] = xf[j, p], vf[j, p], Vf[j, p], xif[j, p]
@@ -890,10 +904,7 @@ def _run_frozen(gen, P: int, N: int, nburn: int, nrun: int, stride: int, cf_f: n
     w2 = cf_f[14] / cf_c[14]
     half = nburn + nrun // 2
     for step in range(nburn + nrun):
-        live = 0
-        for p in range(P):
-            if w[p] > 0.0:
-                live += 1
+        live = _live(w)
         if live == 0:
             break
         meas = step >= nburn and (step - nburn) % stride == 0
@@ -972,15 +983,7 @@ def _run_joint(gen, P: int, N: int, nburn: int, nrun: int, stride: int, cf_f: np
     fext = np.zeros((N, P))
     esc_time[:] = -1.0
     _start(gen, chol, sd, xf, vf, Vf, xif)
-    if kind == KIND_KICK and pp[8] > 2.0:
-        # a Gaussian start can land deep in a steep wall, where even MAX_SUBSTEPS substeps
-        # are unstable: such draws start at the deepest resolvable |x| (the burn-in forgets it)
-        hc = cf_c[12] if coupled else cf_f[12]
-        xcap = (STIFF_LIMIT * MAX_SUBSTEPS**2 * pp[0] / (hc * hc * pp[7] * pp[8] * (pp[8] - 1.0))) \
-            ** (1.0 / (pp[8] - 2.0))
-        for j in range(N):
-            for p in range(P):
-                xf[j, p] = min(max(xf[j, p], -xcap), xcap)
+    _clamp_start(xf, kind, pp, cf_c[12] if coupled else cf_f[12])
     for j in range(N):
         for p in range(P):
             xc[j, p], vc[j, p], Vc[j, p], xic[j, p] = xf[j, p], vf[j, p], Vf[j, p], xif[j, p]
@@ -991,10 +994,7 @@ def _run_joint(gen, P: int, N: int, nburn: int, nrun: int, stride: int, cf_f: np
     h = cf_c[12] if coupled else cf_f[12]
     half = nburn + nrun // 2
     for step in range(nburn + nrun):
-        live = 0
-        for p in range(P):
-            if w[p] > 0.0:
-                live += 1
+        live = _live(w)
         if live == 0:
             break
         meas = step >= nburn and (step - nburn) % stride == 0
