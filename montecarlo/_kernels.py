@@ -394,6 +394,12 @@ def _kink_flow(x, v, V, stuck, f, w, cf, pp, counters, cs) -> None:
                 x0, v0, V0, stuck[j, p], f[j, p], cf, pp, counters, cs)
 
 
+@njit(cache=True, nogil=True, inline="always")
+def _stiff_amplitude(pp: np.ndarray, h: float) -> float:
+    """The |x| beyond which a step h sees h^2 U''(x)/m > STIFF_LIMIT (n > 2)."""
+    return (STIFF_LIMIT * pp[0] / (h * h * pp[7] * pp[8] * (pp[8] - 1.0))) ** (1.0 / (pp[8] - 2.0))
+
+
 @njit(cache=True, nogil=True)
 def _substeps(x: float, v: float, h: float, xstar: float, pp: np.ndarray) -> int:
     """Substeps a unit at (x, v) needs within a step h: :math:`h^2 U''(x_e)/m` at the farther of
@@ -456,7 +462,7 @@ def _d_step(x, v, V, xi, F, stuck, xm, fext, w, cf, pp, kind, counters, cs) -> N
     n_stiff = 0
     xstar = math.inf
     if kind == KIND_KICK and pp[8] > 2.0:
-        xstar = (STIFF_LIMIT * pp[0] / (h * h * pp[7] * pp[8] * (pp[8] - 1.0))) ** (1.0 / (pp[8] - 2.0))
+        xstar = _stiff_amplitude(pp, h)
     if xstar < pp[10]:  # stiffness reachable before the escape amplitude: scan the paths
         for p in range(P):
             for j in range(N):
@@ -600,7 +606,7 @@ def _d_step_joint(x, v, V, xi, F, xm, fext, eps, cf, pp, kind, rbm, rbx, pvx, w,
     n_stiff = 0
     xstar = math.inf
     if kicks and pp[8] > 2.0:
-        xstar = (STIFF_LIMIT * pp[0] / (h * h * pp[7] * pp[8] * (pp[8] - 1.0))) ** (1.0 / (pp[8] - 2.0))
+        xstar = _stiff_amplitude(pp, h)
     if xstar < pp[10]:
         for p in range(P):
             for j in range(N):
@@ -817,8 +823,7 @@ def _clamp_start(x: np.ndarray, kind: int, pp: np.ndarray, h: float) -> None:
     """A Gaussian start can land deep in a steep wall, where even MAX_SUBSTEPS substeps of a
     step h are unstable: such draws start at the deepest resolvable |x| (the burn-in forgets it)."""
     if kind == KIND_KICK and pp[8] > 2.0:
-        xcap = (STIFF_LIMIT * MAX_SUBSTEPS**2 * pp[0] / (h * h * pp[7] * pp[8] * (pp[8] - 1.0))) \
-            ** (1.0 / (pp[8] - 2.0))
+        xcap = _stiff_amplitude(pp, h / MAX_SUBSTEPS)
         for j in range(x.shape[0]):
             for p in range(x.shape[1]):
                 x[j, p] = min(max(x[j, p], -xcap), xcap)
