@@ -24,6 +24,10 @@ Measured in one run:
 * cost and bias against the noise's correlation time tau = 1e-4, 1e-2, 1, 100 (n = 3): the
   solver to 1e-3 against the Fokker--Planck value, which step ran (joint below tau = 10 dt),
   and the coupled time-step differences of the default and the frozen-xi step;
+* steep walls n = 8, 12, 16, 32 (a = 0.5, single unit): the solver to 1e-3 against the
+  Fokker--Planck value, the escaped paths (none may escape: the system is confined), the
+  substeps' cost as path-steps per second against n = 3, and the coupled time-step difference
+  eta(0.01) - eta(0.02);
 * error-versus-time curves (``series``) for the combined benchmark (:mod:`.combined`);
 * the kink's time-step law (:mod:`validation.kinkstudy`): at a = 0.5, 1, 2, eta at fine steps
   0.04 ... 0.005 from runs with independent seeds, each Richardson-coupled, and the weak order
@@ -317,6 +321,46 @@ def _tau_study(quick: bool) -> dict[str, Any]:
     return out
 
 
+#: Exponents of the steep-wall study (:func:`_steep_study`), a = 0.5, single unit.
+STEEP_NS = (8.0, 12.0, 16.0, 32.0)
+
+
+def _steep_study(quick: bool) -> dict[str, Any]:
+    """Steep walls U = a|x|^n, n = 8 ... 32, a = 0.5, single unit: stability, cost and bias.
+
+    Per n: the Fokker--Planck value (tol 1e-5, or 1e-4 where that does not converge within
+    its budget), the Monte Carlo solver to a relative error of 1e-3 (1e-2 quick) within a
+    budget (wall time, replicas, dt, escaped paths, status, difference in combined errors),
+    the fine level's path-steps per CPU second relative to n = 3 on the same settings (what the
+    wall substeps cost), and the coupled difference eta(0.01) - eta(0.02) on common noise.
+    """
+    tol, budget = (1e-2, 30.0) if quick else (1e-3, 300.0)
+    t_run = 10.0 if quick else 50.0
+    # per CPU second: the machine may be shared, and the ratio is what the substeps cost
+    base = _rate(Harvester.build(a=0.5, n=3), 0.01, 256, 4, t_run)["path_steps_per_cpu_s"]
+    out: dict[str, Any] = {"tol": tol, "budget_s": budget, "n3_path_steps_per_s": base}
+    for i, n in enumerate(STEEP_NS):
+        h = Harvester.build(a=0.5, n=n)
+        row: dict[str, Any] = {}
+        for ftol in (1e-5, 1e-4):
+            fp = solve(h, "fpe", tol=ftol, max_seconds=60.0 if quick else 300.0)
+            row.update(fpe_tol=ftol, fpe_eta=fp.eta, fpe_eta_err=fp.eta_err, fpe_status=fp.status.value,
+                       fpe_wall_s=fp.info.get("seconds"))
+            if fp.ok:
+                break
+        r = solve(h, "mc", seed=80 + i, tol=tol, max_time=budget, progress=False)
+        row.update(mc_eta=r.eta, mc_eta_err=r.eta_err, mc_status=r.status.value, wall_s=r.info["wall_time"],
+                   replicas=r.info["replicas"], dt=r.info["dt"], escaped_paths=r.info["escaped_paths"],
+                   escape_fraction=r.info["escape_fraction"])
+        if r.eta is not None and fp.eta is not None:
+            row["mc_minus_fpe_in_combined_errors"] = (r.eta - fp.eta) / math.hypot(r.eta_err, fp.eta_err or 0.0)
+        rate = _rate(h, 0.01, 256, 4, t_run)["path_steps_per_cpu_s"]
+        row.update(path_steps_per_cpu_s=rate, cost_ratio_vs_n3=base / rate)
+        row["coupled_diff"] = _coupled_diff(h, quick, 90 + i, None)
+        out[f"n_{n:g}"] = row
+    return out
+
+
 #: Cases of the control-variate study: label -> Harvester.build arguments.
 CV_CASES = {
     "N1_n1_a0.5": dict(a=0.5, n=1.0),
@@ -484,6 +528,7 @@ def run(quick: bool = False, out: Path | None = None) -> dict[str, Any]:
     res["equal_error"] = _equal_error(quick)
     res["bias"] = _bias_study(quick)
     res["noise_correlation_time"] = _tau_study(quick)
+    res["steep_walls"] = _steep_study(quick)
     res["control_variates"] = _control_variates(quick)
     res["kink_dt"] = _kink_dt_study(quick)
     res["series"] = series(quick, res)
