@@ -211,6 +211,7 @@ def _nonlinear_cases(ctx: Context) -> list[tuple[str, Callable[[], list[CheckRes
         cases += [
             fpe("tiny a = 1e-3, n = 3", b(a=1e-3, n=3)),
             fpe("large n = 8", b(a=0.5, n=8)),
+            fpe("large n = 16", b(a=0.5, n=16)),
             fpe("tau = 1e-4, n = 3", b(a=0.5, n=3, tau=1e-4)),
             fpe("tau = 100, n = 3", b(a=0.5, n=3, tau=100.0)),
             fpe("tau_p = 1e3, n = 3", b(a=0.5, n=3, tau_p=1e3)),
@@ -218,7 +219,9 @@ def _nonlinear_cases(ctx: Context) -> list[tuple[str, Callable[[], list[CheckRes
             fpe("D = 100, n = 1", b(a=0.5, n=1, D=100.0)),
             mc("m = 1e-3 (stiff), n = 3", b(a=0.5, n=3, m=1e-3)),
             mc("large n = 12", b(a=0.5, n=12)),
+            mc("large n = 16", b(a=0.5, n=16)),
             mc("tau = 1e-4, n = 3", b(a=0.5, n=3, tau=1e-4)),
+            mc("tau = 100, n = 3", b(a=0.5, n=3, tau=100.0)),
             mc("D = 100, n = 3", b(a=0.5, n=3, D=100.0)),
             mc("tiny a = 1e-3, n = 3", b(a=1e-3, n=3)),
         ]
