@@ -32,6 +32,7 @@ from skfem import Basis
 from ..errors import MethodNotAvailableError, NotConvergedError, ParameterError, check_int, check_real
 from ..model import Harvester
 from ..result import Stats, Status
+from .adapt import AdaptiveHermiteDG
 from .assemble import _element
 from .discretize import HermiteDG, Level, Whitening
 from .estimate import reported_eta_error
@@ -90,7 +91,7 @@ KINK_MAX_DOFS = 6_000_000
 SCHEMES = ("auto", "x", "xv")
 
 #: The x meshes of scheme ``"x"`` for n < 2 (see :func:`default_plan`).
-MESHES = ("auto", "algebraic", "geometric")
+MESHES = ("auto", "algebraic", "geometric", "adaptive")
 
 #: Geometric layers toward x = 0 of the ``"geometric"`` mesh and their ratio. Measured for
 #: n = 1.5, a = 1 at M = 8 on 8 bulk elements per half: 2 layers are within 3e-8 (relative
@@ -109,6 +110,8 @@ def resolve_mesh(h: Harvester, mesh: str) -> str:
     if mesh not in MESHES:
         raise ParameterError(f"mesh must be one of {', '.join(map(repr, MESHES))}, got {mesh!r} "
                              f"(type {type(mesh).__name__})")
+    if mesh == "adaptive":
+        return mesh
     if mesh == "geometric" and h.n >= 2.0:
         raise ParameterError(f"mesh='geometric' grades toward the non-smooth force at x = 0 of n < 2, "
                              f"got n = {h.n!r}; use mesh='auto'")
@@ -345,7 +348,9 @@ def stationary(
         if weight is not None and not isinstance(weight, Whitening):
             raise ParameterError(f"weight must be a Whitening or None, got {type(weight).__name__}")
         w = Whitening.of(h) if weight is None else weight
-        ref = refine(HermiteDG(h, plan.mesh(h, w), plan.order, w), tol, plan, progress)
+        xdisc = (AdaptiveHermiteDG(h, plan.mesh(h, w), plan.order, w) if resolve_mesh(h, mesh) == "adaptive"
+                 else HermiteDG(h, plan.mesh(h, w), plan.order, w))
+        ref = refine(xdisc, tol, plan, progress)
     stats = _stats(h, ref, tol)
     lv = None if ref.best is None else ref.best.level
     if lv is None:
