@@ -109,7 +109,8 @@ class AdaptiveHermiteDG:
     #: Refine as soon as the first mesh check fails (:func:`~.refine._hermite`): a step
     #: adds only the marked elements, so an early step costs little.
     refine_early: bool = True
-    #: Mesh checks at M - 4 but not below M = 8 (the uniform refinement: 6). The marking
+    #: Mesh checks at M - 4 but, from M = 10 on, not below M = 8 (the uniform refinement:
+    #: not below 6). The marking
     #: follows the highest degree solved, and the mesh error of M = 6 on such a mesh says
     #: little about it: n = 6, a = 1, 10 elements per half adapted once more, at M = 6 the
     #: two meshes differ by 1.3e-4 (relative eta), at M = 8 by 2e-6.

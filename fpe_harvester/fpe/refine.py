@@ -448,8 +448,9 @@ def _hermite_estimate(levels: _Levels, nh: int, M: int, algebraic: bool, mesh_gu
 
 def _mesh_check(levels: _Levels, est: Estimate, nh: int, Mc: int | None = None,
                 enough: float = 0.0) -> Estimate:
-    """The mesh error of ``nh`` elements per half, measured at M - 4 (at least the
-    discretization's ``check_floor``, default its ``mesh_check_degree``; or at ``Mc``)
+    """The mesh error of ``nh`` elements per half, measured at M - 4 (at least its
+    ``mesh_check_degree``, and at least the discretization's ``check_floor`` if that is
+    below M - 2; or at ``Mc``)
     against twice the elements (the next mesh of the discretization).
 
     With the difference d of the two meshes and an error :math:`\\propto N^{-q}`, the
@@ -467,7 +468,7 @@ def _mesh_check(levels: _Levels, est: Estimate, nh: int, Mc: int | None = None,
     M = est.level.M
     if Mc is None:
         floor = getattr(levels.disc, "check_floor", levels.disc.mesh_check_degree)
-        Mc = min(M, max(M - 4, floor))
+        Mc = min(M, max(M - 4, min(floor, M - 2), levels.disc.mesh_check_degree))
     a, b = levels.get(Mc, nh), levels.get(Mc, 2 * nh)
     # A third, coarser mesh gives the observed order, but only at a low degree: at high M
     # a coarse mesh is numerically meaningless for steep potentials.

@@ -54,9 +54,22 @@ current design; numbers in the closing note of the issue as well):
 * *Choosing the mesh at a low degree* (M = 6, ladder of meshes): the mesh error at M = 6
   overestimates that at M = 12 by 8-10x for steep walls and picked meshes 1.5-2x too fine.
 
+*Uniform against element-wise mesh refinement* (:func:`meshes`, in the same run, interleaved):
+``mesh="algebraic"`` (every element bisected at a mesh step, the previous design) against
+``mesh="adaptive"`` (only the elements that :mod:`fpe_harvester.fpe.adapt` marks) for
+n in {1.25, 1.5, 1.75} x a in {0.5, 1, 2} and n = 8, a in {0.5, 1, 2} at 1e-4 and 1e-6,
+and n in {2, 3, 4, 6} x a in {0.5, 1, 2} at 1e-4 (the ratio of times, goal <= 1.2). Runs
+under 3 s are repeated (three of each mesh, alternating) and the medians compared; budgets
+are modest (:data:`MESH_BUDGET`), so "not converged" there means "not within the budget".
+The actual error of each 1e-4 run is taken against the case's 1e-6 run with the smaller
+reported error (a convergence check: the same discretization family), with that run's
+error as the uncertainty.
+
 ``python -m validation.bench.fpe [--quick] [--out DIR]`` runs it (the full one takes
-20-40 minutes, most of it in the 1e-6 runs) and writes ``bench_fpe.json`` and
-``bench_fpe.png``.
+40-70 minutes, most of it in the 1e-6 runs) and writes ``bench_fpe.json`` and
+``bench_fpe.png``; ``python -m validation.bench.fpe --meshes [--quick] [--out DIR]`` runs
+only the mesh comparison (20-30 minutes on 2 loaded cores) and writes
+``bench_fpe_meshes.json``.
 """
 
 from __future__ import annotations
@@ -72,7 +85,7 @@ from fpe_harvester import Harvester
 from fpe_harvester.fpe import discretize, stationary
 from validation.bench.cli import bench_main, save_benchmark
 
-__all__ = ["STEM", "PREVIOUS", "PREVIOUS_SERIES_N3", "run", "work", "table", "series"]
+__all__ = ["STEM", "PREVIOUS", "PREVIOUS_SERIES_N3", "run", "run_meshes", "meshes", "work", "table", "series"]
 
 #: Name of the written ``.json`` and ``.png``.
 STEM = "bench_fpe"
@@ -179,6 +192,142 @@ def _case(n: float, a: float, tols: list[float], budget: float, mc_rel: float | 
     return case
 
 
+#: The two mesh refinements compared by :func:`meshes` (uniform first: the previous design).
+MESH_RULES = ("algebraic", "adaptive")
+
+#: Cases of :func:`meshes`: (n, a, tolerances).
+MESH_CASES = ([(n, a, (1e-4, 1e-6)) for n in (1.25, 1.5, 1.75) for a in (0.5, 1.0, 2.0)]
+              + [(8.0, a, (1e-4, 1e-6)) for a in (0.5, 1.0, 2.0)]
+              + [(n, a, (1e-4,)) for n in (2.0, 3.0, 4.0, 6.0) for a in (0.5, 1.0, 2.0)])
+
+#: Wall-time budget (s) of one run of :func:`meshes` by tolerance (the goals: < 10 s for
+#: 1 < n < 2 at 1e-4, < 1.5 s for n = 8, a = 2 at 1e-4, < 20 s for n = 8, a = 0.5 at 1e-6).
+MESH_BUDGET = {1e-4: 25.0, 1e-6: 30.0}
+
+#: Goals of issue 19 per (n, a, tol): seconds.
+MESH_GOALS = {**{(n, a, 1e-4): 10.0 for n in (1.25, 1.5, 1.75) for a in (0.5, 1.0, 2.0)},
+              (8.0, 2.0, 1e-4): 1.5, (8.0, 0.5, 1e-6): 20.0}
+
+
+def _mesh_run(h: Harvester, tol: float, mesh: str, budget: float) -> dict[str, Any]:
+    discretize._X_CACHE.clear()
+    t0 = time.perf_counter()
+    s = stationary(h, tol=tol, max_seconds=budget, grid=3, mesh=mesh).stats
+    sec = time.perf_counter() - t0
+    return {"seconds": sec, "eta": s.eta, "eta_err": s.eta_err, "status": s.status.value,
+            "M": s.info.get("M"), "elements": s.info.get("elements"), "dofs": s.info.get("dofs"),
+            "work_GF": work(s.info.get("history", []))}
+
+
+def _mesh_pair(h: Harvester, tol: float, budget: float, repeat_below: float = 3.0) -> dict[str, Any]:
+    """Both refinements at ``tol``, alternating; runs under ``repeat_below`` s are repeated
+    (three of each) and the medians kept."""
+    runs: dict[str, list[dict[str, Any]]] = {m: [] for m in MESH_RULES}
+    for k in range(3):
+        for m in MESH_RULES:
+            runs[m].append(_mesh_run(h, tol, m, budget))
+        if k == 0 and max(r[0]["seconds"] for r in runs.values()) >= repeat_below:
+            break
+    out: dict[str, Any] = {}
+    for m, rs in runs.items():
+        r = dict(rs[-1])
+        r["seconds_all"] = [x["seconds"] for x in rs]
+        r["seconds"] = float(np.median(r["seconds_all"]))
+        out[m] = r
+    out["time_ratio"] = out["adaptive"]["seconds"] / out["algebraic"]["seconds"]
+    return out
+
+
+def meshes(quick: bool = False) -> dict[str, Any]:
+    """Uniform (``"algebraic"``) against element-wise (``"adaptive"``) mesh refinement, one
+    run interleaved (see the module docstring). ``quick``: n = 8, a = 2 and n = 1.5, a = 0.5
+    at 1e-3 and n = 3, a = 1 at 1e-4.
+
+    Returns
+    -------
+    dict
+        ``cases`` (per case and tol both runs, their time ratio, the actual errors against
+        the reference) and ``summary`` (goals met, bound held, ratios for n >= 2).
+    """
+    plan = ([(8.0, 2.0, (1e-3,)), (1.5, 0.5, (1e-3,)), (3.0, 1.0, (1e-4,))] if quick else MESH_CASES)
+    cases: dict[str, Any] = {}
+    for n, a, tols in plan:
+        h = Harvester.build(a=a, n=n)
+        case: dict[str, Any] = {"n": n, "a": a, "runs": {}}
+        for tol in tols:
+            case["runs"][f"{tol:g}"] = _mesh_pair(h, tol, MESH_BUDGET.get(tol, 25.0))
+            goal = MESH_GOALS.get((n, a, tol))
+            if goal is not None:
+                for m in MESH_RULES:
+                    r = case["runs"][f"{tol:g}"][m]
+                    r["goal_seconds"] = goal
+                    r["goal_met"] = r["status"] == "stable" and r["seconds"] < goal
+        if len(tols) > 1:
+            _actual_errors(case, f"{max(tols):g}", f"{min(tols):g}")
+        cases[f"n={n:g}, a={a:g}"] = case
+        print(_mesh_lines({f"n={n:g}, a={a:g}": case}), flush=True)
+    return {"cases": cases, "summary": _mesh_summary(cases)}
+
+
+def _actual_errors(case: dict[str, Any], loose: str, tight: str) -> None:
+    """Actual errors of the ``loose`` runs against the ``tight`` run with the smaller
+    reported error (its error the uncertainty of the comparison)."""
+    refs = [r for m, r in case["runs"][tight].items() if m in MESH_RULES and r["eta"] is not None]
+    if not refs:
+        return
+    ref = min(refs, key=lambda r: r["eta_err"])
+    case["reference"] = {"eta": ref["eta"], "eta_err": ref["eta_err"], "status": ref["status"]}
+    for m in MESH_RULES:
+        r = case["runs"][loose][m]
+        if r["eta"] is None:
+            continue
+        actual = abs(r["eta"] - ref["eta"])
+        r["actual_err"] = actual
+        r["reported_over_actual"] = r["eta_err"] / actual if actual > 0 else math.inf
+        r["bounds_actual"] = bool(r["eta_err"] + ref["eta_err"] >= actual)
+        # decisive only where the reference is 10x tighter than the run it checks
+        r["reference_10x_tighter"] = bool(ref["eta_err"] <= 0.1 * r["eta_err"])
+
+
+def _mesh_summary(cases: dict[str, Any]) -> dict[str, Any]:
+    runs = [(name, tol, m, r) for name, c in cases.items() for tol, pair in c["runs"].items()
+            for m, r in pair.items() if m in MESH_RULES]
+    out: dict[str, Any] = {}
+    for m in MESH_RULES:
+        checked = [r for _, _, mm, r in runs if mm == m and "bounds_actual" in r]
+        decisive = [r for r in checked if r["reference_10x_tighter"]]
+        ratios = [r["reported_over_actual"] for r in checked if math.isfinite(r["reported_over_actual"])]
+        out[m] = {
+            "goals_met": [f"{name} tol {tol}" for name, tol, mm, r in runs if mm == m and r.get("goal_met")],
+            "goals_missed": [f"{name} tol {tol}: {r['status']} {r['seconds']:.1f} s (goal {r['goal_seconds']} s)"
+                             for name, tol, mm, r in runs if mm == m and r.get("goal_met") is False],
+            "bound_holds": f"{sum(r['bounds_actual'] for r in checked)} of {len(checked)}",
+            "bound_holds_10x_reference": f"{sum(r['bounds_actual'] for r in decisive)} of {len(decisive)}",
+            "reported_over_actual_median": float(np.median(ratios)) if ratios else None,
+        }
+    smooth = {name: c["runs"]["0.0001"]["time_ratio"] for name, c in cases.items()
+              if c["n"] >= 2.0 and "0.0001" in c["runs"]}
+    out["time_ratio_adaptive_over_uniform_n_ge_2"] = smooth
+    out["n_2_to_6_within_1.2"] = f"{sum(v <= 1.2 for k, v in smooth.items() if cases[k]['n'] <= 6)} of " \
+                                 f"{sum(1 for k in smooth if cases[k]['n'] <= 6)}"
+    return out
+
+
+def _mesh_lines(cases: dict[str, Any]) -> str:
+    lines = []
+    for name, c in cases.items():
+        for tol, pair in c["runs"].items():
+            cells = []
+            for m in MESH_RULES:
+                r = pair[m]
+                act = f"{r['actual_err'] / r['eta']:.1e}" if "actual_err" in r else "-"
+                rep = f"{r['eta_err'] / r['eta']:.1e}" if r["eta"] else "-"
+                cells.append(f"{m[:5]} {r['status'][:6]:6} {r['seconds']:6.2f}s M={r['M']} el={r['elements']} "
+                             f"rep={rep} act={act}")
+            lines.append(f"{name:14} {tol:>6} | " + " | ".join(cells) + f" | ratio {pair['time_ratio']:.2f}")
+    return "\n".join(lines)
+
+
 def run(quick: bool = False, out: pathlib.Path | None = None) -> dict:
     """Measure time to tolerance, reported and actual errors, and the Monte Carlo ratio.
 
@@ -206,7 +355,7 @@ def run(quick: bool = False, out: pathlib.Path | None = None) -> dict:
     for n, a, tols in plan:
         cases[f"n={n:g}, a={a:g}"] = _case(n, a, tols, budget, mc_rel, 60.0)
     result = {"quick": quick, "cases": cases, "targets": TARGETS, "series": series(quick),
-              "summary": _summary(cases)}
+              "summary": _summary(cases), "meshes": meshes(quick)}
     if not quick:
         from validation.bench import kink
 
@@ -339,6 +488,46 @@ def _plot(result: dict, path: pathlib.Path) -> None:
     plt.close(fig)
 
 
+def run_meshes(quick: bool = False, out: pathlib.Path | None = None) -> dict:
+    """Only :func:`meshes`, written to ``bench_fpe_meshes.json`` (and its plot)."""
+    result = {"quick": quick, **meshes(quick)}
+    save_benchmark(result, out, f"{STEM}_meshes", _plot_meshes)
+    return result
+
+
+def _plot_meshes(result: dict, path: pathlib.Path) -> None:
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    fig, ax = plt.subplots(figsize=(6, 4.2))
+    for tol, marker in (("0.0001", "o"), ("1e-06", "s")):
+        xs, ys = [], []
+        for c in result["cases"].values():
+            pair = c["runs"].get(tol)
+            if pair:
+                xs.append(pair["algebraic"]["seconds"])
+                ys.append(pair["adaptive"]["seconds"])
+        if xs:
+            ax.loglog(xs, ys, marker, mfc="none", label=f"tol {tol}")
+    lo, hi = 0.05, 60.0
+    ax.loglog([lo, hi], [lo, hi], "k-", lw=0.8, label="equal")
+    ax.set_xlabel("uniform refinement [s]")
+    ax.set_ylabel("element-wise refinement [s]")
+    ax.legend(fontsize=8)
+    fig.tight_layout()
+    fig.savefig(path, dpi=120)
+    plt.close(fig)
+
+
 if __name__ == "__main__":
-    res = bench_main(run, __doc__, drop=("cases", "series"))
-    print(table(res))
+    import sys
+
+    if "--meshes" in sys.argv:
+        sys.argv.remove("--meshes")
+        res = bench_main(run_meshes, __doc__, drop=("cases",))
+        print(_mesh_lines(res["cases"]))
+    else:
+        res = bench_main(run, __doc__, drop=("cases", "series", "meshes"))
+        print(table(res))
