@@ -50,12 +50,15 @@ class FokkerPlanck:
     scheme : str
         ``"auto"`` (default): for the kink n = 1 DG in (x, v) with Hermite functions of
         (V, xi) (``"xv"``, :mod:`~fpe_harvester.fpe.kink`), else DG in x with Hermite
-        functions of (v, V, xi) (``"x"``). ``"x"`` forces the latter for n = 1 too
-        (benchmarks compare them). For ``"xv"``, ``elements`` is not used and ``order`` is
-        the DG degree in x and v.
+        functions of (v, V, xi) (``"x"``). ``"x"`` forces the latter for n = 1 too, ``"xv"``
+        the former for 1 < n < 2 (benchmarks compare them). For ``"xv"``, ``elements`` is
+        not used and ``order`` is the DG degree in x and v.
     mesh : str
-        x mesh of scheme ``"x"`` for n < 2: ``"auto"`` (default, the algebraic one),
-        ``"algebraic"`` or ``"geometric"`` (see :func:`~fpe_harvester.fpe.stationary`).
+        x mesh of scheme ``"x"``: ``"auto"`` (default, the algebraic one), ``"algebraic"``
+        (graded toward 0 for n < 2, toward the walls otherwise; a mesh step bisects every
+        element), ``"geometric"`` (n < 2: layers toward 0) or ``"adaptive"`` (any n: a
+        mesh step bisects only the elements an error indicator marks, see
+        :mod:`~fpe_harvester.fpe.adapt`).
 
     Examples
     --------

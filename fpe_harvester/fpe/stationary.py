@@ -104,8 +104,10 @@ def resolve_mesh(h: Harvester, mesh: str) -> str:
     """The x mesh ``"algebraic"`` or ``"geometric"`` that ``mesh`` means for ``h``.
 
     ``"auto"`` is ``"algebraic"``: for 1 < n < 2 it measured at least as accurate per
-    unknown as the geometric one (see :func:`default_plan`). For n >= 2 the mesh is graded
-    toward the walls only and ``"algebraic"`` names that mesh; ``"geometric"`` is refused.
+    unknown as the geometric one (see :func:`default_plan`), and the element-wise
+    refinement (``"adaptive"``, any n) did not measure faster overall (see
+    :mod:`validation.bench.fpe`). For n >= 2 the mesh is graded toward the walls only and
+    ``"algebraic"`` names that mesh; ``"geometric"`` is refused.
     """
     if mesh not in MESHES:
         raise ParameterError(f"mesh must be one of {', '.join(map(repr, MESHES))}, got {mesh!r} "
@@ -280,7 +282,9 @@ def stationary(
         DG in (x, v), Hermite functions of (V, xi) (:mod:`.kink`, only n = 1; there
         ``order`` is the DG degree on its base mesh, ``half_elements`` the refinement's
         mesh knob, which raises the degree by log2 of it, default 1; a given ``M`` alone
-        fixes the level); ``"auto"`` (default): ``"xv"`` for n = 1, else ``"x"``.
+        fixes the level); ``"auto"`` (default): ``"xv"`` for n = 1, else ``"x"``. ``"xv"``
+        also takes 1 < n < 2 (force :math:`a n |x|^{n-1}` in the v transport, one core
+        element per axis instead of the kink's layers toward the trap).
     weight : Whitening, optional
         Gaussian weight of the Hermite expansion of scheme ``"x"`` (default
         :meth:`Whitening.of`, the equivalent harmonic unit's). Another weight changes how fast
@@ -290,8 +294,10 @@ def stationary(
         x mesh of scheme ``"x"`` for n < 2: ``"algebraic"`` (nodes graded like
         :math:`t^{2.5}` toward 0), ``"geometric"`` (geometric layers toward 0, Gauss--Jacobi
         quadrature of the force on the element at 0), or ``"auto"`` (default, the
-        algebraic one; see :func:`default_plan`). For n >= 2 only ``"auto"`` and
-        ``"algebraic"`` (the same wall-graded mesh).
+        algebraic one; see :func:`default_plan`). For n >= 2 ``"auto"`` and
+        ``"algebraic"`` are the same wall-graded mesh. ``"adaptive"`` (any n) starts from
+        the algebraic mesh and bisects at each mesh step only the elements that the error
+        indicator of :mod:`.adapt` marks (the others bisect all of them).
 
     Returns
     -------

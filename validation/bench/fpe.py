@@ -70,6 +70,12 @@ error as the uncertainty.
 ``bench_fpe.png``; ``python -m validation.bench.fpe --meshes [--quick] [--out DIR]`` runs
 only the mesh comparison (20-30 minutes on 2 loaded cores) and writes
 ``bench_fpe_meshes.json``.
+
+*Schemes for 1 < n < 2* (:func:`schemes`): DG in x with Hermite functions of (v, V, xi)
+(``scheme="x"``) against DG in (x, v) with Hermite functions of (V, xi) (``scheme="xv"``,
+the kink solver extended to the force :math:`a n |x|^{n-1}`) at 1e-4, with Monte Carlo at
+1e-3 for n = 1.25 and 1.5, a = 1. ``python -m validation.bench.fpe --schemes`` runs only
+that part (``bench_fpe_schemes.json``).
 """
 
 from __future__ import annotations
@@ -85,7 +91,7 @@ from fpe_harvester import Harvester
 from fpe_harvester.fpe import discretize, stationary
 from validation.bench.cli import bench_main, save_benchmark
 
-__all__ = ["STEM", "PREVIOUS", "PREVIOUS_SERIES_N3", "run", "run_meshes", "meshes", "work", "table", "series"]
+__all__ = ["STEM", "PREVIOUS", "PREVIOUS_SERIES_N3", "run", "run_meshes", "meshes", "run_schemes", "schemes", "work", "table", "series"]
 
 #: Name of the written ``.json`` and ``.png``.
 STEM = "bench_fpe"
@@ -355,7 +361,7 @@ def run(quick: bool = False, out: pathlib.Path | None = None) -> dict:
     for n, a, tols in plan:
         cases[f"n={n:g}, a={a:g}"] = _case(n, a, tols, budget, mc_rel, 60.0)
     result = {"quick": quick, "cases": cases, "targets": TARGETS, "series": series(quick),
-              "summary": _summary(cases), "meshes": meshes(quick)}
+              "summary": _summary(cases), "meshes": meshes(quick), "schemes": schemes(quick)}
     if not quick:
         from validation.bench import kink
 
@@ -488,11 +494,90 @@ def _plot(result: dict, path: pathlib.Path) -> None:
     plt.close(fig)
 
 
+#: Budget (s) of one run of :func:`schemes`.
+SCHEME_BUDGET = 45.0
+
+
+def schemes(quick: bool = False, mc_tol: float | None = 1e-3) -> dict[str, Any]:
+    """1 < n < 2 at tol = 1e-4 by the two schemes, interleaved: ``"x"`` (DG in x, Hermite in
+    (v, V, xi), the default mesh) and ``"xv"`` (DG in (x, v), Hermite in (V, xi)). The two
+    share no discretization error, so their difference against the sum of their reported
+    errors is a correctness check; Monte Carlo at ``mc_tol`` (n = 1.25 and 1.5, a = 1) is
+    a third, independent value. ``quick``: n = 1.5, a = 0.5 at 1e-2."""
+    plan = [(1.5, 0.5)] if quick else [(n, a) for n in (1.25, 1.5, 1.75) for a in (0.5, 1.0, 2.0)]
+    tol = 1e-2 if quick else 1e-4
+    cases: dict[str, Any] = {}
+    for n, a in plan:
+        h = Harvester.build(a=a, n=n)
+        case: dict[str, Any] = {"n": n, "a": a, "tol": tol}
+        for scheme in ("x", "xv"):
+            discretize._X_CACHE.clear()
+            t0 = time.perf_counter()
+            st = stationary(h, tol=tol, max_seconds=SCHEME_BUDGET, grid=3, scheme=scheme).stats
+            case[scheme] = {"seconds": time.perf_counter() - t0, "eta": st.eta, "eta_err": st.eta_err,
+                            "status": st.status.value, "M": st.info.get("M"), "dofs": st.info.get("dofs")}
+        x, xv = case["x"], case["xv"]
+        if x["eta"] is not None and xv["eta"] is not None:
+            case["difference"] = abs(x["eta"] - xv["eta"])
+            case["within_error_bars"] = bool(case["difference"] <= x["eta_err"] + xv["eta_err"])
+        if mc_tol is not None and not quick and a == 1.0 and n in (1.25, 1.5):
+            from fpe_harvester import solve
+
+            t0 = time.perf_counter()
+            mc = solve(h, "mc", tol=mc_tol)
+            case["monte_carlo"] = {"seconds": time.perf_counter() - t0, "eta": mc.eta, "eta_err": mc.eta_err,
+                                   "status": mc.status.value}
+        cases[f"n={n:g}, a={a:g}"] = case
+        print(_scheme_line(f"n={n:g}, a={a:g}", case), flush=True)
+    return {"cases": cases}
+
+
+def _scheme_line(name: str, c: dict[str, Any]) -> str:
+    cells = []
+    for scheme in ("x", "xv"):
+        r = c[scheme]
+        rel = f"{r['eta_err'] / r['eta']:.1e}" if r["eta"] else "-"
+        eta = f"{r['eta']:.7f}" if r["eta"] is not None else "-"
+        cells.append(f"{scheme:2} {r['status'][:6]:6} {r['seconds']:6.1f}s M={r['M']} eta={eta} rel={rel}")
+    mc = c.get("monte_carlo")
+    tail = f" | MC {mc['eta']:.5f} +- {mc['eta_err']:.1e} ({mc['seconds']:.0f} s)" if mc and mc["eta"] else ""
+    return f"{name:14} | " + " | ".join(cells) + f" | within bars: {c.get('within_error_bars')}" + tail
+
+
 def run_meshes(quick: bool = False, out: pathlib.Path | None = None) -> dict:
     """Only :func:`meshes`, written to ``bench_fpe_meshes.json`` (and its plot)."""
     result = {"quick": quick, **meshes(quick)}
     save_benchmark(result, out, f"{STEM}_meshes", _plot_meshes)
     return result
+
+
+def run_schemes(quick: bool = False, out: pathlib.Path | None = None) -> dict:
+    """Only :func:`schemes`, written to ``bench_fpe_schemes.json`` (and its plot)."""
+    result = {"quick": quick, **schemes(quick)}
+    save_benchmark(result, out, f"{STEM}_schemes", _plot_schemes)
+    return result
+
+
+def _plot_schemes(result: dict, path: pathlib.Path) -> None:
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    fig, ax = plt.subplots(figsize=(6, 4.2))
+    for scheme, marker in (("x", "o"), ("xv", "s")):
+        pts = [(c[scheme]["seconds"], c[scheme]["eta_err"] / c[scheme]["eta"]) for c in result["cases"].values()
+               if c[scheme]["eta"]]
+        if pts:
+            ax.loglog(*zip(*pts), marker, mfc="none", label=f"scheme {scheme!r}")
+    ax.axhline(result["cases"][next(iter(result["cases"]))]["tol"], color="k", lw=0.8, ls=":")
+    ax.set_xlabel("wall time [s]")
+    ax.set_ylabel("reported relative error on eta")
+    ax.set_title("1 < n < 2: DG in x vs DG in (x, v)", fontsize=9)
+    ax.legend(fontsize=8)
+    fig.tight_layout()
+    fig.savefig(path, dpi=120)
+    plt.close(fig)
 
 
 def _plot_meshes(result: dict, path: pathlib.Path) -> None:
@@ -524,10 +609,15 @@ def _plot_meshes(result: dict, path: pathlib.Path) -> None:
 if __name__ == "__main__":
     import sys
 
-    if "--meshes" in sys.argv:
+    if "--schemes" in sys.argv:
+        sys.argv.remove("--schemes")
+        res = bench_main(run_schemes, __doc__, drop=("cases",))
+        for name, case in res["cases"].items():
+            print(_scheme_line(name, case))
+    elif "--meshes" in sys.argv:
         sys.argv.remove("--meshes")
         res = bench_main(run_meshes, __doc__, drop=("cases",))
         print(_mesh_lines(res["cases"]))
     else:
-        res = bench_main(run, __doc__, drop=("cases", "series", "meshes"))
+        res = bench_main(run, __doc__, drop=("cases", "series", "meshes", "schemes"))
         print(table(res))
