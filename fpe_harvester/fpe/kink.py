@@ -37,7 +37,7 @@ On x = 0 the half plane receives, for v > 0, the mirror image of its own outflow
 maps the mode of node :math:`\\lambda` to that of :math:`-\\lambda` with a sign.
 
 For :math:`U = a|x|^n` with 1 < n < 2 the same hierarchy holds with :math:`a_0` replaced
-by the force :math:`-(a n/m)\,x^{n-1}` (the frame then must not shift with v): the speed of
+by the force :math:`-(a n/m)\\,x^{n-1}` (the frame then must not shift with v): the speed of
 a mode along a face v = const falls monotonically in x, so the upwind split of every face
 is still exact (:meth:`~.plane.DGLine.signed_parts`), and the :math:`x^{n-1}` masses use
 Gauss--Jacobi on the element at x = 0. There is no trap for n > 1 (the density is bounded),
