@@ -535,6 +535,8 @@ class KinkLevel:
         it (:math:`P(E < \\varepsilon) \\sim \\varepsilon^\\beta`); below the innermost layer of
         the mesh (:meth:`~.plane.PlaneMesh.x_nodes`) a level can only follow it polynomially.
         """
+        if self.hierarchy.A:
+            raise ValueError("energy_cdf is the kink's (n = 1: E = m v^2/2 + a|x|); this level has 1 < n < 2")
         eps = np.atleast_1d(np.asarray(eps, dtype=float))
         if np.any(~np.isfinite(eps)) or np.any(eps <= 0.0):
             raise ValueError(f"eps must be positive and finite, got {eps!r}")

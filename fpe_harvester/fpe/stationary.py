@@ -120,13 +120,23 @@ def resolve_mesh(h: Harvester, mesh: str) -> str:
     return "algebraic" if mesh == "auto" else mesh
 
 
-def resolve_scheme(h: Harvester, scheme: str) -> str:
-    """The scheme ``"x"`` or ``"xv"`` that ``scheme`` means for ``h`` (ParameterError if invalid)."""
+def resolve_scheme(h: Harvester, scheme: str, x_settings: bool = False) -> str:
+    """The scheme ``"x"`` or ``"xv"`` that ``scheme`` means for ``h`` (ParameterError if invalid).
+
+    ``"auto"`` is ``"xv"`` for 1 <= n < 2 and ``"x"`` otherwise; for 1 < n < 2 it is ``"x"``
+    when the caller set something only scheme ``"x"`` has (``x_settings``: a mesh, a
+    number of elements, a weight). Measured for 1 < n < 2 at tol = 1e-4 (one run,
+    ``python -m validation.bench.fpe --schemes``, 45 s budget): ``"xv"`` converges in 7 of
+    the 9 cases n in {1.25, 1.5, 1.75} x a in {0.5, 1, 2} (4.7-10.5 s), ``"x"`` in 4
+    (1.1-12.7 s; n = 1.25 at every a and n = 1.5 at a = 1, 2 not in 25-30 s); where both
+    converge ``"x"`` is faster at n = 1.75, a <= 1 (1.1 and 2.9 s against 4.7 and 5.7 s).
+    The two agree within their error bars in all 9.
+    """
     if scheme not in SCHEMES:
         raise ParameterError(f"scheme must be one of {', '.join(map(repr, SCHEMES))}, got {scheme!r} "
                              f"(type {type(scheme).__name__})")
     if scheme == "auto":
-        return "xv" if h.n == 1.0 else "x"
+        return "xv" if h.n == 1.0 or (1.0 < h.n < 2.0 and not x_settings) else "x"
     if scheme == "xv" and not 1.0 <= h.n < 2.0:
         raise ParameterError(f"scheme='xv' (DG in x and v) is built for the kink n = 1 and for 1 < n < 2, "
                              f"got n = {h.n!r}; "
@@ -282,9 +292,10 @@ def stationary(
         DG in (x, v), Hermite functions of (V, xi) (:mod:`.kink`, only n = 1; there
         ``order`` is the DG degree on its base mesh, ``half_elements`` the refinement's
         mesh knob, which raises the degree by log2 of it, default 1; a given ``M`` alone
-        fixes the level); ``"auto"`` (default): ``"xv"`` for n = 1, else ``"x"``. ``"xv"``
-        also takes 1 < n < 2 (force :math:`a n |x|^{n-1}` in the v transport, one core
-        element per axis instead of the kink's layers toward the trap).
+        fixes the level); ``"auto"`` (default): ``"xv"`` for 1 <= n < 2 (for n > 1 the force
+        :math:`a n |x|^{n-1}` in the v transport, one core element per axis instead of the
+        kink's layers toward the trap; ``"x"`` when ``mesh``, ``half_elements`` or
+        ``weight`` is given), else ``"x"`` (see :func:`resolve_scheme`).
     weight : Whitening, optional
         Gaussian weight of the Hermite expansion of scheme ``"x"`` (default
         :meth:`Whitening.of`, the equivalent harmonic unit's). Another weight changes how fast
@@ -329,7 +340,7 @@ def stationary(
     if max_gb is not None:
         max_gb = check_real("max_gb", max_gb, low=0.0, low_open=True)
     grid = check_int("grid", grid, low=3)
-    scheme = resolve_scheme(h, scheme)
+    scheme = resolve_scheme(h, scheme, x_settings=mesh != "auto" or half_elements is not None or weight is not None)
     if weight is not None and scheme != "x":
         raise ParameterError(f"weight is the Gaussian weight of scheme 'x'; got scheme {scheme!r} (n = {h.n:g})")
     resolve_mesh(h, mesh)

@@ -63,9 +63,8 @@ def test_eta_is_continuous_across_n_equals_2() -> None:
 
 
 def test_eta_is_smooth_toward_n_equals_1() -> None:
-    """n = 1.02, 1.05, 1.1 at a = 0.5 converge (tol 3e-3) and lie on a line within their
-    error bars. At tol = 1e-3 these n do not converge in 60 s: the Hermite expansion in v
-    converges algebraically there, as at the kink."""
+    """n = 1.02, 1.05, 1.1 at a = 0.5 converge (tol 3e-3, the default scheme: DG in (x, v))
+    and lie on a line within their error bars."""
     ns = (1.02, 1.05, 1.1)
     res = {n: solve(Harvester.build(a=0.5, n=n), "fpe", tol=3e-3) for n in ns}
     assert all(r.status.value == "stable" for r in res.values())
@@ -77,7 +76,8 @@ def test_eta_is_smooth_toward_n_equals_1() -> None:
 
 @pytest.mark.slow
 def test_eta_near_1_meets_the_kink() -> None:
-    """n = 1.02 (scheme 'x') against the kink n = 1 (scheme 'xv'): the difference is the
+    """n = 1.02 (one core element toward the origin) against the kink n = 1 (four layers
+    toward the trap), both by DG in (x, v): the difference is the
     slope of eta(n) over 0.02 (measured -0.15 per unit n from 1.05 to 1.1) within the
     error bars."""
     kink = solve(Harvester.build(a=0.5, n=1.0), "fpe", tol=1e-2)
@@ -131,3 +131,18 @@ def test_kink_scheme_takes_sub_quadratic_n() -> None:
     assert xv.status.value == x.status.value == "stable"
     assert xv.info["scheme"] == "xv"
     assert abs(xv.eta - x.eta) <= xv.eta_err + x.eta_err
+
+
+def test_auto_scheme_for_sub_quadratic_n() -> None:
+    """1 < n < 2 is solved by DG in (x, v) unless an x-only setting is given; the kink's
+    energy distribution is refused there (its energy is a|x| + m v^2/2)."""
+    from fpe_harvester.fpe.stationary import resolve_scheme
+
+    h = Harvester.build(a=1.0, n=1.5)
+    assert resolve_scheme(h, "auto") == "xv"
+    assert resolve_scheme(h, "auto", x_settings=True) == "x"
+    assert resolve_scheme(Harvester.build(a=1.0, n=2.0), "auto") == "x"
+    sol = stationary(h, tol=1e-2, M=4)
+    assert sol.stats.info["scheme"] == "xv"
+    with pytest.raises(ValueError, match="energy_cdf is the kink's"):
+        sol.level.energy_cdf(np.array([0.1]))
