@@ -75,7 +75,9 @@ only the mesh comparison (20-30 minutes on 2 loaded cores) and writes
 (``scheme="x"``) against DG in (x, v) with Hermite functions of (V, xi) (``scheme="xv"``,
 the kink solver extended to the force :math:`a n |x|^{n-1}`) at 1e-4, with Monte Carlo at
 1e-3 for n = 1.25 and 1.5, a = 1. ``python -m validation.bench.fpe --schemes`` runs only
-that part (``bench_fpe_schemes.json``).
+that part (``bench_fpe_schemes.json``); ``--convergence`` the error of single levels
+against unknowns and seconds at n = 1.5, a = 1 for both (:func:`convergence`,
+``bench_fpe_convergence.json`` and ``.png``).
 """
 
 from __future__ import annotations
@@ -91,7 +93,7 @@ from fpe_harvester import Harvester
 from fpe_harvester.fpe import discretize, stationary
 from validation.bench.cli import bench_main, save_benchmark
 
-__all__ = ["STEM", "PREVIOUS", "PREVIOUS_SERIES_N3", "run", "run_meshes", "meshes", "run_schemes", "schemes", "work", "table", "series"]
+__all__ = ["STEM", "PREVIOUS", "PREVIOUS_SERIES_N3", "run", "run_meshes", "meshes", "run_schemes", "schemes", "run_convergence", "convergence", "work", "table", "series"]
 
 #: Name of the written ``.json`` and ``.png``.
 STEM = "bench_fpe"
@@ -361,7 +363,8 @@ def run(quick: bool = False, out: pathlib.Path | None = None) -> dict:
     for n, a, tols in plan:
         cases[f"n={n:g}, a={a:g}"] = _case(n, a, tols, budget, mc_rel, 60.0)
     result = {"quick": quick, "cases": cases, "targets": TARGETS, "series": series(quick),
-              "summary": _summary(cases), "meshes": meshes(quick), "schemes": schemes(quick)}
+              "summary": _summary(cases), "meshes": meshes(quick), "schemes": schemes(quick),
+              "convergence": convergence(quick=quick)}
     if not quick:
         from validation.bench import kink
 
@@ -551,6 +554,78 @@ def run_meshes(quick: bool = False, out: pathlib.Path | None = None) -> dict:
     return result
 
 
+def convergence(n: float = 1.5, a: float = 1.0, quick: bool = False) -> dict[str, Any]:
+    """Error of single levels against unknowns and seconds for one 1 < n < 2 case: the
+    previous design (DG in x, Hermite in (v, V, xi), the default algebraic mesh with 8 and
+    16 elements per half, M = 4 ... 14) against DG in (x, v), Hermite in (V, xi) (base mesh
+    of one core element per axis, DG degree 3 and 4, M = 2 ... 12). The reference is a
+    tolerance-driven ``"xv"`` run at 2e-5 (its reported error in the result; a convergence
+    check: the reference shares the second family's discretization). Unknowns are those
+    solved (half domain, half plane)."""
+    from fpe_harvester.fpe.discretize import Whitening, solve_level
+    from fpe_harvester.fpe.kinkdisc import KinkDG, KinkSettings
+    from fpe_harvester.fpe.stationary import default_plan
+
+    h = Harvester.build(a=a, n=n)
+    ref_tol = 1e-3 if quick else 2e-5
+    t0 = time.perf_counter()
+    ref = stationary(h, tol=ref_tol, scheme="xv", max_seconds=240.0, grid=3).stats
+    out: dict[str, Any] = {"n": n, "a": a, "reference": {"eta": ref.eta, "eta_err": ref.eta_err,
+                                                         "status": ref.status.value, "tol": ref_tol,
+                                                         "seconds": time.perf_counter() - t0}, "series": {}}
+    w = Whitening.of(h)
+    plan = default_plan(h, scheme="x")
+    for nh, top in ((8, 8 if quick else 14), (16, 6 if quick else 12)):
+        pts = []
+        for M in range(4, top + 1, 2):
+            discretize._X_CACHE.clear()
+            lv = solve_level(h, M, plan.mesh(h, w, nh), plan.order, w)
+            pts.append({"M": M, "dofs": lv.dofs, "seconds": lv.seconds, "eta": lv.moments["eta"]})
+        out["series"][f"x: DG in x, {2 * nh} elements"] = pts
+    disc = KinkDG.build(h, KinkSettings(layers=1), ref_tol)
+    for size, top in ((1, 6 if quick else 12), (2, 4 if quick else 10)):
+        pts, lower = [], None
+        for M in range(2, top + 1, 2):
+            lv = lower = disc.solve(M, size, lower)
+            pts.append({"M": M, "dofs": lv.dofs, "seconds": lv.seconds, "eta": lv.moments["eta"]})
+        out["series"][f"xv: DG in (x, v), degree {disc.degree(size)}"] = pts
+    for pts in out["series"].values():
+        for pt in pts:
+            pt["error"] = abs(pt["eta"] - ref.eta) / abs(ref.eta)
+    return out
+
+
+def run_convergence(quick: bool = False, out: pathlib.Path | None = None) -> dict:
+    """Only :func:`convergence`, written to ``bench_fpe_convergence.json`` and its figure
+    (error against unknowns and against seconds)."""
+    result = {"quick": quick, **convergence(quick=quick)}
+    save_benchmark(result, out, f"{STEM}_convergence", _plot_convergence)
+    return result
+
+
+def _plot_convergence(result: dict, path: pathlib.Path) -> None:
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    fig, axes = plt.subplots(1, 2, figsize=(10, 4.2))
+    for (name, pts), marker in zip(result["series"].items(), ("o-", "s-", "^--", "v--")):
+        err = [max(p["error"], 1e-9) for p in pts]
+        axes[0].loglog([p["dofs"] for p in pts], err, marker, mfc="none", label=name)
+        axes[1].loglog([p["seconds"] for p in pts], err, marker, mfc="none", label=name)
+    ref = result["reference"]
+    for ax, xl in zip(axes, ("unknowns of the level (half domain)", "seconds of the level")):
+        ax.axhline(ref["eta_err"] / abs(ref["eta"]), color="k", lw=0.8, ls=":", label="reference's own error")
+        ax.set_xlabel(xl)
+        ax.set_ylabel("relative error of eta")
+    axes[0].set_title(f"n = {result['n']:g}, a = {result['a']:g}: DG in x (previous) vs DG in (x, v)", fontsize=9)
+    axes[0].legend(fontsize=7)
+    fig.tight_layout()
+    fig.savefig(path, dpi=120)
+    plt.close(fig)
+
+
 def run_schemes(quick: bool = False, out: pathlib.Path | None = None) -> dict:
     """Only :func:`schemes`, written to ``bench_fpe_schemes.json`` (and its plot)."""
     result = {"quick": quick, **schemes(quick)}
@@ -609,7 +684,12 @@ def _plot_meshes(result: dict, path: pathlib.Path) -> None:
 if __name__ == "__main__":
     import sys
 
-    if "--schemes" in sys.argv:
+    if "--convergence" in sys.argv:
+        sys.argv.remove("--convergence")
+        res = bench_main(run_convergence, __doc__, drop=("series",))
+        for name, pts in res["series"].items():
+            print(name, [(p["M"], p["dofs"], round(p["seconds"], 2), f"{p['error']:.1e}") for p in pts])
+    elif "--schemes" in sys.argv:
         sys.argv.remove("--schemes")
         res = bench_main(run_schemes, __doc__, drop=("cases",))
         for name, case in res["cases"].items():
@@ -619,5 +699,5 @@ if __name__ == "__main__":
         res = bench_main(run_meshes, __doc__, drop=("cases",))
         print(_mesh_lines(res["cases"]))
     else:
-        res = bench_main(run, __doc__, drop=("cases", "series", "meshes", "schemes"))
+        res = bench_main(run, __doc__, drop=("cases", "series", "meshes", "schemes", "convergence"))
         print(table(res))
