@@ -338,12 +338,15 @@ def refine(disc: Discretization, tol: float, plan: Plan, progress: Callable[[str
         while True:
             est, why = _hermite(levels, nh, M, tol, mesh, found)
             if why == "resolution":
+                outgrown = getattr(disc, "outgrown", None)
+                if outgrown is not None:
+                    outgrown(nh)  # an element-wise refinement bisects all elements this time
                 nh *= 2  # M is at the most this mesh carries: twice the elements, same M
                 M = est.level.M if est is not None else M
                 continue
             if why == "mesh":
                 nh *= 2  # the early mesh check failed and refining is cheap: refine now
-                M, mesh = est.level.M, est.error_x / abs(est.moments["eta"])
+                M, mesh = est.level.M, math.inf  # the new mesh gets its own early check
                 continue
             M = est.level.M
             est = _mesh_check(levels, est, nh, enough=MESH_SHARE * tol)

@@ -75,17 +75,33 @@ def test_marking_and_refined_mesh() -> None:
 
 
 def test_adaptive_refinement_meets_tol_and_its_error_bounds_a_tighter_run() -> None:
-    """n = 8, a = 2 from 4 elements per half: the degree outgrows the mesh, which is refined
-    where marked (fewer elements than uniform doubling); the reported error bounds the
-    difference to a run 10x tighter on the uniform refinement (a convergence check of the
-    estimate: same discretization family)."""
+    """n = 8, a = 2 from 4 elements per half: the degree outgrows the mesh, which is then
+    bisected everywhere, and the mesh check compares with a mesh refined where marked (not a
+    multiple of the uniform sizes); the reported error bounds the difference to a run 10x
+    tighter on the uniform refinement (a convergence check of the estimate: same
+    discretization family)."""
     h = Harvester.build(a=2.0, n=8.0)
     adapted = stationary(h, tol=1e-2, half_elements=4, mesh="adaptive", grid=3).stats
     tight = solve(h, "fpe", tol=1e-3, mesh="algebraic")
     assert adapted.status.value == tight.status.value == "stable"
-    assert adapted.info["elements"] % 8 != 0 or adapted.info["elements"] < 16
+    assert any(lv["elements"] % 8 for lv in adapted.info["history"])
     assert abs(adapted.eta - tight.eta) <= adapted.eta_err + tight.eta_err
     assert adapted.eta_err / adapted.eta <= 1e-2
+
+
+def test_adapted_mesh_carries_only_what_its_longest_elements_carry() -> None:
+    """Marked bisections do not raise the highest Hermite degree; a mesh the degree outgrew
+    is bisected everywhere (n = 8, a = 2 on 10 elements per half adapted from 8: M = 14 is
+    1.1e-3 off there)."""
+    h = Harvester.build(a=2.0, n=8.0)
+    w = Whitening.of(h)
+    disc = AdaptiveHermiteDG(h, default_plan(h).mesh(h, w, 8), 3, w)
+    disc.solve(8, 16)  # marks mesh 16 from a level on mesh 8
+    assert disc.max_degree(16) == disc.max_degree(8) == 12
+    disc.outgrown(16)
+    assert disc.max_degree(32) == 24
+    assert disc.mesh(32) is not None  # no level needed to bisect everything
+    assert disc.summary()["32"]["half_elements"] == 2 * disc.summary()["16"]["half_elements"]
 
 
 def test_adaptive_discretization_reports_its_meshes() -> None:
