@@ -20,6 +20,11 @@ at M = 12 (n = 6, a = 1: 16 elements are 1.4e-4 off at M = 6 and 1.7e-5 at M = 1
 chose meshes 1.5 times finer than needed. The numbers of the alternatives are in
 :mod:`validation.bench.fpe`.
 
+With the element-wise discretization (:class:`~.adapt.AdaptiveHermiteDG`, ``mesh="adaptive"``)
+"twice the elements" is the mesh whose marked elements are bisected (all of them when M
+outgrows the mesh), the first mesh check refines at once if it finds more than
+:data:`EARLY_SHARE` of tol, and checks from M = 10 on are made at M >= 8.
+
 A level that fails or gives unphysical moments (V2, Pin, v2, x2 <= 0) is dropped when it
 only feeds an estimate; when the level that would carry the result fails, the refinement
 stops. At a stop or a limit (max_M, elements, memory, max_seconds) the result is
