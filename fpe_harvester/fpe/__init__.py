@@ -1,8 +1,9 @@
 """Fokker--Planck solver for a single nonlinear harvester: Hermite functions in (v, V, xi),
 upwind discontinuous Galerkin in x (scikit-fem), tolerance-driven refinement. For the kink
-n = 1 (default there): discontinuous Galerkin in (x, v) on a mesh graded geometrically toward
-the trap at (0, 0), Hermite functions in (V, xi) only (:mod:`.kink`, :mod:`.kinkdisc`,
-:mod:`.plane`), behind the same refinement and error estimate.
+n = 1 and 1 < n < 2 (default there): discontinuous Galerkin in (x, v) on a mesh
+graded geometrically toward the trap at (0, 0), Hermite functions in (V, xi) only
+(:mod:`.kink`, :mod:`.kinkdisc`, :mod:`.plane`), behind the same refinement and error
+estimate. The x mesh refines uniformly or element by element (:mod:`.adapt`).
 
 Public API: the solver object :class:`FokkerPlanck` (``method="fpe"``), the richer
 :func:`stationary` returning an :class:`FPESolution` (density, conditional means,

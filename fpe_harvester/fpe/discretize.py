@@ -239,8 +239,9 @@ class Level:
 
     @property
     def size(self) -> int:
-        """The refinement's mesh knob: elements per half."""
-        return self.mesh.half_elements
+        """The refinement's mesh knob: elements per half (nominal on an adapted mesh,
+        :attr:`~.mesh.XMesh.size`)."""
+        return self.mesh.size
 
     @property
     def elements(self) -> int:

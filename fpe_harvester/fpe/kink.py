@@ -36,6 +36,13 @@ On x = 0 the half plane receives, for v > 0, the mirror image of its own outflow
 :math:`c_\\beta(0^-, v) = (-1)^{|\\beta|} c_\\beta(0^+, -v)`; in the mode basis the parity
 maps the mode of node :math:`\\lambda` to that of :math:`-\\lambda` with a sign.
 
+For :math:`U = a|x|^n` with 1 < n < 2 the same hierarchy holds with :math:`a_0` replaced
+by the force :math:`-(a n/m)\\,x^{n-1}` (the frame then must not shift with v): the speed of
+a mode along a face v = const falls monotonically in x, so the upwind split of every face
+is still exact (:meth:`~.plane.DGLine.signed_parts`), and the :math:`x^{n-1}` masses use
+Gauss--Jacobi on the element at x = 0. There is no trap for n > 1 (the density is bounded),
+so the mesh needs no layers toward the origin.
+
 The linear system (the stationary density is its null vector, normalized) is solved by
 GMRES in the mode basis, preconditioned by the exact solves of every mode's scalar
 transport with the diagonal of the mode coupling (:class:`ModePreconditioner`): the
@@ -150,13 +157,17 @@ class _Hierarchy:
     K1: sp.csr_matrix
     K2: sp.csr_matrix        # multiplies x (the frame's x shift)
     K2m: np.ndarray
-    a0: float                # speed of mode i on x > 0: a0 - gamma_e v + kappa x + lam_i
+    a0: float                # speed of mode i on x > 0: a0 - gamma_e v + kappa x - A x^q + lam_i
     gamma_e: float
     kappa: float
+    A: float = 0.0           # force -A x^q of U = a|x|^n with 1 < n < 2 (A = a n/m, q = n - 1)
+    q: float = 0.0
 
     @classmethod
     def of(cls, h: Harvester, M: int, frame: KinkFrame) -> _Hierarchy:
         p = h.params
+        if h.n != 1.0 and np.any(frame.shift != 0.0):
+            raise ValueError(f"a frame shifted with v needs the constant kink force (n = 1), got n = {h.n!r}")
         hb = HermiteBasis(M, dim=2)
         L, s = frame.factor(h)
         Li = np.linalg.inv(L)
@@ -177,7 +188,8 @@ class _Hierarchy:
         R[np.abs(R) < 1e-15] = 0.0
         par = hb.parity()
         return cls(hb, L, lam, R, R.T @ (K0 @ R), R.T @ (K1 @ R), R.T @ (par[:, None] * R),
-                   K0.tocsr(), K1.tocsr(), K2, R.T @ (K2 @ R), -h.a / p.m, gamma_e, kappa)
+                   K0.tocsr(), K1.tocsr(), K2, R.T @ (K2 @ R), -h.a / p.m if h.n == 1.0 else 0.0, gamma_e, kappa,
+                   0.0 if h.n == 1.0 else h.a * h.n / p.m, h.n - 1.0)
 
 
 @dataclass(frozen=True)
@@ -230,7 +242,9 @@ def _plane(h: Harvester, mesh: PlaneMesh, p: int, gamma_e: float, kappa: float) 
         tl, tr = X.left_of(node), X.right_of(node)
         Xpos = Xpos + sp.csr_matrix(np.outer(tl - tr, tl))
         Xneg = Xneg + sp.csr_matrix(np.outer(tl - tr, tr))
-    S_I = (-sp.kron(Dx, Mvv) - sp.kron(Mx, (-h.a / m) * Dv - gamma_e * Dvv) - kappa * sp.kron(X.mass(power=1), Dv)
+    # the force -U'(x)/m on x > 0: -a/m at the kink, -(a n/m) x^(n-1) for 1 < n < 2
+    Mf = (-h.a / m) * Mx if h.n == 1.0 else (-h.a * h.n / m) * X.power_mass(h.n - 1.0)
+    S_I = (-sp.kron(Dx, Mvv) - sp.kron(Mf, Dv) + gamma_e * sp.kron(Mx, Dvv) - kappa * sp.kron(X.mass(power=1), Dv)
            + sp.kron(Xpos, Mv_up) + sp.kron(Xneg, Mv_dn))
     flip = sp.csr_matrix(np.fliplr(np.eye(Vl.size)))
     S_S = -sp.kron(lft, Mv_up @ flip)
@@ -252,7 +266,7 @@ def _face_parts(pl: _Plane, hi: _Hierarchy) -> tuple[np.ndarray, np.ndarray]:
     :math:`a_0 - \\gamma_e v_j + \\kappa x + \\lambda_i` (linear in x along the face), shape
     ``(nodes, modes, x elements, p + 1, p + 1)``."""
     speed0 = hi.a0 - hi.gamma_e * pl.Vl.nodes[:, None] + hi.lam[None, :]
-    P, N = pl.X.signed_parts(speed0.ravel(), hi.kappa)
+    P, N = pl.X.signed_parts(speed0.ravel(), hi.kappa, hi.A, hi.q)
     shape = (*speed0.shape, *P.shape[1:])
     return P.reshape(shape), N.reshape(shape)
 
@@ -521,6 +535,8 @@ class KinkLevel:
         it (:math:`P(E < \\varepsilon) \\sim \\varepsilon^\\beta`); below the innermost layer of
         the mesh (:meth:`~.plane.PlaneMesh.x_nodes`) a level can only follow it polynomially.
         """
+        if self.hierarchy.A:
+            raise ValueError("energy_cdf is the kink's (n = 1: E = m v^2/2 + a|x|); this level has 1 < n < 2")
         eps = np.atleast_1d(np.asarray(eps, dtype=float))
         if np.any(~np.isfinite(eps)) or np.any(eps <= 0.0):
             raise ValueError(f"eps must be positive and finite, got {eps!r}")

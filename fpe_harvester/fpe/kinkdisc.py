@@ -104,7 +104,8 @@ def kink_domain(h: Harvester, v2: float, sF: float) -> tuple[float, float]:
     """
     p = h.params
     Lv = max(4.5 * sF / (p.m * p.gamma), 8.0 * math.sqrt(v2))
-    Lx = max(p.m * Lv**2 / (2.0 * h.a), 30.0 * p.m * v2 / h.a)
+    # U(Lx) = a Lx^n reaches that energy (n = 1: the kink; 1 < n < 2 the same way)
+    Lx = (max(p.m * Lv**2 / 2.0, 30.0 * p.m * v2) / h.a) ** (1.0 / h.n)
     return Lx, Lv
 
 
@@ -211,5 +212,8 @@ def _harmonic_guess(h: Harvester) -> dict[str, float]:
 
 def _base_mesh(h: Harvester, st: KinkSettings, mo: dict[str, float]) -> PlaneMesh:
     Lx, Lv = kink_domain(h, mo["v2"], _drive_sd(h, mo))
-    return PlaneMesh(Lx=Lx, Lv=Lv, Ec=st.core * h.params.m * mo["v2"], a=h.a, layers=st.layers, ratio=st.ratio,
+    Ec = st.core * h.params.m * mo["v2"]
+    # the core box reaches x_c with U(x_c) = Ec: x_c = Ec / a_eff
+    a_eff = Ec / (Ec / h.a) ** (1.0 / h.n)
+    return PlaneMesh(Lx=Lx, Lv=Lv, Ec=Ec, a=a_eff, layers=st.layers, ratio=st.ratio,
                      bulk_x=st.bulk_x, bulk_v=st.bulk_v, grading=st.grading)

@@ -24,6 +24,9 @@ The *geometric* mesh for 1 < n < 2 keeps :math:`\\beta = 1` and splits the eleme
 so that the element touching 0, where the force :math:`\\propto |x|^{n-1}` is not smooth, is
 :math:`\\sigma^{N_\\ell}` times shorter than the bulk elements and the error it carries falls
 geometrically with :math:`N_\\ell` (Babuska and Guo's hp grading toward a point singularity).
+
+An *adapted* mesh (:meth:`XMesh.refined`) bisects chosen elements of the half mesh (and so
+their mirror images): the inserted nodes are kept in ``extra``, on top of the node map.
 """
 
 from __future__ import annotations
@@ -69,6 +72,10 @@ class XMesh:
         (0: none).
     ratio : float
         Ratio :math:`\\sigma` of successive layers, in (0, 1).
+    extra : tuple of float
+        Nodes in (0, L) inserted on top of the node map by :meth:`refined` (default none).
+    generation : int
+        How many times :meth:`refined` made this mesh from the node map (0: not adapted).
 
     Examples
     --------
@@ -86,6 +93,8 @@ class XMesh:
     grading: float = 1.0
     layers: int = 0
     ratio: float = 0.15
+    extra: tuple[float, ...] = ()
+    generation: int = 0
 
     def __post_init__(self) -> None:
         object.__setattr__(self, "L", check_real("L", self.L, low=0.0, low_open=True))
@@ -98,6 +107,11 @@ class XMesh:
         object.__setattr__(self, "layers", check_int("layers", self.layers, low=0, high=60))
         object.__setattr__(self, "ratio", check_real("ratio", self.ratio, low=0.0, high=1.0, low_open=True,
                                                      high_open=True))
+        extra = tuple(sorted(float(x) for x in self.extra))
+        if extra and not (0.0 < extra[0] and extra[-1] < self.L):
+            raise ValueError(f"extra nodes must lie in (0, L = {self.L!r}), got {extra[0]!r} ... {extra[-1]!r}")
+        object.__setattr__(self, "extra", extra)
+        object.__setattr__(self, "generation", check_int("generation", self.generation, low=0))
 
     def nodes(self) -> np.ndarray:
         """Sorted node coordinates, including -L, 0 and L."""
@@ -114,6 +128,8 @@ class XMesh:
         if self.layers:
             inner = half[1] * self.ratio ** np.arange(self.layers, 0, -1)
             half = np.concatenate([[0.0], inner, half[1:]])
+        if self.extra:
+            half = np.union1d(half, self.extra)
         return half
 
     def skfem(self) -> MeshLine:
@@ -122,8 +138,8 @@ class XMesh:
 
     @property
     def elements(self) -> int:
-        """Total number of elements (the layers included)."""
-        return 2 * (self.half_elements + self.layers)
+        """Total number of elements (the layers and inserted nodes included)."""
+        return 2 * (self.half_elements + self.layers + len(self.extra))
 
     @property
     def geometric(self) -> bool:
@@ -131,5 +147,36 @@ class XMesh:
         return self.layers > 0
 
     def with_elements(self, half_elements: int) -> XMesh:
-        """The same node map with another number of (bulk) elements per half; the layers stay."""
-        return dataclasses.replace(self, half_elements=half_elements)
+        """The same node map with another number of (bulk) elements per half; the layers stay,
+        inserted nodes (``extra``) go."""
+        return dataclasses.replace(self, half_elements=half_elements, extra=(), generation=0)
+
+    @property
+    def size(self) -> int:
+        """Nominal elements per half, :math:`N_h 2^g` after g adaptive refinements (the
+        refinement's mesh knob: one step doubles it, whether all elements were bisected or
+        only the marked ones)."""
+        return self.half_elements * 2**self.generation
+
+    def refined(self, marked: np.ndarray) -> XMesh:
+        """This mesh with the marked elements of the half mesh bisected (the mirror images
+        with them: the mesh stays symmetric).
+
+        Parameters
+        ----------
+        marked : ndarray of bool
+            One flag per element of :meth:`half_nodes`, left to right.
+
+        Examples
+        --------
+        >>> m = XMesh(2.0, 2, n=2.0, scale=1.0, theta=1.0, wall=0.0)
+        >>> r = m.refined(np.array([False, True]))
+        >>> r.half_nodes().tolist(), r.size
+        ([0.0, 1.0, 1.5, 2.0], 4)
+        """
+        half = self.half_nodes()
+        marked = np.asarray(marked, dtype=bool)
+        if marked.shape != (half.size - 1,):
+            raise ValueError(f"marked needs one flag per half element ({half.size - 1}), got shape {marked.shape}")
+        mid = 0.5 * (half[:-1] + half[1:])[marked]
+        return dataclasses.replace(self, extra=self.extra + tuple(mid.tolist()), generation=self.generation + 1)

@@ -120,16 +120,48 @@ class DGLine:
         weight = w * s**power * (1.0 if f is None else np.asarray(f, dtype=float)[:, None])
         return self._blocks(basis, basis, weight)
 
+    def power_mass(self, q: float) -> sp.csr_matrix:
+        """:math:`\\int s^q\\,\\psi_i\\phi_j\\,ds` for a real :math:`q > -1` on a line with
+        :math:`s \\ge 0` (:meth:`_from_left` over whole elements)."""
+        return sp.block_diag(list(self._from_left(q, self.nodes[1:])), format="csr")
+
+    def _from_left(self, q: float, b: np.ndarray) -> np.ndarray:
+        """:math:`\\int_{s_e}^{b_e} s^q\\,\\psi_i\\phi_j\\,ds` from the left end :math:`s_e`
+        of every element e to :math:`b_e` (``b``: shape ``(..., E)``, inside the elements);
+        shape ``(..., E, p + 1, p + 1)``. Gauss--Jacobi of the weight :math:`s^q` where
+        :math:`s_e = 0` (exact), Gauss--Legendre with 2p + 8 points elsewhere (:math:`s^q`
+        smooth there)."""
+        from .assemble import jacobi_rule
+
+        lo, hi = self.nodes[:-1], self.nodes[1:]
+        if lo[0] < 0.0 or not q > -1.0:
+            raise ValueError(f"s^q needs s >= 0 and q > -1, got s from {lo[0]!r}, q = {q!r}")
+        b = np.asarray(b, dtype=float)
+        n = 2 * self.p + 8
+        tj, wj = jacobi_rule(n, q)
+        tg, wg = npleg.leggauss(n)
+        at0 = (lo <= 0.0)[:, None]
+        span = (b - lo)[..., None]
+        pts = np.where(at0, b[..., None] * tj, lo[:, None] + 0.5 * span * (tg + 1.0))
+        w = np.where(at0, np.maximum(b, 0.0)[..., None] ** (q + 1.0) * wj,
+                     0.5 * span * wg * np.maximum(pts, 0.0) ** q)
+        vinv = np.linalg.inv(npleg.legvander(lobatto_points(self.p), self.p))
+        basis = npleg.legvander(2.0 * (pts - lo[:, None]) / (hi - lo)[:, None] - 1.0, self.p) @ vinv
+        return np.einsum("...qi,...q,...qj->...ij", basis, w, basis)
+
     def derivative(self, power: int = 0) -> sp.csr_matrix:
         """:math:`\\int s^{power}\\,\\psi_i'\\phi_j\\,ds` (derivative on the test function)."""
         _, qw, basis, dbasis = _reference(self.p)
         s, _ = self._quadrature()
         return self._blocks(dbasis, basis, s**power * qw[None, :])
 
-    def signed_parts(self, s0: np.ndarray, kappa: float) -> tuple[np.ndarray, np.ndarray]:
+    def signed_parts(self, s0: np.ndarray, kappa: float, A: float = 0.0, q: float = 0.0
+                     ) -> tuple[np.ndarray, np.ndarray]:
         """Element mass matrices weighted by the positive and the negative part of the
-        linear speed :math:`u(s) = s_0 + \\kappa s`:
-        :math:`\\int_e u^\\pm\\psi_i\\phi_j\\,ds`, exact (each element is split at the root of u).
+        speed :math:`u(s) = s_0 + \\kappa s - A s^q`:
+        :math:`\\int_e u^\\pm\\psi_i\\phi_j\\,ds`, each element split at the root of u: exact
+        for A = 0 (u linear); for A > 0 (with ``kappa = 0`` and :math:`s \\ge 0`: u falls
+        monotonically, one root) by :meth:`_from_left`, exact on the element at 0.
 
         Returns two arrays of shape ``(len(s0), elements, p + 1, p + 1)``.
         """
@@ -137,6 +169,15 @@ class DGLine:
         qx, qw, _, _ = _reference(self.p)
         vinv = np.linalg.inv(npleg.legvander(lobatto_points(self.p), self.p))
         lo, hi = self.nodes[:-1], self.nodes[1:]
+        if A:
+            if kappa != 0.0 or q <= 0.0 or lo[0] < 0.0:
+                raise ValueError(f"a power-law speed needs kappa = 0, q > 0 and s >= 0, got {kappa!r}, {q!r}")
+            # u falls monotonically: positive left of its root, negative right of it
+            root = np.where(s0 > 0.0, (np.maximum(s0, 0.0) / A) ** (1.0 / q), 0.0)
+            cut = np.clip(root[:, None], lo, hi)                     # (n, E)
+            left = s0[:, None, None, None] * self._from_left(0.0, cut) - A * self._from_left(q, cut)
+            whole = s0[:, None, None, None] * self._from_left(0.0, hi) - A * self._from_left(q, hi)
+            return left, whole - left
         if kappa == 0.0:
             root = np.where(s0 > 0.0, -np.inf, np.inf)[:, None] * np.ones(lo.size)
         else:

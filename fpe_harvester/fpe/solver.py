@@ -48,14 +48,18 @@ class FokkerPlanck:
     progress : bool or callable
         True prints one line per level; a callable receives the lines.
     scheme : str
-        ``"auto"`` (default): for the kink n = 1 DG in (x, v) with Hermite functions of
-        (V, xi) (``"xv"``, :mod:`~fpe_harvester.fpe.kink`), else DG in x with Hermite
-        functions of (v, V, xi) (``"x"``). ``"x"`` forces the latter for n = 1 too
-        (benchmarks compare them). For ``"xv"``, ``elements`` is not used and ``order`` is
-        the DG degree in x and v.
+        ``"auto"`` (default): for 1 <= n < 2 DG in (x, v) with Hermite functions of
+        (V, xi) (``"xv"``, :mod:`~fpe_harvester.fpe.kink`; for 1 < n < 2 ``"x"`` if
+        ``mesh`` or ``elements`` is given), else DG in x with Hermite functions of
+        (v, V, xi) (``"x"``). ``"x"`` forces the latter for 1 <= n < 2 too (benchmarks
+        compare them). For ``"xv"``, ``elements`` is not used and ``order`` is the DG
+        degree in x and v.
     mesh : str
-        x mesh of scheme ``"x"`` for n < 2: ``"auto"`` (default, the algebraic one),
-        ``"algebraic"`` or ``"geometric"`` (see :func:`~fpe_harvester.fpe.stationary`).
+        x mesh of scheme ``"x"``: ``"auto"`` (default, the algebraic one), ``"algebraic"``
+        (graded toward 0 for n < 2, toward the walls otherwise; a mesh step bisects every
+        element), ``"geometric"`` (n < 2: layers toward 0) or ``"adaptive"`` (any n: a
+        mesh step bisects only the elements an error indicator marks, see
+        :mod:`~fpe_harvester.fpe.adapt`).
 
     Examples
     --------
@@ -121,8 +125,8 @@ class FokkerPlanck:
         try:
             sol = stationary(
                 h, self.tol, M=self.M,
-                half_elements=None if self.elements is None or resolve_scheme(h, self.scheme) == "xv"
-                else self.elements // 2,
+                half_elements=None if self.elements is None
+                or resolve_scheme(h, self.scheme, x_settings=h.n != 1.0) == "xv" else self.elements // 2,
                 order=self.order, theta=self.domain, max_M=max(self.max_M, self.M or 0),
                 max_seconds=self.max_seconds, max_gb=self.max_gb, grid=3, progress=progress or None,
                 scheme=self.scheme, mesh=self.mesh,

@@ -32,6 +32,7 @@ from skfem import Basis
 from ..errors import MethodNotAvailableError, NotConvergedError, ParameterError, check_int, check_real
 from ..model import Harvester
 from ..result import Stats, Status
+from .adapt import AdaptiveHermiteDG
 from .assemble import _element
 from .discretize import HermiteDG, Level, Whitening
 from .estimate import reported_eta_error
@@ -90,7 +91,7 @@ KINK_MAX_DOFS = 6_000_000
 SCHEMES = ("auto", "x", "xv")
 
 #: The x meshes of scheme ``"x"`` for n < 2 (see :func:`default_plan`).
-MESHES = ("auto", "algebraic", "geometric")
+MESHES = ("auto", "algebraic", "geometric", "adaptive")
 
 #: Geometric layers toward x = 0 of the ``"geometric"`` mesh and their ratio. Measured for
 #: n = 1.5, a = 1 at M = 8 on 8 bulk elements per half: 2 layers are within 3e-8 (relative
@@ -103,27 +104,42 @@ def resolve_mesh(h: Harvester, mesh: str) -> str:
     """The x mesh ``"algebraic"`` or ``"geometric"`` that ``mesh`` means for ``h``.
 
     ``"auto"`` is ``"algebraic"``: for 1 < n < 2 it measured at least as accurate per
-    unknown as the geometric one (see :func:`default_plan`). For n >= 2 the mesh is graded
-    toward the walls only and ``"algebraic"`` names that mesh; ``"geometric"`` is refused.
+    unknown as the geometric one (see :func:`default_plan`), and the element-wise
+    refinement (``"adaptive"``, any n) did not measure faster overall (see
+    :mod:`validation.bench.fpe`). For n >= 2 the mesh is graded toward the walls only and
+    ``"algebraic"`` names that mesh; ``"geometric"`` is refused.
     """
     if mesh not in MESHES:
         raise ParameterError(f"mesh must be one of {', '.join(map(repr, MESHES))}, got {mesh!r} "
                              f"(type {type(mesh).__name__})")
+    if mesh == "adaptive":
+        return mesh
     if mesh == "geometric" and h.n >= 2.0:
         raise ParameterError(f"mesh='geometric' grades toward the non-smooth force at x = 0 of n < 2, "
                              f"got n = {h.n!r}; use mesh='auto'")
     return "algebraic" if mesh == "auto" else mesh
 
 
-def resolve_scheme(h: Harvester, scheme: str) -> str:
-    """The scheme ``"x"`` or ``"xv"`` that ``scheme`` means for ``h`` (ParameterError if invalid)."""
+def resolve_scheme(h: Harvester, scheme: str, x_settings: bool = False) -> str:
+    """The scheme ``"x"`` or ``"xv"`` that ``scheme`` means for ``h`` (ParameterError if invalid).
+
+    ``"auto"`` is ``"xv"`` for 1 <= n < 2 and ``"x"`` otherwise; for 1 < n < 2 it is ``"x"``
+    when the caller set something only scheme ``"x"`` has (``x_settings``: a mesh, a
+    number of elements, a weight). Measured for 1 < n < 2 at tol = 1e-4 (one run,
+    ``python -m validation.bench.fpe --schemes``, 45 s budget): ``"xv"`` converges in 7 of
+    the 9 cases n in {1.25, 1.5, 1.75} x a in {0.5, 1, 2} (4.7-10.5 s), ``"x"`` in 4
+    (1.1-12.7 s; n = 1.25 at every a and n = 1.5 at a = 1, 2 not in 25-30 s); where both
+    converge ``"x"`` is faster at n = 1.75, a <= 1 (1.1 and 2.9 s against 4.7 and 5.7 s).
+    The two agree within their error bars in all 9.
+    """
     if scheme not in SCHEMES:
         raise ParameterError(f"scheme must be one of {', '.join(map(repr, SCHEMES))}, got {scheme!r} "
                              f"(type {type(scheme).__name__})")
     if scheme == "auto":
-        return "xv" if h.n == 1.0 else "x"
-    if scheme == "xv" and h.n != 1.0:
-        raise ParameterError(f"scheme='xv' (DG in x and v) is built for the kink n = 1, got n = {h.n!r}; "
+        return "xv" if h.n == 1.0 or (1.0 < h.n < 2.0 and not x_settings) else "x"
+    if scheme == "xv" and not 1.0 <= h.n < 2.0:
+        raise ParameterError(f"scheme='xv' (DG in x and v) is built for the kink n = 1 and for 1 < n < 2, "
+                             f"got n = {h.n!r}; "
                              "use scheme='x' or 'auto'")
     return scheme
 
@@ -276,7 +292,10 @@ def stationary(
         DG in (x, v), Hermite functions of (V, xi) (:mod:`.kink`, only n = 1; there
         ``order`` is the DG degree on its base mesh, ``half_elements`` the refinement's
         mesh knob, which raises the degree by log2 of it, default 1; a given ``M`` alone
-        fixes the level); ``"auto"`` (default): ``"xv"`` for n = 1, else ``"x"``.
+        fixes the level); ``"auto"`` (default): ``"xv"`` for 1 <= n < 2 (for n > 1 the force
+        :math:`a n |x|^{n-1}` in the v transport, one core element per axis instead of the
+        kink's layers toward the trap; ``"x"`` when ``mesh``, ``half_elements`` or
+        ``weight`` is given), else ``"x"`` (see :func:`resolve_scheme`).
     weight : Whitening, optional
         Gaussian weight of the Hermite expansion of scheme ``"x"`` (default
         :meth:`Whitening.of`, the equivalent harmonic unit's). Another weight changes how fast
@@ -286,8 +305,10 @@ def stationary(
         x mesh of scheme ``"x"`` for n < 2: ``"algebraic"`` (nodes graded like
         :math:`t^{2.5}` toward 0), ``"geometric"`` (geometric layers toward 0, Gauss--Jacobi
         quadrature of the force on the element at 0), or ``"auto"`` (default, the
-        algebraic one; see :func:`default_plan`). For n >= 2 only ``"auto"`` and
-        ``"algebraic"`` (the same wall-graded mesh).
+        algebraic one; see :func:`default_plan`). For n >= 2 ``"auto"`` and
+        ``"algebraic"`` are the same wall-graded mesh. ``"adaptive"`` (any n) starts from
+        the algebraic mesh and bisects at each mesh step only the elements that the error
+        indicator of :mod:`.adapt` marks (the others bisect all of them).
 
     Returns
     -------
@@ -319,7 +340,7 @@ def stationary(
     if max_gb is not None:
         max_gb = check_real("max_gb", max_gb, low=0.0, low_open=True)
     grid = check_int("grid", grid, low=3)
-    scheme = resolve_scheme(h, scheme)
+    scheme = resolve_scheme(h, scheme, x_settings=mesh != "auto" or half_elements is not None or weight is not None)
     if weight is not None and scheme != "x":
         raise ParameterError(f"weight is the Gaussian weight of scheme 'x'; got scheme {scheme!r} (n = {h.n:g})")
     resolve_mesh(h, mesh)
@@ -332,7 +353,11 @@ def stationary(
         t0 = time.perf_counter()
         deadline = None if max_seconds is None else t0 + max_seconds
         try:
-            disc: Discretization = KinkDG.build(h, KinkSettings(order=plan.order), tol, deadline)
+            # 1 < n < 2 has no trap at the origin: one core element per axis (measured at
+            # a = 1, tol 1e-4: n = 1.5 eta 0.3878655 in 22 s against 0.3878575 +- 1.4e-5 in
+            # 47 s with the kink's four layers; n = 1.25 0.3919145 in 31 s against 0.3919087 in 90 s)
+            settings = KinkSettings(order=plan.order, layers=1 if h.n > 1.0 else KinkSettings.layers)
+            disc: Discretization = KinkDG.build(h, settings, tol, deadline)
         except (ArithmeticError, ValueError, np.linalg.LinAlgError, NotConvergedError) as exc:
             ref = RefinementResult(None, False, f"the kink solver's pilot level failed ({exc}); use method='mc'",
                                    seconds=time.perf_counter() - t0)
@@ -345,7 +370,9 @@ def stationary(
         if weight is not None and not isinstance(weight, Whitening):
             raise ParameterError(f"weight must be a Whitening or None, got {type(weight).__name__}")
         w = Whitening.of(h) if weight is None else weight
-        ref = refine(HermiteDG(h, plan.mesh(h, w), plan.order, w), tol, plan, progress)
+        xdisc = (AdaptiveHermiteDG(h, plan.mesh(h, w), plan.order, w) if resolve_mesh(h, mesh) == "adaptive"
+                 else HermiteDG(h, plan.mesh(h, w), plan.order, w))
+        ref = refine(xdisc, tol, plan, progress)
     stats = _stats(h, ref, tol)
     lv = None if ref.best is None else ref.best.level
     if lv is None:

@@ -54,9 +54,30 @@ current design; numbers in the closing note of the issue as well):
 * *Choosing the mesh at a low degree* (M = 6, ladder of meshes): the mesh error at M = 6
   overestimates that at M = 12 by 8-10x for steep walls and picked meshes 1.5-2x too fine.
 
+*Uniform against element-wise mesh refinement* (:func:`meshes`, in the same run, interleaved):
+``mesh="algebraic"`` (every element bisected at a mesh step, the previous design) against
+``mesh="adaptive"`` (only the elements that :mod:`fpe_harvester.fpe.adapt` marks) for
+n in {1.25, 1.5, 1.75} x a in {0.5, 1, 2} and n = 8, a in {0.5, 1, 2} at 1e-4 and 1e-6,
+and n in {2, 3, 4, 6} x a in {0.5, 1, 2} at 1e-4 (the ratio of times, goal <= 1.2). Runs
+under 3 s are repeated (three of each mesh, alternating) and the medians compared; budgets
+are modest (:data:`MESH_BUDGET`), so "not converged" there means "not within the budget".
+The actual error of each 1e-4 run is taken against the case's 1e-6 run with the smaller
+reported error (a convergence check: the same discretization family), with that run's
+error as the uncertainty.
+
 ``python -m validation.bench.fpe [--quick] [--out DIR]`` runs it (the full one takes
-20-40 minutes, most of it in the 1e-6 runs) and writes ``bench_fpe.json`` and
-``bench_fpe.png``.
+40-70 minutes, most of it in the 1e-6 runs) and writes ``bench_fpe.json`` and
+``bench_fpe.png``; ``python -m validation.bench.fpe --meshes [--quick] [--out DIR]`` runs
+only the mesh comparison (20-30 minutes on 2 loaded cores) and writes
+``bench_fpe_meshes.json``.
+
+*Schemes for 1 < n < 2* (:func:`schemes`): DG in x with Hermite functions of (v, V, xi)
+(``scheme="x"``) against DG in (x, v) with Hermite functions of (V, xi) (``scheme="xv"``,
+the kink solver extended to the force :math:`a n |x|^{n-1}`) at 1e-4, with Monte Carlo at
+1e-3 for n = 1.25 and 1.5, a = 1. ``python -m validation.bench.fpe --schemes`` runs only
+that part (``bench_fpe_schemes.json``); ``--convergence`` the error of single levels
+against unknowns and seconds at n = 1.5, a = 1 for both (:func:`convergence`,
+``bench_fpe_convergence.json`` and ``.png``).
 """
 
 from __future__ import annotations
@@ -72,7 +93,7 @@ from fpe_harvester import Harvester
 from fpe_harvester.fpe import discretize, stationary
 from validation.bench.cli import bench_main, save_benchmark
 
-__all__ = ["STEM", "PREVIOUS", "PREVIOUS_SERIES_N3", "run", "work", "table", "series"]
+__all__ = ["STEM", "PREVIOUS", "PREVIOUS_SERIES_N3", "run", "run_meshes", "meshes", "run_schemes", "schemes", "run_convergence", "convergence", "work", "table", "series"]
 
 #: Name of the written ``.json`` and ``.png``.
 STEM = "bench_fpe"
@@ -179,6 +200,142 @@ def _case(n: float, a: float, tols: list[float], budget: float, mc_rel: float | 
     return case
 
 
+#: The two mesh refinements compared by :func:`meshes` (uniform first: the previous design).
+MESH_RULES = ("algebraic", "adaptive")
+
+#: Cases of :func:`meshes`: (n, a, tolerances).
+MESH_CASES = ([(n, a, (1e-4, 1e-6)) for n in (1.25, 1.5, 1.75) for a in (0.5, 1.0, 2.0)]
+              + [(8.0, a, (1e-4, 1e-6)) for a in (0.5, 1.0, 2.0)]
+              + [(n, a, (1e-4,)) for n in (2.0, 3.0, 4.0, 6.0) for a in (0.5, 1.0, 2.0)])
+
+#: Wall-time budget (s) of one run of :func:`meshes` by tolerance (the goals: < 10 s for
+#: 1 < n < 2 at 1e-4, < 1.5 s for n = 8, a = 2 at 1e-4, < 20 s for n = 8, a = 0.5 at 1e-6).
+MESH_BUDGET = {1e-4: 25.0, 1e-6: 30.0}
+
+#: Goals of issue 19 per (n, a, tol): seconds.
+MESH_GOALS = {**{(n, a, 1e-4): 10.0 for n in (1.25, 1.5, 1.75) for a in (0.5, 1.0, 2.0)},
+              (8.0, 2.0, 1e-4): 1.5, (8.0, 0.5, 1e-6): 20.0}
+
+
+def _mesh_run(h: Harvester, tol: float, mesh: str, budget: float) -> dict[str, Any]:
+    discretize._X_CACHE.clear()
+    t0 = time.perf_counter()
+    s = stationary(h, tol=tol, max_seconds=budget, grid=3, mesh=mesh).stats
+    sec = time.perf_counter() - t0
+    return {"seconds": sec, "eta": s.eta, "eta_err": s.eta_err, "status": s.status.value,
+            "M": s.info.get("M"), "elements": s.info.get("elements"), "dofs": s.info.get("dofs"),
+            "work_GF": work(s.info.get("history", []))}
+
+
+def _mesh_pair(h: Harvester, tol: float, budget: float, repeat_below: float = 3.0) -> dict[str, Any]:
+    """Both refinements at ``tol``, alternating; runs under ``repeat_below`` s are repeated
+    (three of each) and the medians kept."""
+    runs: dict[str, list[dict[str, Any]]] = {m: [] for m in MESH_RULES}
+    for k in range(3):
+        for m in MESH_RULES:
+            runs[m].append(_mesh_run(h, tol, m, budget))
+        if k == 0 and max(r[0]["seconds"] for r in runs.values()) >= repeat_below:
+            break
+    out: dict[str, Any] = {}
+    for m, rs in runs.items():
+        r = dict(rs[-1])
+        r["seconds_all"] = [x["seconds"] for x in rs]
+        r["seconds"] = float(np.median(r["seconds_all"]))
+        out[m] = r
+    out["time_ratio"] = out["adaptive"]["seconds"] / out["algebraic"]["seconds"]
+    return out
+
+
+def meshes(quick: bool = False) -> dict[str, Any]:
+    """Uniform (``"algebraic"``) against element-wise (``"adaptive"``) mesh refinement, one
+    run interleaved (see the module docstring). ``quick``: n = 1.5 and n = 3 at a = 0.5,
+    tol = 1e-3.
+
+    Returns
+    -------
+    dict
+        ``cases`` (per case and tol both runs, their time ratio, the actual errors against
+        the reference) and ``summary`` (goals met, bound held, ratios for n >= 2).
+    """
+    plan = ([(1.5, 0.5, (1e-3,)), (3.0, 0.5, (1e-3,))] if quick else MESH_CASES)
+    cases: dict[str, Any] = {}
+    for n, a, tols in plan:
+        h = Harvester.build(a=a, n=n)
+        case: dict[str, Any] = {"n": n, "a": a, "runs": {}}
+        for tol in tols:
+            case["runs"][f"{tol:g}"] = _mesh_pair(h, tol, MESH_BUDGET.get(tol, 25.0))
+            goal = MESH_GOALS.get((n, a, tol))
+            if goal is not None:
+                for m in MESH_RULES:
+                    r = case["runs"][f"{tol:g}"][m]
+                    r["goal_seconds"] = goal
+                    r["goal_met"] = r["status"] == "stable" and r["seconds"] < goal
+        if len(tols) > 1:
+            _actual_errors(case, f"{max(tols):g}", f"{min(tols):g}")
+        cases[f"n={n:g}, a={a:g}"] = case
+        print(_mesh_lines({f"n={n:g}, a={a:g}": case}), flush=True)
+    return {"cases": cases, "summary": _mesh_summary(cases)}
+
+
+def _actual_errors(case: dict[str, Any], loose: str, tight: str) -> None:
+    """Actual errors of the ``loose`` runs against the ``tight`` run with the smaller
+    reported error (its error the uncertainty of the comparison)."""
+    refs = [r for m, r in case["runs"][tight].items() if m in MESH_RULES and r["eta"] is not None]
+    if not refs:
+        return
+    ref = min(refs, key=lambda r: r["eta_err"])
+    case["reference"] = {"eta": ref["eta"], "eta_err": ref["eta_err"], "status": ref["status"]}
+    for m in MESH_RULES:
+        r = case["runs"][loose][m]
+        if r["eta"] is None:
+            continue
+        actual = abs(r["eta"] - ref["eta"])
+        r["actual_err"] = actual
+        r["reported_over_actual"] = r["eta_err"] / actual if actual > 0 else math.inf
+        r["bounds_actual"] = bool(r["eta_err"] + ref["eta_err"] >= actual)
+        # decisive only where the reference is 10x tighter than the run it checks
+        r["reference_10x_tighter"] = bool(ref["eta_err"] <= 0.1 * r["eta_err"])
+
+
+def _mesh_summary(cases: dict[str, Any]) -> dict[str, Any]:
+    runs = [(name, tol, m, r) for name, c in cases.items() for tol, pair in c["runs"].items()
+            for m, r in pair.items() if m in MESH_RULES]
+    out: dict[str, Any] = {}
+    for m in MESH_RULES:
+        checked = [r for _, _, mm, r in runs if mm == m and "bounds_actual" in r]
+        decisive = [r for r in checked if r["reference_10x_tighter"]]
+        ratios = [r["reported_over_actual"] for r in checked if math.isfinite(r["reported_over_actual"])]
+        out[m] = {
+            "goals_met": [f"{name} tol {tol}" for name, tol, mm, r in runs if mm == m and r.get("goal_met")],
+            "goals_missed": [f"{name} tol {tol}: {r['status']} {r['seconds']:.1f} s (goal {r['goal_seconds']} s)"
+                             for name, tol, mm, r in runs if mm == m and r.get("goal_met") is False],
+            "bound_holds": f"{sum(r['bounds_actual'] for r in checked)} of {len(checked)}",
+            "bound_holds_10x_reference": f"{sum(r['bounds_actual'] for r in decisive)} of {len(decisive)}",
+            "reported_over_actual_median": float(np.median(ratios)) if ratios else None,
+        }
+    smooth = {name: c["runs"]["0.0001"]["time_ratio"] for name, c in cases.items()
+              if c["n"] >= 2.0 and "0.0001" in c["runs"]}
+    out["time_ratio_adaptive_over_uniform_n_ge_2"] = smooth
+    out["n_2_to_6_within_1.2"] = f"{sum(v <= 1.2 for k, v in smooth.items() if cases[k]['n'] <= 6)} of " \
+                                 f"{sum(1 for k in smooth if cases[k]['n'] <= 6)}"
+    return out
+
+
+def _mesh_lines(cases: dict[str, Any]) -> str:
+    lines = []
+    for name, c in cases.items():
+        for tol, pair in c["runs"].items():
+            cells = []
+            for m in MESH_RULES:
+                r = pair[m]
+                act = f"{r['actual_err'] / r['eta']:.1e}" if "actual_err" in r else "-"
+                rep = f"{r['eta_err'] / r['eta']:.1e}" if r["eta"] else "-"
+                cells.append(f"{m[:5]} {r['status'][:6]:6} {r['seconds']:6.2f}s M={r['M']} el={r['elements']} "
+                             f"rep={rep} act={act}")
+            lines.append(f"{name:14} {tol:>6} | " + " | ".join(cells) + f" | ratio {pair['time_ratio']:.2f}")
+    return "\n".join(lines)
+
+
 def run(quick: bool = False, out: pathlib.Path | None = None) -> dict:
     """Measure time to tolerance, reported and actual errors, and the Monte Carlo ratio.
 
@@ -186,7 +343,8 @@ def run(quick: bool = False, out: pathlib.Path | None = None) -> dict:
     ----------
     quick : bool
         n = 3, 8 and 1.5 at a = 0.5 only, at tolerances 1e-3 and 1e-5, 1e-3 and 1e-4,
-        1e-2 and 1e-3, no Monte Carlo (about 15 s on an idle 2-core machine).
+        1e-2 and 1e-3, no Monte Carlo, the quick mesh and scheme comparisons, no convergence
+        series (about 40 s on an idle 2-core machine).
     out : pathlib.Path, optional
         Directory for ``bench_fpe.json`` and ``bench_fpe.png``.
 
@@ -206,7 +364,9 @@ def run(quick: bool = False, out: pathlib.Path | None = None) -> dict:
     for n, a, tols in plan:
         cases[f"n={n:g}, a={a:g}"] = _case(n, a, tols, budget, mc_rel, 60.0)
     result = {"quick": quick, "cases": cases, "targets": TARGETS, "series": series(quick),
-              "summary": _summary(cases)}
+              "summary": _summary(cases), "meshes": meshes(quick), "schemes": schemes(quick)}
+    if not quick:
+        result["convergence"] = convergence()
     if not quick:
         from validation.bench import kink
 
@@ -339,6 +499,207 @@ def _plot(result: dict, path: pathlib.Path) -> None:
     plt.close(fig)
 
 
+#: Budget (s) of one run of :func:`schemes`.
+SCHEME_BUDGET = 45.0
+
+
+def schemes(quick: bool = False, mc_tol: float | None = 1e-3) -> dict[str, Any]:
+    """1 < n < 2 at tol = 1e-4 by the two schemes, interleaved: ``"x"`` (DG in x, Hermite in
+    (v, V, xi), the default mesh) and ``"xv"`` (DG in (x, v), Hermite in (V, xi)). The two
+    share no discretization error, so their difference against the sum of their reported
+    errors is a correctness check; Monte Carlo at ``mc_tol`` (n = 1.25 and 1.5, a = 1) is
+    a third, independent value. ``quick``: n = 1.5, a = 0.5 at 1e-2."""
+    plan = [(1.5, 0.5)] if quick else [(n, a) for n in (1.25, 1.5, 1.75) for a in (0.5, 1.0, 2.0)]
+    tol = 1e-2 if quick else 1e-4
+    cases: dict[str, Any] = {}
+    for n, a in plan:
+        h = Harvester.build(a=a, n=n)
+        case: dict[str, Any] = {"n": n, "a": a, "tol": tol}
+        for scheme in ("x", "xv"):
+            discretize._X_CACHE.clear()
+            t0 = time.perf_counter()
+            st = stationary(h, tol=tol, max_seconds=SCHEME_BUDGET, grid=3, scheme=scheme).stats
+            case[scheme] = {"seconds": time.perf_counter() - t0, "eta": st.eta, "eta_err": st.eta_err,
+                            "status": st.status.value, "M": st.info.get("M"), "dofs": st.info.get("dofs")}
+        x, xv = case["x"], case["xv"]
+        if x["eta"] is not None and xv["eta"] is not None:
+            case["difference"] = abs(x["eta"] - xv["eta"])
+            case["within_error_bars"] = bool(case["difference"] <= x["eta_err"] + xv["eta_err"])
+        if mc_tol is not None and not quick and a == 1.0 and n in (1.25, 1.5):
+            from fpe_harvester import solve
+
+            t0 = time.perf_counter()
+            mc = solve(h, "mc", tol=mc_tol)
+            case["monte_carlo"] = {"seconds": time.perf_counter() - t0, "eta": mc.eta, "eta_err": mc.eta_err,
+                                   "status": mc.status.value}
+        cases[f"n={n:g}, a={a:g}"] = case
+        print(_scheme_line(f"n={n:g}, a={a:g}", case), flush=True)
+    return {"cases": cases}
+
+
+def _scheme_line(name: str, c: dict[str, Any]) -> str:
+    cells = []
+    for scheme in ("x", "xv"):
+        r = c[scheme]
+        rel = f"{r['eta_err'] / r['eta']:.1e}" if r["eta"] else "-"
+        eta = f"{r['eta']:.7f}" if r["eta"] is not None else "-"
+        cells.append(f"{scheme:2} {r['status'][:6]:6} {r['seconds']:6.1f}s M={r['M']} eta={eta} rel={rel}")
+    mc = c.get("monte_carlo")
+    tail = f" | MC {mc['eta']:.5f} +- {mc['eta_err']:.1e} ({mc['seconds']:.0f} s)" if mc and mc["eta"] else ""
+    return f"{name:14} | " + " | ".join(cells) + f" | within bars: {c.get('within_error_bars')}" + tail
+
+
+def run_meshes(quick: bool = False, out: pathlib.Path | None = None) -> dict:
+    """Only :func:`meshes`, written to ``bench_fpe_meshes.json`` (and its plot)."""
+    result = {"quick": quick, **meshes(quick)}
+    save_benchmark(result, out, f"{STEM}_meshes", _plot_meshes)
+    return result
+
+
+def convergence(n: float = 1.5, a: float = 1.0, quick: bool = False) -> dict[str, Any]:
+    """Error of single levels against unknowns and seconds for one 1 < n < 2 case: the
+    previous design (DG in x, Hermite in (v, V, xi), the default algebraic mesh with 8 and
+    16 elements per half, M = 4 ... 14) against DG in (x, v), Hermite in (V, xi) (base mesh
+    of one core element per axis, DG degree 3 and 4, M = 2 ... 12). The reference is a
+    tolerance-driven ``"xv"`` run at 2e-5 (its reported error in the result; a convergence
+    check: the reference shares the second family's discretization). Unknowns are those
+    solved (half domain, half plane)."""
+    from fpe_harvester.fpe.discretize import Whitening, solve_level
+    from fpe_harvester.fpe.kinkdisc import KinkDG, KinkSettings
+    from fpe_harvester.fpe.stationary import default_plan
+
+    h = Harvester.build(a=a, n=n)
+    ref_tol = 1e-3 if quick else 2e-5
+    t0 = time.perf_counter()
+    ref = stationary(h, tol=ref_tol, scheme="xv", max_seconds=240.0, grid=3).stats
+    out: dict[str, Any] = {"n": n, "a": a, "reference": {"eta": ref.eta, "eta_err": ref.eta_err,
+                                                         "status": ref.status.value, "tol": ref_tol,
+                                                         "seconds": time.perf_counter() - t0}, "series": {}}
+    w = Whitening.of(h)
+    plan = default_plan(h, scheme="x")
+    for nh, top in ((8, 8 if quick else 14), (16, 6 if quick else 12)):
+        pts = []
+        for M in range(4, top + 1, 2):
+            discretize._X_CACHE.clear()
+            lv = solve_level(h, M, plan.mesh(h, w, nh), plan.order, w)
+            pts.append({"M": M, "dofs": lv.dofs, "seconds": lv.seconds, "eta": lv.moments["eta"]})
+        out["series"][f"x: DG in x, {2 * nh} elements"] = pts
+    disc = KinkDG.build(h, KinkSettings(layers=1), ref_tol)
+    for size, top in ((1, 6 if quick else 12), (2, 4 if quick else 10)):
+        pts, lower = [], None
+        for M in range(2, top + 1, 2):
+            lv = lower = disc.solve(M, size, lower)
+            pts.append({"M": M, "dofs": lv.dofs, "seconds": lv.seconds, "eta": lv.moments["eta"]})
+        out["series"][f"xv: DG in (x, v), degree {disc.degree(size)}"] = pts
+    for pts in out["series"].values():
+        for pt in pts:
+            pt["error"] = abs(pt["eta"] - ref.eta) / abs(ref.eta)
+    return out
+
+
+def run_convergence(quick: bool = False, out: pathlib.Path | None = None) -> dict:
+    """Only :func:`convergence`, written to ``bench_fpe_convergence.json`` and its figure
+    (error against unknowns and against seconds)."""
+    result = {"quick": quick, **convergence(quick=quick)}
+    save_benchmark(result, out, f"{STEM}_convergence", _plot_convergence)
+    return result
+
+
+def _plot_convergence(result: dict, path: pathlib.Path) -> None:
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    fig, axes = plt.subplots(1, 2, figsize=(10, 4.2))
+    for (name, pts), marker in zip(result["series"].items(), ("o-", "s-", "^--", "v--")):
+        err = [max(p["error"], 1e-9) for p in pts]
+        axes[0].loglog([p["dofs"] for p in pts], err, marker, mfc="none", label=name)
+        axes[1].loglog([p["seconds"] for p in pts], err, marker, mfc="none", label=name)
+    ref = result["reference"]
+    for ax, xl in zip(axes, ("unknowns of the level (half domain)", "seconds of the level")):
+        ax.axhline(ref["eta_err"] / abs(ref["eta"]), color="k", lw=0.8, ls=":", label="reference's own error")
+        ax.set_xlabel(xl)
+        ax.set_ylabel("relative error of eta")
+    axes[0].set_title(f"n = {result['n']:g}, a = {result['a']:g}: DG in x (previous) vs DG in (x, v)", fontsize=9)
+    axes[0].legend(fontsize=7)
+    fig.tight_layout()
+    fig.savefig(path, dpi=120)
+    plt.close(fig)
+
+
+def run_schemes(quick: bool = False, out: pathlib.Path | None = None) -> dict:
+    """Only :func:`schemes`, written to ``bench_fpe_schemes.json`` (and its plot)."""
+    result = {"quick": quick, **schemes(quick)}
+    save_benchmark(result, out, f"{STEM}_schemes", _plot_schemes)
+    return result
+
+
+def _plot_schemes(result: dict, path: pathlib.Path) -> None:
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    fig, ax = plt.subplots(figsize=(6, 4.2))
+    for scheme, marker in (("x", "o"), ("xv", "s")):
+        pts = [(c[scheme]["seconds"], c[scheme]["eta_err"] / c[scheme]["eta"]) for c in result["cases"].values()
+               if c[scheme]["eta"]]
+        if pts:
+            ax.loglog(*zip(*pts), marker, mfc="none", label=f"scheme {scheme!r}")
+    ax.axhline(result["cases"][next(iter(result["cases"]))]["tol"], color="k", lw=0.8, ls=":")
+    ax.set_xlabel("wall time [s]")
+    ax.set_ylabel("reported relative error on eta")
+    ax.set_title("1 < n < 2: DG in x vs DG in (x, v)", fontsize=9)
+    ax.legend(fontsize=8)
+    fig.tight_layout()
+    fig.savefig(path, dpi=120)
+    plt.close(fig)
+
+
+def _plot_meshes(result: dict, path: pathlib.Path) -> None:
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    fig, ax = plt.subplots(figsize=(6, 4.2))
+    for tol, marker in (("0.0001", "o"), ("1e-06", "s")):
+        xs, ys = [], []
+        for c in result["cases"].values():
+            pair = c["runs"].get(tol)
+            if pair:
+                xs.append(pair["algebraic"]["seconds"])
+                ys.append(pair["adaptive"]["seconds"])
+        if xs:
+            ax.loglog(xs, ys, marker, mfc="none", label=f"tol {tol}")
+    lo, hi = 0.05, 60.0
+    ax.loglog([lo, hi], [lo, hi], "k-", lw=0.8, label="equal")
+    ax.set_xlabel("uniform refinement [s]")
+    ax.set_ylabel("element-wise refinement [s]")
+    ax.legend(fontsize=8)
+    fig.tight_layout()
+    fig.savefig(path, dpi=120)
+    plt.close(fig)
+
+
 if __name__ == "__main__":
-    res = bench_main(run, __doc__, drop=("cases", "series"))
-    print(table(res))
+    import sys
+
+    if "--convergence" in sys.argv:
+        sys.argv.remove("--convergence")
+        res = bench_main(run_convergence, __doc__, drop=("series",))
+        for name, pts in res["series"].items():
+            print(name, [(p["M"], p["dofs"], round(p["seconds"], 2), f"{p['error']:.1e}") for p in pts])
+    elif "--schemes" in sys.argv:
+        sys.argv.remove("--schemes")
+        res = bench_main(run_schemes, __doc__, drop=("cases",))
+        for name, case in res["cases"].items():
+            print(_scheme_line(name, case))
+    elif "--meshes" in sys.argv:
+        sys.argv.remove("--meshes")
+        res = bench_main(run_meshes, __doc__, drop=("cases",))
+        print(_mesh_lines(res["cases"]))
+    else:
+        res = bench_main(run, __doc__, drop=("cases", "series", "meshes", "schemes", "convergence"))
+        print(table(res))
