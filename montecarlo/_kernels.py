@@ -53,6 +53,8 @@ import math
 import numpy as np
 from numba import njit
 
+from ._martingale import MG_DIST, mg_measure, mg_noise
+
 KIND_LINEAR = 0
 KIND_KICK = 1
 KIND_KINK = 2
@@ -843,7 +845,7 @@ def _live(w: np.ndarray) -> int:
 def _run_frozen(gen, P: int, N: int, nburn: int, nrun: int, stride: int, cf_f: np.ndarray,
          cf_c: np.ndarray, pp: np.ndarray, kind: int, coupled: bool, cf_t: np.ndarray,
          pp_t: np.ndarray, twin: bool, chol: np.ndarray, sums: np.ndarray, counts: np.ndarray,
-         esc_time: np.ndarray, counters: np.ndarray) -> None:
+         esc_time: np.ndarray, counters: np.ndarray, mg: np.ndarray) -> None:
     """Simulate P independent rings of N units with the frozen-xi step and accumulate their
     time averages (:func:`_run_joint` has the same arguments and outputs for the joint step).
 
@@ -876,6 +878,9 @@ def _run_frozen(gen, P: int, N: int, nburn: int, nrun: int, stride: int, cf_f: n
     counters : (5,) int64 array
         Kink statistics (slow-path unit steps, crossings, averaged-map entries, exhausted
         event budgets) and, in slot 4, the number of ring steps taken (all levels).
+    mg : (2, n_basis) or (2, 0) array
+        Martingale control sums of the fine level (:mod:`montecarlo._martingale`) over the
+        measured window and its first half (accumulated); zero columns switch them off.
     """
     thr = pp[10]
     sd = math.sqrt(pp[11])
@@ -894,6 +899,12 @@ def _run_frozen(gen, P: int, N: int, nburn: int, nrun: int, stride: int, cf_f: n
     cs = np.zeros((3, N_TAYLOR + 1))
     fext = np.zeros((N, P))
     esc_time[:] = -1.0
+    use_mg = mg.shape[1] > 0
+    n_lag = min(N // 2, MG_DIST) if use_mg else 0
+    phi = np.zeros((mg.shape[1] - n_lag - 1 if use_mg else 0, N, P))
+    dW = np.zeros((N, P))
+    he = np.zeros(n_lag + 1)
+    mg_started = False
     _start(gen, chol, sd, xf, vf, Vf, xif)
     _clamp_start(xf, kind, pp, cf_c[12] if coupled else cf_f[12])
     for j in range(N):
@@ -938,6 +949,9 @@ def _run_frozen(gen, P: int, N: int, nburn: int, nrun: int, stride: int, cf_f: n
             if meas:
                 n0 = _measure(xf, vf, Vf, xif, sf, Ff, w, cf_f, pp, kind, sums[0], xm)
                 counts[0] += n0
+                if use_mg:
+                    mg_measure(xf, vf, Vf, xif, w, pp[7], pp[8], phi, dW, he, mg, first, mg_started)
+                    mg_started = True
                 if twin:
                     _measure_twin(xt, vt, Vt, xif, w, cf_f, sums[0], pp[8], xm)
                 if first:
@@ -950,6 +964,8 @@ def _run_frozen(gen, P: int, N: int, nburn: int, nrun: int, stride: int, cf_f: n
             for j in range(N):
                 for p in range(P):
                     xif[j, p] = cf_f[13] * xif[j, p] + cf_f[14] * zz[j, p]
+            if mg_started:
+                mg_noise(dW, he, zz, cf_f[14], w)
         if coupled:
             for j in range(N):
                 for p in range(P):
@@ -960,7 +976,7 @@ def _run_frozen(gen, P: int, N: int, nburn: int, nrun: int, stride: int, cf_f: n
 def _run_joint(gen, P: int, N: int, nburn: int, nrun: int, stride: int, cf_f: np.ndarray,
                cf_c: np.ndarray, pp: np.ndarray, kind: int, coupled: bool, cf_t: np.ndarray,
                pp_t: np.ndarray, twin: bool, chol: np.ndarray, sums: np.ndarray, counts: np.ndarray,
-               esc_time: np.ndarray, counters: np.ndarray) -> None:
+               esc_time: np.ndarray, counters: np.ndarray, mg: np.ndarray) -> None:
     """:func:`_run_frozen` (same arguments and outputs) with the joint step.
 
     Four normals per unit and fine step; the coarse level takes the exact composition of the
@@ -987,6 +1003,12 @@ def _run_joint(gen, P: int, N: int, nburn: int, nrun: int, stride: int, cf_f: np
     w = np.ones(P)
     fext = np.zeros((N, P))
     esc_time[:] = -1.0
+    use_mg = mg.shape[1] > 0
+    n_lag = min(N // 2, MG_DIST) if use_mg else 0
+    phi = np.zeros((mg.shape[1] - n_lag - 1 if use_mg else 0, N, P))
+    dW = np.zeros((N, P))
+    he = np.zeros(n_lag + 1)
+    mg_started = False
     _start(gen, chol, sd, xf, vf, Vf, xif)
     _clamp_start(xf, kind, pp, cf_c[12] if coupled else cf_f[12])
     for j in range(N):
@@ -1017,6 +1039,8 @@ def _run_joint(gen, P: int, N: int, nburn: int, nrun: int, stride: int, cf_f: np
             zz = z1 if sub == 0 else z2
             ee = eps1 if sub == 0 else eps2
             _noise(cf_f, zz, ee)
+            if mg_started:  # the xi increment is L[3, 0] z[0] (montecarlo.scheme.noise_factor)
+                mg_noise(dW, he, zz[0], cf_f[CF_JOINT + 33], w)
             _d_step_joint(xf, vf, Vf, xif, Ff, xm, fext, ee, cf_f, pp, kind, rbm, rbx, pvx_f, w, gen)
             if twin:
                 _noise(cf_t, zz, epst)
@@ -1030,6 +1054,9 @@ def _run_joint(gen, P: int, N: int, nburn: int, nrun: int, stride: int, cf_f: np
                           esc_time)
             if meas:
                 counts[0] += _measure(xf, vf, Vf, xif, sf, Ff, w, cf_f, pp, kind, sums[0], pvx_f)
+                if use_mg:
+                    mg_measure(xf, vf, Vf, xif, w, pp[7], pp[8], phi, dW, he, mg, first, mg_started)
+                    mg_started = True
                 if twin:
                     _measure_twin(xt, vt, Vt, xit, w, cf_t, sums[0], pp[8], pvx_t)
                 if first:
@@ -1043,9 +1070,9 @@ def _run_joint(gen, P: int, N: int, nburn: int, nrun: int, stride: int, cf_f: np
 def run_chunk(gen, P: int, N: int, nburn: int, nrun: int, stride: int, cf_f: np.ndarray,
               cf_c: np.ndarray, pp: np.ndarray, kind: int, coupled: bool, cf_t: np.ndarray,
               pp_t: np.ndarray, twin: bool, chol: np.ndarray, sums: np.ndarray,
-              counts: np.ndarray, esc_time: np.ndarray, counters: np.ndarray) -> None:
+              counts: np.ndarray, esc_time: np.ndarray, counters: np.ndarray, mg: np.ndarray) -> None:
     """Run :func:`_run_frozen` or :func:`_run_joint` (arguments as there; ``cf_f`` says which)
     on a scratch block sized for this chunk."""
     run = _run_joint if cf_f[CF_JOINT] == 1.0 else _run_frozen
     run(gen, P, N, nburn, nrun, stride, cf_f, cf_c, pp, kind, coupled, cf_t, pp_t, twin, chol,
-        sums, counts, esc_time, counters)
+        sums, counts, esc_time, counters, mg)
