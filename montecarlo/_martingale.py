@@ -32,7 +32,7 @@ Basis, per unit j (sums over units; the ring's symmetry makes one coefficient pe
          the neighbours' :math:`x_{j-1}^2 + x_{j+1}^2`). Measured at n = 3, N = 3, a = 0.5,
          k = -0.5 (300 replicas of 2 paths, t_run = 400; variance reduction of eta): lin 4.7,
          lin + he 4.7, lin + he + nl 9.4, with the twin 10.3. Rejected: the ring's angular
-         momentum :math:`\ell = \sum_l x_l(v_{l+1} - v_{l-1})` times the tangents
+         momentum :math:`\\ell = \\sum_l x_l(v_{l+1} - v_{l-1})` times the tangents
          :math:`x_{j+1} - x_{j-1}` (and of v, xi): 9.2; cubic neighbour terms
          :math:`x_j^2 s_j, x_j s_j^2, s_j^3, x_jv_js_j` (:math:`s_j = x_{j-1} + x_{j+1}`): 9.6
          for four more controls;
