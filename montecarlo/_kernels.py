@@ -53,7 +53,8 @@ import math
 import numpy as np
 from numba import njit
 
-from ._martingale import MG_DIST, mg_measure, mg_noise
+from ._force import _onsite_force
+from ._martingale import MG_DIST, mg_measure
 
 KIND_LINEAR = 0
 KIND_KICK = 1
@@ -102,21 +103,6 @@ AVG_SWINGS = 4.0
 MAX_EVENTS = 64
 N_SAMPLE = 8
 N_TAYLOR = 11
-
-
-@njit(cache=True, nogil=True, inline="always")
-def _onsite_force(x: float, a: float, n: float) -> float:
-    """-U'(x) = -a n |x|^(n-1) sign(x), with fast paths for integer n."""
-    ax = abs(x)
-    if n == 3.0:
-        p = ax * ax * 3.0
-    elif n == 4.0:
-        p = ax * ax * ax * 4.0
-    elif ax == 0.0:
-        return 0.0
-    else:
-        p = n * ax ** (n - 1.0)
-    return -a * p if x > 0.0 else a * p
 
 
 @njit(cache=True, nogil=True)
@@ -900,11 +886,10 @@ def _run_frozen(gen, P: int, N: int, nburn: int, nrun: int, stride: int, cf_f: n
     fext = np.zeros((N, P))
     esc_time[:] = -1.0
     use_mg = mg.shape[1] > 0
-    n_lag = min(N // 2, MG_DIST) if use_mg else 0
-    phi = np.zeros((mg.shape[1] - n_lag - 1 if use_mg else 0, N, P))
-    dW = np.zeros((N, P))
-    he = np.zeros(n_lag + 1)
+    phi = np.zeros((mg.shape[1] - min(N // 2, MG_DIST) - 1 if use_mg else 0, N, P))
+    xi0 = np.zeros((N, P))
     mg_started = False
+    n_upd = 0  # xi updates of the fine level since the last martingale point
     _start(gen, chol, sd, xf, vf, Vf, xif)
     _clamp_start(xf, kind, pp, cf_c[12] if coupled else cf_f[12])
     for j in range(N):
@@ -949,9 +934,12 @@ def _run_frozen(gen, P: int, N: int, nburn: int, nrun: int, stride: int, cf_f: n
             if meas:
                 n0 = _measure(xf, vf, Vf, xif, sf, Ff, w, cf_f, pp, kind, sums[0], xm)
                 counts[0] += n0
-                if use_mg:
-                    mg_measure(xf, vf, Vf, xif, w, pp[7], pp[8], phi, dW, he, mg, first, mg_started)
+                if use_mg and sub == 0:
+                    dec = cf_f[13] ** n_upd
+                    mg_measure(xf, vf, Vf, xif, w, pp[7], pp[8], phi, xi0, mg, first, mg_started, dec,
+                               pp[11] * (1.0 - dec * dec))
                     mg_started = True
+                    n_upd = 0
                 if twin:
                     _measure_twin(xt, vt, Vt, xif, w, cf_f, sums[0], pp[8], xm)
                 if first:
@@ -964,8 +952,7 @@ def _run_frozen(gen, P: int, N: int, nburn: int, nrun: int, stride: int, cf_f: n
             for j in range(N):
                 for p in range(P):
                     xif[j, p] = cf_f[13] * xif[j, p] + cf_f[14] * zz[j, p]
-            if mg_started:
-                mg_noise(dW, he, zz, cf_f[14], w)
+            n_upd += 1
         if coupled:
             for j in range(N):
                 for p in range(P):
@@ -1004,11 +991,10 @@ def _run_joint(gen, P: int, N: int, nburn: int, nrun: int, stride: int, cf_f: np
     fext = np.zeros((N, P))
     esc_time[:] = -1.0
     use_mg = mg.shape[1] > 0
-    n_lag = min(N // 2, MG_DIST) if use_mg else 0
-    phi = np.zeros((mg.shape[1] - n_lag - 1 if use_mg else 0, N, P))
-    dW = np.zeros((N, P))
-    he = np.zeros(n_lag + 1)
+    phi = np.zeros((mg.shape[1] - min(N // 2, MG_DIST) - 1 if use_mg else 0, N, P))
+    xi0 = np.zeros((N, P))
     mg_started = False
+    n_upd = 0  # xi updates of the fine level since the last martingale point
     _start(gen, chol, sd, xf, vf, Vf, xif)
     _clamp_start(xf, kind, pp, cf_c[12] if coupled else cf_f[12])
     for j in range(N):
@@ -1039,8 +1025,7 @@ def _run_joint(gen, P: int, N: int, nburn: int, nrun: int, stride: int, cf_f: np
             zz = z1 if sub == 0 else z2
             ee = eps1 if sub == 0 else eps2
             _noise(cf_f, zz, ee)
-            if mg_started:  # the xi increment is L[3, 0] z[0] (montecarlo.scheme.noise_factor)
-                mg_noise(dW, he, zz[0], cf_f[CF_JOINT + 33], w)
+            n_upd += 1
             _d_step_joint(xf, vf, Vf, xif, Ff, xm, fext, ee, cf_f, pp, kind, rbm, rbx, pvx_f, w, gen)
             if twin:
                 _noise(cf_t, zz, epst)
@@ -1054,9 +1039,12 @@ def _run_joint(gen, P: int, N: int, nburn: int, nrun: int, stride: int, cf_f: np
                           esc_time)
             if meas:
                 counts[0] += _measure(xf, vf, Vf, xif, sf, Ff, w, cf_f, pp, kind, sums[0], pvx_f)
-                if use_mg:
-                    mg_measure(xf, vf, Vf, xif, w, pp[7], pp[8], phi, dW, he, mg, first, mg_started)
+                if use_mg and sub == 0:
+                    dec = cf_f[13] ** n_upd
+                    mg_measure(xf, vf, Vf, xif, w, pp[7], pp[8], phi, xi0, mg, first, mg_started, dec,
+                               pp[11] * (1.0 - dec * dec))
                     mg_started = True
+                    n_upd = 0
                 if twin:
                     _measure_twin(xt, vt, Vt, xit, w, cf_t, sums[0], pp[8], pvx_t)
                 if first:

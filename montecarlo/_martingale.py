@@ -8,8 +8,9 @@ whose xi increment :math:`\\varepsilon_{\\xi,j}` is used here. For any function
 
 .. math::
 
-    M_\\phi = \\sum_{m} \\sum_j \\phi_j(Y_{t_m}) \\sum_{t_m \\le s < t_{m+1}} s Z_{j,s},
-    \\qquad E[M_\\phi] = 0
+    M_\\phi = \\sum_{m} \\sum_j \\phi_j(Y_{t_m})\\,\\eta_{j,m},\\qquad
+    \\eta_{j,m} = \\xi_j(t_{m+1}) - e^{-(t_{m+1} - t_m)/\\tau}\\xi_j(t_m)
+    = \\sum_{t_m \\le s < t_{m+1}} e^{-(t_{m+1} - s - h)/\\tau} s Z_{j,s},\\qquad E[M_\\phi] = 0
 
 exactly, for any dt, scheme, start and coefficient (each normal is independent of everything
 before it), so these sums are control variates with known mean 0 whose regression
@@ -43,6 +44,8 @@ from __future__ import annotations
 
 import numpy as np
 from numba import njit
+
+from ._force import _onsite_force
 
 #: Largest neighbour lag of the linear basis (the Poisson solution's weight on farther units is
 #: small; the count of controls grows with it).
@@ -93,13 +96,7 @@ def mg_phi(x, v, V, xi, w, a, n, phi) -> None:
                 phi[b + 1, j, p] = wp * (v[jm, p] + v[jp, p])
                 phi[b + 2, j, p] = wp * (V[jm, p] + V[jp, p])
                 phi[b + 3, j, p] = wp * (xi[jm, p] + xi[jp, p])
-            ax = abs(xx)
-            if n == 2.0:
-                du = -2.0 * a * xx
-            elif ax == 0.0:
-                du = 0.0
-            else:
-                du = -a * n * ax ** (n - 1.0) * (1.0 if xx > 0.0 else -1.0)
+            du = -2.0 * a * xx if n == 2.0 else _onsite_force(xx, a, n)
             x2 = xx * xx
             r2 = 0.0
             if N > 1:
@@ -117,46 +114,46 @@ def mg_phi(x, v, V, xi, w, a, n, phi) -> None:
 
 
 @njit(cache=True, nogil=True)
-def mg_noise(dW, he, z, s, w) -> None:
-    """Add one step's xi increments ``s * z`` (z (N, P)) to ``dW`` and the Hermite sums to ``he``."""
-    N, P = z.shape
-    D = he.size - 1
-    for j in range(N):
-        for p in range(P):
-            dW[j, p] += s * z[j, p]
-    for p in range(P):
-        if w[p] == 0.0:
-            continue
-        for j in range(N):
-            zj = z[j, p]
-            he[0] += zj * zj - 1.0
-            for d in range(1, D + 1):
-                he[d] += zj * z[(j + d) % N, p]
+def mg_measure(x, v, V, xi, w, a, n, phi, xi0, acc, first: bool, started: bool, decay: float,
+               var: float) -> None:
+    """At a measured step: close the interval since the previous one (unless this is the first)
+    and start the next.
 
-
-@njit(cache=True, nogil=True)
-def mg_measure(x, v, V, xi, w, a, n, phi, dW, he, acc, first: bool, started: bool) -> None:
-    """At a measured step: close the interval since the previous one (unless this is the first),
-    acc[0, k] += sum over units and paths of phi[k] dW (k < n_state), acc[0, n_state + d] +=
-    he[d], and the same into acc[1] while in the first half of the window; then clear dW and he
-    and evaluate the basis at the current state (:func:`mg_phi`)."""
+    The interval's noise of unit j is the innovation of its xi,
+    :math:`\\eta_j = \\xi_j - e^{-\\Delta/\\tau}\\xi_j^{(0)}` (``decay``; ``xi0`` holds xi at the
+    previous measured step), the exponentially weighted sum of the normals drawn since, with
+    conditional mean 0 and variance ``var`` = :math:`(D/\\tau)(1 - e^{-2\\Delta/\\tau})` whatever
+    happened to x, v, V: acc[0, k] += sum over units and paths of phi[k] eta (k < n_state),
+    acc[0, n_state + d] += sum of :math:`\\eta_j\\eta_{j+d}/var - \\delta_{d0}` over live paths,
+    the same into acc[1] while in the first half of the window. Then the basis is evaluated at
+    the current state (:func:`mg_phi`) and xi is kept in ``xi0``. Nothing is done per step.
+    """
     K, N, P = phi.shape
     if started:
+        D = acc.shape[1] - K - 1
         for k in range(K):
             s = 0.0
             for j in range(N):
                 for p in range(P):
-                    s += phi[k, j, p] * dW[j, p]
+                    s += phi[k, j, p] * (xi[j, p] - decay * xi0[j, p])
             acc[0, k] += s
             if first:
                 acc[1, k] += s
-        for d in range(he.size):
-            acc[0, K + d] += he[d]
+        for d in range(D + 1):
+            s = 0.0
+            for p in range(P):
+                if w[p] == 0.0:
+                    continue
+                for j in range(N):
+                    l = (j + d) % N
+                    s += (xi[j, p] - decay * xi0[j, p]) * (xi[l, p] - decay * xi0[l, p]) / var
+                    if d == 0:
+                        s -= 1.0
+            acc[0, K + d] += s
             if first:
-                acc[1, K + d] += he[d]
-    dW[:, :] = 0.0
-    he[:] = 0.0
+                acc[1, K + d] += s
     mg_phi(x, v, V, xi, w, a, n, phi)
+    xi0[:, :] = xi
 
 
 def empty_accumulator() -> np.ndarray:
