@@ -425,7 +425,7 @@ def _martingale_row(h: Harvester, seed: int, quick: bool) -> dict[str, Any]:
     extrapolated from each, wall * (relative se / target)^2 (the Richardson bias is reported, not
     added)."""
     plan = MonteCarlo(seed=seed, tol=CV_TARGET).plan(h)
-    reps, paths = (48, 2) if quick else (64, 4)
+    reps, paths = (48, 2) if quick else (64, 2)
     t_run = 200.0 if quick else 400.0
     kw = dict(dt=plan.dt, paths=paths, replicas=reps, t_burn=plan.t_burn, t_run=t_run, richardson=True,
               seed=seed, twin=plan.twin, start=plan.start)
@@ -458,7 +458,7 @@ def martingale_rows(quick: bool) -> dict[str, Any]:
     controls (the estimator's automatic choice among twin, martingale sums, both), the twin alone
     and plain, for n in MARTINGALE_N, N = 1 and N = 3 at each k in MARTINGALE_K, a = 0.5; all
     three from one ensemble pair per row (with and without the martingale sums, same paths).
-    Budget per row: 64 replicas of 4 paths, t_run = 400 (quick: 48 of 2, t_run = 200), the
+    Budget per row: 64 replicas of 2 paths, t_run = 400 (quick: 48 of 2, t_run = 200), the
     solver's plan for tol = 1e-4 otherwise (dt, burn-in, twin); the times are extrapolated from
     that run, not measured to the target."""
     out: dict[str, Any] = {}
