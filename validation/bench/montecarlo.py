@@ -59,7 +59,7 @@ from montecarlo import MonteCarlo, estimate, simulate, simulate_naive
 from montecarlo.simulate import default_threads
 from validation.bench.cli import bench_main, save_benchmark
 
-__all__ = ["STEM", "run", "martingale_rows", "martingale_coverage"]
+__all__ = ["STEM", "run", "martingale_rows", "martingale_coverage", "run_martingale"]
 
 #: Name of the written ``.json`` and ``.png``.
 STEM = "bench_montecarlo"
@@ -435,6 +435,10 @@ def _martingale_row(h: Harvester, seed: int, quick: bool) -> dict[str, Any]:
     without = simulate(h, martingale=False, **kw)
     row.update(wall_martingale_s=with_mg.wall_time, wall_plain_s=without.wall_time,
                escape_fraction=with_mg.escaped_fraction())
+    if with_mg.escaped_fraction() > 0.0:
+        row["note"] = (f"{with_mg.escaped_fraction():.1%} of paths escaped within t_burn + t_run: no "
+                       "stationary statistics, no control variates, no time to target")
+        return row
     plain = estimate(with_mg, h, control=False)
     row.update(eta=plain.mean["eta"], rel_bias=abs(plain.bias["eta"] / plain.mean["eta"]))
     for label, ens, controls in (("plain", without, False), ("twin", without, "twin"),
@@ -472,6 +476,21 @@ def martingale_rows(quick: bool) -> dict[str, Any]:
         out[name] = {"n": n, "N": N, "k": k, "confinement": h.confinement,
                      **_martingale_row(h, 4100 + i, quick), "bench_wall_s": time.perf_counter() - t0}
     return out
+
+
+def run_martingale(quick: bool = False, out: Path | str | None = None) -> dict[str, Any]:
+    """Only this section (:func:`martingale_rows`, :func:`martingale_coverage`); writes
+    ``bench_montecarlo_martingale.json`` into ``out`` when given."""
+    import json
+
+    t0 = time.perf_counter()
+    res = {"quick": quick, "threads": default_threads(), "rows": martingale_rows(quick),
+           "coverage": martingale_coverage(quick)}
+    res["wall_s"] = time.perf_counter() - t0
+    if out is not None:
+        Path(out).mkdir(parents=True, exist_ok=True)
+        (Path(out) / "bench_montecarlo_martingale.json").write_text(json.dumps(res, indent=1))
+    return res
 
 
 def martingale_coverage(quick: bool) -> dict[str, Any]:
