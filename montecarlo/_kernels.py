@@ -864,7 +864,7 @@ def _run_frozen(gen, P: int, N: int, nburn: int, nrun: int, stride: int, cf_f: n
     counters : (5,) int64 array
         Kink statistics (slow-path unit steps, crossings, averaged-map entries, exhausted
         event budgets) and, in slot 4, the number of ring steps taken (all levels).
-    mg : (2, n_basis) or (2, 0) array
+    mg : (2, len(basis_names(N))) or (2, 0) array
         Martingale control sums of the fine level (:mod:`montecarlo._martingale`) over the
         measured window and its first half (accumulated); zero columns switch them off.
     """

@@ -2,9 +2,9 @@
 
 In every step of the kernel the only randomness is a fresh Gaussian draw: the
 Ornstein--Uhlenbeck normal :math:`Z_j` of each unit (frozen-xi step, xi increment
-:math:`s Z_j`, :math:`s = \\sqrt{(D/\\tau)(1 - e^{-2h/\\tau})}`), or the joint step's four normals,
-whose xi increment :math:`\\varepsilon_{\\xi,j}` is used here. For any function
-:math:`\\phi` of the state :math:`Y_t` known before the draw,
+:math:`s Z_j`, :math:`s = \\sqrt{(D/\\tau)(1 - e^{-2h/\\tau})}`), or the joint step's four normals
+(xi's own transition is the same exact OU update). For any function :math:`\\phi` of the state
+:math:`Y_{t_m}` at a martingale point, and the innovation :math:`\\eta` of xi until the next,
 
 .. math::
 
@@ -15,15 +15,16 @@ whose xi increment :math:`\\varepsilon_{\\xi,j}` is used here. For any function
 exactly, for any dt, scheme, start and coefficient (each normal is independent of everything
 before it), so these sums are control variates with known mean 0 whose regression
 (:mod:`montecarlo.control`) adds no bias and leaves the Richardson pair untouched. The
-:math:`t_m` are the measured steps; :math:`\\phi` is evaluated only there and multiplies the
-noise summed until the next one (the noise after the last measured step is left out, so that
-the sums telescope with the measured window). The ideal :math:`\\phi` is the gradient in xi of
+:math:`t_m` are the measured steps (the fine level's first substep with Richardson); the
+innovation needs no work per step, and the noise after the last point is left out, so that the
+sums telescope with the measured window. The ideal :math:`\\phi` is the gradient in xi of
 the solution g of the Poisson equation of the measured observable,
 :math:`g(Y) - E[g(Y')|Y] = f(Y) - \\pi(f)`, whose martingale
 :math:`\\sum_t g(Y_{t+1}) - E[g(Y_{t+1})|Y_t]` cancels the time average's fluctuation up to the
 boundary term :math:`g(Y_{t_0}) - g(Y_{t_1})`; for a harmonic ring g is quadratic, so its
 first-order part is linear in the state (the ``lin`` basis) and its second-order part is
-:math:`\\sum_d G_d \\sum_j (Z_jZ_{j+d} - \\delta_{d0})` (the ``he`` sums).
+:math:`\\sum_d G_d \\sum_j (\\eta_j\\eta_{j+d} - \\delta_{d0}\\,\\mathrm{var})` (the ``he`` sums;
+exact with a martingale point at every step, :func:`montecarlo.twin.poisson_controls`).
 
 Basis, per unit j (sums over units; the ring's symmetry makes one coefficient per lag d):
 
@@ -37,12 +38,12 @@ Basis, per unit j (sums over units; the ring's symmetry makes one coefficient pe
          :math:`x_{j+1} - x_{j-1}` (and of v, xi): 9.2; cubic neighbour terms
          :math:`x_j^2 s_j, x_j s_j^2, s_j^3, x_jv_js_j` (:math:`s_j = x_{j-1} + x_{j+1}`): 9.6
          for four more controls;
-``he``   noise only: :math:`\\sum_j (Z_j^2 - 1)` and :math:`\\sum_j Z_j Z_{j+d}`, d = 1 .. D.
+``he``   noise only: :math:`\\sum_j (\\eta_j^2/\\mathrm{var} - 1)` and
+         :math:`\\sum_j \\eta_j\\eta_{j+d}/\\mathrm{var}`, d = 1 .. D (var the innovation's variance).
 """
 
 from __future__ import annotations
 
-import numpy as np
 from numba import njit
 
 from ._force import _onsite_force
@@ -68,19 +69,10 @@ def basis_names(N: int) -> tuple[str, ...]:
     return lin + tuple("nl_" + t for t in NL_NAMES) + tuple(f"he_{d}" for d in range(D + 1))
 
 
-def n_state(N: int) -> int:
-    """Number of state-dependent basis functions (``lin`` and ``nl``)."""
-    return 4 * (lags(N) + 1) + len(NL_NAMES)
-
-
-def n_basis(N: int) -> int:
-    """Number of accumulated martingale controls."""
-    return n_state(N) + lags(N) + 1
-
-
 @njit(cache=True, nogil=True)
 def mg_phi(x, v, V, xi, w, a, n, phi) -> None:
-    """Evaluate the state basis at the measured state into ``phi`` (n_state, N, P); dead paths 0."""
+    """Evaluate the state basis at the measured state into ``phi`` (K, N, P), K the ``lin``
+    and ``nl`` functions; dead paths 0."""
     N, P = x.shape
     D = min(N // 2, MG_DIST)
     o = 4 * (D + 1)
@@ -123,8 +115,8 @@ def mg_measure(x, v, V, xi, w, a, n, phi, xi0, acc, first: bool, started: bool, 
     :math:`\\eta_j = \\xi_j - e^{-\\Delta/\\tau}\\xi_j^{(0)}` (``decay``; ``xi0`` holds xi at the
     previous measured step), the exponentially weighted sum of the normals drawn since, with
     conditional mean 0 and variance ``var`` = :math:`(D/\\tau)(1 - e^{-2\\Delta/\\tau})` whatever
-    happened to x, v, V: acc[0, k] += sum over units and paths of phi[k] eta (k < n_state),
-    acc[0, n_state + d] += sum of :math:`\\eta_j\\eta_{j+d}/var - \\delta_{d0}` over live paths,
+    happened to x, v, V: acc[0, k] += sum over units and paths of phi[k] eta (k < K),
+    acc[0, K + d] += sum of :math:`\\eta_j\\eta_{j+d}/var - \\delta_{d0}` over live paths,
     the same into acc[1] while in the first half of the window. Then the basis is evaluated at
     the current state (:func:`mg_phi`) and xi is kept in ``xi0``. Nothing is done per step.
     """
@@ -154,8 +146,3 @@ def mg_measure(x, v, V, xi, w, a, n, phi, xi0, acc, first: bool, started: bool, 
                 acc[1, K + d] += s
     mg_phi(x, v, V, xi, w, a, n, phi)
     xi0[:, :] = xi
-
-
-def empty_accumulator() -> np.ndarray:
-    """The (2, 0) accumulator that switches the martingale sums off."""
-    return np.zeros((2, 0))
