@@ -284,8 +284,9 @@ def poisson_controls(lin: Harvester, dt: float, names: tuple[str, ...]) -> dict[
 
     linear in the state times the noise plus Hermite terms: a fixed combination of the ``lin`` and
     ``he`` sums of :mod:`montecarlo._martingale` (the ring's symmetry makes the weights depend on
-    the lag only). With a sample at every step the time average's fluctuation is this martingale
-    up to the boundary term :math:`g(Y_{t_0}) - g(Y_{t_1})`.
+    the lag only; lags beyond :data:`montecarlo._martingale.MG_DIST` are not in the basis, so the
+    weights are exact for N <= 9). With a sample at every step the time average's fluctuation is
+    this martingale up to the boundary term :math:`g(Y_{t_0}) - g(Y_{t_1})`.
 
     Parameters
     ----------
