@@ -316,7 +316,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--tol", type=_number, default=None,
                    help="Monte Carlo: target standard error of the optimum's position, > 0 (adds batches)")
     p.add_argument("--batches", type=int, default=8, help="independent common-random-number batches, >= 3")
-    p.add_argument("--replicas", type=int, default=16, help="Monte Carlo replicas per point and batch, >= 2")
+    p.add_argument("--replicas", type=int, default=48, help="Monte Carlo replicas per point and batch, >= 2")
     p.add_argument("--seed", type=int, default=2017, help="base random seed, >= 0 (default 2017)")
     p.add_argument("--json", action="store_true", help="print one JSON object")
     p.add_argument("--no-progress", action="store_true", help="no progress bar")

@@ -15,7 +15,9 @@ Scheme: Strang splitting of the exact Ornstein--Uhlenbeck flow of xi with the fl
 located zero crossings for the kink force of 1 <= n <= 1.05), numba-compiled,
 one :class:`numpy.random.Generator` per (replica, chunk) from a ``SeedSequence``. A harmonic
 twin ring on the same noise, whose moments are known exactly at the step used, gives
-control variates; the paths start from its stationary law.
+control variates; the paths start from its stationary law. Martingale sums (functions of the
+state times the noise drawn after it, :mod:`._martingale`; mean exactly 0) give more, alone or
+with the twin's (:func:`estimate` picks the set).
 """
 
 from __future__ import annotations

@@ -53,6 +53,9 @@ import math
 import numpy as np
 from numba import njit
 
+from ._force import _onsite_force
+from ._martingale import MG_DIST, mg_measure
+
 KIND_LINEAR = 0
 KIND_KICK = 1
 KIND_KINK = 2
@@ -100,21 +103,6 @@ AVG_SWINGS = 4.0
 MAX_EVENTS = 64
 N_SAMPLE = 8
 N_TAYLOR = 11
-
-
-@njit(cache=True, nogil=True, inline="always")
-def _onsite_force(x: float, a: float, n: float) -> float:
-    """-U'(x) = -a n |x|^(n-1) sign(x), with fast paths for integer n."""
-    ax = abs(x)
-    if n == 3.0:
-        p = ax * ax * 3.0
-    elif n == 4.0:
-        p = ax * ax * ax * 4.0
-    elif ax == 0.0:
-        return 0.0
-    else:
-        p = n * ax ** (n - 1.0)
-    return -a * p if x > 0.0 else a * p
 
 
 @njit(cache=True, nogil=True)
@@ -843,7 +831,7 @@ def _live(w: np.ndarray) -> int:
 def _run_frozen(gen, P: int, N: int, nburn: int, nrun: int, stride: int, cf_f: np.ndarray,
          cf_c: np.ndarray, pp: np.ndarray, kind: int, coupled: bool, cf_t: np.ndarray,
          pp_t: np.ndarray, twin: bool, chol: np.ndarray, sums: np.ndarray, counts: np.ndarray,
-         esc_time: np.ndarray, counters: np.ndarray) -> None:
+         esc_time: np.ndarray, counters: np.ndarray, mg: np.ndarray) -> None:
     """Simulate P independent rings of N units with the frozen-xi step and accumulate their
     time averages (:func:`_run_joint` has the same arguments and outputs for the joint step).
 
@@ -876,6 +864,9 @@ def _run_frozen(gen, P: int, N: int, nburn: int, nrun: int, stride: int, cf_f: n
     counters : (5,) int64 array
         Kink statistics (slow-path unit steps, crossings, averaged-map entries, exhausted
         event budgets) and, in slot 4, the number of ring steps taken (all levels).
+    mg : (2, len(basis_names(N))) or (2, 0) array
+        Martingale control sums of the fine level (:mod:`montecarlo._martingale`) over the
+        measured window and its first half (accumulated); zero columns switch them off.
     """
     thr = pp[10]
     sd = math.sqrt(pp[11])
@@ -894,6 +885,11 @@ def _run_frozen(gen, P: int, N: int, nburn: int, nrun: int, stride: int, cf_f: n
     cs = np.zeros((3, N_TAYLOR + 1))
     fext = np.zeros((N, P))
     esc_time[:] = -1.0
+    use_mg = mg.shape[1] > 0
+    phi = np.zeros((mg.shape[1] - min(N // 2, MG_DIST) - 1 if use_mg else 0, N, P))
+    xi0 = np.zeros((N, P))
+    mg_started = False
+    n_upd = 0  # xi updates of the fine level since the last martingale point
     _start(gen, chol, sd, xf, vf, Vf, xif)
     _clamp_start(xf, kind, pp, cf_c[12] if coupled else cf_f[12])
     for j in range(N):
@@ -938,6 +934,12 @@ def _run_frozen(gen, P: int, N: int, nburn: int, nrun: int, stride: int, cf_f: n
             if meas:
                 n0 = _measure(xf, vf, Vf, xif, sf, Ff, w, cf_f, pp, kind, sums[0], xm)
                 counts[0] += n0
+                if use_mg and sub == 0:
+                    dec = cf_f[13] ** n_upd
+                    mg_measure(xf, vf, Vf, xif, w, pp[7], pp[8], phi, xi0, mg, first, mg_started, dec,
+                               pp[11] * (1.0 - dec * dec))
+                    mg_started = True
+                    n_upd = 0
                 if twin:
                     _measure_twin(xt, vt, Vt, xif, w, cf_f, sums[0], pp[8], xm)
                 if first:
@@ -950,6 +952,7 @@ def _run_frozen(gen, P: int, N: int, nburn: int, nrun: int, stride: int, cf_f: n
             for j in range(N):
                 for p in range(P):
                     xif[j, p] = cf_f[13] * xif[j, p] + cf_f[14] * zz[j, p]
+            n_upd += 1
         if coupled:
             for j in range(N):
                 for p in range(P):
@@ -960,7 +963,7 @@ def _run_frozen(gen, P: int, N: int, nburn: int, nrun: int, stride: int, cf_f: n
 def _run_joint(gen, P: int, N: int, nburn: int, nrun: int, stride: int, cf_f: np.ndarray,
                cf_c: np.ndarray, pp: np.ndarray, kind: int, coupled: bool, cf_t: np.ndarray,
                pp_t: np.ndarray, twin: bool, chol: np.ndarray, sums: np.ndarray, counts: np.ndarray,
-               esc_time: np.ndarray, counters: np.ndarray) -> None:
+               esc_time: np.ndarray, counters: np.ndarray, mg: np.ndarray) -> None:
     """:func:`_run_frozen` (same arguments and outputs) with the joint step.
 
     Four normals per unit and fine step; the coarse level takes the exact composition of the
@@ -987,6 +990,11 @@ def _run_joint(gen, P: int, N: int, nburn: int, nrun: int, stride: int, cf_f: np
     w = np.ones(P)
     fext = np.zeros((N, P))
     esc_time[:] = -1.0
+    use_mg = mg.shape[1] > 0
+    phi = np.zeros((mg.shape[1] - min(N // 2, MG_DIST) - 1 if use_mg else 0, N, P))
+    xi0 = np.zeros((N, P))
+    mg_started = False
+    n_upd = 0  # xi updates of the fine level since the last martingale point
     _start(gen, chol, sd, xf, vf, Vf, xif)
     _clamp_start(xf, kind, pp, cf_c[12] if coupled else cf_f[12])
     for j in range(N):
@@ -1017,6 +1025,7 @@ def _run_joint(gen, P: int, N: int, nburn: int, nrun: int, stride: int, cf_f: np
             zz = z1 if sub == 0 else z2
             ee = eps1 if sub == 0 else eps2
             _noise(cf_f, zz, ee)
+            n_upd += 1
             _d_step_joint(xf, vf, Vf, xif, Ff, xm, fext, ee, cf_f, pp, kind, rbm, rbx, pvx_f, w, gen)
             if twin:
                 _noise(cf_t, zz, epst)
@@ -1030,6 +1039,12 @@ def _run_joint(gen, P: int, N: int, nburn: int, nrun: int, stride: int, cf_f: np
                           esc_time)
             if meas:
                 counts[0] += _measure(xf, vf, Vf, xif, sf, Ff, w, cf_f, pp, kind, sums[0], pvx_f)
+                if use_mg and sub == 0:
+                    dec = cf_f[13] ** n_upd
+                    mg_measure(xf, vf, Vf, xif, w, pp[7], pp[8], phi, xi0, mg, first, mg_started, dec,
+                               pp[11] * (1.0 - dec * dec))
+                    mg_started = True
+                    n_upd = 0
                 if twin:
                     _measure_twin(xt, vt, Vt, xit, w, cf_t, sums[0], pp[8], pvx_t)
                 if first:
@@ -1043,9 +1058,9 @@ def _run_joint(gen, P: int, N: int, nburn: int, nrun: int, stride: int, cf_f: np
 def run_chunk(gen, P: int, N: int, nburn: int, nrun: int, stride: int, cf_f: np.ndarray,
               cf_c: np.ndarray, pp: np.ndarray, kind: int, coupled: bool, cf_t: np.ndarray,
               pp_t: np.ndarray, twin: bool, chol: np.ndarray, sums: np.ndarray,
-              counts: np.ndarray, esc_time: np.ndarray, counters: np.ndarray) -> None:
+              counts: np.ndarray, esc_time: np.ndarray, counters: np.ndarray, mg: np.ndarray) -> None:
     """Run :func:`_run_frozen` or :func:`_run_joint` (arguments as there; ``cf_f`` says which)
     on a scratch block sized for this chunk."""
     run = _run_joint if cf_f[CF_JOINT] == 1.0 else _run_frozen
     run(gen, P, N, nburn, nrun, stride, cf_f, cf_c, pp, kind, coupled, cf_t, pp_t, twin, chol,
-        sums, counts, esc_time, counters)
+        sums, counts, esc_time, counters, mg)

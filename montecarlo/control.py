@@ -28,11 +28,19 @@ import numpy as np
 
 from fpe_harvester.errors import ParameterError
 
-__all__ = ["Regression", "regression_estimate", "MIN_DOF"]
+__all__ = ["Regression", "regression_estimate", "MIN_DOF", "enough_dof"]
 
-#: Residual degrees of freedom (R - p - 1) required before the controls are used: with fewer,
-#: the estimated coefficients cost more variance than they remove.
+#: Residual degrees of freedom (R - p - 1) required before p controls are used: at least
+#: MIN_DOF and at least p. Estimating the coefficients inflates the residual variance by about
+#: (R - 2)/(R - p - 2) (2 at the limit R = 2p + 1, 1.2 at R = 6p), which the regression's
+#: covariance includes; below the limit the coefficients cost more variance than they remove.
 MIN_DOF = 12
+
+
+def enough_dof(replicas: int, p: int) -> bool:
+    """Whether ``replicas`` leave enough residual degrees of freedom for ``p`` controls:
+    :math:`R - p - 1 \\ge \\max(` :data:`MIN_DOF` :math:`, p)`."""
+    return replicas - p - 1 >= max(MIN_DOF, p)
 
 #: Relative spread over replicas below which a control counts as constant (round-off).
 _FLAT = 1e-9

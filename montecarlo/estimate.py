@@ -5,8 +5,12 @@ samples inside a path. Standard errors are Student-t scaled: the sample standard
 :math:`t_{\\nu}(\\Phi(1))`, the quantile of Student's t with the estimate's residual degrees
 of freedom :math:`\\nu` at the one-sigma level (0.8413), so that the reported one-sigma interval
 covers 68 % also for few replicas (the factor is 1.84 for 2 replicas, 1.08 for 8, 1.02 for 32).
-With a harmonic twin in the ensemble (:mod:`.twin`), the means are
-the regression (control-variate) estimates of :mod:`.control`; without, plain means.
+With control variates in the ensemble, the means are the regression (control-variate)
+estimates of :mod:`.control`; without, plain means. Two kinds exist, both with an exactly known
+mean: the harmonic twin's moments (:mod:`.twin`; the paths must start from its stationary law)
+and the martingale sums of :mod:`montecarlo._martingale` (mean 0 for any start). The set used
+is the candidate (:data:`CONTROL_SETS`) with the least variance of eta among those whose residual
+degrees of freedom meet :func:`montecarlo.control.enough_dof`.
 
 ``eta`` is the ratio of the estimated means, :math:`\\eta = \\overline{V^2}/(R\\,\\overline{P_{in}})`
 (not a mean of per-replica ratios, whose bias is of the order of the squared per-replica
@@ -24,12 +28,15 @@ import numpy as np
 from fpe_harvester.errors import ParameterError
 from fpe_harvester.model import Harvester
 
-from .control import MIN_DOF, regression_estimate
+from .control import enough_dof, regression_estimate
 from .scheme import KIND_KINK, scheme_kind
 from .simulate import Ensemble
 from .twin import TWIN_MOMENTS
 
-__all__ = ["Estimate", "estimate", "BIAS_ORDER", "bias_order", "student_factor"]
+__all__ = ["Estimate", "estimate", "BIAS_ORDER", "bias_order", "student_factor", "CONTROL_SETS"]
+
+#: Candidate sets of control variates, by name: the twin's moments, the martingale sums, both.
+CONTROL_SETS = ("twin", "martingale", "martingale+twin")
 
 #: Weak order assumed when the coarse/fine difference is turned into a bias estimate of the
 #: fine level, bias = (coarse - fine) / (2^p - 1) (so fine - bias is the extrapolation), i.e.
@@ -84,7 +91,9 @@ class Estimate:
         Variance-reduction factor of the control variates per observable (plain variance of
         the mean / control-variate variance); empty without controls.
     control : bool
-        Whether the twin's control variates were used.
+        Whether control variates were used.
+    controls : str
+        Which set (a name of :data:`CONTROL_SETS`, or ``"none"``).
     """
 
     mean: dict[str, float]
@@ -99,6 +108,7 @@ class Estimate:
     drift_se: dict[str, float] = field(default_factory=dict)
     reduction: dict[str, float] = field(default_factory=dict)
     control: bool = False
+    controls: str = "none"
 
     def total_error(self, name: str) -> float:
         """Standard error and bias estimate added in quadrature."""
@@ -135,7 +145,34 @@ def _linear_eta(delta: np.ndarray, cov: np.ndarray, mean: np.ndarray, R: float) 
     return float(grad @ delta[:2]), math.sqrt(max(float(grad @ cov[:2, :2] @ grad), 0.0))
 
 
-def estimate(e: Ensemble, h: Harvester, order: float | None = None, control: bool | None = None) -> Estimate:
+def _control_columns(e: Ensemble, valid: np.ndarray, which: str, n: int) -> tuple | None:
+    """Controls of one candidate set: (C, C over the first half, mu), or None where the set is not
+    available (no twin started from its law or no martingale sums, an escaped path, too few
+    replicas for :func:`montecarlo.control.enough_dof`)."""
+    if e.escaped_fraction() > 0.0:
+        return None
+    cols, first, mu = [], [], []
+    if "twin" in which:
+        if e.twin_kappa is None or e.start != "twin":
+            return None
+        mom, mom_first = e.moments(0), e.moments(-1)
+        cols += [mom["t_" + name][valid] for name in TWIN_MOMENTS]
+        first += [mom_first["t_" + name][valid] for name in TWIN_MOMENTS]
+        mu += [e.twin_mean[name] for name in TWIN_MOMENTS]
+    if "martingale" in which:
+        if not e.mart_names:
+            return None
+        mg, mg_first = e.martingale(), e.martingale(first_half=True)
+        cols += [mg[name][valid] for name in e.mart_names]
+        first += [mg_first[name][valid] for name in e.mart_names]
+        mu += [0.0] * len(e.mart_names)
+    if not enough_dof(n, len(cols)):
+        return None
+    return np.column_stack(cols), np.column_stack(first), np.array(mu)
+
+
+def estimate(e: Ensemble, h: Harvester, order: float | None = None, control: bool | None = None,
+             controls: str | None = None) -> Estimate:
     """Statistics of an ensemble of ``h`` (see :class:`Estimate`).
 
     Parameters
@@ -147,10 +184,17 @@ def estimate(e: Ensemble, h: Harvester, order: float | None = None, control: boo
     order : float, optional
         Weak order for the Richardson bias; default :func:`bias_order`.
     control : bool, optional
-        Use the twin's moments as control variates (:mod:`.control`). None: whenever the
-        ensemble has a twin started from its stationary law, no path escaped and there are at
-        least ``MIN_DOF`` residual degrees of freedom. True raises if that is not the case.
+        Use control variates (:mod:`.control`). None: whenever some set of
+        :data:`CONTROL_SETS` is available (the twin's needs the paths started from its stationary
+        law; either needs no escaped path and the degrees of freedom of
+        :func:`montecarlo.control.enough_dof`). True raises if none is.
+    controls : str, optional
+        Use this set of :data:`CONTROL_SETS` only (raises if it is not available). None: of the
+        available sets, the one that gives eta the least variance.
     """
+    if controls is not None and controls not in CONTROL_SETS:
+        raise ParameterError(f"controls must be None or one of {CONTROL_SETS}, got {controls!r} "
+                             f"(type {type(controls).__name__})")
     if order is None:
         order = bias_order(h, e.notes.get("scheme_kind"))
     fine = _per_replica(e, h, 0)
@@ -161,31 +205,30 @@ def estimate(e: Ensemble, h: Harvester, order: float | None = None, control: boo
         valid &= np.all(np.isfinite(coarse[:, :5]), axis=1)
     valid &= np.all(np.isfinite(first[:, :5]), axis=1)
     n = int(valid.sum())
-    n_twin = len(TWIN_MOMENTS)
-    usable = (e.twin_kappa is not None and e.start == "twin" and e.escaped_fraction() == 0.0
-              and n - n_twin - 1 >= MIN_DOF)
-    if control and not usable:
+    wanted = (controls,) if controls is not None else CONTROL_SETS
+    sets = {} if control is False else {
+        name: cols for name in wanted if (cols := _control_columns(e, valid, name, n)) is not None}
+    if (control or controls is not None) and not sets:
         raise ParameterError(
-            "control=True needs an ensemble with a twin started from its stationary law "
-            f"(start='twin'), no escaped path and at least {n_twin + 1 + MIN_DOF} valid replicas; "
-            f"got twin {e.twin_kappa}, start {e.start!r}, escaped fraction {e.escaped_fraction():g}, "
-            f"{n} replicas")
-    use = usable if control is None else bool(control)
+            f"control=True needs an ensemble with control variates ({controls or 'any set'}): a twin "
+            f"started from its stationary law (start='twin') or martingale sums (martingale=True), no "
+            f"escaped path and enough replicas; got twin {e.twin_kappa}, start {e.start!r}, martingale "
+            f"{bool(e.mart_names)}, escaped fraction {e.escaped_fraction():g}, {n} replicas")
+    use = bool(sets)
     if n < 2:
         nan = dict.fromkeys(_NAMES + ("eta",), math.nan)
         zero = dict.fromkeys(_NAMES + ("eta",), 0.0)
         return Estimate(dict(nan), dict(nan), dict(zero), dict(zero), math.nan, n, (math.nan, math.nan),
                         (math.nan, math.nan), dict(zero), dict(zero))
     R = h.params.R
-    if use:
-        mom, mom_first = e.moments(0), e.moments(-1)
-        C = np.column_stack([mom["t_" + name][valid] for name in TWIN_MOMENTS])
-        C_first = np.column_stack([mom_first["t_" + name][valid] for name in TWIN_MOMENTS])
-        mu = np.array([e.twin_mean[name] for name in TWIN_MOMENTS])
     reduction: dict[str, float] = {}
     Ff = fine[valid]
+    chosen = "none"
     if use:
-        mean, cov, plain_cov = _regression(Ff, C, mu)
+        fits = {name: _regression(Ff, C, mu) for name, (C, _, mu) in sets.items()}
+        chosen = min(fits, key=lambda name: _ratio(fits[name][0], fits[name][1], R)[1])
+        C, C_first, mu = sets[chosen]
+        mean, cov, plain_cov = fits[chosen]
         for i, name in enumerate(_NAMES):
             if cov[i, i] > 0:
                 reduction[name] = float(plain_cov[i, i] / cov[i, i])
@@ -212,7 +255,7 @@ def estimate(e: Ensemble, h: Harvester, order: float | None = None, control: boo
     # the twin's own first-half-minus-whole difference has mean 0 (it is stationary): the
     # control for the system's, which a transient would shift
     dr_mean, dr_cov = _best(first[valid] - Ff, (C_first - C) if use else None,
-                            np.zeros(len(TWIN_MOMENTS)) if use else None, mean, R)
+                            np.zeros(C.shape[1]) if use else None, mean, R)
     drift = {name: float(dr_mean[i]) for i, name in enumerate(_NAMES)}
     drift_se = {name: math.sqrt(max(float(dr_cov[i, i]), 0.0)) for i, name in enumerate(_NAMES)}
     drift["eta"], drift_se["eta"] = _linear_eta(dr_mean, dr_cov, mean, R)
@@ -222,7 +265,7 @@ def estimate(e: Ensemble, h: Harvester, order: float | None = None, control: boo
     return Estimate(
         mean=est_mean, se=est_se, bias=bias, bias_se=bias_se, cov_V2_Pin=float(cov[0, 1]), replicas=n,
         identity_V2=_mean_se(r1), identity_power=_mean_se(r2), drift=drift, drift_se=drift_se,
-        reduction=reduction, control=use)
+        reduction=reduction, control=use, controls=chosen)
 
 
 @functools.cache

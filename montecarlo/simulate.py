@@ -24,6 +24,7 @@ from fpe_harvester.errors import ParameterError, check_int, check_real
 from fpe_harvester.model import Harvester
 
 from ._kernels import KIND_KICK, KIND_KINK, MOMENTS, N_MOM, ROWS, run_chunk
+from ._martingale import basis_names
 from .scheme import (KINK_RULES, joint_step_refusal, physical_vector, scheme_kind, step_coefficients,
                      uses_joint_step)
 from .twin import initial_cholesky, twin_expectations, twin_harvester, twin_is_stable
@@ -67,6 +68,11 @@ class Ensemble:
     kink_counters : tuple of int
         Kink scheme: unit-steps on the slow path (near x = 0), located zero crossings, entries
         into the averaged swing map, steps that exhausted the event budget (all levels).
+    mart : ndarray, shape (replicas, 2, len(mart_names))
+        Martingale control sums of level 0 (:mod:`montecarlo._martingale`) over the measured
+        window and over its first half; no columns without ``martingale``.
+    mart_names : tuple of str
+        Their names (:func:`montecarlo._martingale.basis_names`).
     """
 
     sums: np.ndarray
@@ -86,6 +92,8 @@ class Ensemble:
     twin_kappa: float | None = None
     twin_mean: dict[str, float] = field(default_factory=dict)
     start: str = "rest"
+    mart: np.ndarray | None = None
+    mart_names: tuple[str, ...] = ()
 
     @property
     def replicas(self) -> int:
@@ -106,16 +114,28 @@ class Ensemble:
         out = {name: np.where(cnt > 0, self.sums[:, level, i] / safe, np.nan) for i, name in enumerate(MOMENTS)}
         return out
 
+    def martingale(self, first_half: bool = False) -> dict[str, np.ndarray]:
+        """Per-replica martingale controls ``{name: array(replicas)}``, each sum divided by the
+        unit-steps counted in its window (NaN where nothing counted); every one has mean 0
+        exactly when no path escaped. Empty without ``martingale``."""
+        if self.mart is None or not self.mart_names:
+            return {}
+        cnt = self.counts[:, -1 if first_half else 0]
+        safe = np.where(cnt > 0, cnt, 1.0)
+        row = self.mart[:, 1 if first_half else 0]
+        return {name: np.where(cnt > 0, row[:, i] / safe, np.nan) for i, name in enumerate(self.mart_names)}
+
     def escaped_fraction(self) -> float:
         """Fraction of all paths that crossed the escape threshold."""
         return float(np.isfinite(self.escape_times).mean())
 
     def merge(self, other: Ensemble) -> Ensemble:
         """Concatenate the replicas of two runs with identical settings."""
-        if (other.dts, other.paths, other.t_run, other.t_burn, other.twin_kappa, other.start) != (
-                self.dts, self.paths, self.t_run, self.t_burn, self.twin_kappa, self.start):
+        if (other.dts, other.paths, other.t_run, other.t_burn, other.twin_kappa, other.start,
+                other.mart_names) != (self.dts, self.paths, self.t_run, self.t_burn, self.twin_kappa,
+                                      self.start, self.mart_names):
             raise ParameterError("can only merge ensembles with the same dt, paths, t_run, t_burn, "
-                                 "twin and start")
+                                 "twin, start and martingale controls")
         return Ensemble(
             sums=np.concatenate([self.sums, other.sums]),
             counts=np.concatenate([self.counts, other.counts]),
@@ -131,6 +151,8 @@ class Ensemble:
             twin_kappa=self.twin_kappa,
             twin_mean=dict(self.twin_mean),
             start=self.start,
+            mart=None if self.mart is None else np.concatenate([self.mart, other.mart]),
+            mart_names=self.mart_names,
         )
 
 
@@ -159,6 +181,7 @@ def simulate(
     kink_rule: str = "average",
     kind: int | None = None,
     joint: bool | None = None,
+    martingale: bool = False,
 ) -> Ensemble:
     """Simulate independent replicas of ``h`` and return their raw moment sums.
 
@@ -216,6 +239,10 @@ def simulate(
         tau < :data:`montecarlo.scheme.JOINT_STEPS` dt, where freezing xi is wrong
         (:func:`montecarlo.scheme.uses_joint_step`). True raises where the scheme has no joint
         step (:func:`montecarlo.scheme.joint_step_refusal`).
+    martingale : bool
+        Also accumulate level 0's martingale control sums (:mod:`montecarlo._martingale`,
+        :attr:`Ensemble.mart`): sums of basis functions of the state times the noise drawn
+        after it, with mean exactly 0. The simulated paths are the same with or without them.
 
     Returns
     -------
@@ -253,6 +280,9 @@ def simulate(
             raise ParameterError(
                 f"twin must give every twin mode a positive stiffness twin + 4k sin^2(pi q/N) "
                 f"(k = {h.k:g}, N = {h.N}), got {twin!r}")
+    if not isinstance(martingale, bool):
+        raise ParameterError(f"martingale must be True or False, got {martingale!r} "
+                             f"(type {type(martingale).__name__})")
     if start == "twin" and twin is None:
         if not h.is_linear:
             raise ParameterError("start='twin' needs a twin stiffness for a nonlinear potential")
@@ -287,7 +317,9 @@ def simulate(
     sizes = _chunks(paths, chunk)
     tasks = [(r, c) for r in range(replicas) for c in range(len(sizes))]
 
-    def work(task: tuple[int, int]) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    names = basis_names(h.N) if martingale else ()
+
+    def work(task: tuple[int, int]) -> tuple[np.ndarray, ...]:
         r, c = task
         child = np.random.SeedSequence(ss.entropy, spawn_key=(first_replica + r, c))
         gen = np.random.Generator(np.random.PCG64(child))
@@ -295,9 +327,10 @@ def simulate(
         counts = np.zeros(ROWS)
         esc = np.empty(sizes[c])
         counters = np.zeros(5, dtype=np.int64)
+        mg = np.zeros((2, len(names)))
         run_chunk(gen, sizes[c], h.N, nburn, nrun, stride, cf_f, cf_c, pp, kind, richardson, cf_t,
-                  pp_t, twin is not None, chol, sums, counts, esc, counters)
-        return sums, counts, esc, counters
+                  pp_t, twin is not None, chol, sums, counts, esc, counters, mg)
+        return sums, counts, esc, counters, mg
 
     t0 = time.perf_counter()
     if threads == 1 or len(tasks) == 1:
@@ -311,8 +344,10 @@ def simulate(
     counts = np.zeros((replicas, levels + 1))
     esc_times = np.full((replicas, paths), np.inf)
     counters = np.zeros(5, dtype=np.int64)
+    mart = np.zeros((replicas, 2, len(names)))
     offsets = np.concatenate([[0], np.cumsum(sizes)])
-    for (r, c), (s, n, e, k) in zip(tasks, results):
+    for (r, c), (s, n, e, k, mg) in zip(tasks, results):
+        mart[r] += mg
         sums[r] += s[rows]
         counts[r] += n[rows]
         esc_times[r, offsets[c]:offsets[c + 1]] = np.where(e >= 0.0, e, np.inf)
@@ -336,5 +371,7 @@ def simulate(
         twin_kappa=twin,
         twin_mean=twin_mean,
         start=start,
+        mart=mart if martingale else None,
+        mart_names=names,
     )
 

@@ -49,6 +49,7 @@ __all__ = [
     "twin_expectations",
     "initial_cholesky",
     "linearized_stiffness",
+    "poisson_controls",
 ]
 
 #: The twin's measured moments (the ``t_`` entries of :data:`montecarlo._kernels.MOMENTS`):
@@ -262,3 +263,86 @@ def linearized_stiffness(h: Harvester, xdU: float | None = None, x2: float | Non
     i = int(sign[0])
     kappa = math.exp(brentq(lambda t: closure_mismatch(h, t), grid[i], grid[i + 1], xtol=1e-13))
     return kappa if twin_is_stable(h, kappa) else None
+
+
+def poisson_controls(lin: Harvester, dt: float, names: tuple[str, ...]) -> dict[str, np.ndarray]:
+    """Weights over the martingale sums that make the Poisson-solution controls of V2 and Pin.
+
+    For the harmonic ring ``lin`` at the frozen-xi step dt, the measured state
+    :math:`Y_t` (x, v, V after the step's flow, xi before its update, unit by unit) is the linear
+    chain :math:`Y_{t+1} = A Y_t + \\sum_j b_j Z_j` with :math:`A = T D_\\xi` (T of
+    :func:`scheme_matrices` in unit space, :math:`D_\\xi` the xi decay :math:`e^{-h/\\tau}`) and
+    :math:`b_j = s\\,T e_{\\xi_j}`. For a quadratic observable :math:`f = Y^TFY` (the ring mean of
+    :math:`V^2`, or of :math:`\\sigma e^{-h/2\\tau} v\\xi`) the Poisson equation
+    :math:`g - E[g(Y')|Y] = f - \\pi(f)` has the quadratic solution :math:`g = Y^TGY`,
+    :math:`G - A^TGA = F` (one discrete Lyapunov solve), and its martingale increment is
+
+    .. math::
+
+        g(Y') - E[g(Y')|Y] = \\sum_j 2\\,e_{\\xi_j}^T T^T G A Y\\; sZ_j
+        + s^2 \\sum_{j,l} (T^TGT)_{\\xi_j\\xi_l}(Z_jZ_l - \\delta_{jl}),
+
+    linear in the state times the noise plus Hermite terms: a fixed combination of the ``lin`` and
+    ``he`` sums of :mod:`montecarlo._martingale` (the ring's symmetry makes the weights depend on
+    the lag only; lags beyond :data:`montecarlo._martingale.MG_DIST` are not in the basis, so the
+    weights are exact for N <= 9). With a sample at every step the time average's fluctuation is
+    this martingale up to the boundary term :math:`g(Y_{t_0}) - g(Y_{t_1})`.
+
+    Parameters
+    ----------
+    lin : Harvester
+        A stable harmonic ring (the system itself, or a nonlinear system's twin: the weights then
+        define a control evaluated on the real state, still of mean 0).
+    dt : float
+        The fine step of the ensemble, > 0 (frozen-xi step).
+    names : tuple of str
+        :attr:`montecarlo.Ensemble.mart_names` of the ensemble.
+
+    Returns
+    -------
+    dict
+        ``{"V2": w, "Pin": w}``, weight vectors over ``names``.
+    """
+    import scipy.linalg
+
+    M, T, _ = scheme_matrices(lin, dt)
+    N = lin.N
+    p = lin.params
+    lag = np.arange(N)
+    cosw = np.cos(2.0 * math.pi * np.outer(lag, np.arange(N)) / N) / N
+    Tb = np.einsum("lq,qab->lab", cosw, T)
+    Tu = np.zeros((4 * N, 4 * N))
+    for j in range(N):
+        for l in range(N):
+            Tu[4 * j:4 * j + 4, 4 * l:4 * l + 4] = Tb[(j - l) % N]
+    Dxi = np.eye(4 * N)
+    Dxi[3::4, 3::4] *= math.exp(-dt / p.tau)
+    A = Tu @ Dxi
+    s = math.sqrt(p.noise_variance * -math.expm1(-2.0 * dt / p.tau))
+    half = math.exp(-0.5 * dt / p.tau)
+    out = {}
+    for key in ("V2", "Pin"):
+        F = np.zeros((4 * N, 4 * N))
+        for j in range(N):
+            if key == "V2":
+                F[4 * j + 2, 4 * j + 2] = 1.0 / N
+            else:
+                F[4 * j + 1, 4 * j + 3] = F[4 * j + 3, 4 * j + 1] = 0.5 * p.sigma * half / N
+        G = scipy.linalg.solve_discrete_lyapunov(A.T, F)
+        lin_w = 2.0 * Tu[:, 3].T @ G @ A  # unit 0's phi = lin_w . Y
+        K = s * s * Tu.T @ G @ Tu
+        w = np.zeros(len(names))
+        for i, name in enumerate(names):
+            kind, *rest = name.split("_")
+            if kind == "lin":
+                var, d = "x v V xi".split().index(rest[0]), int(rest[1])
+                if d == 0:
+                    w[i] = lin_w[var]
+                else:
+                    # the basis holds y_{j-d} + y_{j+d}: equal weights on a reflection-symmetric ring
+                    w[i] = lin_w[4 * d + var] if 2 * d != N else 0.5 * lin_w[4 * d + var]
+            elif kind == "he":
+                d = int(rest[0])
+                w[i] = K[3, 3] if d == 0 else (K[3, 4 * d + 3] * (1.0 if 2 * d == N else 2.0))
+        out[key] = w
+    return out

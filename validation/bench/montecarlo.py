@@ -29,6 +29,11 @@ Measured in one run:
   substeps' cost as path-steps per second against n = 3, and the coupled time-step difference
   eta(0.01) - eta(0.02);
 * error-versus-time curves (``series``) for the combined benchmark (:mod:`.combined`);
+* martingale control variates (:func:`martingale_rows`): the variance-reduction factor of eta
+  and the time to 1e-4 with the new controls, the twin alone and plain, for n in 1, 1.5, 3, 4, 8,
+  N = 1 and N = 3 at k = -0.01, -0.2, -0.5, from one ensemble pair per row; and the coverage of
+  their error bars over seeds against the exact solution (harmonic pair) and the Fokker--Planck
+  solver (single n = 3 unit) (:func:`martingale_coverage`);
 * the kink's time-step law (:mod:`validation.kinkstudy`): at a = 0.5, 1, 2, eta at fine steps
   0.04 ... 0.005 from runs with independent seeds, each Richardson-coupled, and the weak order
   p of eta(dt) = eta0 + c dt^p fitted to the independent values and to the coupled differences
@@ -53,11 +58,12 @@ import numpy as np
 from numba import njit, prange
 
 from fpe_harvester import Harvester, solve
+from fpe_harvester.errors import ParameterError
 from montecarlo import MonteCarlo, estimate, simulate, simulate_naive
 from montecarlo.simulate import default_threads
 from validation.bench.cli import bench_main, save_benchmark
 
-__all__ = ["STEM", "run"]
+__all__ = ["STEM", "run", "martingale_rows", "martingale_coverage", "run_martingale"]
 
 #: Name of the written ``.json`` and ``.png``.
 STEM = "bench_montecarlo"
@@ -446,6 +452,134 @@ def _control_variates(quick: bool) -> dict[str, Any]:
     return out
 
 
+# -- martingale control variates (issue 21) ------------------------------------------------------
+
+#: Rows of the martingale benchmark: n x (single unit, or N = 3 at k), a = 0.5.
+MARTINGALE_N = (1.0, 1.5, 3.0, 4.0, 8.0)
+MARTINGALE_K = (-0.01, -0.2, -0.5)
+
+
+def _eta_rel_se(est: Any) -> float:
+    return est.se["eta"] / abs(est.mean["eta"]) if est.mean["eta"] else math.inf
+
+
+def _martingale_row(h: Harvester, seed: int, quick: bool) -> dict[str, Any]:
+    """One row: one ensemble with the martingale sums and one without (same seed, the same paths),
+    the variance reduction of eta with each control set and the wall time to CV_TARGET
+    extrapolated from each, wall * (relative se / target)^2 (the Richardson bias is reported, not
+    added)."""
+    plan = MonteCarlo(seed=seed, tol=CV_TARGET).plan(h)
+    reps, paths = (48, 2) if quick else (64, 2)
+    t_run = 200.0 if quick else 400.0
+    kw = dict(dt=plan.dt, paths=paths, replicas=reps, t_burn=plan.t_burn, t_run=t_run, richardson=True,
+              seed=seed, twin=plan.twin, start=plan.start)
+    row: dict[str, Any] = {"twin_kappa": plan.twin, "dt": plan.dt, "t_burn": plan.t_burn, "t_run": t_run,
+                           "replicas": reps, "paths": paths}
+    with_mg = simulate(h, martingale=True, **kw)
+    without = simulate(h, martingale=False, **kw)
+    row.update(wall_martingale_s=with_mg.wall_time, wall_plain_s=without.wall_time,
+               escape_fraction=with_mg.escaped_fraction())
+    if with_mg.escaped_fraction() > 0.0:
+        row["note"] = (f"{with_mg.escaped_fraction():.1%} of paths escaped within t_burn + t_run: no "
+                       "stationary statistics, no control variates, no time to target")
+        return row
+    plain = estimate(with_mg, h, control=False)
+    row.update(eta=plain.mean["eta"], rel_bias=abs(plain.bias["eta"] / plain.mean["eta"]))
+    for label, ens, controls in (("plain", without, False), ("twin", without, "twin"),
+                                 ("martingale", with_mg, "martingale"), ("both", with_mg, "martingale+twin"),
+                                 ("auto", with_mg, None)):
+        try:
+            est = estimate(ens, h, control=False if controls is False else None,
+                           controls=controls if isinstance(controls, str) else None)
+        except ParameterError as exc:
+            row[label] = {"note": str(exc).split(";")[0]}
+            continue
+        rel = _eta_rel_se(est)
+        vrf = (_eta_rel_se(plain) / rel) ** 2 if rel > 0 else None
+        row[label] = {"controls": est.controls, "vrf_eta": vrf, "rel_se": rel, "eta": est.mean["eta"],
+                      "time_to_1e-4_s": ens.wall_time * (rel / CV_TARGET) ** 2}
+    return row
+
+
+def martingale_rows(quick: bool) -> dict[str, Any]:
+    """Variance-reduction factor of eta and time to 1e-4 (relative standard error) with the new
+    controls (the estimator's automatic choice among twin, martingale sums, both), the twin alone
+    and plain, for n in MARTINGALE_N, N = 1 and N = 3 at each k in MARTINGALE_K, a = 0.5; all
+    three from one ensemble pair per row (with and without the martingale sums, same paths).
+    Budget per row: 64 replicas of 2 paths, t_run = 400 (quick: 48 of 2, t_run = 200), the
+    solver's plan for tol = 1e-4 otherwise (dt, burn-in, twin); the times are extrapolated from
+    that run, not measured to the target."""
+    out: dict[str, Any] = {}
+    cases = [(n, 1, 0.0) for n in MARTINGALE_N] + [(n, 3, k) for n in MARTINGALE_N for k in MARTINGALE_K]
+    if quick:
+        cases = [(3.0, 1, 0.0), (3.0, 3, -0.5)]
+    for i, (n, N, k) in enumerate(cases):
+        h = Harvester.build(a=0.5, n=n, N=N, k=k)
+        name = f"n{n:g}_N{N}" + (f"_k{k:g}" if N > 1 else "")
+        t0 = time.perf_counter()
+        out[name] = {"n": n, "N": N, "k": k, "confinement": h.confinement,
+                     **_martingale_row(h, 4100 + i, quick), "bench_wall_s": time.perf_counter() - t0}
+    return out
+
+
+def run_martingale(quick: bool = False, out: Path | str | None = None) -> dict[str, Any]:
+    """Only this section (:func:`martingale_rows`, :func:`martingale_coverage`); writes
+    ``bench_montecarlo_martingale.json`` into ``out`` when given."""
+    import json
+
+    t0 = time.perf_counter()
+    res = {"quick": quick, "threads": default_threads(), "rows": martingale_rows(quick),
+           "coverage": martingale_coverage(quick)}
+    res["wall_s"] = time.perf_counter() - t0
+    if out is not None:
+        Path(out).mkdir(parents=True, exist_ok=True)
+        (Path(out) / "bench_montecarlo_martingale.json").write_text(json.dumps(res, indent=1))
+    return res
+
+
+def martingale_coverage(quick: bool) -> dict[str, Any]:
+    """Coverage of the martingale error bars against independent references over seeds: the
+    harmonic pair (N = 2, k = -0.2, a = 0.5) against its exact discrete value (twin_expectations,
+    frozen step dt = 0.1), and the single n = 3 unit (a = 0.5) against the Fokker--Planck solver
+    (extrapolated value mean - bias against hypot(se, bias_se), and the solver's own error
+    hypot(se, bias) around the fine level)."""
+    from montecarlo.twin import twin_expectations
+
+    seeds = 24 if quick else 100
+    h2 = Harvester.build(a=0.5, N=2, k=-0.2)
+    ex = twin_expectations(h2, 0.1)
+    eta2 = ex["V2"] / ex["vxi"]
+    z2 = []
+    for s in range(seeds):
+        e = simulate(h2, dt=0.1, paths=2, replicas=48, t_burn=20.0, t_run=100.0, seed=5000 + s, start="twin",
+                     martingale=True)
+        est = estimate(e, h2, controls="martingale")
+        z2.append((est.mean["eta"] - eta2) / est.se["eta"])
+    h3 = Harvester.build(a=0.5, n=3)
+    ref = solve(h3, "fpe", tol=1e-6)
+    plan = MonteCarlo(seed=1, tol=1e-3).plan(h3)
+    z3, z3_solver, vrf = [], [], []
+    for s in range(seeds):
+        e = simulate(h3, dt=plan.dt, paths=4, replicas=64, t_burn=plan.t_burn, t_run=200.0, seed=6000 + s,
+                     twin=plan.twin, start="twin", richardson=True, martingale=True)
+        est = estimate(e, h3)
+        vrf.append(est.reduction.get("eta"))
+        z3.append((est.mean["eta"] - est.bias["eta"] - ref.eta)
+                  / math.hypot(est.se["eta"], est.bias_se["eta"], ref.eta_err))
+        z3_solver.append((est.mean["eta"] - ref.eta) / math.hypot(est.total_error("eta"), ref.eta_err))
+
+    def summary(z: list[float]) -> dict[str, Any]:
+        a = np.abs(np.array(z))
+        return {"seeds": len(z), "within_1": float((a < 1).mean()), "within_2": float((a < 2).mean()),
+                "max_abs_z": float(a.max()), "z": [round(float(v), 3) for v in z]}
+
+    return {"harmonic_N2_vs_exact": summary(z2),
+            "n3_N1_vs_fpe_extrapolated": {**summary(z3), "fpe_eta": ref.eta, "fpe_err": ref.eta_err,
+                                          "median_vrf_eta": float(np.median([v for v in vrf if v]))},
+            "n3_N1_vs_fpe_solver_error": summary(z3_solver),
+            "nominal": {"within_1": 0.683, "within_2": 0.954}}
+
+
 def _kink_dt_study(quick: bool) -> dict[str, Any]:
     """Kink n = 1: the time-step law per a (:mod:`validation.kinkstudy`: independent seeds per
     dt, coupled differences, both fits), the old rule (units held at rest) against the default
@@ -530,6 +664,10 @@ def run(quick: bool = False, out: Path | None = None) -> dict[str, Any]:
     res["noise_correlation_time"] = _tau_study(quick)
     res["steep_walls"] = _steep_study(quick)
     res["control_variates"] = _control_variates(quick)
+    res["martingale"] = martingale_rows(quick)
+    # the coverage study takes minutes: full mode only (quick runs feed `harvester validate`)
+    res["martingale_coverage"] = martingale_coverage(quick) if not quick else {
+        "note": "full mode only; CI smoke test: tests/montecarlo/test_martingale.py"}
     res["kink_dt"] = _kink_dt_study(quick)
     res["series"] = series(quick, res)
     save_benchmark(res, out, STEM, _plot)
