@@ -223,13 +223,16 @@ def _mc_checks(ctx: Context, sec: Section) -> list[CheckResult]:
     table.rows.append(("normal", *(f"{x:.3f}" for x in NORMAL_COVERAGE), "-"))
     table.note = ("Cases: " + "; ".join(f"{c['label']} (reference {c['reference_method']}, median "
                                          f"relative error {c['median_rel_err_eta']:.1e}, {c['wall_s']:.0f} s)"
-                                         for c in res["cases"])
+                                         for c in res["cases"] if "unusable_reference" not in c)
                   + f". Each quantity is checked on its own, against the binomial limits of the normal "
                     f"coverage for the number of results (two-sided probability {ALPHA:g} per fraction).")
     sec.tables.append(table)
     sec.figures.append(_plot_coverage(ctx, res))
     z = {q: [v for c in res["cases"] for v in c["z"][q]] for q in res["fractions"]}
-    return [expect(label, _SECTION, ok, detail) for label, ok, detail in coverage_checks(z)]
+    missing = [expect(f"mc coverage: reference for {c['label']}", _SECTION, False,
+                      f"no usable reference, the case was not counted: {c['unusable_reference']}")
+               for c in res["cases"] if "unusable_reference" in c]
+    return missing + [expect(label, _SECTION, ok, detail) for label, ok, detail in coverage_checks(z)]
 
 
 def _plot_coverage(ctx: Context, res: dict) -> Figure:

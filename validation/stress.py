@@ -183,10 +183,35 @@ def _judge(label: str, method: str, run: Callable[[], Stats], h: Harvester,
     return out
 
 
+#: Share of the cap that a reference's 4-error band may take before it is solved again tighter.
+REF_CAP_SHARE = 0.8
+
+
+def _matched_reference(ctx: Context, h: Harvester, method: str) -> Stats:
+    """The reference solve, run at an accuracy at which the comparison's cap can be met.
+
+    A Monte Carlo reference aims at a relative error on eta; V2 and Pin may come out wider
+    (slow noise: V2 ~1.6x). When 4 of its errors exceed :data:`REF_CAP_SHARE` of the cap
+    :data:`MAX_REL_TOL` for any quantity, it is solved again with the tolerance scaled down by
+    that excess (at most 4x, with 4x the time budget), so that a good result is not failed
+    for its reference's width.
+    """
+    r = ctx.solve(h, method)
+    if method != "mc" or not r.ok or r.eta is None:
+        return r
+    widths = [4.0 * e / abs(v) for v, e in (r.value(q) for q in ("eta", "V2", "Pin")) if v and e is not None]
+    limit = REF_CAP_SHARE * MAX_REL_TOL[ctx.quick]
+    if not widths or max(widths) <= limit:
+        return r
+    opts = ctx.options("mc")
+    tol = max(opts["tol"] * limit / max(widths), opts["tol"] / 4.0)
+    return ctx.solve(h, "mc", tol=tol, max_time=4.0 * opts["max_time"])
+
+
 def _nonlinear_cases(ctx: Context) -> list[tuple[str, Callable[[], list[CheckResult]]]]:
     def independent(h: Harvester, method: str) -> Callable[[], Stats]:
         other = "mc" if method == "fpe" else "fpe"
-        return lambda: ctx.solve(h, other)
+        return lambda: _matched_reference(ctx, h, other)
 
     def fpe(label: str, h: Harvester, checked: bool = True) -> tuple:
         ref = independent(h, "fpe") if checked else None

@@ -64,3 +64,38 @@ def test_full_coverage() -> None:
     z = {q: [v for c in res["cases"] for v in c["z"][q]] for q in res["fractions"]}
     failed = [(label, detail) for label, ok, detail in coverage_checks(z) if not ok]
     assert not failed, failed
+
+
+def test_a_reference_short_of_its_tolerance_serves_only_when_precise_enough() -> None:
+    from fpe_harvester import Stats, Status
+    from validation.coverage import REF_MAX_SHARE, usable_reference
+
+    def ref(rel: float, status: Status = Status.NOT_CONVERGED) -> Stats:
+        return Stats(V2=1.0, V2_err=rel, Pin=2.0, Pin_err=2.0 * rel, eta=0.5, eta_err=0.5 * rel, status=status,
+                     method="mc", message="budget ran out")
+
+    assert usable_reference(ref(0.9 * REF_MAX_SHARE * 1e-2), 1e-2) is None
+    assert "budget ran out" in usable_reference(ref(1.1 * REF_MAX_SHARE * 1e-2), 1e-2)
+    assert usable_reference(ref(0.5, Status.STABLE), 1e-2) is None
+    assert usable_reference(ref(1e-4, Status.UNSTABLE), 1e-2) is not None
+
+
+def test_an_unusable_reference_is_reported_and_the_other_cases_run() -> None:
+    from fpe_harvester import Stats, Status
+
+    h = Harvester.build(a=0.5)
+    bad = CoverageCase("no reference", h, {"tol": 0.05, "paths": 8, "t_run": 50.0, "progress": False},
+                       reference=Stats(status=Status.NOT_CONVERGED, method="mc", message="no numbers"))
+    good = CoverageCase("harmonic", h, {"tol": 0.05, "paths": 8, "t_run": 50.0, "progress": False})
+    res = mc_coverage(cases=(bad, good), runs=3)
+    assert res["cases"][0]["unusable_reference"].startswith("not_converged")
+    assert res["count"] == 3 and len(res["cases"][1]["z"]["eta"]) == 3
+
+
+def test_the_full_grid_takes_its_monte_carlo_references_from_the_table() -> None:
+    from validation.coverage import FULL_CASES, _table_reference
+
+    for case in FULL_CASES:
+        if case.method == "mc":
+            r = _table_reference(case)
+            assert r is not None and r.eta_err is not None and "reference table" in r.message, case.label
