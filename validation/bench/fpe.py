@@ -15,12 +15,12 @@ run includes), one run:
 * Monte Carlo to the same error, extrapolated from a measured run (time ~ 1/error^2,
   labelled as such), and the ratio to the Fokker--Planck time;
 * the *previous design* (commit e011c60: neighbouring levels M + 2 and coarser meshes as
-  certificate, :data:`PREVIOUS`): its time, work and status, measured on this machine in the
-  session that replaced it, old and new runs interleaved; the ratio of work is the
-  load-independent comparison.
+  certificate, :data:`PREVIOUS`): its time, work and status, measured once on this 2-core
+  machine under load, old and new runs interleaved (recorded numbers: that code is no longer
+  in the package); the ratio of work is the load-independent comparison.
 
-Design alternatives measured and not adopted (this machine, the session that built the
-current design; numbers in the closing note of the issue as well):
+Design alternatives measured and not adopted (this 2-core machine, while the current design
+was built; recorded numbers, not re-run by this module):
 
 * *A Hermite frame that moves with x* (mean mu(x) and Cholesky factor L(x) of the
   conditional law of (v, V, xi), continuous piecewise linear, every x-derivative of the
@@ -105,10 +105,10 @@ SMOOTH = [(n, a) for n in (3.0, 4.0, 6.0, 8.0) for a in (0.5, 1.0, 2.0)]
 SUB_QUADRATIC = [(n, a) for n in (1.5,) for a in (0.5, 1.0, 2.0)]
 #: The kink n = 1 has its own scheme and benchmark (:mod:`validation.bench.kink`), part of the full run.
 
-#: The previous design (refinement by neighbouring levels, commit e011c60), measured in the
-#: session that replaced it, interleaved with the new one on the same loaded machine:
-#: (n, a, tol) -> (status, seconds, work in GF, M, elements). Its timings carry the load of
-#: that session (other jobs on both cores: compare the work, or the new design's work).
+#: The previous design (refinement by neighbouring levels, commit e011c60), measured once,
+#: interleaved with the new one on the same loaded 2-core machine (recorded numbers: that code
+#: is no longer in the package): (n, a, tol) -> (status, seconds, work in GF, M, elements).
+#: Its timings carry that run's load (other jobs on both cores): compare the work.
 PREVIOUS: dict[tuple[float, float, float], tuple[str, float, float, int, int]] = {
     (3.0, 0.5, 1e-4): ("stable", 0.32, 2.5, 8, 16),
     (3.0, 1.0, 1e-4): ("stable", 0.66, 13.7, 10, 16),
@@ -212,7 +212,7 @@ MESH_CASES = ([(n, a, (1e-4, 1e-6)) for n in (1.25, 1.5, 1.75) for a in (0.5, 1.
 #: 1 < n < 2 at 1e-4, < 1.5 s for n = 8, a = 2 at 1e-4, < 20 s for n = 8, a = 0.5 at 1e-6).
 MESH_BUDGET = {1e-4: 25.0, 1e-6: 30.0}
 
-#: Goals of issue 19 per (n, a, tol): seconds.
+#: Target wall times per (n, a, tol) [s] that the summary compares against.
 MESH_GOALS = {**{(n, a, 1e-4): 10.0 for n in (1.25, 1.5, 1.75) for a in (0.5, 1.0, 2.0)},
               (8.0, 2.0, 1e-4): 1.5, (8.0, 0.5, 1e-6): 20.0}
 
@@ -403,7 +403,7 @@ def series(quick: bool) -> list[dict[str, Any]]:
                 "reference_eta": ref.eta, "reference_err": ref.eta_err / abs(ref.eta)})
     out.append({"problem": "n3_single", "method": "Fokker-Planck (previous design)",
                 "points": [{"seconds": sec, "eta": eta, "tol": tol} for tol, sec, eta in PREVIOUS_SERIES_N3],
-                "reference": "measured in an earlier session (PREVIOUS_SERIES_N3)"})
+                "reference": "recorded numbers of the previous design, commit e011c60, loaded machine (PREVIOUS_SERIES_N3)"})
     h1 = Harvester.build(a=0.5, n=1.0)
     pts = []
     for tol in ([1e-2] if quick else [1e-2, 3e-3, 1e-3]):
@@ -446,7 +446,7 @@ def table(result: dict) -> str:
                          f"{f(prev.get('work_GF'), '8.1f')} {f(r.get('work_previous_over_new'), '8.1f')} "
                          f"{f(r.get('monte_carlo_over_fpe'), '9.3g')}")
     lines.append("reported/actual: relative errors; actual against the tighter run of the same case. "
-                 "prev: the previous design (measured in the session that replaced it). MC/FPE: Monte "
+                 "prev: the previous design (commit e011c60, recorded numbers of one loaded run). MC/FPE: Monte "
                  "Carlo time to the same tol, extrapolated from a measured run (time ~ 1/error^2).")
     s = result.get("summary", {})
     lines.append(f"reported error bounds the actual one: {s.get('reported_bounds_actual')}; "

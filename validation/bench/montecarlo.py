@@ -452,7 +452,7 @@ def _control_variates(quick: bool) -> dict[str, Any]:
     return out
 
 
-# -- martingale control variates (issue 21) ------------------------------------------------------
+# -- martingale control variates -------------------------------------------------------------------
 
 #: Rows of the martingale benchmark: n x (single unit, or N = 3 at k), a = 0.5.
 MARTINGALE_N = (1.0, 1.5, 3.0, 4.0, 8.0)

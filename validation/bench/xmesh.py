@@ -1,6 +1,6 @@
 """Benchmark of the x mesh for 1 < n < 2: algebraic grading against geometric layers.
 
-Two parts, both run in one session so that the two meshes share the machine's load:
+Two parts, both in one run so that the two meshes share the machine's load:
 
 * *Mesh error against unknowns* (n = 1.5, a = 1, fixed Hermite degree M): eta on the
   algebraic mesh (nodes graded like :math:`t^{2.5}` toward 0) and on the geometric one
