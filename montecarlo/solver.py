@@ -32,7 +32,7 @@ from .plan import FALLBACK_NOTE, burn_in, relaxation_time
 from .scheme import (JOINT_STEPS, KIND_KINK, KINK_WIDTH, SCHEME_NAMES, joint_step_refusal, scheme_kind,
                      uses_joint_step)
 from .simulate import Ensemble, default_threads, simulate
-from .twin import linearized_stiffness
+from .twin import linearized_stiffness, natural_amplitude
 
 __all__ = ["MonteCarlo", "Plan"]
 
@@ -65,6 +65,10 @@ _RUN_PER_BURN = 3.0
 #: t_run = 100, 400, 1000; harmonic unit (a = 0.5, linear basis) 8.0 at 100, 34 at 400.
 _T_RUN, _T_RUN_MART = 100.0, 400.0
 
+
+#: A confined system's escape threshold is at least this many natural amplitudes
+#: (:func:`~montecarlo.twin.natural_amplitude`), and at least 100.
+ESCAPE_AMPLITUDES = 30.0
 
 @dataclass(frozen=True)
 class Plan:
@@ -138,7 +142,10 @@ class MonteCarlo:
         Escape threshold on |x_j|, > 0. None (default): 100, or for a metastable ring four
         times the barrier amplitude :math:`x^* = (a n / (4|k| s))^{1/(2-n)}` where the
         anti-phase coupling force :math:`4|k| s x` (:math:`s = \\max_q \\sin^2(\\pi q/N)`)
-        overtakes the on-site force, if that is larger.
+        overtakes the on-site force, if that is larger; for a confined system
+        ``ESCAPE_AMPLITUDES`` (30) times the root-mean-square x of the equivalent harmonic
+        unit (:func:`~montecarlo.twin.natural_amplitude`), if that is larger (strong noise on
+        a weak wall: n = 1, D = 100 has sd(x) ~ 94, threshold ~2500).
     progress : bool or None
         tqdm bar on stderr; None shows it only for runs longer than 2 s.
     richardson : bool
@@ -255,7 +262,10 @@ class MonteCarlo:
         if h.confinement == "metastable":
             x_star = (h.a * h.n / (4.0 * abs(h.k) * max_sin2(h.N))) ** (1.0 / (2.0 - h.n))
             return float(max(100.0, 4.0 * x_star))
-        return 100.0
+        # a confined system whose natural amplitude is large (strong noise on a weak wall: n = 1,
+        # D = 100 has sd(x) ~ 94) must not count its ordinary paths as blown up
+        amp = natural_amplitude(h)
+        return float(max(100.0, ESCAPE_AMPLITUDES * amp)) if amp is not None else 100.0
 
     # -- planning ----------------------------------------------------------------------------
 

@@ -35,13 +35,14 @@ import math
 import numpy as np
 
 from fpe_harvester.errors import ParameterError, check_real
-from fpe_harvester.exact.moments import closure_mismatch
+from fpe_harvester.exact.moments import closure_mismatch, mode_moments
 from fpe_harvester.model import Harvester, mode_sin2
 
 from .scheme import joint_matrices, step_coefficients
 
 __all__ = [
     "TWIN_MOMENTS",
+    "natural_amplitude",
     "twin_harvester",
     "twin_is_stable",
     "scheme_matrices",
@@ -346,3 +347,20 @@ def poisson_controls(lin: Harvester, dt: float, names: tuple[str, ...]) -> dict[
                 w[i] = K[3, 3] if d == 0 else (K[3, 4 * d + 3] * (1.0 if 2 * d == N else 2.0))
         out[key] = w
     return out
+
+
+def natural_amplitude(h: Harvester) -> float | None:
+    """Root-mean-square displacement :math:`\\sqrt{\\langle x^2\\rangle}` of the equivalent
+    harmonic ring (stiffness :func:`linearized_stiffness`, closed-form moments): the scale of the
+    paths of a confined system, in units of x. None when the closure has no stable root.
+
+    >>> round(natural_amplitude(Harvester.build(a=0.5, n=2)), 6) == round(
+    ...     math.sqrt(mode_moments(np.array([1.0]), Harvester.build(a=0.5).params)["x2"][0]), 6)
+    True
+    """
+    kappa = linearized_stiffness(h)
+    if kappa is None:
+        return None
+    kap = kappa + 4.0 * h.k * mode_sin2(h.N) if h.N > 1 else np.array([kappa])
+    x2 = float(np.mean(mode_moments(kap, h.params)["x2"]))
+    return math.sqrt(x2) if math.isfinite(x2) and x2 > 0 else None

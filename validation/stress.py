@@ -248,6 +248,7 @@ def _nonlinear_cases(ctx: Context) -> list[tuple[str, Callable[[], list[CheckRes
             mc("tau = 1e-4, n = 3", b(a=0.5, n=3, tau=1e-4)),
             mc("tau = 100, n = 3", b(a=0.5, n=3, tau=100.0)),
             mc("D = 100, n = 3", b(a=0.5, n=3, D=100.0)),
+            mc("D = 100, n = 1", b(a=0.5, n=1, D=100.0)),
             mc("tiny a = 1e-3, n = 3", b(a=1e-3, n=3)),
         ]
     return cases

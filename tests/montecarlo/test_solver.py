@@ -272,3 +272,17 @@ def test_stiffness_beyond_the_double_range_is_a_clear_error() -> None:
     # 2a overflows: was a LinAlgError from the relaxation-time eigenvalues
     with pytest.raises(ParameterError, match=r"a = 1e\+308: Monte Carlo needs the unit stiffness 2a"):
         solve(Harvester.build(a=1e308), "mc", seed=0, tol=0.1, progress=False)
+
+
+def test_escape_threshold_follows_the_natural_amplitude_of_a_confined_system() -> None:
+    """Strong noise on the kink (n = 1, D = 100) has sd(x) ~ 94: its ordinary paths must not
+    count as blown up at |x| = 100; a weakly driven unit keeps the floor 100."""
+    from montecarlo.solver import ESCAPE_AMPLITUDES
+    from montecarlo.twin import natural_amplitude
+
+    strong = Harvester.build(a=0.5, n=1.0, D=100.0)
+    amp = natural_amplitude(strong)
+    assert 50.0 < amp < 150.0
+    assert MonteCarlo().threshold(strong) == pytest.approx(ESCAPE_AMPLITUDES * amp)
+    assert MonteCarlo().threshold(Harvester.build(a=0.5, n=3.0)) == 100.0
+    assert MonteCarlo(escape=7.0).threshold(strong) == 7.0
