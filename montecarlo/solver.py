@@ -63,7 +63,12 @@ _RUN_PER_BURN = 3.0
 #: g(Y_start) - g(Y_end), whose share of the variance falls like 1/t_run: measured at n = 3,
 #: N = 3, a = 0.5, k = -0.5 (same basis and twin), variance reduction of eta 5.7, 10.6, 12.9 at
 #: t_run = 100, 400, 1000; harmonic unit (a = 0.5, linear basis) 8.0 at 100, 34 at 400.
+#: The longer run pays only when many replicas are needed anyway: at a loose tolerance the
+#: minimum of replicas at t_run = 100 already meets it and 400 would cost 4x (the test suite's
+#: Monte Carlo solves took ~1.5x longer in all with 400 at every tolerance), so 400 applies at
+#: tol <= _T_RUN_MART_TOL.
 _T_RUN, _T_RUN_MART = 100.0, 400.0
+_T_RUN_MART_TOL = 1e-3
 
 
 #: A confined system's escape threshold is at least this many natural amplitudes
@@ -134,7 +139,7 @@ class MonteCarlo:
         Burn-in per path (>= 0); None: from the slowest relaxation time and ``tol``
         (:func:`montecarlo.plan.burn_in`), doubled while the data show a transient.
     t_run : float or None
-        Measured time per path, > 0. None: 100 (400 with ``martingale``), or three times the
+        Measured time per path, > 0. None: 100 (400 with ``martingale`` at tol <= 1e-3), or three times the
         burn-in if that is longer (so that the burn-in costs at most a quarter of the run).
     max_time : float
         Wall-time budget in seconds, > 0. Default 600.
@@ -173,7 +178,7 @@ class MonteCarlo:
         of the state times the noise drawn after it, mean 0 exactly, for any potential and
         ring) and use them as control variates, alone or with the twin's, whichever gives eta
         the smaller variance (:func:`montecarlo.estimate`). The default ``t_run`` is then 400
-        instead of 100. Default True.
+        instead of 100 when ``tol <= 1e-3``. Default True.
 
     Examples
     --------
@@ -333,7 +338,7 @@ class MonteCarlo:
                     relaxation_time=tau_r, notes=notes)
 
     def _default_run(self) -> float:
-        return _T_RUN_MART if self.martingale else _T_RUN
+        return _T_RUN_MART if self.martingale and self.tol <= _T_RUN_MART_TOL else _T_RUN
 
     def _auto_paths(self, t_burn: float, t_run: float) -> int:
         base = 64 if self.tol < _LOOSE_TOL else 16

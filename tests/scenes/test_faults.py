@@ -18,6 +18,8 @@ import numpy as np
 import pytest
 
 from fpe_harvester.model import Harvester
+from fpe_harvester.optimum import Optimum
+from fpe_harvester.result import Status
 from fpe_harvester.scenes import Axis, FigureSpec, Optimize, Scene
 from fpe_harvester.scenes import run as scene_run
 from fpe_harvester.scenes.cache import CACHE_NAME, PointCache, _encode
@@ -258,6 +260,12 @@ def test_rows_missing_the_accuracy_are_not_converged(tmp_path: Path, monkeypatch
     monkeypatch.setattr(scene_run, "exact_stats", loose_exact)
     res = scene_run.run_scene(harmonic, tmp_path / "exact", progress=False)
     assert [r.status for r in res.rows] == ["not_converged"] * 2
+    def stand_in_optimum(h: Harvester, over: str, interval: tuple, maximize: str, **kw: object) -> Optimum:
+        # the Monte Carlo optimizer has its own tests (tests/test_optimize.py); here only the row
+        return Optimum(over, maximize, x_opt=-0.2, x_opt_err=0.01, value=0.5, value_err=1e-4,
+                       status=Status.STABLE, method="mc")
+
+    monkeypatch.setattr(scene_run, "optimize", stand_in_optimum)
     opt = Scene("o", system=Harvester.build(a=0.5, n=3, N=3), observables=("eta",), rtol=0.01,
                 optimize=Optimize("eta", "k", (-0.3, -0.1), points=3))
     row = scene_run.run_scene(opt, tmp_path / "opt", progress=False).rows[0]

@@ -266,7 +266,8 @@ def test_auto_falls_back_to_monte_carlo_when_fokker_planck_gives_no_result(tmp_p
     from fpe_harvester import Harvester, Scene, run_scene
 
     scene = Scene(name="fallback", system=Harvester.build(a=2.0, n=1), observables=("eta",),
-                  rtol=0.05, options={"mc": {"paths": 64, "t_run": 40.0, "min_replicas": 4}},
+                  rtol=0.05, options={"mc": {"paths": 64, "t_run": 40.0, "min_replicas": 4},
+                                      "fpe": {"max_seconds": 5.0}},
                   outputs=())
     row = run_scene(scene, tmp_path, progress=False).rows[0]
     assert row.method == "mc" and row.status == "stable"
