@@ -88,6 +88,7 @@ def validate(
     steps: Sequence[tuple[str | Callable[[Context], Section], str]] | None = None,
     progress: Callable[[str], None] | None = None,
     bench: Path | str | None = None,
+    finished: Callable[[Section], None] | None = None,
 ) -> Report:
     """Run the validation steps and write ``report.md`` and ``report.html`` into ``out``.
 
@@ -108,6 +109,8 @@ def validate(
         Folder written by ``python -m validation.bench.fpe --out DIR`` (and the other
         benchmark modules): their exhaustive results are included in the report. The
         report's own benchmark section always runs the short benchmarks.
+    finished : callable, optional
+        Called with each section (its ``seconds`` and checks filled in) as soon as it is done.
 
     Returns
     -------
@@ -158,6 +161,8 @@ def validate(
         sec.checks += crash
         sec.seconds = time.perf_counter() - t0
         done[i] = sec
+        if finished:
+            finished(sec)
     report.sections += [done[i] for i in range(len(plan))]
     if progress:
         progress("Identities")
@@ -165,6 +170,8 @@ def validate(
     sec = _identities(ctx)
     sec.seconds = time.perf_counter() - t0
     report.sections.append(sec)
+    if finished:
+        finished(sec)
     if ctx.cache.dropped:
         report.meta["solver options not supported (dropped)"] = "; ".join(
             f"{m}: {', '.join(sorted(o))}" for m, o in ctx.cache.dropped.items())
@@ -212,8 +219,18 @@ def run_cli(quick: bool = False, out: Path | str = "validation_report", seed: in
             bar.set_postfix_str(title)
         started.append(title)
 
+    def step_done(sec: Section) -> None:
+        failed = sum(c.outcome.value == "FAIL" for c in sec.checks)
+        line = (f"{time.perf_counter() - t0:7.1f} s  {sec.title}: {sec.seconds:.1f} s, {len(sec.checks)} checks"
+                + (f", {failed} FAILED" if failed else ""))
+        if bar is not None:
+            bar.write(line, file=sys.stderr)
+        else:
+            print(line, file=sys.stderr, flush=True)
+
     t0 = time.perf_counter()
-    report = validate(quick=quick, out=out, seed=seed, steps=steps, progress=tick, bench=bench)
+    report = validate(quick=quick, out=out, seed=seed, steps=steps, progress=tick, bench=bench,
+                      finished=step_done)
     if bar is not None:
         bar.update(bar.total - bar.n)
         bar.close()

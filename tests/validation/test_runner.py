@@ -99,8 +99,12 @@ def test_cli_exit_code(monkeypatch, tmp_path, capsys, steps, quick, code):
     """A failure fails any run; a skip fails the full run, and a quick run names every skip."""
     monkeypatch.setattr(runner, "STEPS", steps)
     assert main(["validate", *(["--quick"] if quick else []), "--no-progress", "--out", str(tmp_path)]) == code
-    out = capsys.readouterr().out
+    captured = capsys.readouterr()
+    out = captured.out
     assert "passed" in out and "report.md" in out
+    # each step's wall time is printed as soon as it ends (a long full run shows where it is)
+    assert all(f"{title}: " in captured.err for _, title in steps)
+    assert ("1 FAILED" in captured.err) == any(title == "Failing step" for _, title in steps)
     assert (tmp_path / "report.html").is_file()
     if any(title == "Skipping step" for _, title in steps):
         assert "SKIP    never ran" in out and "check(s) SKIPPED" in out
