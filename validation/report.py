@@ -225,18 +225,19 @@ def slowest_checks(report: Report, k: int = SLOWEST) -> list[str]:
     """Lines naming the ``k`` slowest computations of the run (where the wall time goes).
 
     Checks made by one computation (for example eta, V2 and Pin of one cross-check) share its
-    time; they count once, under the first check's name, with the number of checks made."""
+    time equally (:func:`validation.checks.guarded`); they count once, under the first check's
+    name, with the computation's whole time and the number of checks made."""
     groups: dict[tuple[str, float], list[str]] = {}
     for c in report.checks:
         if c.seconds > 0.0:
             groups.setdefault((c.section, c.seconds), []).append(c.name)
-    top = sorted(groups.items(), key=lambda kv: -kv[0][1])[:k]
+    top = sorted(groups.items(), key=lambda kv: -kv[0][1] * len(kv[1]))[:k]
     if not top:
         return []
     lines = ["", f"slowest computations ({len(top)} of {len(groups)})", f"{'time [s]':>8}  check"]
     for (_, sec), names in top:
         more = f" (+{len(names) - 1} more checks)" if len(names) > 1 else ""
-        lines.append(f"{sec:8.1f}  {names[0]}{more}")
+        lines.append(f"{sec * len(names):8.1f}  {names[0]}{more}")
     return lines
 
 

@@ -73,17 +73,20 @@ def test_outcome_values():
 
 
 def test_summary_names_the_slowest_computations_once_each():
-    """Checks of one computation share its time and count once; the slowest come first."""
+    """Checks of one computation share its time (guarded divides it equally) and count once with
+    the whole time; the slowest come first."""
     from dataclasses import replace
 
     rep = Report("timing")
     sec = Section("s", "S")
     sec.checks += [replace(expect(f"fast {i}", "S", True, "ok"), seconds=0.1 * (i + 1)) for i in range(3)]
     sec.checks += [replace(expect(f"slow: {q}", "S", True, "ok"), seconds=42.0) for q in ("eta", "V2", "Pin")]
+    sec.checks.append(replace(expect("single", "S", True, "ok"), seconds=100.0))
     sec.checks.append(expect("untimed", "S", True, "ok"))
     rep.sections.append(sec)
-    lines = slowest_checks(rep, k=2)
-    assert "2 of 4" in lines[1]
-    assert lines[3].split() == ["42.0", "slow:", "eta", "(+2", "more", "checks)"]
-    assert lines[4].split()[:2] == ["0.3", "fast"]
+    lines = slowest_checks(rep, k=3)
+    assert "3 of 5" in lines[1]
+    assert lines[3].split() == ["126.0", "slow:", "eta", "(+2", "more", "checks)"]
+    assert lines[4].split() == ["100.0", "single"]
+    assert lines[5].split()[:2] == ["0.3", "fast"]
     assert "slowest computations" in summary_text(rep)
