@@ -68,6 +68,7 @@ class CoverageCase:
     options: dict[str, Any]
     reference: Stats | None = None
     ref_method: str = "auto"
+    runs: int | None = None
 
     @property
     def method(self) -> str:
@@ -78,6 +79,11 @@ class CoverageCase:
             return self.ref_method
         return "exact" if self.h.is_linear else "fpe" if self.h.N == 1 else "mc"
 
+
+#: Results per case of the full grid: 10 cases x 10 + the strong kink x 4 = 104 results per
+#: quantity, enough for the 2-standard-error fraction to fail bars 1.5x too small (0.82 expected
+#: against a binomial lower limit of ~0.89) in about two minutes.
+FULL_RUNS = 10
 
 _QUICK_OPTS = {"tol": 0.05, "paths": 8, "t_run": 50.0, "min_replicas": 32, "progress": False}
 _FULL_OPTS = {"tol": 1e-2, "progress": False}
@@ -96,7 +102,7 @@ FULL_CASES = (
     CoverageCase("n = 1, a = 0.5", Harvester.build(a=0.5, n=1.0), _FULL_OPTS),
     CoverageCase("n = 1, a = 1", Harvester.build(a=1.0, n=1.0), _FULL_OPTS),
     # the Fokker-Planck solver does not converge at the strong kink: independent long run
-    CoverageCase("n = 1, a = 2", Harvester.build(a=2.0, n=1.0), _FULL_OPTS, ref_method="mc"),
+    CoverageCase("n = 1, a = 2", Harvester.build(a=2.0, n=1.0), _FULL_OPTS, ref_method="mc", runs=4),
     CoverageCase("n = 1.5, a = 1", Harvester.build(a=1.0, n=1.5), _FULL_OPTS),
     CoverageCase("n = 3, a = 0.5", Harvester.build(a=0.5, n=3.0), _FULL_OPTS),
     CoverageCase("n = 4, a = 1", Harvester.build(a=1.0, n=4.0), _FULL_OPTS),
@@ -106,35 +112,38 @@ FULL_CASES = (
 )
 
 
-def _table_reference(case: CoverageCase) -> Stats | None:
-    """The long independent Monte Carlo run of the project's reference table
-    (:mod:`validation.reftable`: its own seed, command and commit) for ``case``'s system, or None."""
+def _table_reference(case: CoverageCase, method: str = "mc", max_rel_err: float = math.inf) -> Stats | None:
+    """The entry of the project's reference table (:mod:`validation.reftable`: solver, seed,
+    command and commit recorded) for ``case``'s system and ``method``, or None (also when its
+    relative error on eta exceeds ``max_rel_err``)."""
     from . import reftable
 
     for c in reftable.CASES:
-        if c.method != "mc" or c.h != case.h:
+        if c.method != method or c.h != case.h:
             continue
         entry = reftable.load().get(c.label)
-        if entry is None or entry.get("eta_err") is None:
+        if entry is None or entry.get("eta_err") is None or not entry["eta_err"] <= max_rel_err * abs(entry["eta"]):
             return None
         values = {q: entry[q] for q in _QUANTITIES} | {q + "_err": entry[q + "_err"] for q in _QUANTITIES}
-        return Stats(**values, status=Status(entry["status"]), method="mc",
+        return Stats(**values, status=Status(entry["status"]), method=method,
                      message=f"reference table '{c.label}' ({entry['date']}, commit {entry['commit']}, seed "
                              f"{entry['options'].get('seed')}): {entry['message']}")
     return None
 
 
 def _reference(case: CoverageCase, seed: int) -> Stats:
-    """The case's reference: given, exact, Fokker--Planck ``tol / REF_FACTOR``, or for a Monte
-    Carlo reference the reference table's long run when it has the system (computing one
-    costs up to an hour at the strong kink), else a fresh run ``tol / REF_FACTOR``."""
+    """The case's reference: given, exact, Fokker--Planck or Monte Carlo ``tol / REF_FACTOR``,
+    taken from the reference table when it holds the system that accurately (a Fokker--Planck
+    value to 1e-4...1e-7, or a long Monte Carlo run: computing one at the strong kink costs up to
+    an hour), else solved now."""
     if case.reference is not None:
         return case.reference
     tol = case.options["tol"] / REF_FACTOR
     if case.method == "exact":
         return solve(case.h, "exact")
     if case.method == "fpe":
-        return solve(case.h, "fpe", tol=tol, max_seconds=600.0)
+        stored = _table_reference(case, "fpe", max_rel_err=tol)
+        return stored if stored is not None else solve(case.h, "fpe", tol=tol, max_seconds=600.0)
     stored = _table_reference(case)
     if stored is not None:
         return stored
@@ -198,9 +207,9 @@ def mc_coverage(quick: bool = True, runs: int | None = None, seed: int = 0,
     ----------
     quick : bool
         :data:`QUICK_CASES` with 12 runs each (about ten seconds), else :data:`FULL_CASES`
-        with 20 runs each (tens of minutes).
+        with :data:`FULL_RUNS` runs each (a case's own ``runs`` where set; minutes).
     runs : int, optional
-        Results per case, >= 2 (overrides the default).
+        Results per case, >= 2 (overrides the defaults, also the cases' own).
     seed : int
         First seed; result ``i`` of a case uses ``seed + i``, its reference ``seed + 10**6``.
     cases : tuple of CoverageCase, optional
@@ -215,9 +224,9 @@ def mc_coverage(quick: bool = True, runs: int | None = None, seed: int = 0,
     """
     if cases is None:
         cases = QUICK_CASES if quick else FULL_CASES
-    runs = runs if runs is not None else (12 if quick else 20)
-    if runs < 2:
+    if runs is not None and runs < 2:
         raise ValueError(f"runs must be an integer >= 2, got {runs!r}")
+    default_runs = runs if runs is not None else (12 if quick else FULL_RUNS)
     out_cases = []
     zs: dict[str, list[float]] = {q: [] for q in _QUANTITIES}
     for case in cases:
@@ -233,7 +242,7 @@ def mc_coverage(quick: bool = True, runs: int | None = None, seed: int = 0,
             continue
         z_case: dict[str, list[float]] = {q: [] for q in _QUANTITIES}
         statuses, rel = [], []
-        for i in range(runs):
+        for i in range(runs if runs is not None else case.runs or default_runs):
             r = solve(case.h, "mc", seed=seed + i, **case.options)
             statuses.append(r.status.value)
             rel.append(r.eta_err / abs(r.eta))
@@ -253,7 +262,7 @@ def mc_coverage(quick: bool = True, runs: int | None = None, seed: int = 0,
         return [float((a < k).mean()) if a.size else 0.0 for k in (1, 2, 3)]
 
     return {
-        "quick": quick, "runs": runs, "count": len(zs["eta"]), "expected": list(NORMAL_COVERAGE),
+        "quick": quick, "runs": default_runs, "count": len(zs["eta"]), "expected": list(NORMAL_COVERAGE),
         "fractions": {q: fractions(zs[q]) for q in _QUANTITIES},
         "cases": out_cases,
     }

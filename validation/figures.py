@@ -12,6 +12,7 @@ solver error fails it.
 from __future__ import annotations
 
 import math
+import os
 import shutil
 from pathlib import Path
 from typing import Any
@@ -43,7 +44,9 @@ def _run_one(ctx: Context, name: str, sec: Section) -> list[CheckResult]:
     folder = ctx.out / "scenes" / name
     # A validation run computes afresh: a cache left by an earlier run (older code) must not be reused.
     shutil.rmtree(folder, ignore_errors=True)
-    res = run_scene(scene, folder, quick=ctx.quick, progress=False)
+    # Fokker--Planck points are single-threaded: one process per core (Monte Carlo points run
+    # in this process, multi-threaded)
+    res = run_scene(scene, folder, quick=ctx.quick, progress=False, workers=os.cpu_count() or 1)
     for fig_name, path in res.figures.items():
         sec.figures.append(Figure(Path(path), f"{res.scene.title or name} [{fig_name}] "
                                               f"(scene '{name}', {len(res.rows)} points, {res.elapsed:.1f} s)"))

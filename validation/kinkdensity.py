@@ -106,7 +106,7 @@ def v_concentration(h: Harvester, deltas: tuple[float, ...] = (1e-3, 1e-2, 1e-1)
 
 def _fpe_levels(h: Harvester, quick: bool) -> tuple[bool, list[ShellDensity]]:
     """Whether the solver converged, and the certified level, else its first levels labelled so."""
-    sol = stationary(h, tol=1e-3, max_seconds=60.0 if quick else 300.0)
+    sol = stationary(h, tol=1e-3, max_seconds=60.0)
     st = sol.stats
     if sol.level is not None and st.ok:
         lv = sol.level

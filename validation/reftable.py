@@ -57,7 +57,8 @@ def _mc(label: str, system: dict[str, Any], tol: float, seed: int) -> RefCase:
 
 #: The cases: Fokker--Planck to 1e-7 for smooth walls (1e-6 where 1e-7 is out of reach in
 #: minutes), to 1e-5 for n = 1.5 and 1e-4 for the kink; Monte Carlo to 1e-3 elsewhere (the
-#: kink's long Monte Carlo runs to 3e-4 are in kink_mc_reference_values.json).
+#: kink's long Monte Carlo runs to 3e-4 are in kink_mc_reference_values.json), and to 2e-4 for
+#: four single smooth units (the Fokker--Planck error bounds' independent references).
 CASES: tuple[RefCase, ...] = (
     *(_fpe(n, a, 1e-7) for n in (3.0, 4.0) for a in (0.5, 1.0, 2.0)),
     *(_fpe(n, a, 1e-6) for n in (6.0, 8.0) for a in (0.5, 1.0, 2.0)),
@@ -65,6 +66,11 @@ CASES: tuple[RefCase, ...] = (
     _fpe(1.0, 0.5, 1e-4),
     _fpe(1.0, 1.0, 1e-4),
     _mc("mc n = 1, a = 2", {"n": 1.0, "a": 2.0}, 1e-3, 101),
+    # single smooth units by Monte Carlo: the independent references of the Fokker--Planck error bounds
+    _mc("mc n = 1.5, a = 1", {"n": 1.5, "a": 1.0}, 2e-4, 104),
+    _mc("mc n = 3, a = 0.5", {"n": 3.0, "a": 0.5}, 2e-4, 105),
+    _mc("mc n = 4, a = 1", {"n": 4.0, "a": 1.0}, 2e-4, 106),
+    _mc("mc n = 8, a = 0.5", {"n": 8.0, "a": 0.5}, 2e-4, 107),
     _mc("mc n = 3, N = 3, a = 0.5, k = -0.5", {"n": 3.0, "a": 0.5, "N": 3, "k": -0.5}, 1e-3, 102),
     _mc("mc n = 4, N = 3, a = 0.5, k = -0.5", {"n": 4.0, "a": 0.5, "N": 3, "k": -0.5}, 1e-3, 103),
 )

@@ -146,7 +146,7 @@ def test_scene_rows_are_checked_for_status_accuracy_and_exact_values(tmp_path):
     assert not row_checks("fig4", res.scene, off)[2].passed
 
 
-def test_error_bar_checks_fail_when_the_promise_breaks(tmp_path):
+def test_error_bar_checks_fail_when_the_promise_breaks(tmp_path, monkeypatch):
     from validation.checks import Context, SolveCache
     from validation.errorbars import Bound, FpeCase, _fpe_checks
     from validation.report import Section
@@ -164,18 +164,13 @@ def test_error_bar_checks_fail_when_the_promise_breaks(tmp_path):
     h = Harvester.build(a=0.5, n=3.0)
     wrong_ref = solve(h.replace(a=0.55), "fpe", tol=1e-3)
 
-    class WrongReference(Context):
-        def solve(self, h, method, **overrides):
-            if overrides.get("tol") == 1e-5:
-                return wrong_ref
-            return super().solve(h, method, **overrides)
-
-    ctx = WrongReference(quick=True, out=tmp_path, cache=SolveCache())
+    ctx = Context(quick=True, out=tmp_path, cache=SolveCache())
     import validation.errorbars as eb
-    old = eb.QUICK_FPE
-    eb.QUICK_FPE = (FpeCase(3.0, 0.5, (1e-2,), 1e-5),)
-    try:
-        checks = _fpe_checks(ctx, Section("e", "E"))
-    finally:
-        eb.QUICK_FPE = old
-    assert checks and not any(c.passed for c in checks)
+    monkeypatch.setattr(eb, "_fpe_reference", lambda ctx, case: wrong_ref)
+    monkeypatch.setattr(eb, "QUICK_FPE", (FpeCase(3.0, 0.5, (1e-2,), 1e-5),))
+    checks = _fpe_checks(ctx, Section("e", "E"))
+    assert len(checks) == 3 and not any(c.passed for c in checks)  # eta, V2 and Pin
+    # a wrong independent Monte Carlo reference fails it too
+    monkeypatch.setattr(eb, "_mc_reference", lambda n, a: replace(wrong_ref, method="mc"))
+    monkeypatch.setattr(eb, "QUICK_FPE", (FpeCase(3.0, 0.5, (1e-2,), None, reference="mc"),))
+    assert not any(c.passed for c in _fpe_checks(ctx, Section("e", "E")))
