@@ -26,7 +26,8 @@ from fpe_harvester.model import Harvester
 from fpe_harvester.result import Stats, Status
 
 from .checks import CheckResult, Context, agree, expect, skipped, solver_available
-from .crosscheck import identity_checks
+from .crosscheck import MAX_REL_TOL as CROSS_MAX_REL_TOL
+from .crosscheck import identity_checks, mc_within_cap
 from .references import mp_ring_moments
 from .report import Section, Table
 
@@ -36,8 +37,8 @@ _SECTION = "Stress tests"
 #: Relative round-off floor allowed on top of the exact solver's stated error of 0.
 EXACT_FLOOR = 1e-9
 #: Largest tolerance of a Fokker-Planck / Monte Carlo stress comparison relative to the
-#: reference value (quick, full).
-MAX_REL_TOL = {True: 0.1, False: 0.03}
+#: reference value (quick, full): the cross-checks' (:mod:`validation.crosscheck`).
+MAX_REL_TOL = CROSS_MAX_REL_TOL
 
 
 def _vs_mp(label: str, r: Stats, h: Harvester, names: tuple[str, ...] = ("eta", "V2", "Pin"),
@@ -183,35 +184,13 @@ def _judge(label: str, method: str, run: Callable[[], Stats], h: Harvester,
     return out
 
 
-#: Share of the cap that a reference's 4-error band may take before it is solved again tighter.
-REF_CAP_SHARE = 0.8
-
-
-def _matched_reference(ctx: Context, h: Harvester, method: str) -> Stats:
-    """The reference solve, run at an accuracy at which the comparison's cap can be met.
-
-    A Monte Carlo reference aims at a relative error on eta; V2 and Pin may come out wider
-    (slow noise: V2 ~1.6x). When 4 of its errors exceed :data:`REF_CAP_SHARE` of the cap
-    :data:`MAX_REL_TOL` for any quantity, it is solved again with the tolerance scaled down by
-    that excess (at most 4x, with 4x the time budget), so that a good result is not failed
-    for its reference's width.
-    """
-    r = ctx.solve(h, method)
-    if method != "mc" or not r.ok or r.eta is None:
-        return r
-    widths = [4.0 * e / abs(v) for v, e in (r.value(q) for q in ("eta", "V2", "Pin")) if v and e is not None]
-    limit = REF_CAP_SHARE * MAX_REL_TOL[ctx.quick]
-    if not widths or max(widths) <= limit:
-        return r
-    opts = ctx.options("mc")
-    tol = max(opts["tol"] * limit / max(widths), opts["tol"] / 4.0)
-    return ctx.solve(h, "mc", tol=tol, max_time=4.0 * opts["max_time"])
-
-
 def _nonlinear_cases(ctx: Context) -> list[tuple[str, Callable[[], list[CheckResult]]]]:
+    def run(h: Harvester, method: str) -> Stats:
+        # a Monte Carlo run (result or reference) at an accuracy at which the check's cap can be met
+        return mc_within_cap(ctx, h) if method == "mc" else ctx.solve(h, method)
+
     def independent(h: Harvester, method: str) -> Callable[[], Stats]:
-        other = "mc" if method == "fpe" else "fpe"
-        return lambda: _matched_reference(ctx, h, other)
+        return lambda: run(h, "mc" if method == "fpe" else "fpe")
 
     def fpe(label: str, h: Harvester, checked: bool = True) -> tuple:
         ref = independent(h, "fpe") if checked else None
@@ -219,7 +198,7 @@ def _nonlinear_cases(ctx: Context) -> list[tuple[str, Callable[[], list[CheckRes
 
     def mc(label: str, h: Harvester, expected: Status | None = None) -> tuple:
         ref = independent(h, "mc") if h.N == 1 and expected is None else None
-        return (f"{label} [mc]", lambda: _judge(label, "mc", lambda: ctx.solve(h, "mc"), h, ref, ctx.quick, expected))
+        return (f"{label} [mc]", lambda: _judge(label, "mc", lambda: run(h, "mc"), h, ref, ctx.quick, expected))
 
     b = Harvester.build
     # Quick mode (CI): one case per kind of difficulty; the full run covers the whole list.

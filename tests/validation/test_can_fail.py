@@ -5,6 +5,8 @@ from __future__ import annotations
 
 from dataclasses import replace
 
+import pytest
+
 
 from fpe_harvester import Harvester, Optimum, Stats, Status, solve
 from validation import paper
@@ -174,3 +176,29 @@ def test_error_bar_checks_fail_when_the_promise_breaks(tmp_path, monkeypatch):
     monkeypatch.setattr(eb, "_mc_reference", lambda n, a: replace(wrong_ref, method="mc"))
     monkeypatch.setattr(eb, "QUICK_FPE", (FpeCase(3.0, 0.5, (1e-2,), None, reference="mc"),))
     assert not any(c.passed for c in _fpe_checks(ctx, Section("e", "E")))
+
+
+def test_a_monte_carlo_run_too_wide_for_the_cap_is_solved_again_tighter(tmp_path):
+    """Results and references alike: when 4 errors of V2 (or Pin) exceed the cap's share, the run
+    is repeated with tol scaled down by the excess (at most 4x, 4x the time); a narrow run is kept."""
+    from validation.checks import Context, SolveCache
+    from validation.crosscheck import CAP_SHARE, MAX_REL_TOL, mc_within_cap
+
+    ex = solve(H)
+    calls = []
+
+    class Fake(Context):
+        def solve(self, h, method, **overrides):
+            calls.append(overrides)
+            rel = 0.0083 if not overrides else 1e-3  # V2 error 0.83 % (tau = 100), then tighter
+            return replace(_mc_like(ex), V2_err=rel * ex.V2)
+
+    ctx = Fake(quick=False, out=tmp_path, cache=SolveCache())
+    r = mc_within_cap(ctx, H)
+    assert len(calls) == 2 and r.V2_err == pytest.approx(1e-3 * ex.V2)
+    tol = calls[1]["tol"]
+    full = ctx.mc_options
+    assert tol == pytest.approx(full["tol"] * CAP_SHARE * MAX_REL_TOL[False] / (4 * 0.0083))
+    assert calls[1]["max_time"] == 4 * full["max_time"]
+    calls.clear()
+    assert mc_within_cap(Fake(quick=True, out=tmp_path, cache=SolveCache()), H) is not None and len(calls) == 1
