@@ -54,7 +54,7 @@ import numpy as np
 from numba import njit
 
 from ._force import _onsite_force
-from ._martingale import MG_DIST, mg_measure
+from ._martingale import MG_DIST, mg_measure, n_state
 
 KIND_LINEAR = 0
 KIND_KICK = 1
@@ -896,7 +896,9 @@ def _run_frozen(gen, P: int, N: int, nburn: int, nrun: int, stride: int, cf_f: n
     fext = np.zeros((N, P))
     esc_time[:] = -1.0
     use_mg = mg.shape[1] > 0
-    phi = np.zeros((mg.shape[1] - min(N // 2, MG_DIST) - 1 if use_mg else 0, N, P))
+    phi = np.zeros((n_state(N) if use_mg else 0, N, P))
+    n_bd = mg.shape[1] - n_state(N) - min(N // 2, MG_DIST) - 1 if use_mg else 0
+    g_bd, gprev_bd = np.zeros(max(n_bd, 0)), np.zeros(max(n_bd, 0))
     xi0 = np.zeros((N, P))
     mg_started = False
     n_upd = 0  # xi updates of the fine level since the last martingale point
@@ -954,7 +956,7 @@ def _run_frozen(gen, P: int, N: int, nburn: int, nrun: int, stride: int, cf_f: n
                 if use_mg and sub == 0:
                     dec = cf_f[13] ** n_upd
                     mg_measure(xf, vf, Vf, xif, w, pp[7], pp[8], phi, xi0, mg, first, mg_started, dec,
-                               pp[11] * (1.0 - dec * dec))
+                               pp[11] * (1.0 - dec * dec), g_bd, gprev_bd)
                     mg_started = True
                     n_upd = 0
                 if twin:
@@ -1030,7 +1032,9 @@ def _run_joint(gen, P: int, N: int, nburn: int, nrun: int, stride: int, cf_f: np
     fext = np.zeros((N, P))
     esc_time[:] = -1.0
     use_mg = mg.shape[1] > 0
-    phi = np.zeros((mg.shape[1] - min(N // 2, MG_DIST) - 1 if use_mg else 0, N, P))
+    phi = np.zeros((n_state(N) if use_mg else 0, N, P))
+    n_bd = mg.shape[1] - n_state(N) - min(N // 2, MG_DIST) - 1 if use_mg else 0
+    g_bd, gprev_bd = np.zeros(max(n_bd, 0)), np.zeros(max(n_bd, 0))
     xi0 = np.zeros((N, P))
     mg_started = False
     n_upd = 0  # xi updates of the fine level since the last martingale point
@@ -1083,7 +1087,7 @@ def _run_joint(gen, P: int, N: int, nburn: int, nrun: int, stride: int, cf_f: np
                 if use_mg and sub == 0:
                     dec = cf_f[13] ** n_upd
                     mg_measure(xf, vf, Vf, xif, w, pp[7], pp[8], phi, xi0, mg, first, mg_started, dec,
-                               pp[11] * (1.0 - dec * dec))
+                               pp[11] * (1.0 - dec * dec), g_bd, gprev_bd)
                     mg_started = True
                     n_upd = 0
                 if twin:

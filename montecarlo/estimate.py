@@ -44,8 +44,10 @@ from .twin import TWIN_MOMENTS
 __all__ = ["Estimate", "estimate", "BIAS_ORDER", "bias_order", "student_factor", "CONTROL_SETS",
            "RESIDUAL_RULE"]
 
-#: Candidate sets of control variates, by name: the twin's moments, the martingale sums, both.
-CONTROL_SETS = ("twin", "martingale", "martingale+twin")
+#: Candidate sets of control variates, by name: the twin's moments, the martingale sums, both;
+#: and the martingale sums with the end-of-window terms (``bd_*`` of
+#: :func:`montecarlo._martingale.basis_names`), with and without the twin.
+CONTROL_SETS = ("twin", "martingale", "martingale+twin", "martingale+boundary", "martingale+boundary+twin")
 
 #: Weak order assumed when the coarse/fine difference is turned into a bias estimate of the
 #: fine level, bias = (coarse - fine) / (2^p - 1) (so fine - bias is the extrapolation), i.e.
@@ -195,9 +197,12 @@ def _control_columns(e: Ensemble, valid: np.ndarray, which: str, n: int) -> tupl
         if not e.mart_names:
             return None
         mg, mg_first = e.martingale(), e.martingale(first_half=True)
-        cols += [mg[name][valid] for name in e.mart_names]
-        first += [mg_first[name][valid] for name in e.mart_names]
-        mu += [0.0] * len(e.mart_names)
+        names = [name for name in e.mart_names if "boundary" in which or not name.startswith("bd_")]
+        if "boundary" in which and len(names) == len([n for n in names if not n.startswith("bd_")]):
+            return None
+        cols += [mg[name][valid] for name in names]
+        first += [mg_first[name][valid] for name in names]
+        mu += [0.0] * len(names)
     if not enough_dof(n, len(cols)):
         return None
     return np.column_stack(cols), np.column_stack(first), np.array(mu)
