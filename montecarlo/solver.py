@@ -5,10 +5,17 @@ the slowest relaxation time, the harmonic twin whose moments are control variate
 started from the twin's stationary law), then runs batches of independent replicas (each
 ``paths`` rings for ``t_burn + t_run``) until the relative error on eta (standard error and,
 with ``richardson=True``, the time-step bias estimate, in quadrature) is below ``tol`` or the
-wall-time budget ``max_time`` is spent; then the status says ``NOT_CONVERGED``. After each
-batch it halves an automatic ``dt`` when the bias estimate takes more than a third of ``tol``,
-and doubles the burn-in when the first half of the measured window differs significantly
-from the whole (a transient left over); either restarts the ensemble.
+wall-time budget ``max_time`` is spent; then the status says ``NOT_CONVERGED``.
+
+Time step: with ``extrapolate`` (default) three coupled levels ``dt/2, dt, 2 dt`` run on the same
+noise and the reported numbers are the Richardson extrapolation from ``(dt, dt/2)``; its error
+adds the bound of :data:`montecarlo.estimate.RESIDUAL_RULE` on the remaining bias, and ``dt``
+(automatic: twice the old start) is halved only when that bound, resolved, takes more than a
+third of ``tol``. With ``extrapolate=False`` the fine level is reported with its Richardson bias
+estimate in the error, and an automatic ``dt`` is halved whenever that bias takes more than a
+third of ``tol``. After each batch the burn-in is doubled when the first half of the measured
+window differs significantly from the whole (a transient left over); a halving or a doubling
+restarts the ensemble.
 """
 
 from __future__ import annotations
@@ -131,9 +138,11 @@ class MonteCarlo:
         ``richardson``) the time-step bias estimate, added in quadrature. Default 1e-2.
     dt : float or None
         Time step, > 0 (model time units). With ``richardson`` the reported numbers come
-        from ``dt/2`` and ``dt`` gives the bias estimate. None (default): 0.02 (0.04 where the
-        joint step runs, see ``joint``), halved after the first batch (down to 0.02/32) while
-        the bias estimate exceeds a third of ``tol``.
+        from ``dt/2`` and ``dt`` (and ``2 dt`` with ``extrapolate``) gives the bias estimate.
+        None (default): 0.02 (0.04 where the joint step runs, see ``joint``), twice that with
+        ``extrapolate``, halved after a batch (down to 0.02/32) while the time-step error
+        (the bias estimate, or with ``extrapolate`` the bound on the extrapolation's remaining
+        bias) exceeds a third of ``tol`` by three of its standard errors.
     paths : int or None
         Paths (rings) per replica, >= 2. None: 64 for ``tol`` < 5e-3, else 16 (the first
         batch of ``min_replicas`` then usually meets ``tol`` already); fewer when a path's
@@ -160,7 +169,8 @@ class MonteCarlo:
     progress : bool or None
         tqdm bar on stderr; None shows it only for runs longer than 2 s.
     richardson : bool
-        Also run at the coarse step on the same noise and fold the bias into the error.
+        Also run at the coarse step on the same noise and fold the bias into the error (or,
+        with ``extrapolate``, remove it).
     threads : int or None
         Worker threads (results do not depend on it, only on ``batch``). Default: usable CPUs.
     batch : int or None
@@ -185,6 +195,13 @@ class MonteCarlo:
         ring) and use them as control variates, alone or with the twin's, whichever gives eta
         the smaller variance (:func:`montecarlo.estimate`). The default ``t_run`` is then 400
         instead of 100 when ``tol <= 1e-3``. Default True.
+    extrapolate : bool
+        With ``richardson``: run a third level at ``2 dt`` and report the Richardson extrapolation
+        from ``(dt, dt/2)``, with :math:`(|D| + D_{se})/7` in quadrature in the error, D the
+        difference of the extrapolations from ``(2 dt, dt)`` and ``(dt, dt/2)``
+        (:data:`montecarlo.estimate.RESIDUAL_RULE`); ``info["extrapolated"]``,
+        ``info["residual_eta"]``. False: the halving policy (fine level reported, its bias
+        estimate in the error). Default True.
 
     Examples
     --------
@@ -588,6 +605,7 @@ class MonteCarlo:
             "bias_eta": est.bias["eta"],
             "bias_eta_se": est.bias_se["eta"],
             "extrapolated": est.extrapolated,
+            "eta_systematic": est.systematic("eta"),
             "dt_coarsest": ens.dts[2] if len(ens.dts) > 2 else None,
             "residual_eta": est.residual.get("eta"),
             "residual_eta_se": est.residual_se.get("eta"),
