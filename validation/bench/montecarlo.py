@@ -40,6 +40,8 @@ Measured in one run:
   N = 3, k = -0.5 and single n = 3, n = 1.5 units (a = 0.5), in one run; and the coverage of both
   policies' error bars at tol = 1e-3 over seeds against independent references (Fokker--Planck
   values of ``reference_values.json`` for the single units, :data:`RING_REFERENCE` for the ring);
+  and the variance reduction with the end-of-window terms of the martingale controls
+  (:func:`boundary_rows`);
 * the kink's time-step law (:mod:`validation.kinkstudy`): at a = 0.5, 1, 2, eta at fine steps
   0.04 ... 0.005 from runs with independent seeds, each Richardson-coupled, and the weak order
   p of eta(dt) = eta0 + c dt^p fitted to the independent values and to the coupled differences
@@ -70,7 +72,7 @@ from montecarlo.simulate import default_threads
 from validation.bench.cli import bench_main, save_benchmark
 
 __all__ = ["STEM", "run", "martingale_rows", "martingale_coverage", "run_martingale", "policy_rows",
-           "policy_coverage", "run_policy", "RING_REFERENCE"]
+           "policy_coverage", "run_policy", "boundary_rows", "RING_REFERENCE"]
 
 #: Name of the written ``.json`` and ``.png``.
 STEM = "bench_montecarlo"
@@ -615,12 +617,44 @@ def run_policy(quick: bool = False, out: Path | str | None = None) -> dict[str, 
 
     t0 = time.perf_counter()
     res = {"quick": quick, "threads": default_threads(), "rows": policy_rows(quick),
-           "coverage": policy_coverage(quick)}
+           "coverage": policy_coverage(quick), "boundary": boundary_rows(quick)}
     res["wall_s"] = time.perf_counter() - t0
     if out is not None:
         Path(out).mkdir(parents=True, exist_ok=True)
         (Path(out) / "bench_montecarlo_policy.json").write_text(json.dumps(res, indent=1))
     return res
+
+
+def boundary_rows(quick: bool) -> dict[str, Any]:
+    """Variance reduction of eta with each control set of :data:`montecarlo.estimate.CONTROL_SETS`
+    (the end-of-window terms with and without the twin among them) on one ensemble per case and
+    t_run: ring n = 3, N = 3, k = -0.5, harmonic ring N = 3, k = -0.2, single n = 3 (a = 0.5); 300
+    replicas of 2 paths (quick: 120), the solver's plan for tol = 1e-4 otherwise, t_run = 100 and
+    400; with each set's eta and standard error, and the CPU seconds of the ensemble."""
+    from montecarlo.estimate import CONTROL_SETS
+
+    reps = 120 if quick else 300
+    out: dict[str, Any] = {"replicas": reps, "paths": 2}
+    cases = (("ring n3 N3 k-0.5", Harvester.build(a=0.5, n=3.0, N=3, k=-0.5)),
+             ("harmonic ring N3 k-0.2", Harvester.build(a=0.5, N=3, k=-0.2)), ("n3 N1", Harvester.build(a=0.5, n=3.0)))
+    for name, h in cases:
+        plan = MonteCarlo(seed=3, tol=1e-4, progress=False).plan(h)
+        for t_run in ((100.0,) if quick else (100.0, 400.0)):
+            c0 = time.process_time()
+            e = simulate(h, dt=plan.dt, paths=2, replicas=reps, t_burn=plan.t_burn, t_run=t_run, seed=21,
+                         twin=plan.twin, start=plan.start, richardson=True, third_level=True, martingale=True)
+            row: dict[str, Any] = {"cpu_s": time.process_time() - c0, "dt": plan.dt, "t_burn": plan.t_burn}
+            plain = estimate(e, h, control=False)
+            for cs in CONTROL_SETS:
+                try:
+                    est = estimate(e, h, controls=cs)
+                except ParameterError as exc:
+                    row[cs] = {"note": str(exc).split(";")[0]}
+                    continue
+                row[cs] = {"vrf_eta": (plain.se["eta"] / est.se["eta"]) ** 2, "eta": est.mean["eta"],
+                           "se": est.se["eta"]}
+            out[f"{name} t_run {t_run:g}"] = row
+    return out
 
 
 def martingale_coverage(quick: bool) -> dict[str, Any]:
@@ -754,6 +788,10 @@ def run(quick: bool = False, out: Path | None = None) -> dict[str, Any]:
     # the coverage study takes minutes: full mode only (quick runs feed `harvester validate`)
     res["martingale_coverage"] = martingale_coverage(quick) if not quick else {
         "note": "full mode only; CI smoke test: tests/montecarlo/test_martingale.py"}
+    res["time_step_policy"] = policy_rows(quick)
+    res["end_of_window_terms"] = boundary_rows(quick)
+    res["time_step_policy_coverage"] = policy_coverage(quick) if not quick else {
+        "note": "full mode only (~8 min); CI checks: tests/montecarlo/test_extrapolate.py"}
     res["kink_dt"] = _kink_dt_study(quick)
     res["series"] = series(quick, res)
     save_benchmark(res, out, STEM, _plot)
