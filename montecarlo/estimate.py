@@ -76,8 +76,8 @@ BIAS_ORDER = {"smooth": 2.0, "nonsmooth": 2.0}
 #: unresolved (validation.bench.montecarlo.policy_coverage checks the error bars' coverage).
 RESIDUAL_RULE = (3.0, 1.0)
 
-#: Tail probability of the chi^2 test that the end-of-window terms have mean 0 (else the
-#: candidate sets with them are left out).
+#: Tail probability of the test (Hotelling's T^2 against chi^2) that the end-of-window terms
+#: have mean 0; where it fails the candidate sets with them are left out.
 BOUNDARY_TAIL = 1e-3
 
 #: Observables estimated from the replica moments (``eta`` is derived from V2 and Pin).
@@ -222,9 +222,9 @@ def _control_columns(e: Ensemble, valid: np.ndarray, which: str, n: int) -> tupl
 def _stationary_window(mg: dict[str, np.ndarray], valid: np.ndarray, names: tuple[str, ...]) -> bool:
     """Whether the end-of-window terms are usable: present, and their means consistent with 0
     (Hotelling's T^2 below the chi^2 quantile at :data:`BOUNDARY_TAIL`). They have mean 0 only
-    for a stationary window; a transient left by the burn-in shows here first (a ring n = 3 from
-    rest with t_burn = 5: the sum of the squared z-scores of its 21 terms was 299 with all 41
-    controls, ~250 with those 21)."""
+    for a stationary window; a transient left by the burn-in shows here first (ring n = 3, N = 3,
+    k = -0.5 from rest, dt = 0.1, 200 replicas of 4 paths, t_run = 40: refused at t_burn = 5,
+    accepted at t_burn = 50)."""
     from scipy.stats import chi2
 
     cols = [mg[name][valid] for name in names if name.startswith("bd_")]
@@ -237,7 +237,7 @@ def _stationary_window(mg: dict[str, np.ndarray], valid: np.ndarray, names: tupl
     # Hotelling's T^2 of the means (the terms are strongly correlated), on the resolved rank
     m = C.mean(axis=0)
     Cc = C - m
-    u, sv, vt = np.linalg.svd(Cc / math.sqrt(n - 1), full_matrices=False)
+    _, sv, vt = np.linalg.svd(Cc / math.sqrt(n - 1), full_matrices=False)
     keep = sv > 1e-8 * sv[0] if sv.size else sv > 0
     proj = vt[keep] @ m / sv[keep]
     t2 = n * float(proj @ proj)

@@ -249,7 +249,9 @@ def simulate(
         With ``richardson``, also run level 2 at ``2 dt`` on the same noise (two coarse
         increments composed exactly), so that two Richardson extrapolations, from
         ``(dt, dt/2)`` and from ``(2 dt, dt)``, can be compared (:func:`montecarlo.estimate`);
-        it adds a quarter of level 0's steps. Ignored without ``richardson``.
+        it adds a quarter of level 0's steps (measured on the ring n = 3, N = 3, k = -0.5 with
+        twin and martingale sums, one thread, median of 3: 1.24x and 1.31x the CPU of level 0
+        alone for two and three levels). Ignored without ``richardson``.
 
     Returns
     -------

@@ -638,7 +638,8 @@ def boundary_rows(quick: bool) -> dict[str, Any]:
     reps = 120 if quick else 300
     out: dict[str, Any] = {"replicas": reps, "paths": 2}
     cases = (("ring n3 N3 k-0.5", Harvester.build(a=0.5, n=3.0, N=3, k=-0.5)),
-             ("harmonic ring N3 k-0.2", Harvester.build(a=0.5, N=3, k=-0.2)), ("n3 N1", Harvester.build(a=0.5, n=3.0)))
+             ("harmonic ring N3 k-0.2", Harvester.build(a=0.5, N=3, k=-0.2)),
+             ("n3 N1", Harvester.build(a=0.5, n=3.0)))
     for name, h in cases:
         plan = MonteCarlo(seed=3, tol=1e-4, progress=False).plan(h)
         for t_run in ((100.0,) if quick else (100.0, 400.0)):
