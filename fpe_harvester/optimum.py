@@ -470,7 +470,8 @@ def optimize(
     -------
     Optimum
         ``to_dict()`` gives e.g. ``k_opt, k_opt_err, eta_max, eta_max_err, method, status``.
-        With Monte Carlo, ``eta_max_err`` also holds the time-step bias estimate at the optimum.
+        With Monte Carlo, ``eta_max_err`` also holds the time-step error at the optimum
+        (:meth:`montecarlo.Estimate.systematic`).
 
     Raises
     ------
@@ -540,7 +541,7 @@ def _optimize_mc(h: Harvester, over: str, maximize: str, lo: float, hi: float, m
         if value is None or r.status not in (Status.STABLE, Status.NOT_CONVERGED):
             return None
         if maximize == "eta":
-            bias[(x, b)] = abs(float(r.info.get("bias_eta") or 0.0))
+            bias[(x, b)] = float(r.info.get("eta_systematic") or 0.0)
         return value
 
     with tqdm(desc=f"optimize {maximize} over {over}", unit="run", file=sys.stderr, leave=False,
@@ -554,9 +555,11 @@ def _optimize_mc(h: Harvester, over: str, maximize: str, lo: float, hi: float, m
     if core.x_opt is not None and bias and core.value_err is not None:
         near = min({x for x, _ in bias}, key=lambda x: abs(x - core.x_opt))
         b = float(np.mean([v for (x, _), v in bias.items() if x == near]))
-        info["bias_eta_at_optimum"] = b
+        info["time_step_error_at_optimum"] = b
         value_err = math.hypot(core.value_err, b)
-        message += f"; {maximize}_max_err includes the time-step bias estimate {b:.2g} at dt = {plan.dt:g}"
+        message += (f"; {maximize}_max_err includes the time-step error estimate {b:.2g} at dt = {plan.dt:g} "
+                    "(the Richardson extrapolation's remaining-bias bound, or the fine level's bias "
+                    "with extrapolate=False)")
     value_ci = core.value_ci
     if value_ci is not None and value_err is not None and core.value_err:
         t = (core.value - value_ci[0]) / core.value_err

@@ -54,7 +54,7 @@ import numpy as np
 from numba import njit
 
 from ._force import _onsite_force
-from ._martingale import MG_DIST, mg_measure
+from ._martingale import MG_DIST, mg_measure, n_state
 
 KIND_LINEAR = 0
 KIND_KICK = 1
@@ -89,8 +89,9 @@ MOMENTS = ("V2", "vV", "v2", "x2", "vxi", "stuck", "xdU",
            "t_x4", "t_x2V2", "t_x2v2", "t_absxn", "t_V2v2", "t_vxiV2")
 N_MOM = len(MOMENTS)
 #: Rows of the ``sums`` accumulator: fine level, coarse level, fine level over the first half
-#: of the measured window (the burn-in drift check compares it with the whole).
-ROWS = 3
+#: of the measured window (the burn-in drift check compares it with the whole), and the
+#: coarsest level (twice the coarse step, only with ``third``).
+ROWS = 4
 
 #: Kink rule for swings shorter than the step (``pp[12]``). The model's swings never stop
 #: (docs/model.md §3). AVERAGE (default) advances them with the averaged map of their crossing
@@ -831,7 +832,8 @@ def _live(w: np.ndarray) -> int:
 def _run_frozen(gen, P: int, N: int, nburn: int, nrun: int, stride: int, cf_f: np.ndarray,
          cf_c: np.ndarray, pp: np.ndarray, kind: int, coupled: bool, cf_t: np.ndarray,
          pp_t: np.ndarray, twin: bool, chol: np.ndarray, sums: np.ndarray, counts: np.ndarray,
-         esc_time: np.ndarray, counters: np.ndarray, mg: np.ndarray) -> None:
+         esc_time: np.ndarray, counters: np.ndarray, mg: np.ndarray, cf_cc: np.ndarray,
+         third: bool) -> None:
     """Simulate P independent rings of N units with the frozen-xi step and accumulate their
     time averages (:func:`_run_joint` has the same arguments and outputs for the joint step).
 
@@ -848,6 +850,10 @@ def _run_frozen(gen, P: int, N: int, nburn: int, nrun: int, stride: int, cf_f: n
         If True, each coarse step ``cf_c`` is also done as two fine steps ``cf_f`` (h/2) driven
         by the same Brownian increments (exact OU composition): level 0 = fine, 1 = coarse.
         If False, only level 0 is run, with step ``cf_f``.
+    cf_cc, third : array, bool
+        With ``third`` (and ``coupled``), every two coarse steps are also done as one step
+        ``cf_cc`` (2h) on their combined increments: the coarsest level, row 3 of ``sums``
+        (measured at its own steps in the measured window).
     cf_t, pp_t, twin : array, array, bool
         With ``twin``, a harmonic ring (coefficients ``cf_t`` at the fine step, physical
         vector ``pp_t``) is advanced on the fine level's xi and measured with it.
@@ -868,12 +874,16 @@ def _run_frozen(gen, P: int, N: int, nburn: int, nrun: int, stride: int, cf_f: n
         Martingale control sums of the fine level (:mod:`montecarlo._martingale`) over the
         measured window and its first half (accumulated); zero columns switch them off.
     """
+    third = third and coupled
     thr = pp[10]
     sd = math.sqrt(pp[11])
     xf, vf, Vf = np.zeros((N, P)), np.zeros((N, P)), np.zeros((N, P))
     xif, Ff = np.zeros((N, P)), np.zeros((N, P))
     xc, vc, Vc = np.zeros((N, P)), np.zeros((N, P)), np.zeros((N, P))
     xic, Fc = np.zeros((N, P)), np.zeros((N, P))
+    xcc, vcc, Vcc = np.zeros((N, P)), np.zeros((N, P)), np.zeros((N, P))
+    xicc, Fcc = np.zeros((N, P)), np.zeros((N, P))
+    scc = np.zeros((N, P), dtype=np.bool_)
     xt, vt, Vt, Ft = np.zeros((N, P)), np.zeros((N, P)), np.zeros((N, P)), np.zeros((N, P))
     sf = np.zeros((N, P), dtype=np.bool_)
     sc = np.zeros((N, P), dtype=np.bool_)
@@ -886,7 +896,9 @@ def _run_frozen(gen, P: int, N: int, nburn: int, nrun: int, stride: int, cf_f: n
     fext = np.zeros((N, P))
     esc_time[:] = -1.0
     use_mg = mg.shape[1] > 0
-    phi = np.zeros((mg.shape[1] - min(N // 2, MG_DIST) - 1 if use_mg else 0, N, P))
+    phi = np.zeros((n_state(N) if use_mg else 0, N, P))
+    n_bd = mg.shape[1] - n_state(N) - min(N // 2, MG_DIST) - 1 if use_mg else 0
+    g_bd, gprev_bd = np.zeros(max(n_bd, 0)), np.zeros(max(n_bd, 0))
     xi0 = np.zeros((N, P))
     mg_started = False
     n_upd = 0  # xi updates of the fine level since the last martingale point
@@ -895,14 +907,21 @@ def _run_frozen(gen, P: int, N: int, nburn: int, nrun: int, stride: int, cf_f: n
     for j in range(N):
         for p in range(P):
             xc[j, p], vc[j, p], Vc[j, p], xic[j, p] = xf[j, p], vf[j, p], Vf[j, p], xif[j, p]
+            xcc[j, p], vcc[j, p], Vcc[j, p], xicc[j, p] = xf[j, p], vf[j, p], Vf[j, p], xif[j, p]
             xt[j, p], vt[j, p], Vt[j, p] = xf[j, p], vf[j, p], Vf[j, p]
             if kind != KIND_LINEAR:
                 Ff[j, p] = _kick_force(xf[j, p], pp)
                 Fc[j, p] = Ff[j, p]
+                Fcc[j, p] = Ff[j, p]
     h = cf_c[12] if coupled else cf_f[12]
     # the two fine half-step normals combine into the coarse normal exactly
     w1 = cf_f[13] * cf_f[14] / cf_c[14]
     w2 = cf_f[14] / cf_c[14]
+    # and two coarse normals into the coarsest one
+    u1 = cf_c[13] * cf_c[14] / cf_cc[14]
+    u2 = cf_c[14] / cf_cc[14]
+    zc = np.zeros((N, P))
+    cc_stride = max(1, stride // 2)
     half = nburn + nrun // 2
     for step in range(nburn + nrun):
         live = _live(w)
@@ -937,7 +956,7 @@ def _run_frozen(gen, P: int, N: int, nburn: int, nrun: int, stride: int, cf_f: n
                 if use_mg and sub == 0:
                     dec = cf_f[13] ** n_upd
                     mg_measure(xf, vf, Vf, xif, w, pp[7], pp[8], phi, xi0, mg, first, mg_started, dec,
-                               pp[11] * (1.0 - dec * dec))
+                               pp[11] * (1.0 - dec * dec), g_bd, gprev_bd)
                     mg_started = True
                     n_upd = 0
                 if twin:
@@ -957,26 +976,45 @@ def _run_frozen(gen, P: int, N: int, nburn: int, nrun: int, stride: int, cf_f: n
             for j in range(N):
                 for p in range(P):
                     xic[j, p] = cf_c[13] * xic[j, p] + cf_c[14] * (w1 * z1[j, p] + w2 * z2[j, p])
+        if third and step % 2 == 1:
+            counters[4] += live
+            _d_step(xcc, vcc, Vcc, xicc, Fcc, scc, xm, fext, w, cf_cc, pp, kind, counters, cs)
+            _check_escape(xcc, vcc, Vcc, xicc, Fcc, scc, w, thr, t_end, esc_time)
+            if step >= nburn and ((step - nburn) // 2) % cc_stride == 0:
+                counts[3] += _measure(xcc, vcc, Vcc, xicc, scc, Fcc, w, cf_cc, pp, kind, sums[3], xm)
+            for j in range(N):
+                for p in range(P):
+                    xicc[j, p] = cf_cc[13] * xicc[j, p] + cf_cc[14] * (
+                        u1 * zc[j, p] + u2 * (w1 * z1[j, p] + w2 * z2[j, p]))
+        elif third:
+            for j in range(N):
+                for p in range(P):
+                    zc[j, p] = w1 * z1[j, p] + w2 * z2[j, p]
 
 
 @njit(cache=True, nogil=True)
 def _run_joint(gen, P: int, N: int, nburn: int, nrun: int, stride: int, cf_f: np.ndarray,
                cf_c: np.ndarray, pp: np.ndarray, kind: int, coupled: bool, cf_t: np.ndarray,
                pp_t: np.ndarray, twin: bool, chol: np.ndarray, sums: np.ndarray, counts: np.ndarray,
-               esc_time: np.ndarray, counters: np.ndarray, mg: np.ndarray) -> None:
+               esc_time: np.ndarray, counters: np.ndarray, mg: np.ndarray, cf_cc: np.ndarray,
+               third: bool) -> None:
     """:func:`_run_frozen` (same arguments and outputs) with the joint step.
 
     Four normals per unit and fine step; the coarse level takes the exact composition of the
     fine level's two increments (:func:`_compose`), the twin its own noise factor applied to the
     same normals, with its own xi (the same process as the system's: the factors share the xi
-    row).
+    row); the coarsest level the composition of two coarse increments.
     """
+    third = third and coupled
     thr = pp[10]
     sd = math.sqrt(pp[11])
     xf, vf, Vf = np.zeros((N, P)), np.zeros((N, P)), np.zeros((N, P))
     xif, Ff = np.zeros((N, P)), np.zeros((N, P))
     xc, vc, Vc = np.zeros((N, P)), np.zeros((N, P)), np.zeros((N, P))
     xic, Fc = np.zeros((N, P)), np.zeros((N, P))
+    xcc, vcc, Vcc = np.zeros((N, P)), np.zeros((N, P)), np.zeros((N, P))
+    xicc, Fcc = np.zeros((N, P)), np.zeros((N, P))
+    scc = np.zeros((N, P), dtype=np.bool_)
     xt, vt, Vt, Ft = np.zeros((N, P)), np.zeros((N, P)), np.zeros((N, P)), np.zeros((N, P))
     xit = np.zeros((N, P))
     sf = np.zeros((N, P), dtype=np.bool_)
@@ -985,13 +1023,18 @@ def _run_joint(gen, P: int, N: int, nburn: int, nrun: int, stride: int, cf_f: np
     z1, z2 = np.zeros((4, N, P)), np.zeros((4, N, P))
     eps1, eps2 = np.zeros((4, N, P)), np.zeros((4, N, P))
     epsc, epst = np.zeros((4, N, P)), np.zeros((4, N, P))
+    epsc0, epscc = np.zeros((4, N, P)), np.zeros((4, N, P))
+    pvx_cc = np.zeros((N, P))
+    cc_stride = max(1, stride // 2)
     rbm, rbx = np.zeros((N, P)), np.zeros((N, P))
     pvx_f, pvx_c, pvx_t = np.zeros((N, P)), np.zeros((N, P)), np.zeros((N, P))
     w = np.ones(P)
     fext = np.zeros((N, P))
     esc_time[:] = -1.0
     use_mg = mg.shape[1] > 0
-    phi = np.zeros((mg.shape[1] - min(N // 2, MG_DIST) - 1 if use_mg else 0, N, P))
+    phi = np.zeros((n_state(N) if use_mg else 0, N, P))
+    n_bd = mg.shape[1] - n_state(N) - min(N // 2, MG_DIST) - 1 if use_mg else 0
+    g_bd, gprev_bd = np.zeros(max(n_bd, 0)), np.zeros(max(n_bd, 0))
     xi0 = np.zeros((N, P))
     mg_started = False
     n_upd = 0  # xi updates of the fine level since the last martingale point
@@ -1000,10 +1043,12 @@ def _run_joint(gen, P: int, N: int, nburn: int, nrun: int, stride: int, cf_f: np
     for j in range(N):
         for p in range(P):
             xc[j, p], vc[j, p], Vc[j, p], xic[j, p] = xf[j, p], vf[j, p], Vf[j, p], xif[j, p]
+            xcc[j, p], vcc[j, p], Vcc[j, p], xicc[j, p] = xf[j, p], vf[j, p], Vf[j, p], xif[j, p]
             xt[j, p], vt[j, p], Vt[j, p], xit[j, p] = xf[j, p], vf[j, p], Vf[j, p], xif[j, p]
             if kind != KIND_LINEAR:
                 Ff[j, p] = _kick_force(xf[j, p], pp)
                 Fc[j, p] = Ff[j, p]
+                Fcc[j, p] = Ff[j, p]
     h = cf_c[12] if coupled else cf_f[12]
     half = nburn + nrun // 2
     for step in range(nburn + nrun):
@@ -1042,7 +1087,7 @@ def _run_joint(gen, P: int, N: int, nburn: int, nrun: int, stride: int, cf_f: np
                 if use_mg and sub == 0:
                     dec = cf_f[13] ** n_upd
                     mg_measure(xf, vf, Vf, xif, w, pp[7], pp[8], phi, xi0, mg, first, mg_started, dec,
-                               pp[11] * (1.0 - dec * dec))
+                               pp[11] * (1.0 - dec * dec), g_bd, gprev_bd)
                     mg_started = True
                     n_upd = 0
                 if twin:
@@ -1053,14 +1098,25 @@ def _run_joint(gen, P: int, N: int, nburn: int, nrun: int, stride: int, cf_f: np
                         _measure_twin(xt, vt, Vt, xit, w, cf_t, sums[2], pp[8], pvx_t)
                 if coupled and sub == 1:
                     counts[1] += _measure(xc, vc, Vc, xic, sc, Fc, w, cf_c, pp, kind, sums[1], pvx_c)
+        if third and step % 2 == 1:
+            counters[4] += live
+            _compose(cf_c, epsc0, epsc, epscc)
+            _d_step_joint(xcc, vcc, Vcc, xicc, Fcc, xm, fext, epscc, cf_cc, pp, kind, rbm, rbx, pvx_cc, w,
+                          gen)
+            _check_escape(xcc, vcc, Vcc, xicc, Fcc, scc, w, thr, t_end, esc_time)
+            if step >= nburn and ((step - nburn) // 2) % cc_stride == 0:
+                counts[3] += _measure(xcc, vcc, Vcc, xicc, scc, Fcc, w, cf_cc, pp, kind, sums[3], pvx_cc)
+        elif third:
+            epsc0[:] = epsc
 
 
 def run_chunk(gen, P: int, N: int, nburn: int, nrun: int, stride: int, cf_f: np.ndarray,
               cf_c: np.ndarray, pp: np.ndarray, kind: int, coupled: bool, cf_t: np.ndarray,
               pp_t: np.ndarray, twin: bool, chol: np.ndarray, sums: np.ndarray,
-              counts: np.ndarray, esc_time: np.ndarray, counters: np.ndarray, mg: np.ndarray) -> None:
+              counts: np.ndarray, esc_time: np.ndarray, counters: np.ndarray, mg: np.ndarray,
+              cf_cc: np.ndarray, third: bool) -> None:
     """Run :func:`_run_frozen` or :func:`_run_joint` (arguments as there; ``cf_f`` says which)
     on a scratch block sized for this chunk."""
     run = _run_joint if cf_f[CF_JOINT] == 1.0 else _run_frozen
     run(gen, P, N, nburn, nrun, stride, cf_f, cf_c, pp, kind, coupled, cf_t, pp_t, twin, chol,
-        sums, counts, esc_time, counters, mg)
+        sums, counts, esc_time, counters, mg, cf_cc, third)

@@ -40,10 +40,19 @@ Basis, per unit j (sums over units; the ring's symmetry makes one coefficient pe
          for four more controls;
 ``he``   noise only: :math:`\\sum_j (\\eta_j^2/\\mathrm{var} - 1)` and
          :math:`\\sum_j \\eta_j\\eta_{j+d}/\\mathrm{var}`, d = 1 .. D (var the innovation's variance).
+
+End-of-window terms ``bd``: :math:`G(Y_{t_{last}}) - G(Y_{t_0})` for quadratic G, the symmetrized
+products :math:`a_j b_{j+d} + b_j a_{j+d}` of (x, v, V, xi), d = 0 .. D, and the potential
+:math:`|x_j|^n`, summed over units (accumulated as the telescoping sum of G's changes between
+measured points). They are the Poisson solution's boundary term, which the martingale sums
+leave; their mean is 0 only for a stationary window (exactly so for a harmonic ring started
+from its own law, up to the burn-in's remaining transient otherwise), so the estimator uses them
+only as a separate candidate set (:data:`montecarlo.estimate.CONTROL_SETS`).
 """
 
 from __future__ import annotations
 
+import numpy as np
 from numba import njit
 
 from ._force import _onsite_force
@@ -54,6 +63,8 @@ MG_DIST = 4
 #: Odd nonlinear terms of the basis, in the kernel's order.
 NL_NAMES = ("dU", "x3", "x2v", "x2V", "x2xi", "xv2", "xvV", "xvxi", "xr2", "vr2")
 _LIN = ("x", "v", "V", "xi")
+#: Quadratic products of the end-of-window terms, as index pairs into (x, v, V, xi).
+BD_PAIRS = ((0, 0), (0, 1), (0, 2), (0, 3), (1, 1), (1, 2), (1, 3), (2, 2), (2, 3), (3, 3))
 
 
 def lags(N: int) -> int:
@@ -63,10 +74,40 @@ def lags(N: int) -> int:
 
 def basis_names(N: int) -> tuple[str, ...]:
     """Names of the accumulated martingale controls for N units, in the kernel's order:
-    ``lin_<var>_<d>``, ``nl_<term>``, ``he_<d>``."""
+    ``lin_<var>_<d>``, ``nl_<term>``, ``he_<d>``, then the end-of-window terms ``bd_<ab>_<d>``
+    and ``bd_U``."""
     D = lags(N)
     lin = tuple(f"lin_{v}_{d}" for d in range(D + 1) for v in _LIN)
-    return lin + tuple("nl_" + t for t in NL_NAMES) + tuple(f"he_{d}" for d in range(D + 1))
+    bd = tuple(f"bd_{_LIN[a]}{_LIN[b]}_{d}" for d in range(D + 1) for a, b in BD_PAIRS) + ("bd_U",)
+    return lin + tuple("nl_" + t for t in NL_NAMES) + tuple(f"he_{d}" for d in range(D + 1)) + bd
+
+
+@njit(cache=True, nogil=True)
+def n_state(N: int) -> int:
+    """Number of state functions (``lin`` and ``nl``) of the basis for N units."""
+    return 4 * (min(N // 2, MG_DIST) + 1) + len(NL_NAMES)
+
+
+@njit(cache=True, nogil=True)
+def _boundary(x, v, V, xi, w, n, g) -> None:
+    """g[k] = sum over units and live paths of the k-th end-of-window function at this state."""
+    N, P = x.shape
+    D = min(N // 2, MG_DIST)
+    g[:] = 0.0
+    for p in range(P):
+        if w[p] == 0.0:
+            continue
+        for j in range(N):
+            a0 = (x[j, p], v[j, p], V[j, p], xi[j, p])
+            for d in range(D + 1):
+                l = (j + d) % N
+                b0 = (x[l, p], v[l, p], V[l, p], xi[l, p])
+                for i in range(len(BD_PAIRS)):
+                    a, b = BD_PAIRS[i]
+                    val = a0[a] * b0[b] + a0[b] * b0[a] if a != b or d > 0 else a0[a] * a0[a]
+                    # lag d > 0 visits each unordered pair of units once per j (twice for d = N/2)
+                    g[10 * d + i] += 0.5 * val if d > 0 else val
+            g[10 * (D + 1)] += abs(x[j, p]) ** n
 
 
 @njit(cache=True, nogil=True)
@@ -107,7 +148,7 @@ def mg_phi(x, v, V, xi, w, a, n, phi) -> None:
 
 @njit(cache=True, nogil=True)
 def mg_measure(x, v, V, xi, w, a, n, phi, xi0, acc, first: bool, started: bool, decay: float,
-               var: float) -> None:
+               var: float, g: np.ndarray, gprev: np.ndarray) -> None:
     """At a measured step: close the interval since the previous one (unless this is the first)
     and start the next.
 
@@ -117,12 +158,20 @@ def mg_measure(x, v, V, xi, w, a, n, phi, xi0, acc, first: bool, started: bool, 
     conditional mean 0 and variance ``var`` = :math:`(D/\\tau)(1 - e^{-2\\Delta/\\tau})` whatever
     happened to x, v, V: acc[0, k] += sum over units and paths of phi[k] eta (k < K),
     acc[0, K + d] += sum of :math:`\\eta_j\\eta_{j+d}/var - \\delta_{d0}` over live paths,
-    the same into acc[1] while in the first half of the window. Then the basis is evaluated at
-    the current state (:func:`mg_phi`) and xi is kept in ``xi0``. Nothing is done per step.
+    the same into acc[1] while in the first half of the window; the end-of-window functions'
+    change since the previous point goes to acc[:, K + D + 1:] (``g``, ``gprev`` scratch). Then
+    the basis is evaluated at the current state (:func:`mg_phi`) and xi is kept in ``xi0``.
+    Nothing is done per step.
     """
     K, N, P = phi.shape
+    D = min(N // 2, MG_DIST)
+    o = K + D + 1
+    _boundary(x, v, V, xi, w, n, g)
     if started:
-        D = acc.shape[1] - K - 1
+        for k in range(g.size):
+            acc[0, o + k] += g[k] - gprev[k]
+            if first:
+                acc[1, o + k] += g[k] - gprev[k]
         for k in range(K):
             s = 0.0
             for j in range(N):
@@ -144,5 +193,6 @@ def mg_measure(x, v, V, xi, w, a, n, phi, xi0, acc, first: bool, started: bool, 
             acc[0, K + d] += s
             if first:
                 acc[1, K + d] += s
+    gprev[:] = g
     mg_phi(x, v, V, xi, w, a, n, phi)
     xi0[:, :] = xi

@@ -12,6 +12,14 @@ and the martingale sums of :mod:`montecarlo._martingale` (mean 0 for any start).
 is the candidate (:data:`CONTROL_SETS`) with the least variance of eta among those whose residual
 degrees of freedom meet :func:`montecarlo.control.enough_dof`.
 
+Time-step error, two policies. Without extrapolation the reported numbers are the fine level's
+(``dt/2``) and the Richardson estimate of its bias is added to the error in quadrature. With
+``extrapolate`` (three coupled levels ``dt/2, dt, 2 dt``) the reported numbers are the
+Richardson extrapolation from ``(dt, dt/2)``, per replica ``F0 + (F0 - F1)/(2^p - 1)``, whose
+remaining bias is of higher order; the difference between the extrapolations from ``(2 dt, dt)``
+and from ``(dt, dt/2)`` measures it, and :data:`RESIDUAL_RULE` turns it into the systematic term
+added to the error in quadrature.
+
 ``eta`` is the ratio of the estimated means, :math:`\\eta = \\overline{V^2}/(R\\,\\overline{P_{in}})`
 (not a mean of per-replica ratios, whose bias is of the order of the squared per-replica
 relative error), with the first-order (delta-method) error.
@@ -33,10 +41,13 @@ from .scheme import KIND_KINK, scheme_kind
 from .simulate import Ensemble
 from .twin import TWIN_MOMENTS
 
-__all__ = ["Estimate", "estimate", "BIAS_ORDER", "bias_order", "student_factor", "CONTROL_SETS"]
+__all__ = ["Estimate", "estimate", "BIAS_ORDER", "bias_order", "student_factor", "CONTROL_SETS",
+           "RESIDUAL_RULE"]
 
-#: Candidate sets of control variates, by name: the twin's moments, the martingale sums, both.
-CONTROL_SETS = ("twin", "martingale", "martingale+twin")
+#: Candidate sets of control variates, by name: the twin's moments, the martingale sums, both;
+#: and the martingale sums with the end-of-window terms (``bd_*`` of
+#: :func:`montecarlo._martingale.basis_names`), with and without the twin.
+CONTROL_SETS = ("twin", "martingale", "martingale+twin", "martingale+boundary", "martingale+boundary+twin")
 
 #: Weak order assumed when the coarse/fine difference is turned into a bias estimate of the
 #: fine level, bias = (coarse - fine) / (2^p - 1) (so fine - bias is the extrapolation), i.e.
@@ -51,6 +62,23 @@ CONTROL_SETS = ("twin", "martingale", "martingale+twin")
 #: combined standard errors), and the scheme at dt = 0.04 ... 0.01 agrees with the independent
 #: reference of validation/kinkref.py on common noise.
 BIAS_ORDER = {"smooth": 2.0, "nonsmooth": 2.0}
+
+#: Systematic error of the extrapolated value, from the difference D = R(2 dt) - R(dt) of the
+#: extrapolations from the pairs (2 dt, dt) and (dt, dt/2) and its standard error D_se: with a
+#: remaining error c dt^q, R(dt) is off by D / (2^q - 1). The rule is
+#: ``(|D| + RESIDUAL_RULE[1] * D_se) / (2^RESIDUAL_RULE[0] - 1)``, i.e. q = 3 (the next order after
+#: p = 2) plus one standard error of D. Measured on the exact discrete values of the harmonic
+#: schemes (discrete Lyapunov, no sampling noise; harmonic unit and rings N = 3 at k = -0.2,
+#: -0.3, coarse dt 0.04 ... 0.32; tests/montecarlo/test_extrapolate.py): the extrapolation's true
+#: error is 0.29-0.47 of |D|/7 for the frozen-xi step (whose next term is dt^4: 7/15 = 0.47) and
+#: 0.87-0.99 for the joint step on a ring (dt^3), never above it; with q = 4 (|D|/15) the joint
+#: ring's bound would fail by 2x. For nonlinear units at coarse dt 0.04 the D are ~1e-5 and
+#: unresolved (validation.bench.montecarlo.policy_coverage checks the error bars' coverage).
+RESIDUAL_RULE = (3.0, 1.0)
+
+#: Tail probability of the test (Hotelling's T^2 against chi^2) that the end-of-window terms
+#: have mean 0; where it fails the candidate sets with them are left out.
+BOUNDARY_TAIL = 1e-3
 
 #: Observables estimated from the replica moments (``eta`` is derived from V2 and Pin).
 _NAMES = ("V2", "Pin", "v2", "vV", "x2", "stuck")
@@ -77,6 +105,13 @@ class Estimate:
     bias_se : dict of float
         Standard error of ``bias`` over replicas (the levels share their noise, so it is
         much smaller than ``se``).
+    extrapolated : bool
+        Whether ``mean`` is the Richardson extrapolation (then ``residual`` is the systematic
+        part of the error, else ``bias``).
+    residual, residual_se : dict of float
+        With three levels: the higher-order estimate :math:`(R(2dt) - R(dt))/(2^q - 1)` of the
+        extrapolation's remaining bias (q = :data:`RESIDUAL_RULE` [0]) and its standard error;
+        0 otherwise.
     cov_V2_Pin : float
         Covariance of the V2 and Pin estimates (of their means).
     replicas : int
@@ -109,10 +144,20 @@ class Estimate:
     reduction: dict[str, float] = field(default_factory=dict)
     control: bool = False
     controls: str = "none"
+    extrapolated: bool = False
+    residual: dict[str, float] = field(default_factory=dict)
+    residual_se: dict[str, float] = field(default_factory=dict)
+
+    def systematic(self, name: str) -> float:
+        """Time-step part of the error: the bias estimate of the fine level, or for an
+        extrapolated value the bound of :data:`RESIDUAL_RULE` on its remaining bias."""
+        if not self.extrapolated:
+            return abs(self.bias[name])
+        return abs(self.residual.get(name, 0.0)) + RESIDUAL_RULE[1] * self.residual_se.get(name, 0.0)
 
     def total_error(self, name: str) -> float:
-        """Standard error and bias estimate added in quadrature."""
-        return math.hypot(self.se[name], self.bias[name])
+        """Standard error and the time-step part (:meth:`systematic`) added in quadrature."""
+        return math.hypot(self.se[name], self.systematic(name))
 
     def rel_error(self, name: str = "eta") -> float:
         """Total error relative to the value (inf when the value is 0 or undefined)."""
@@ -163,16 +208,44 @@ def _control_columns(e: Ensemble, valid: np.ndarray, which: str, n: int) -> tupl
         if not e.mart_names:
             return None
         mg, mg_first = e.martingale(), e.martingale(first_half=True)
-        cols += [mg[name][valid] for name in e.mart_names]
-        first += [mg_first[name][valid] for name in e.mart_names]
-        mu += [0.0] * len(e.mart_names)
+        names = [name for name in e.mart_names if "boundary" in which or not name.startswith("bd_")]
+        if "boundary" in which and not _stationary_window(mg, valid, e.mart_names):
+            return None
+        cols += [mg[name][valid] for name in names]
+        first += [mg_first[name][valid] for name in names]
+        mu += [0.0] * len(names)
     if not enough_dof(n, len(cols)):
         return None
     return np.column_stack(cols), np.column_stack(first), np.array(mu)
 
 
+def _stationary_window(mg: dict[str, np.ndarray], valid: np.ndarray, names: tuple[str, ...]) -> bool:
+    """Whether the end-of-window terms are usable: present, and their means consistent with 0
+    (Hotelling's T^2 below the chi^2 quantile at :data:`BOUNDARY_TAIL`). They have mean 0 only
+    for a stationary window; a transient left by the burn-in shows here first (ring n = 3, N = 3,
+    k = -0.5 from rest, dt = 0.1, 200 replicas of 4 paths, t_run = 40: refused at t_burn = 5,
+    accepted at t_burn = 50)."""
+    from scipy.stats import chi2
+
+    cols = [mg[name][valid] for name in names if name.startswith("bd_")]
+    n = int(valid.sum())
+    if not cols or n < 3:
+        return False
+    C = np.column_stack(cols)
+    sd = C.std(axis=0, ddof=1)
+    C = C[:, sd > 0] / sd[sd > 0]
+    # Hotelling's T^2 of the means (the terms are strongly correlated), on the resolved rank
+    m = C.mean(axis=0)
+    Cc = C - m
+    _, sv, vt = np.linalg.svd(Cc / math.sqrt(n - 1), full_matrices=False)
+    keep = sv > 1e-8 * sv[0] if sv.size else sv > 0
+    proj = vt[keep] @ m / sv[keep]
+    t2 = n * float(proj @ proj)
+    return bool(t2 < chi2.ppf(1.0 - BOUNDARY_TAIL, max(int(keep.sum()), 1)))
+
+
 def estimate(e: Ensemble, h: Harvester, order: float | None = None, control: bool | None = None,
-             controls: str | None = None) -> Estimate:
+             controls: str | None = None, extrapolate: bool | None = None) -> Estimate:
     """Statistics of an ensemble of ``h`` (see :class:`Estimate`).
 
     Parameters
@@ -191,18 +264,27 @@ def estimate(e: Ensemble, h: Harvester, order: float | None = None, control: boo
     controls : str, optional
         Use this set of :data:`CONTROL_SETS` only (raises if it is not available). None: of the
         available sets, the one that gives eta the least variance.
+    extrapolate : bool, optional
+        Report the Richardson extrapolation (needs three levels,
+        :func:`montecarlo.simulate` ``third_level``). None: whenever the ensemble has three.
     """
     if controls is not None and controls not in CONTROL_SETS:
         raise ParameterError(f"controls must be None or one of {CONTROL_SETS}, got {controls!r} "
                              f"(type {type(controls).__name__})")
     if order is None:
         order = bias_order(h, e.notes.get("scheme_kind"))
+    if extrapolate and e.levels < 3:
+        raise ParameterError(f"extrapolate=True needs three levels (simulate(..., richardson=True, "
+                             f"third_level=True)), got dts {e.dts}")
+    extrapolate = e.levels >= 3 if extrapolate is None else extrapolate
     fine = _per_replica(e, h, 0)
     coarse = _per_replica(e, h, 1) if e.levels > 1 else None
+    coarsest = _per_replica(e, h, 2) if e.levels > 2 else None
     first = _per_replica(e, h, -1)
     valid = np.all(np.isfinite(fine[:, :5]), axis=1) & (fine[:, 1] != 0)
-    if coarse is not None:
-        valid &= np.all(np.isfinite(coarse[:, :5]), axis=1)
+    for other in (coarse, coarsest):
+        if other is not None:
+            valid &= np.all(np.isfinite(other[:, :5]), axis=1)
     valid &= np.all(np.isfinite(first[:, :5]), axis=1)
     n = int(valid.sum())
     wanted = (controls,) if controls is not None else CONTROL_SETS
@@ -223,9 +305,12 @@ def estimate(e: Ensemble, h: Harvester, order: float | None = None, control: boo
     R = h.params.R
     reduction: dict[str, float] = {}
     Ff = fine[valid]
+    scale = 1.0 / (2.0**order - 1.0)
+    # the extrapolation per replica: its mean is that of the reported number
+    Y = Ff + scale * (Ff - coarse[valid]) if extrapolate else Ff
     chosen = "none"
     if use:
-        fits = {name: _regression(Ff, C, mu) for name, (C, _, mu) in sets.items()}
+        fits = {name: _regression(Y, C, mu) for name, (C, _, mu) in sets.items()}
         chosen = min(fits, key=lambda name: _ratio(fits[name][0], fits[name][1], R)[1])
         C, C_first, mu = sets[chosen]
         mean, cov, plain_cov = fits[chosen]
@@ -233,7 +318,7 @@ def estimate(e: Ensemble, h: Harvester, order: float | None = None, control: boo
             if cov[i, i] > 0:
                 reduction[name] = float(plain_cov[i, i] / cov[i, i])
     else:
-        mean, cov = _plain(Ff)
+        mean, cov = _plain(Y)
     est_mean = {name: float(mean[i]) for i, name in enumerate(_NAMES)}
     est_se = {name: math.sqrt(max(float(cov[i, i]), 0.0)) for i, name in enumerate(_NAMES)}
     est_mean["eta"], est_se["eta"] = _ratio(mean, cov, R)
@@ -243,7 +328,6 @@ def estimate(e: Ensemble, h: Harvester, order: float | None = None, control: boo
     bias_se = dict.fromkeys(_NAMES + ("eta",), 0.0)
     if coarse is not None:
         # e(h) = C h^p gives fine - coarse = (1 - 2^p) e(h/2)
-        scale = 1.0 / (2.0**order - 1.0)
         # the twin runs at the fine step only: its controls are used for the coarse - fine
         # difference when they lower the variance of eta's difference, which is rare
         d_mean, d_cov = _best(coarse[valid] - Ff, C if use else None, mu if use else None, mean, R)
@@ -252,6 +336,20 @@ def estimate(e: Ensemble, h: Harvester, order: float | None = None, control: boo
             bias_se[name] = math.sqrt(max(float(d_cov[i, i]), 0.0)) * scale
         b, b_se = _linear_eta(d_mean, d_cov, mean, R)
         bias["eta"], bias_se["eta"] = b * scale, b_se * scale
+    residual = dict.fromkeys(_NAMES + ("eta",), 0.0)
+    residual_se = dict.fromkeys(_NAMES + ("eta",), 0.0)
+    if coarsest is not None:
+        # R(2dt) - R(dt) with R(h) = F(h/2) + scale (F(h/2) - F(h)); the remaining error c dt^q of
+        # R(dt) is that difference / (2^q - 1)
+        Fc, Fcc = coarse[valid], coarsest[valid]
+        D = (1.0 + 2.0 * scale) * Fc - scale * Fcc - (1.0 + scale) * Ff
+        r_scale = 1.0 / (2.0 ** RESIDUAL_RULE[0] - 1.0)
+        q_mean, q_cov = _best(D, C if use else None, mu if use else None, mean, R)
+        for i, name in enumerate(_NAMES):
+            residual[name] = float(q_mean[i]) * r_scale
+            residual_se[name] = math.sqrt(max(float(q_cov[i, i]), 0.0)) * r_scale
+        q, q_se = _linear_eta(q_mean, q_cov, mean, R)
+        residual["eta"], residual_se["eta"] = q * r_scale, q_se * r_scale
     # the twin's own first-half-minus-whole difference has mean 0 (it is stationary): the
     # control for the system's, which a transient would shift
     dr_mean, dr_cov = _best(first[valid] - Ff, (C_first - C) if use else None,
@@ -265,7 +363,8 @@ def estimate(e: Ensemble, h: Harvester, order: float | None = None, control: boo
     return Estimate(
         mean=est_mean, se=est_se, bias=bias, bias_se=bias_se, cov_V2_Pin=float(cov[0, 1]), replicas=n,
         identity_V2=_mean_se(r1), identity_power=_mean_se(r2), drift=drift, drift_se=drift_se,
-        reduction=reduction, control=use, controls=chosen)
+        reduction=reduction, control=use, controls=chosen, extrapolated=bool(extrapolate),
+        residual=residual, residual_se=residual_se)
 
 
 @functools.cache

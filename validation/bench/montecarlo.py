@@ -34,6 +34,14 @@ Measured in one run:
   N = 1 and N = 3 at k = -0.01, -0.2, -0.5, from one ensemble pair per row; and the coverage of
   their error bars over seeds against the exact solution (harmonic pair) and the Fokker--Planck
   solver (single n = 3 unit) (:func:`martingale_coverage`);
+* the time-step policy (:func:`policy_rows`, :func:`policy_coverage`): the solver's CPU and wall
+  time to 1e-4 with the Richardson extrapolation (three coupled levels, the default) and with
+  the old rule (halve dt and restart while the bias estimate exceeds tol/3), for the ring n = 3,
+  N = 3, k = -0.5 and single n = 3, n = 1.5 units (a = 0.5), in one run; and the coverage of both
+  policies' error bars at tol = 1e-3 over seeds against independent references (Fokker--Planck
+  values of ``reference_values.json`` for the single units, :data:`RING_REFERENCE` for the ring);
+  and the variance reduction with the end-of-window terms of the martingale controls
+  (:func:`boundary_rows`);
 * the kink's time-step law (:mod:`validation.kinkstudy`): at a = 0.5, 1, 2, eta at fine steps
   0.04 ... 0.005 from runs with independent seeds, each Richardson-coupled, and the weak order
   p of eta(dt) = eta0 + c dt^p fitted to the independent values and to the coupled differences
@@ -63,7 +71,8 @@ from montecarlo import MonteCarlo, estimate, simulate, simulate_naive
 from montecarlo.simulate import default_threads
 from validation.bench.cli import bench_main, save_benchmark
 
-__all__ = ["STEM", "run", "martingale_rows", "martingale_coverage", "run_martingale"]
+__all__ = ["STEM", "run", "martingale_rows", "martingale_coverage", "run_martingale", "policy_rows",
+           "policy_coverage", "run_policy", "boundary_rows", "RING_REFERENCE"]
 
 #: Name of the written ``.json`` and ``.png``.
 STEM = "bench_montecarlo"
@@ -538,6 +547,120 @@ def run_martingale(quick: bool = False, out: Path | str | None = None) -> dict[s
     return res
 
 
+# -- time-step policy: Richardson extrapolation against halving dt ------------------------------
+
+#: Independent reference for eta of the ring n = 3, N = 3, a = 0.5, k = -0.5: the old policy
+#: (fine level reported, its Richardson bias in quadrature) at a fixed dt = 0.01 (levels 0.005,
+#: 0.01), tol = 1e-4, seed 777001, with (value, error, CPU seconds). A second one with the
+#: extrapolation at a fixed dt = 0.02 (levels 0.01, 0.02, 0.04), seed 777002: 0.5504542 +- 5.2e-5
+#: (89 CPU-s), 0.7 combined errors above it.
+RING_REFERENCE = (0.5504025545113229, 4.873396667290318e-05, 154.7)
+
+#: Fokker--Planck values (validation/data/reference_values.json: tol 1e-7 for n = 3, 1e-5
+#: requested and 1.3e-5 reached for n = 1.5), with their errors.
+_FPE_REFERENCE = {3.0: (0.4840014710439786, 2.4203158585381594e-08),
+                  1.5: (0.5479634094655252, 7.312264433032261e-06)}
+
+_POLICY_CASES = (("ring n3 N3 k-0.5", 3.0, 3, -0.5), ("n3 N1", 3.0, 1, 0.0), ("n1.5 N1", 1.5, 1, 0.0))
+
+
+def _policy_solve(h: Harvester, extrapolate: bool, tol: float, seed: int) -> dict[str, Any]:
+    c0, t0 = time.process_time(), time.perf_counter()
+    r = solve(h, MonteCarlo(seed=seed, tol=tol, extrapolate=extrapolate, progress=False, max_time=900.0))
+    i = r.info
+    return {"eta": r.eta, "eta_err": r.eta_err, "status": r.status.value, "cpu_s": time.process_time() - c0,
+            "wall_s": time.perf_counter() - t0, "dt": i["dt"], "dt_coarsest": i["dt_coarsest"],
+            "restarts": i["plan_notes"].get("restarts"), "replicas": i["replicas"], "paths": i["paths"],
+            "t_run": i["t_run"], "se": i["eta_standard_error"], "bias": i["bias_eta"],
+            "residual": i["residual_eta"], "residual_se": i["residual_eta_se"],
+            "vrf": i["variance_reduction"], "controls": i["control_set"]}
+
+
+def policy_rows(quick: bool) -> dict[str, Any]:
+    """CPU and wall seconds of the solver to tol = 1e-4 (quick: 1e-3) with ``extrapolate=True``
+    (default) and ``False`` (halve dt and restart), for the cases of :data:`_POLICY_CASES`, the two
+    policies alternating in one run (one solve each: the halving policy takes minutes)."""
+    tol = 1e-3 if quick else 1e-4
+    out: dict[str, Any] = {"tol": tol}
+    for i, (name, n, N, k) in enumerate(_POLICY_CASES):
+        h = Harvester.build(a=0.5, n=n, N=N, k=k)
+        row = {pol: _policy_solve(h, pol == "extrapolate", tol, 8100 + i) for pol in ("extrapolate", "halve")}
+        row["cpu_ratio_halve_over_extrapolate"] = row["halve"]["cpu_s"] / row["extrapolate"]["cpu_s"]
+        out[name] = row
+    return out
+
+
+def policy_coverage(quick: bool, seeds: int | None = None) -> dict[str, Any]:
+    """Coverage at tol = 1e-3 of both policies' error bars over ``seeds`` seeds (default 20,
+    quick 4) against independent references (:data:`_FPE_REFERENCE`, :data:`RING_REFERENCE`):
+    z = (eta - reference) / hypot(eta_err, reference error), and the CPU seconds per solve."""
+    seeds = seeds or (4 if quick else 20)
+    out: dict[str, Any] = {"tol": 1e-3, "seeds": seeds, "nominal": {"within_1": 0.683, "within_2": 0.954}}
+    for name, n, N, k in _POLICY_CASES:
+        h = Harvester.build(a=0.5, n=n, N=N, k=k)
+        ref, ref_err = _FPE_REFERENCE[n] if N == 1 else RING_REFERENCE[:2]
+        row: dict[str, Any] = {"reference": ref, "reference_err": ref_err}
+        for pol in ("extrapolate", "halve"):
+            runs = [_policy_solve(h, pol == "extrapolate", 1e-3, 9000 + s) for s in range(seeds)]
+            z = np.array([(r["eta"] - ref) / math.hypot(r["eta_err"], ref_err) for r in runs])
+            a = np.abs(z)
+            row[pol] = {"within_1": float((a < 1).mean()), "within_2": float((a < 2).mean()),
+                        "max_abs_z": float(a.max()), "mean_z": float(z.mean()),
+                        "median_cpu_s": float(np.median([r["cpu_s"] for r in runs])),
+                        "median_wall_s": float(np.median([r["wall_s"] for r in runs])),
+                        "dts": sorted({r["dt"] for r in runs}), "z": [round(float(v), 3) for v in z]}
+        out[name] = row
+    return out
+
+
+def run_policy(quick: bool = False, out: Path | str | None = None) -> dict[str, Any]:
+    """Only this section (:func:`policy_rows`, :func:`policy_coverage`); writes
+    ``bench_montecarlo_policy.json`` into ``out`` when given."""
+    import json
+
+    t0 = time.perf_counter()
+    res = {"quick": quick, "threads": default_threads(), "rows": policy_rows(quick),
+           "coverage": policy_coverage(quick), "boundary": boundary_rows(quick)}
+    res["wall_s"] = time.perf_counter() - t0
+    if out is not None:
+        Path(out).mkdir(parents=True, exist_ok=True)
+        (Path(out) / "bench_montecarlo_policy.json").write_text(json.dumps(res, indent=1))
+    return res
+
+
+def boundary_rows(quick: bool) -> dict[str, Any]:
+    """Variance reduction of eta with each control set of :data:`montecarlo.estimate.CONTROL_SETS`
+    (the end-of-window terms with and without the twin among them) on one ensemble per case and
+    t_run: ring n = 3, N = 3, k = -0.5, harmonic ring N = 3, k = -0.2, single n = 3 (a = 0.5); 300
+    replicas of 2 paths (quick: 120), the solver's plan for tol = 1e-4 otherwise, t_run = 100 and
+    400; with each set's eta and standard error, and the CPU seconds of the ensemble."""
+    from montecarlo.estimate import CONTROL_SETS
+
+    reps = 120 if quick else 300
+    out: dict[str, Any] = {"replicas": reps, "paths": 2}
+    cases = (("ring n3 N3 k-0.5", Harvester.build(a=0.5, n=3.0, N=3, k=-0.5)),
+             ("harmonic ring N3 k-0.2", Harvester.build(a=0.5, N=3, k=-0.2)),
+             ("n3 N1", Harvester.build(a=0.5, n=3.0)))
+    for name, h in cases:
+        plan = MonteCarlo(seed=3, tol=1e-4, progress=False).plan(h)
+        for t_run in ((100.0,) if quick else (100.0, 400.0)):
+            c0 = time.process_time()
+            e = simulate(h, dt=plan.dt, paths=2, replicas=reps, t_burn=plan.t_burn, t_run=t_run, seed=21,
+                         twin=plan.twin, start=plan.start, richardson=True, third_level=True, martingale=True)
+            row: dict[str, Any] = {"cpu_s": time.process_time() - c0, "dt": plan.dt, "t_burn": plan.t_burn}
+            plain = estimate(e, h, control=False)
+            for cs in CONTROL_SETS:
+                try:
+                    est = estimate(e, h, controls=cs)
+                except ParameterError as exc:
+                    row[cs] = {"note": str(exc).split(";")[0]}
+                    continue
+                row[cs] = {"vrf_eta": (plain.se["eta"] / est.se["eta"]) ** 2, "eta": est.mean["eta"],
+                           "se": est.se["eta"]}
+            out[f"{name} t_run {t_run:g}"] = row
+    return out
+
+
 def martingale_coverage(quick: bool) -> dict[str, Any]:
     """Coverage of the martingale error bars against independent references over seeds: the
     harmonic pair (N = 2, k = -0.2, a = 0.5) against its exact discrete value (twin_expectations,
@@ -669,6 +792,10 @@ def run(quick: bool = False, out: Path | None = None) -> dict[str, Any]:
     # the coverage study takes minutes: full mode only (quick runs feed `harvester validate`)
     res["martingale_coverage"] = martingale_coverage(quick) if not quick else {
         "note": "full mode only; CI smoke test: tests/montecarlo/test_martingale.py"}
+    res["time_step_policy"] = policy_rows(quick)
+    res["end_of_window_terms"] = boundary_rows(quick)
+    res["time_step_policy_coverage"] = policy_coverage(quick) if not quick else {
+        "note": "full mode only (~8 min); CI checks: tests/montecarlo/test_extrapolate.py"}
     res["kink_dt"] = _kink_dt_study(quick)
     res["series"] = series(quick, res)
     save_benchmark(res, out, STEM, _plot)
