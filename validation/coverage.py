@@ -118,17 +118,10 @@ def _table_reference(case: CoverageCase, method: str = "mc", max_rel_err: float 
     relative error on eta exceeds ``max_rel_err``)."""
     from . import reftable
 
-    for c in reftable.CASES:
-        if c.method != method or c.h != case.h:
-            continue
-        entry = reftable.load().get(c.label)
-        if entry is None or entry.get("eta_err") is None or not entry["eta_err"] <= max_rel_err * abs(entry["eta"]):
-            return None
-        values = {q: entry[q] for q in _QUANTITIES} | {q + "_err": entry[q + "_err"] for q in _QUANTITIES}
-        return Stats(**values, status=Status(entry["status"]), method=method,
-                     message=f"reference table '{c.label}' ({entry['date']}, commit {entry['commit']}, seed "
-                             f"{entry['options'].get('seed')}): {entry['message']}")
-    return None
+    entry = reftable.lookup(case.h, method)
+    if entry is None or not entry["eta_err"] <= max_rel_err * abs(entry["eta"]):
+        return None
+    return reftable.as_stats(entry)
 
 
 def _reference(case: CoverageCase, seed: int) -> Stats:

@@ -157,39 +157,25 @@ class Bound:
 
 
 def _mc_reference(n: float, a: float) -> Stats:
-    """The long Monte Carlo run of validation/data for the unit ``U = a|x|^n``, as a result:
-    the kink's (n = 1) own file, else the reference table's entry."""
-    from .kinkref import recorded_reference
+    """The long Monte Carlo run recorded for the unit ``U = a|x|^n`` (:func:`validation.reftable.recorded_mc`)."""
+    from .reftable import recorded_mc
 
-    d = recorded_reference(a) if n == 1.0 else _table_entry(n, a, "mc")
-    if d is None:
+    ref = recorded_mc(Harvester.build(a=a, n=n))
+    if ref is None:
         raise RuntimeError(f"no recorded Monte Carlo reference for n = {n:g}, a = {a:g} "
                            "(python -m validation.reftable)")
-    return Stats(status=Status.STABLE, message=d["message"], method="mc", eta=d["eta"], eta_err=d["eta_err"],
-                 V2=d["V2"], V2_err=d["V2_err"], Pin=d["Pin"], Pin_err=d["Pin_err"])
-
-
-def _table_entry(n: float, a: float, method: str) -> dict[str, Any] | None:
-    """The reference table's entry (:mod:`validation.reftable`) for the single unit (n, a) by ``method``."""
-    from . import reftable
-
-    h = Harvester.build(a=a, n=n)
-    table = reftable.load()
-    for c in reftable.CASES:
-        if c.method == method and c.h == h and table.get(c.label, {}).get("eta_err") is not None:
-            return {**table[c.label], "label": c.label}
-    return None
+    return ref
 
 
 def _fpe_reference(ctx: Context, case: FpeCase) -> Stats:
     """The Fokker--Planck reference ``ref_tol``: the reference table's value when it is at least
     that accurate (computed once, with its commit recorded), else solved in this run."""
-    d = _table_entry(case.n, case.a, "fpe")
+    from . import reftable
+
+    d = reftable.lookup(case.h, "fpe")
     tol = float(case.ref_tol or 0.0)
     if d is not None and d["eta_err"] <= tol * abs(d["eta"]) and d["status"] in ("stable", "not_converged"):
-        return Stats(status=Status.STABLE, method="fpe", eta=d["eta"], eta_err=d["eta_err"], V2=d["V2"],
-                     V2_err=d["V2_err"], Pin=d["Pin"], Pin_err=d["Pin_err"],
-                     message=f"reference table '{d['label']}' ({d['status']}, commit {d['commit']})")
+        return reftable.as_stats(d, Status.STABLE)
     return ctx.solve(case.h, "fpe", tol=tol, max_seconds=600.0)
 
 

@@ -164,17 +164,13 @@ _DISAGREES = "THE PAPER'S PRINTED VALUE DISAGREES: "
 
 
 def second_solver(row: PaperRow, r: Stats) -> Stats | None:
-    """An independent value of a single-unit row from the other solver, recorded in validation/data:
-    the long Monte Carlo run of the kink (n = 1) when ``r`` is the Fokker--Planck result, else None."""
-    if row.N != 1 or r.method != "fpe" or row.n != 1.0:
+    """An independent value of a single-unit row from the other solver, recorded in validation/data
+    (:func:`validation.reftable.recorded_mc`) when ``r`` is the Fokker--Planck result, else None."""
+    if row.N != 1 or r.method != "fpe":
         return None
-    from .kinkref import recorded_reference
+    from .reftable import recorded_mc
 
-    d = recorded_reference(row.a)
-    if d is None:
-        return None
-    return Stats(status=Status.STABLE, method="mc", eta=d["eta"], eta_err=d["eta_err"],
-                 message=f"long Monte Carlo run recorded in validation/data (seed {d.get('seed')})")
+    return recorded_mc(Harvester.build(a=row.a, n=row.n))
 
 
 def paper_disagreement(row: PaperRow, r: Stats, second: Stats, rounding: float) -> tuple[bool, str]:

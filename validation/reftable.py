@@ -25,9 +25,9 @@ from datetime import datetime, timezone
 from pathlib import Path
 from typing import Any
 
-from fpe_harvester import Harvester, Stats, solve
+from fpe_harvester import Harvester, Stats, Status, solve
 
-__all__ = ["RefCase", "CASES", "PATH", "load", "compute", "compare", "main"]
+__all__ = ["RefCase", "CASES", "PATH", "load", "lookup", "as_stats", "recorded_mc", "compute", "compare", "main"]
 
 #: Where the table lives.
 PATH = Path(__file__).parent / "data" / "reference_values.json"
@@ -106,6 +106,43 @@ def compute(case: RefCase) -> dict[str, Any]:
 def load(path: Path = PATH) -> dict[str, dict[str, Any]]:
     """The table: label -> entry (empty if it does not exist)."""
     return json.loads(path.read_text()) if path.exists() else {}
+
+
+def lookup(h: Harvester, method: str, path: Path = PATH) -> dict[str, Any] | None:
+    """The table's entry for system ``h`` solved by ``method`` (with its ``label`` added), or
+    None when the table has none or it carries no error."""
+    table = load(path)
+    for c in CASES:
+        if c.method == method and c.h == h and table.get(c.label, {}).get("eta_err") is not None:
+            return {**table[c.label], "label": c.label}
+    return None
+
+
+def as_stats(entry: dict[str, Any], status: Status | None = None) -> Stats:
+    """A table entry (:func:`lookup`) as a result, with its origin in the message; ``status``
+    replaces the recorded one (e.g. STABLE for a reference known to be accurate enough)."""
+    values = {q: entry[q] for q in ("eta", "V2", "Pin")} | {q + "_err": entry[q + "_err"] for q in ("eta", "V2", "Pin")}
+    return Stats(**values, status=status or Status(entry["status"]), method=entry["method"],
+                 message=f"reference table '{entry['label']}' ({entry['status']}, {entry['date']}, commit "
+                         f"{entry['commit']}, seed {entry['options'].get('seed')}): {entry['message']}")
+
+
+def recorded_mc(h: Harvester) -> Stats | None:
+    """The independent long Monte Carlo run recorded for the single unit ``h``: the kink's own
+    file (``validation/data/kink_mc_reference_values.json``, n = 1), else this table; None if
+    there is none."""
+    if h.N == 1 and h.n == 1.0:
+        from .kinkref import recorded_reference
+
+        d = recorded_reference(h.a)
+        if d is None:
+            return None
+        return Stats(status=Status.STABLE, method="mc", eta=d["eta"], eta_err=d["eta_err"],
+                     message=f"long run in validation/data/kink_mc_reference_values.json (seed {d.get('seed')}): "
+                             f"{d['message']}",
+                     V2=d["V2"], V2_err=d["V2_err"], Pin=d["Pin"], Pin_err=d["Pin_err"])
+    entry = lookup(h, "mc")
+    return None if entry is None else as_stats(entry, Status.STABLE)
 
 
 def compare(label: str, r: Stats, sigmas: float = 4.0, path: Path = PATH) -> list[tuple[str, bool, str]]:
