@@ -324,39 +324,26 @@ def estimate(e: Ensemble, h: Harvester, order: float | None = None, control: boo
     est_mean["eta"], est_se["eta"] = _ratio(mean, cov, R)
     if use and est_se["eta"] > 0:
         reduction["eta"] = (_ratio(mean, plain_cov, R)[1] / est_se["eta"]) ** 2
-    bias = dict.fromkeys(_NAMES + ("eta",), 0.0)
-    bias_se = dict.fromkeys(_NAMES + ("eta",), 0.0)
+    zero = dict.fromkeys(_NAMES + ("eta",), 0.0)
+    controls_used = (C, mu) if use else (None, None)
+    bias, bias_se = dict(zero), dict(zero)
     if coarse is not None:
         # e(h) = C h^p gives fine - coarse = (1 - 2^p) e(h/2)
         # the twin runs at the fine step only: its controls are used for the coarse - fine
         # difference when they lower the variance of eta's difference, which is rare
-        d_mean, d_cov = _best(coarse[valid] - Ff, C if use else None, mu if use else None, mean, R)
-        for i, name in enumerate(_NAMES):
-            bias[name] = float(d_mean[i]) * scale
-            bias_se[name] = math.sqrt(max(float(d_cov[i, i]), 0.0)) * scale
-        b, b_se = _linear_eta(d_mean, d_cov, mean, R)
-        bias["eta"], bias_se["eta"] = b * scale, b_se * scale
-    residual = dict.fromkeys(_NAMES + ("eta",), 0.0)
-    residual_se = dict.fromkeys(_NAMES + ("eta",), 0.0)
+        bias, bias_se = _scaled_difference(coarse[valid] - Ff, *controls_used, mean, R, scale)
+    residual, residual_se = dict(zero), dict(zero)
     if coarsest is not None:
         # R(2dt) - R(dt) with R(h) = F(h/2) + scale (F(h/2) - F(h)); the remaining error c dt^q of
         # R(dt) is that difference / (2^q - 1)
         Fc, Fcc = coarse[valid], coarsest[valid]
         D = (1.0 + 2.0 * scale) * Fc - scale * Fcc - (1.0 + scale) * Ff
-        r_scale = 1.0 / (2.0 ** RESIDUAL_RULE[0] - 1.0)
-        q_mean, q_cov = _best(D, C if use else None, mu if use else None, mean, R)
-        for i, name in enumerate(_NAMES):
-            residual[name] = float(q_mean[i]) * r_scale
-            residual_se[name] = math.sqrt(max(float(q_cov[i, i]), 0.0)) * r_scale
-        q, q_se = _linear_eta(q_mean, q_cov, mean, R)
-        residual["eta"], residual_se["eta"] = q * r_scale, q_se * r_scale
+        residual, residual_se = _scaled_difference(D, *controls_used, mean, R,
+                                                   1.0 / (2.0 ** RESIDUAL_RULE[0] - 1.0))
     # the twin's own first-half-minus-whole difference has mean 0 (it is stationary): the
     # control for the system's, which a transient would shift
-    dr_mean, dr_cov = _best(first[valid] - Ff, (C_first - C) if use else None,
-                            np.zeros(C.shape[1]) if use else None, mean, R)
-    drift = {name: float(dr_mean[i]) for i, name in enumerate(_NAMES)}
-    drift_se = {name: math.sqrt(max(float(dr_cov[i, i]), 0.0)) for i, name in enumerate(_NAMES)}
-    drift["eta"], drift_se["eta"] = _linear_eta(dr_mean, dr_cov, mean, R)
+    drift, drift_se = _scaled_difference(first[valid] - Ff, (C_first - C) if use else None,
+                                         np.zeros(C.shape[1]) if use else None, mean, R, 1.0)
     p = h.params
     r1 = Ff[:, 0] - p.Kc * p.tau_p * Ff[:, 3]
     r2 = Ff[:, 1] - p.m * p.gamma * Ff[:, 2] - p.Kv * Ff[:, 3]
@@ -396,6 +383,18 @@ def _regression(Y: np.ndarray, C: np.ndarray, mu: np.ndarray) -> tuple[np.ndarra
     reg = regression_estimate(Y, C, mu)
     n = Y.shape[0]
     return reg.mean, reg.cov * student_factor(reg.dof) ** 2, reg.plain_cov * student_factor(n - 1) ** 2
+
+
+def _scaled_difference(D: np.ndarray, C: np.ndarray | None, mu: np.ndarray | None, mean: np.ndarray, R: float,
+                       factor: float) -> tuple[dict[str, float], dict[str, float]]:
+    """Mean and standard error of a per-replica difference between levels (:func:`_best`, controls
+    where they help), times ``factor``, per observable and for eta (to first order)."""
+    d_mean, d_cov = _best(D, C, mu, mean, R)
+    value = {name: float(d_mean[i]) * factor for i, name in enumerate(_NAMES)}
+    se = {name: math.sqrt(max(float(d_cov[i, i]), 0.0)) * factor for i, name in enumerate(_NAMES)}
+    b, b_se = _linear_eta(d_mean, d_cov, mean, R)
+    value["eta"], se["eta"] = b * factor, b_se * factor
+    return value, se
 
 
 def _best(Y: np.ndarray, C: np.ndarray | None, mu: np.ndarray | None, ref: np.ndarray,
