@@ -558,8 +558,7 @@ def _optimize_mc(h: Harvester, over: str, maximize: str, lo: float, hi: float, m
         info["time_step_error_at_optimum"] = b
         value_err = math.hypot(core.value_err, b)
         message += (f"; {maximize}_max_err includes the time-step error estimate {b:.2g} at dt = {plan.dt:g} "
-                    "(the Richardson extrapolation's remaining-bias bound, or the fine level's bias "
-                    "with extrapolate=False)")
+                    "(the fine level's Richardson bias estimate: the solver's default halving policy)")
     value_ci = core.value_ci
     if value_ci is not None and value_err is not None and core.value_err:
         t = (core.value - value_ci[0]) / core.value_err
