@@ -119,17 +119,16 @@ def _exact_vs_mc(ctx: Context, N: int, k: float) -> list[CheckResult]:
     return _compare(f"exact vs mc: N = {N}, k = {k:g}", mc, ex, quick=ctx.quick)
 
 
-def fpe_crosscheck_tol(ctx: Context) -> float:
-    """Fokker--Planck tolerance of the comparisons with Monte Carlo: twenty times tighter than
-    Monte Carlo's (a tighter one costs minutes at the kink and adds nothing to the check), not
-    below the run's Fokker--Planck setting (then the result is shared with the other steps)."""
-    return max(ctx.fpe_options["tol"], ctx.mc_options["tol"] / 20.0)
-
-
 def _fpe_vs_mc(ctx: Context, n: float, a: float) -> list[CheckResult]:
     ctx.require("fpe", "mc")
     h = Harvester.build(a=a, n=n)
-    fp = ctx.solve(h, "fpe", tol=fpe_crosscheck_tol(ctx))
+    fp = ctx.solve(h, "fpe")
+    if not fp.ok and fp.eta is None:
+        # Nothing to compare with: the check fails on the Fokker-Planck side, and a Monte Carlo run
+        # narrowed to the cap would buy nothing (the stress section solves it to judge its identities).
+        return [expect(f"fpe vs mc: n = {n:g}, a = {a:g}: {q}", _SECTION, False,
+                       f"fpe is {fp.status.value} ({fp.message}): no stationary number to cross-check "
+                       "(Monte Carlo not run for this check)") for q in _COMPARED]
     mc = mc_within_cap(ctx, h)
     return _compare(f"fpe vs mc: n = {n:g}, a = {a:g}", fp, mc, quick=ctx.quick)
 
@@ -160,10 +159,13 @@ def table_checks(ctx: Context) -> list[CheckResult]:
 def _kink_density(ctx: Context, sec: Section) -> list[CheckResult]:
     """The kink's (x, v) density near its trap, Fokker-Planck against Monte Carlo
     (:mod:`validation.kinkdensity`); quick mode a = 0.5 only."""
-    from .kinkdensity import kink_density_figure
+    from .kinkdensity import FPE_TOL, kink_density_figure
 
     ctx.require("fpe", "mc")
-    fig, lines = kink_density_figure(ctx.out, ctx.quick, (0.5,) if ctx.quick else (0.5, 2.0))
+    # the run's Fokker-Planck result of each kink (shared with "fpe vs mc" when the tolerances match)
+    # tells whether the solver converges, so a failed solve is not repeated for the figure
+    solved = lambda h: ctx.solve(h, "fpe", tol=FPE_TOL)  # noqa: E731
+    fig, lines = kink_density_figure(ctx.out, ctx.quick, (0.5,) if ctx.quick else (0.5, 2.0), solved)
     sec.figures.append(fig)
     return [expect(label, _SECTION, ok, detail) for label, ok, detail in lines]
 
@@ -214,9 +216,8 @@ def run(ctx: Context) -> Section:
         "with the errors the solvers report (Monte Carlo: standard error from replicas, time-step bias folded in; "
         "Fokker-Planck: truncation and mesh error; exact: 0, with a relative round-off floor of 1e-12, "
         "1e-10 for the dense Lyapunov solve). "
-        f"Monte Carlo settings: {ctx.mc_options} (repeated with a smaller tol when the error bars of V2 or Pin "
-        f"exceed 0.9 of the cap); Fokker-Planck settings: {ctx.fpe_options}, at tol = {fpe_crosscheck_tol(ctx):g} "
-        "against Monte Carlo."
+        f"Monte Carlo settings: {ctx.mc_options} (repeated with a smaller tol when 4 error bars of eta, V2 or Pin "
+        f"exceed {CAP_SHARE:g} of the cap); Fokker-Planck settings: {ctx.fpe_options}."
     )
     sec.text.append(
         f"Harmonic rings (a = 0.5) compared with Monte Carlo: (N, k) = {list(rings)}. "

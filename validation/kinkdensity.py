@@ -20,6 +20,7 @@ over energy shells,
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -28,12 +29,16 @@ import numpy as np
 from fpe_harvester.fpe import stationary
 from fpe_harvester.fpe.kinkdisc import KinkDG, KinkSettings
 from fpe_harvester.model import Harvester
+from fpe_harvester.result import Stats
 from montecarlo.sample import sample_states
 
 from .report import Figure, new_figure, save_figure
 
 __all__ = ["ShellDensity", "shell_density_fpe", "shell_density_mc", "kink_density_figure", "EDGES",
            "v_concentration"]
+
+#: Fokker--Planck tolerance on eta of the figure's levels.
+FPE_TOL = 1e-3
 
 #: Energy shells' edges [energy units] (log-spaced).
 EDGES = np.logspace(-3.5, 0.25, 16)
@@ -104,15 +109,22 @@ def v_concentration(h: Harvester, deltas: tuple[float, ...] = (1e-3, 1e-2, 1e-1)
             "exponent": beta.tolist(), "sd_V": sd}
 
 
-def _fpe_levels(h: Harvester, quick: bool) -> tuple[bool, list[ShellDensity]]:
-    """Whether the solver converged, and the certified level, else its first levels labelled so."""
-    sol = stationary(h, tol=1e-3, max_seconds=60.0)
-    st = sol.stats
-    if sol.level is not None and st.ok:
-        lv = sol.level
-        return True, [shell_density_fpe(lv, EDGES, f"Fokker-Planck, M = {lv.M}, degree {lv.order}: "
-                                                   f"eta {st.eta:.5f} +- {st.eta_err:.1e}")]
-    disc = KinkDG.build(h, KinkSettings(), 1e-3)
+def _fpe_levels(h: Harvester, solved: Callable[[Harvester], Stats] | None = None
+                ) -> tuple[bool, list[ShellDensity]]:
+    """Whether the solver converged, and the certified level, else its first levels labelled so.
+
+    ``solved`` (optional) gives the Fokker--Planck result of ``h`` at :data:`FPE_TOL` if it is known
+    already (the validation run's cache): when it did not converge, the levels are shown
+    without solving it again (at a = 2 the failed solve costs ~50 s)."""
+    known = None if solved is None else solved(h)
+    if known is None or known.ok:
+        sol = stationary(h, tol=FPE_TOL, max_seconds=60.0)
+        st = sol.stats
+        if sol.level is not None and st.ok:
+            lv = sol.level
+            return True, [shell_density_fpe(lv, EDGES, f"Fokker-Planck, M = {lv.M}, degree {lv.order}: "
+                                                       f"eta {st.eta:.5f} +- {st.eta_err:.1e}")]
+    disc = KinkDG.build(h, KinkSettings(), FPE_TOL)
     out = []
     for M in (4, 6):
         lv = disc.solve(M, 1)
@@ -125,11 +137,13 @@ def _fpe_levels(h: Harvester, quick: bool) -> tuple[bool, list[ShellDensity]]:
 SIGMAS = 4.0
 
 
-def kink_density_figure(out: Path, quick: bool, a_values: tuple[float, ...] = (0.5, 2.0)
+def kink_density_figure(out: Path, quick: bool, a_values: tuple[float, ...] = (0.5, 2.0),
+                        solved: Callable[[Harvester], Stats] | None = None
                         ) -> tuple[Figure, list[tuple[str, bool, str]]]:
     """The figure, and per a one comparison (label, passed, detail): the certified
     Fokker--Planck level's shell densities within :data:`SIGMAS` Monte Carlo standard errors
-    on every shell with a Monte Carlo count (fails when the solver does not converge)."""
+    on every shell with a Monte Carlo count (fails when the solver does not converge).
+    ``solved``: the Fokker--Planck result at :data:`FPE_TOL` where already known (see :func:`_fpe_levels`)."""
     fig, axes = new_figure((5.5 * len(a_values), 4.2), ncols=len(a_values))
     lines = []
     # full: 4x the quick run's states (2e6 took two minutes per a; the shells' Monte Carlo errors
@@ -140,7 +154,7 @@ def kink_density_figure(out: Path, quick: bool, a_values: tuple[float, ...] = (0
         mc = shell_density_mc(h, EDGES, samples=samples, paths=paths)
         ok = mc.density > 0
         ax.errorbar(mc.centres[ok], mc.density[ok], yerr=mc.error[ok], fmt="o", ms=4, color="k", label=mc.label)
-        converged, fps = _fpe_levels(h, quick)
+        converged, fps = _fpe_levels(h, solved)
         detail = []
         for i, fp in enumerate(fps):
             ax.loglog(fp.centres, np.abs(fp.density), "-" if i == 0 else "--", label=fp.label)

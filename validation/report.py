@@ -57,6 +57,9 @@ class Section:
     figures: list[Figure] = field(default_factory=list)
     checks: list[CheckResult] = field(default_factory=list)
     seconds: float = 0.0
+    #: Processor time [s] of the step (all threads of this process and its finished child
+    #: processes); above ``seconds`` when the step ran on several cores.
+    cpu_seconds: float = 0.0
 
 
 @dataclass
@@ -135,9 +138,9 @@ def write_markdown(report: Report, path: Path) -> Path:
               f"**{counts.get('PASS', 0)} passed, {counts.get('FAIL', 0)} failed, "
               f"{counts.get('SKIP', 0)} skipped** (skipped checks did not run: see the reason; "
               "they are not passes).", ""]
-    lines += _md_table(("section", "pass", "fail", "skip", "time [s]"), [
+    lines += _md_table(("section", "pass", "fail", "skip", "time [s]", "CPU [s]"), [
         (s.title, *(str(sum(c.outcome.value == o for c in s.checks)) for o in ("PASS", "FAIL", "SKIP")),
-         f"{s.seconds:.1f}") for s in report.sections])
+         f"{s.seconds:.1f}", f"{s.cpu_seconds:.1f}") for s in report.sections])
     bad = [c for c in report.checks if c.outcome is not Outcome.PASS]
     if bad:
         lines += ["", "### Failed and skipped checks", ""]
@@ -191,9 +194,9 @@ def write_html(report: Report, path: Path) -> Path:
     parts.append("</ul><h2>Summary</h2>")
     parts.append(f"<p class='summary'><b>{counts.get('PASS', 0)} passed, {counts.get('FAIL', 0)} failed, "
                  f"{counts.get('SKIP', 0)} skipped</b> (skipped checks did not run; they are not passes)</p>")
-    parts.append(_html_table(("section", "pass", "fail", "skip", "time [s]"), [
+    parts.append(_html_table(("section", "pass", "fail", "skip", "time [s]", "CPU [s]"), [
         (s.title, *(str(sum(c.outcome.value == o for c in s.checks)) for o in ("PASS", "FAIL", "SKIP")),
-         f"{s.seconds:.1f}") for s in report.sections]))
+         f"{s.seconds:.1f}", f"{s.cpu_seconds:.1f}") for s in report.sections]))
     bad = [c for c in report.checks if c.outcome is not Outcome.PASS]
     if bad:
         parts.append("<h3>Failed and skipped checks</h3>")
@@ -250,12 +253,12 @@ def summary_text(report: Report, width: int = 110, show_passed: bool = False) ->
     """
     order = {Outcome.FAIL: 0, Outcome.SKIP: 1, Outcome.PASS: 2}
     title_w = min(max([7, *(len(s.title) for s in report.sections)]), 50)
-    lines = [f"{'section':{title_w}}  {'pass':>5} {'fail':>5} {'skip':>5}  {'time [s]':>8}",
-             f"{'-' * title_w}  {'-' * 5} {'-' * 5} {'-' * 5}  {'-' * 8}"]
+    lines = [f"{'section':{title_w}}  {'pass':>5} {'fail':>5} {'skip':>5}  {'time [s]':>8}  {'CPU [s]':>8}",
+             f"{'-' * title_w}  {'-' * 5} {'-' * 5} {'-' * 5}  {'-' * 8}  {'-' * 8}"]
     for sec in report.sections:
         n = Counter(c.outcome for c in sec.checks)
         lines.append(f"{sec.title[:title_w]:{title_w}}  {n[Outcome.PASS]:5d} {n[Outcome.FAIL]:5d} "
-                     f"{n[Outcome.SKIP]:5d}  {sec.seconds:8.1f}")
+                     f"{n[Outcome.SKIP]:5d}  {sec.seconds:8.1f}  {sec.cpu_seconds:8.1f}")
     checks = sorted((c for c in report.checks if show_passed or c.outcome is not Outcome.PASS),
                     key=lambda c: order[c.outcome])
     if checks:

@@ -13,6 +13,7 @@ import argparse
 import importlib
 import os
 import platform
+import resource
 import sys
 import time
 from collections.abc import Callable, Sequence
@@ -48,6 +49,12 @@ STEPS: tuple[tuple[str, str], ...] = (
     ("validation.figures:run_solvers", "The paper's figures: nonlinear scenes (Fokker-Planck, Monte Carlo)"),
     ("validation.bench.combined", "Benchmarks: error versus wall time"),
 )
+
+
+def cpu_time() -> float:
+    """Processor time [s] used so far by this process (all threads) and its finished children."""
+    own, kids = resource.getrusage(resource.RUSAGE_SELF), resource.getrusage(resource.RUSAGE_CHILDREN)
+    return own.ru_utime + own.ru_stime + kids.ru_utime + kids.ru_stime
 
 
 def _identities(ctx: Context) -> Section:
@@ -143,7 +150,7 @@ def validate(
         module, title = plan[i]
         if progress:
             progress(title)
-        t0 = time.perf_counter()
+        t0, c0 = time.perf_counter(), cpu_time()
         holder: list[Section] = []
 
         def step(module: str | Callable[[Context], Section] = module) -> list:
@@ -160,15 +167,17 @@ def validate(
         sec.title = title
         sec.checks += crash
         sec.seconds = time.perf_counter() - t0
+        sec.cpu_seconds = cpu_time() - c0
         done[i] = sec
         if finished:
             finished(sec)
     report.sections += [done[i] for i in range(len(plan))]
     if progress:
         progress("Identities")
-    t0 = time.perf_counter()
+    t0, c0 = time.perf_counter(), cpu_time()
     sec = _identities(ctx)
     sec.seconds = time.perf_counter() - t0
+    sec.cpu_seconds = cpu_time() - c0
     report.sections.append(sec)
     if finished:
         finished(sec)
@@ -221,7 +230,8 @@ def run_cli(quick: bool = False, out: Path | str = "validation_report", seed: in
 
     def step_done(sec: Section) -> None:
         failed = sum(c.outcome.value == "FAIL" for c in sec.checks)
-        line = (f"{time.perf_counter() - t0:7.1f} s  {sec.title}: {sec.seconds:.1f} s, {len(sec.checks)} checks"
+        line = (f"{time.perf_counter() - t0:7.1f} s  {sec.title}: {sec.seconds:.1f} s ({sec.cpu_seconds:.0f} CPU-s), "
+                f"{len(sec.checks)} checks"
                 + (f", {failed} FAILED" if failed else ""))
         if bar is not None:
             bar.write(line, file=sys.stderr)

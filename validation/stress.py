@@ -198,7 +198,17 @@ def _nonlinear_cases(ctx: Context) -> list[tuple[str, Callable[[], list[CheckRes
 
     def mc(label: str, h: Harvester, expected: Status | None = None) -> tuple:
         ref = independent(h, "mc") if h.N == 1 and expected is None else None
-        return (f"{label} [mc]", lambda: _judge(label, "mc", lambda: run(h, "mc"), h, ref, ctx.quick, expected))
+
+        def result() -> Stats:
+            # narrowed to the cap only when a reference number is there to compare with; without
+            # one the result is judged by its status and the identities, at the run's settings
+            try:
+                usable = ref is not None and (r := ref()).ok and r.eta is not None
+            except HarvesterError:
+                usable = False
+            return run(h, "mc") if usable else ctx.solve(h, "mc")
+
+        return (f"{label} [mc]", lambda: _judge(label, "mc", result, h, ref, ctx.quick, expected))
 
     b = Harvester.build
     # Quick mode (CI): one case per kind of difficulty; the full run covers the whole list.
