@@ -273,37 +273,108 @@ def solver_available(method: str) -> str | None:
     return None
 
 
+def _solve_portable(h: Harvester, solver: Any) -> dict[str, Any]:
+    """:func:`fpe_harvester.solve.solve` in a worker process; the result travels as a dict."""
+    return solve(h, solver).to_dict()
+
+
 class SolveCache:
     """Solve each (harvester, method, options) once per validation run.
 
     Options the solver class does not define are dropped (and listed in ``dropped``), so the
     validation code can ask for ``max_time`` or ``tol`` even from a solver that lacks them.
+
+    With ``background=True``, :meth:`prefetch` starts a solve in a worker process (one, forked
+    at the first prefetch) and :meth:`solve` waits for it: the steps announce their
+    Fokker--Planck solves at the start of the run, and the worker computes them while this
+    process runs Monte Carlo. A Fokker--Planck solve uses about one core, Monte Carlo two
+    threads, so on two cores the two lanes fill the machine instead of taking turns. The result
+    is the same as a solve in this process (same solver, same settings; a time budget
+    ``max_seconds`` is wall time in the worker, so under load it buys less).
     """
 
-    def __init__(self) -> None:
+    def __init__(self, background: bool = False) -> None:
         self._store: dict[tuple[Any, ...], Stats] = {}
+        self._pending: dict[tuple[Any, ...], Any] = {}
+        self._pool: Any = None
+        self.background = background
         self.dropped: dict[str, set[str]] = {}
         self.seconds: dict[str, float] = {}
+        #: Solves given to the worker, those a step then asked for, and how long this process
+        #: waited for them [s].
+        self.announced = 0
+        self.prefetched = 0
+        self.waited = 0.0
 
     def results(self) -> list[tuple[Harvester, str, Stats]]:
         """Every (harvester, method, result) solved so far, in order."""
         return [(key[0], key[1], r) for key, r in self._store.items()]
 
+    def _solver(self, h: Harvester, method: str, options: dict[str, Any]) -> tuple[tuple[Any, ...], Any]:
+        key = (h, method, tuple(sorted(options.items())))
+        base = get_solver(method, h)
+        names = {f.name for f in fields(base)} if hasattr(base, "__dataclass_fields__") else set()
+        accepted = {k: v for k, v in options.items() if k in names}
+        extra = set(options) - set(accepted)
+        if extra:
+            self.dropped.setdefault(method, set()).update(extra)
+        return key, (replace(base, **accepted) if accepted else base)
+
+    def prefetch(self, h: Harvester, method: str, **options: Any) -> None:
+        """Start solving in the worker process (``background`` only; else nothing). Errors are
+        left for :meth:`solve` to raise where the step asks for the result."""
+        if not self.background:
+            return
+        try:
+            key, solver = self._solver(h, method, options)
+            if key in self._store or key in self._pending:
+                return
+            if self._pool is None:
+                import multiprocessing
+                from concurrent.futures import ProcessPoolExecutor
+
+                # fork: the worker starts from this process as it is (nothing to re-import); the
+                # first prefetch comes before any Monte Carlo run has started numba's threads
+                methods = multiprocessing.get_all_start_methods()
+                self._pool = ProcessPoolExecutor(
+                    max_workers=1, mp_context=multiprocessing.get_context("fork" if "fork" in methods else "spawn"))
+            self._pending[key] = self._pool.submit(_solve_portable, h, solver)
+            self.announced += 1
+        except Exception:  # noqa: BLE001 - the step's own solve reports it
+            return
+
     def solve(self, h: Harvester, method: str, **options: Any) -> Stats:
         """Stats of ``h`` by ``method`` with the given settings (cached)."""
-        key = (h, method, tuple(sorted(options.items())))
+        key, solver = self._solver(h, method, options)
         if key not in self._store:
-            base = get_solver(method, h)
-            names = {f.name for f in fields(base)} if hasattr(base, "__dataclass_fields__") else set()
-            accepted = {k: v for k, v in options.items() if k in names}
-            extra = set(options) - set(accepted)
-            if extra:
-                self.dropped.setdefault(method, set()).update(extra)
-            solver = replace(base, **accepted) if accepted else base
             t0 = time.perf_counter()
-            self._store[key] = solve(h, solver)
+            job = self._pending.pop(key, None)
+            result = None
+            if job is not None:
+                from concurrent.futures.process import BrokenProcessPool
+
+                from fpe_harvester.scenes.cache import stats_from_dict
+
+                try:
+                    result = stats_from_dict(job.result())
+                    self.prefetched += 1
+                    self.waited += time.perf_counter() - t0
+                except BrokenProcessPool:  # the worker died (memory?): solve here instead
+                    result = None
+            if result is None:
+                result = solve(h, solver)
+            self._store[key] = result
             self.seconds[method] = self.seconds.get(method, 0.0) + time.perf_counter() - t0
         return self._store[key]
+
+    def close(self) -> None:
+        """Stop the worker process; solves announced but never asked for are dropped."""
+        if self._pool is not None:
+            # waits for a solve in progress (none, when every announced solve was asked for), so
+            # that the worker's processor time is counted in the run's
+            self._pool.shutdown(wait=True, cancel_futures=True)
+            self._pool = None
+        self._pending.clear()
 
 
 @dataclass(frozen=True)
@@ -382,3 +453,7 @@ class Context:
     def solve(self, h: Harvester, method: str, **overrides: Any) -> Stats:
         """Solve through the run's cache with this context's settings for ``method``."""
         return self.cache.solve(h, method, **{**self.options(method), **overrides})
+
+    def prefetch(self, h: Harvester, method: str, **overrides: Any) -> None:
+        """Announce a later :meth:`solve` with the same arguments (:meth:`SolveCache.prefetch`)."""
+        self.cache.prefetch(h, method, **{**self.options(method), **overrides})

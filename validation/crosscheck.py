@@ -38,6 +38,10 @@ HARMONIC_RINGS = ((1, 0.0), (2, -0.15), (3, -0.25), (5, -0.2))
 NONLINEAR_GRID = tuple((n, a) for n in (1.0, 1.5, 3.0, 4.0, 8.0) for a in (0.5, 1.0, 2.0))
 #: The subset used in quick mode: the kink, a non-integer n and a steep potential.
 QUICK_NONLINEAR = ((1.0, 0.5), (1.5, 1.0), (4.0, 2.0))
+#: a of the harmonic units solved by Fokker--Planck against the exact solver, and the
+#: tolerance asked for (keyed by quick mode).
+_FPE_VS_EXACT_A = {True: (0.5, 2.0), False: (0.5, 1.0, 2.0)}
+_FPE_VS_EXACT_TOL = {True: 1e-4, False: 1e-8}
 
 _SECTION = "Cross-checks"
 _COMPARED = ("eta", "V2", "Pin")
@@ -135,7 +139,7 @@ def _fpe_vs_mc(ctx: Context, n: float, a: float) -> list[CheckResult]:
 
 def _fpe_vs_exact(ctx: Context, a: float) -> list[CheckResult]:
     h = Harvester.build(a=a, n=2)
-    fp = ctx.solve(h, "fpe", tol=1e-4 if ctx.quick else 1e-8)
+    fp = ctx.solve(h, "fpe", tol=_FPE_VS_EXACT_TOL[ctx.quick])
     ex = ctx.solve(h, "exact")
     return _compare(f"fpe vs exact: n = 2, a = {a:g}", fp, ex, names=("eta", "V2", "Pin", "v2", "vV"),
                     rel_floor=1e-12, quick=ctx.quick)
@@ -207,7 +211,7 @@ def run(ctx: Context) -> Section:
     rings = HARMONIC_RINGS[::2] if ctx.quick else HARMONIC_RINGS
     grid = QUICK_NONLINEAR if ctx.quick else NONLINEAR_GRID
     dense_N = (1, 2, 3) if ctx.quick else (1, 2, 3, 4, 5, 6)
-    fpe_a = (0.5, 2.0) if ctx.quick else (0.5, 1.0, 2.0)
+    fpe_a = _FPE_VS_EXACT_A[ctx.quick]
     sec.text.append(
         "Each comparison passes when both results describe the stationary state (stable, or not converged "
         "with a best estimate and its error, whose error bar is then what is tested) and |a - b| <= "
@@ -222,7 +226,7 @@ def run(ctx: Context) -> Section:
     sec.text.append(
         f"Harmonic rings (a = 0.5) compared with Monte Carlo: (N, k) = {list(rings)}. "
         f"Single nonlinear units (n, a): {list(grid)}. Fokker-Planck vs exact at n = 2, a in {list(fpe_a)}. "
-        f"(Fokker-Planck asked for tol = {1e-4 if ctx.quick else 1e-8:g} there.) Dense Lyapunov cross-check for N in {list(dense_N)} with random parameters."
+        f"(Fokker-Planck asked for tol = {_FPE_VS_EXACT_TOL[ctx.quick]:g} there.) Dense Lyapunov cross-check for N in {list(dense_N)} with random parameters."
         + (" Quick mode: subsets; the full run covers N = 1, 2, 3, 5 and the whole 5 x 3 grid." if ctx.quick
            else "")
     )
@@ -244,6 +248,15 @@ def run(ctx: Context) -> Section:
         if note:
             sec.text.append(f"**Diagnostic ({prefix}, eta; not a pass/fail check).** {note}")
     return sec
+
+
+def prefetch(ctx: Context) -> None:
+    """Announce this step's Fokker--Planck solves (:meth:`Context.prefetch`): the harmonic units
+    against the exact solver, then the grid of single units (the kink density figure reuses them)."""
+    for a in _FPE_VS_EXACT_A[ctx.quick]:
+        ctx.prefetch(Harvester.build(a=a, n=2.0), "fpe", tol=_FPE_VS_EXACT_TOL[ctx.quick])
+    for n, a in QUICK_NONLINEAR if ctx.quick else NONLINEAR_GRID:
+        ctx.prefetch(Harvester.build(a=a, n=n), "fpe")
 
 
 def systematic_offset(checks: list[CheckResult]) -> str:

@@ -179,6 +179,23 @@ def _fpe_reference(ctx: Context, case: FpeCase) -> Stats:
     return ctx.solve(case.h, "fpe", tol=tol, max_seconds=600.0)
 
 
+def prefetch(ctx: Context) -> None:
+    """Announce the Fokker--Planck solves of the bounds (:meth:`Context.prefetch`): the references
+    solved in the run, then every tolerance of every case without a weight object."""
+    from . import reftable
+
+    cases = QUICK_FPE if ctx.quick else FULL_FPE
+    for case in cases:
+        if case.reference != "mc" and case.ref_tol is not None:
+            d = reftable.lookup(case.h, "fpe")
+            if d is None or d["eta_err"] > case.ref_tol * abs(d["eta"]):
+                ctx.prefetch(case.h, "fpe", tol=float(case.ref_tol), max_seconds=600.0)
+    for case in cases:
+        if not case.options():
+            for tol in case.tols:
+                ctx.prefetch(case.h, "fpe", tol=tol)
+
+
 def fpe_bounds(ctx: Context, cases: tuple[FpeCase, ...]) -> list[Bound]:
     """Solve every case at each tolerance and compare eta, V2 and Pin with the reference."""
     out = []

@@ -105,6 +105,14 @@ def solve_first(ctx: Context, h: Harvester, methods: Sequence[str]) -> Stats:
     raise MethodNotAvailableError("; ".join(reasons))
 
 
+def prefetch(ctx: Context) -> None:
+    """Announce the Fokker--Planck solves of the rows that use it first (:meth:`Context.prefetch`)."""
+    for row in PAPER_ROWS:
+        if row.methods[0] == "fpe" and not row.maximum:
+            for k in row.k_quick if (ctx.quick and row.k_quick) else row.k:
+                ctx.prefetch(Harvester.build(a=row.a, n=row.n, N=row.N, k=k), "fpe", tol=PAPER_FPE_TOL)
+
+
 def _row_optimum(ctx: Context, row: PaperRow) -> tuple[float, Stats, Optimum]:
     """A "maximum" row: eta_max and k_opt from the optimizer; Vrms and the rest solved at k_opt."""
     h = Harvester.build(a=row.a, n=row.n, N=row.N)

@@ -32,6 +32,10 @@ __all__ = ["STEPS", "QUICK_BUDGET", "QUICK_MIN_RAN", "validate", "exit_code", "r
 #: Steps run before the others (cheapest per check first); unlisted steps follow in plan order.
 RUN_FIRST = ("validation.stress:run_exact", "validation.figures:run_exact", "validation.crosscheck",
              "validation.paper", "validation.beyond", "validation.stress:run_solvers")
+#: The full run's order: the Monte Carlo-only steps (beyond the paper, the paper's rings) run
+#: while the worker process solves the Fokker-Planck problems the later steps announced.
+RUN_FIRST_FULL = ("validation.stress:run_exact", "validation.figures:run_exact", "validation.beyond",
+                  "validation.paper", "validation.crosscheck", "validation.stress:run_solvers")
 
 #: Wall-time budget [s] of the checks in quick mode; checks that would start later are skipped
 #: (and listed as such), so that CI always gets its report within 3 minutes.
@@ -88,6 +92,57 @@ def _identities(ctx: Context) -> Section:
     return sec
 
 
+def _announce(ctx: Context, modules: Sequence[str | Callable[[Context], Section]]) -> list[str]:
+    """Call each step module's ``prefetch(ctx)``, if it has one, in run order: the solves it
+    announces start in the background (:meth:`SolveCache.prefetch`; full run only). Returns
+    what went wrong (a step then solves in this process what it could not announce)."""
+    problems: list[str] = []
+    if not ctx.cache.background:
+        return problems
+    seen = set()
+    for module in modules:
+        if not isinstance(module, str):
+            continue
+        name = module.partition(":")[0]
+        if name in seen:
+            continue
+        seen.add(name)
+        hook = getattr(importlib.import_module(name), "prefetch", None)
+        if hook is not None:
+            problems += [f"{name}: {c.detail}" for c in guarded(f"prefetch {name}", name, lambda: hook(ctx) or [])
+                         if not c.passed]
+    return problems
+
+
+def _run_steps(ctx: Context, plan: list, order: list[int], done: dict[int, Section],
+               progress: Callable[[str], None] | None, finished: Callable[[Section], None] | None) -> None:
+    for i in order:
+        module, title = plan[i]
+        if progress:
+            progress(title)
+        t0, c0 = time.perf_counter(), cpu_time()
+        holder: list[Section] = []
+
+        def step(module: str | Callable[[Context], Section] = module) -> list:
+            if isinstance(module, str):
+                name, _, func = module.partition(":")
+                fn = getattr(importlib.import_module(name), func or "run")
+            else:
+                fn = module
+            holder.append(fn(ctx))
+            return []
+
+        crash = guarded(title, title, step)
+        sec = holder[0] if holder else Section(str(module).rsplit(".", 1)[-1], title)
+        sec.title = title
+        sec.checks += crash
+        sec.seconds = time.perf_counter() - t0
+        sec.cpu_seconds = cpu_time() - c0
+        done[i] = sec
+        if finished:
+            finished(sec)
+
+
 def validate(
     quick: bool = False,
     out: Path | str = "validation_report",
@@ -130,7 +185,8 @@ def validate(
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
     t_start = time.perf_counter()
-    ctx = Context(quick=quick, out=out.resolve(), cache=SolveCache(), seed=seed,
+    # full run: Fokker-Planck solves in a second process beside the Monte Carlo ones (SolveCache)
+    ctx = Context(quick=quick, out=out.resolve(), cache=SolveCache(background=not quick), seed=seed,
                   deadline=t_start + QUICK_BUDGET if quick else None,
                   bench=None if bench is None else Path(bench).resolve())
     report = Report("fpe-harvester validation report" + (" (quick)" if quick else ""))
@@ -143,34 +199,22 @@ def validate(
     plan = list(STEPS if steps is None else steps)
     # Cheap, exact-heavy steps run first so that a slow solver cannot crowd them out of the quick
     # budget; the report keeps the reading order of ``plan``.
-    order = sorted(range(len(plan)), key=lambda i: (RUN_FIRST.index(plan[i][0]) if plan[i][0] in RUN_FIRST
-                                                     else len(RUN_FIRST), i))
+    first = RUN_FIRST if quick else RUN_FIRST_FULL
+    order = sorted(range(len(plan)), key=lambda i: (first.index(plan[i][0]) if plan[i][0] in first
+                                                     else len(first), i))
+    c_start = cpu_time()
+    problems = _announce(ctx, [plan[i][0] for i in order])
+    if problems:
+        report.meta["announcing solves failed (the steps solved them themselves)"] = "; ".join(problems)
     done: dict[int, Section] = {}
-    for i in order:
-        module, title = plan[i]
-        if progress:
-            progress(title)
-        t0, c0 = time.perf_counter(), cpu_time()
-        holder: list[Section] = []
-
-        def step(module: str | Callable[[Context], Section] = module) -> list:
-            if isinstance(module, str):
-                name, _, func = module.partition(":")
-                fn = getattr(importlib.import_module(name), func or "run")
-            else:
-                fn = module
-            holder.append(fn(ctx))
-            return []
-
-        crash = guarded(title, title, step)
-        sec = holder[0] if holder else Section(str(module).rsplit(".", 1)[-1], title)
-        sec.title = title
-        sec.checks += crash
-        sec.seconds = time.perf_counter() - t0
-        sec.cpu_seconds = cpu_time() - c0
-        done[i] = sec
-        if finished:
-            finished(sec)
+    try:
+        _run_steps(ctx, plan, order, done, progress, finished)
+    finally:
+        ctx.cache.close()
+    if ctx.cache.background:
+        report.meta["Fokker-Planck solves in a second process"] = (
+            f"{ctx.cache.announced} announced, {ctx.cache.prefetched} used; this process waited for them "
+            f"{ctx.cache.waited:.1f} s in all")
     report.sections += [done[i] for i in range(len(plan))]
     if progress:
         progress("Identities")
@@ -185,6 +229,7 @@ def validate(
         report.meta["solver options not supported (dropped)"] = "; ".join(
             f"{m}: {', '.join(sorted(o))}" for m, o in ctx.cache.dropped.items())
     report.meta["total wall time"] = f"{time.perf_counter() - t_start:.1f} s"
+    report.meta["total CPU time"] = f"{cpu_time() - c_start:.1f} s (all threads and processes)"
     write_markdown(report, out / "report.md")
     write_html(report, out / "report.html")
     return report

@@ -210,37 +210,55 @@ def _nonlinear_cases(ctx: Context) -> list[tuple[str, Callable[[], list[CheckRes
 
         return (f"{label} [mc]", lambda: _judge(label, "mc", result, h, ref, ctx.quick, expected))
 
+    return [fpe(label, h, checked) if kind == "fpe" else mc(label, h, expected)
+            for kind, label, h, checked, expected in _nonlinear_specs(ctx.quick)]
+
+
+def _nonlinear_specs(quick: bool) -> list[tuple[str, str, Harvester, bool, Status | None]]:
+    """(solver, label, system, checked against the other solver, expected status) of every
+    nonlinear stress case."""
     b = Harvester.build
     # Quick mode (CI): one case per kind of difficulty; the full run covers the whole list.
     # Every Fokker-Planck case is checked against Monte Carlo (an independent solver): in quick
     # mode only where the kink does not make both expensive.
-    cases = [
-        fpe("large n = 12", b(a=0.5, n=12)),
-        fpe("n = 1 kink, a = 2", b(a=2.0, n=1), checked=not ctx.quick),
-        fpe("D = 100, n = 3", b(a=0.5, n=3, D=100.0)),
-        mc("harmonic ring beyond k_di (k = 1.2 k_di)", b(a=0.5, n=2, N=3, k=1.2 * k_di(3, 0.5)), Status.UNSTABLE),
-        mc("n = 1 kink, a = 2", b(a=2.0, n=1)),
+    cases: list[tuple[str, str, Harvester, bool, Status | None]] = [
+        ("fpe", "large n = 12", b(a=0.5, n=12), True, None),
+        ("fpe", "n = 1 kink, a = 2", b(a=2.0, n=1), not quick, None),
+        ("fpe", "D = 100, n = 3", b(a=0.5, n=3, D=100.0), True, None),
+        ("mc", "harmonic ring beyond k_di (k = 1.2 k_di)", b(a=0.5, n=2, N=3, k=1.2 * k_di(3, 0.5)), True,
+         Status.UNSTABLE),
+        ("mc", "n = 1 kink, a = 2", b(a=2.0, n=1), True, None),
     ]
-    if not ctx.quick:
-        cases += [
-            fpe("tiny a = 1e-3, n = 3", b(a=1e-3, n=3)),
-            fpe("large n = 8", b(a=0.5, n=8)),
-            fpe("large n = 16", b(a=0.5, n=16)),
-            fpe("tau = 1e-4, n = 3", b(a=0.5, n=3, tau=1e-4)),
-            fpe("tau = 100, n = 3", b(a=0.5, n=3, tau=100.0)),
-            fpe("tau_p = 1e3, n = 3", b(a=0.5, n=3, tau_p=1e3)),
-            fpe("m = 1e-3 (stiff), n = 3", b(a=0.5, n=3, m=1e-3)),
-            fpe("D = 100, n = 1", b(a=0.5, n=1, D=100.0)),
-            mc("m = 1e-3 (stiff), n = 3", b(a=0.5, n=3, m=1e-3)),
-            mc("large n = 12", b(a=0.5, n=12)),
-            mc("large n = 16", b(a=0.5, n=16)),
-            mc("tau = 1e-4, n = 3", b(a=0.5, n=3, tau=1e-4)),
-            mc("tau = 100, n = 3", b(a=0.5, n=3, tau=100.0)),
-            mc("D = 100, n = 3", b(a=0.5, n=3, D=100.0)),
-            mc("D = 100, n = 1", b(a=0.5, n=1, D=100.0)),
-            mc("tiny a = 1e-3, n = 3", b(a=1e-3, n=3)),
-        ]
+    if not quick:
+        cases += [("fpe", label, h, True, None) for label, h in (
+            ("tiny a = 1e-3, n = 3", b(a=1e-3, n=3)),
+            ("large n = 8", b(a=0.5, n=8)),
+            ("large n = 16", b(a=0.5, n=16)),
+            ("tau = 1e-4, n = 3", b(a=0.5, n=3, tau=1e-4)),
+            ("tau = 100, n = 3", b(a=0.5, n=3, tau=100.0)),
+            ("tau_p = 1e3, n = 3", b(a=0.5, n=3, tau_p=1e3)),
+            ("m = 1e-3 (stiff), n = 3", b(a=0.5, n=3, m=1e-3)),
+            ("D = 100, n = 1", b(a=0.5, n=1, D=100.0)),
+        )]
+        cases += [("mc", label, h, True, None) for label, h in (
+            ("m = 1e-3 (stiff), n = 3", b(a=0.5, n=3, m=1e-3)),
+            ("large n = 12", b(a=0.5, n=12)),
+            ("large n = 16", b(a=0.5, n=16)),
+            ("tau = 1e-4, n = 3", b(a=0.5, n=3, tau=1e-4)),
+            ("tau = 100, n = 3", b(a=0.5, n=3, tau=100.0)),
+            ("D = 100, n = 3", b(a=0.5, n=3, D=100.0)),
+            ("D = 100, n = 1", b(a=0.5, n=1, D=100.0)),
+            ("tiny a = 1e-3, n = 3", b(a=1e-3, n=3)),
+        )]
     return cases
+
+
+def prefetch(ctx: Context) -> None:
+    """Announce the Fokker--Planck solves of the nonlinear cases, results and references
+    (:meth:`Context.prefetch`)."""
+    for kind, _, h, checked, expected in _nonlinear_specs(ctx.quick):
+        if kind == "fpe" or (h.N == 1 and expected is None):
+            ctx.prefetch(h, "fpe")
 
 
 def run_exact(ctx: Context) -> Section:

@@ -150,3 +150,25 @@ def test_timeout_is_not_swallowed_by_broad_handlers():
 
     (r,) = guarded("c", "s", swallowing, timeout=0.2)
     assert r.outcome is Outcome.FAIL and "hang" in r.detail
+
+
+def test_solve_cache_background_gives_the_same_result_as_a_solve_here():
+    """A solve announced to the worker process returns what the same solve in this process
+    returns, and counts as announced and used."""
+    from fpe_harvester.model import Harvester
+    from validation.checks import SolveCache
+
+    h = Harvester.build(a=0.5, n=3.0)
+    here = SolveCache().solve(h, "fpe", tol=1e-2)
+    cache = SolveCache(background=True)
+    try:
+        cache.prefetch(h, "fpe", tol=1e-2)
+        cache.prefetch(h, "fpe", tol=1e-2)  # announced once
+        cache.prefetch(Harvester.build(a=0.5, n=3.0, N=3, k=-0.1), "fpe", tol=1e-2)  # a ring: the solve raises
+        there = cache.solve(h, "fpe", tol=1e-2)
+    finally:
+        cache.close()
+    assert (cache.announced, cache.prefetched) == (2, 1)
+    assert there.status is here.status
+    for q in ("eta", "V2", "Pin"):
+        assert there.value(q) == here.value(q)
