@@ -107,7 +107,10 @@ def _announce(ctx: Context, modules: Sequence[str | Callable[[Context], Section]
         if name in seen:
             continue
         seen.add(name)
-        hook = getattr(importlib.import_module(name), "prefetch", None)
+        try:
+            hook = getattr(importlib.import_module(name), "prefetch", None)
+        except Exception:  # noqa: BLE001 - the step reports its own import failure
+            continue
         if hook is not None:
             problems += [f"{name}: {c.detail}" for c in guarded(f"prefetch {name}", name, lambda: hook(ctx) or [])
                          if not c.passed]
