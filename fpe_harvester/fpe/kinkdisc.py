@@ -54,6 +54,15 @@ TRAPPING_WIDEN, WIDEN_V = 0.8, 2.0
 #: with 53, 52, 74 and 68 iterations.
 GMRES_TOL = 1e-2
 
+#: GMRES iteration budget of a level: GMRES_GROWTH times the most any earlier level of the same
+#: solve needed, at least GMRES_FLOOR and at most GMRES_MAXITER. Measured (defaults, every
+#: level of the solves of n in {1, 1.25, 1.5, 1.75} x a in {0.5, 1, 2} at tol 5e-3 and 1e-3,
+#: and n = 1, a = 1 to M = 16 at 1e-4): a level that converges needs 25-123 iterations, the
+#: highest levels at 1e-4 up to 235, growing slowly with M; the levels that do not converge
+#: (n = 1, a = 2 at M = 8; n = 1.25, a = 2 at its last level) jump from <= 123 to > 1400 and
+#: ran to the old fixed budget of 1500 (44 s of the 52 s the a = 2 solve took to fail).
+GMRES_FLOOR, GMRES_GROWTH, GMRES_MAXITER = 600, 4, 1500
+
 #: Degrees of the pilot level, tried in turn until one is physical. M = 2 suffices for
 #: a <= 1 (defaults); at a = 2 the harmonic first guess makes it unphysical (V2 < 0) and
 #: M = 4 is needed.
@@ -140,6 +149,7 @@ class KinkDG:
     #: at M = 8), so the mesh is checked at a low degree.
     mesh_check_degree: int = 4
     _coarse: dict[int, CoarseCorrection] = field(default_factory=dict, repr=False, compare=False)
+    _iterations: list[int] = field(default_factory=list, repr=False, compare=False)
 
     @classmethod
     def build(cls, h: Harvester, settings: KinkSettings | None = None, tol: float = 1e-4,
@@ -175,8 +185,15 @@ class KinkDG:
     def solve(self, M: int, size: int, lower: Any = None) -> KinkLevel:
         guess = lower if isinstance(lower, KinkLevel) else None
         lv = solve_kink_level(self.h, M, self.base, self.degree(size), self.frame, guess=guess, rtol=self.rtol,
-                              coarse=self.coarse(size), deadline=self.deadline)
+                              coarse=self.coarse(size), deadline=self.deadline, maxiter=self.maxiter())
+        self._iterations.append(lv.iterations)
         return dataclasses.replace(lv, size=size)
+
+    def maxiter(self) -> int:
+        """GMRES budget of the next level: :data:`GMRES_GROWTH` times the most iterations an
+        earlier level needed, within [:data:`GMRES_FLOOR`, :data:`GMRES_MAXITER`] (a level that
+        needs far more than the others is one the expansion does not resolve)."""
+        return min(GMRES_MAXITER, max(GMRES_FLOOR, GMRES_GROWTH * max(self._iterations, default=0)))
 
     def coarse(self, size: int) -> CoarseCorrection:
         """The coarse-degree correction of the mesh of ``size`` (made once, shared by every M)."""
