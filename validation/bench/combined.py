@@ -221,7 +221,8 @@ def _run_one(ctx: Context, module: str, solver: str, sec: Section,
         return [skipped(f"benchmark {module}", _SECTION, f"module not available ({exc})")]
     out = ctx.out / "bench"
     out.mkdir(parents=True, exist_ok=True)
-    data = mod.run(quick=True, out=out)
+    # a module's REPORT_KW narrows its short run to what this section needs (its own CLI runs all)
+    data = mod.run(quick=True, out=out, **getattr(mod, "REPORT_KW", {}))
     name = mod.STEM
     _include(ctx, mod, sec, targets)
     pairs = list(error_time_pairs(data))

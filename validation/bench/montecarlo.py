@@ -770,34 +770,61 @@ def series(quick: bool, res: dict[str, Any]) -> list[dict[str, Any]]:
     return out
 
 
-def run(quick: bool = False, out: Path | None = None) -> dict[str, Any]:
-    """Run the benchmark; returns (and writes, when ``out`` is given) the measurements."""
+#: The studies of :func:`run`, in order.
+STUDIES = ("rng", "throughput", "equal_error", "bias", "noise_correlation_time", "steep_walls",
+           "control_variates", "martingale", "martingale_coverage", "time_step_policy", "end_of_window_terms",
+           "time_step_policy_coverage", "kink_dt", "series")
+#: The studies the validation report's benchmark section runs (:mod:`.combined`): throughput,
+#: error against time, and what its combined figure needs (the kink's time-step study and the
+#: ring's run at 1e-4 give the references of the Monte Carlo curves). The design studies (bias
+#: against dt, noise correlation time, steep walls, the martingale terms, the time-step policy,
+#: 35 s of the quick run's 66 s) run with ``python -m validation.bench.montecarlo [--quick]``.
+REPORT_STUDIES = ("rng", "throughput", "equal_error", "control_variates", "kink_dt", "series")
+#: Keyword arguments the report's benchmark section passes to :func:`run`.
+REPORT_KW = {"studies": REPORT_STUDIES}
+
+
+def run(quick: bool = False, out: Path | None = None, studies: tuple[str, ...] | None = None) -> dict[str, Any]:
+    """Run the benchmark; returns (and writes, when ``out`` is given) the measurements.
+
+    ``studies``: the subset of :data:`STUDIES` to run (default all); the others are listed as not run.
+    """
+    chosen = STUDIES if studies is None else tuple(studies)
+    unknown = set(chosen) - set(STUDIES)
+    if unknown:
+        raise ValueError(f"studies must be among {STUDIES}, got {sorted(unknown)}")
     threads = default_threads()
     res: dict[str, Any] = {"quick": quick, "threads": threads, "target_path_steps_per_s": 1e8,
                            "target_speedup_vs_numpy_em": 10.0}
-    res["rng_ns_per_normal"] = _rng_costs(2**22 if quick else 2**25, threads)
     t_run = 10.0 if quick else 50.0
-    res["throughput"] = {
-        "N1_harmonic": _rate(Harvester.build(a=0.5), 0.01, 256, 4, t_run),
-        "N1_kink_n1_a0.5": _rate(Harvester.build(a=0.5, n=1), 0.01, 256, 4, t_run),
-        "N3_harmonic_k-0.2": _rate(Harvester.build(a=0.5, N=3, k=-0.2), 0.01, 256, 4, t_run),
-        "N3_n3_k-0.5": _rate(Harvester.build(a=0.5, n=3, N=3, k=-0.5), 0.01, 256, 4, t_run),
+    steps: dict[str, Any] = {
+        "rng": lambda: _rng_costs(2**22 if quick else 2**25, threads),
+        "throughput": lambda: {
+            "N1_harmonic": _rate(Harvester.build(a=0.5), 0.01, 256, 4, t_run),
+            "N1_kink_n1_a0.5": _rate(Harvester.build(a=0.5, n=1), 0.01, 256, 4, t_run),
+            "N3_harmonic_k-0.2": _rate(Harvester.build(a=0.5, N=3, k=-0.2), 0.01, 256, 4, t_run),
+            "N3_n3_k-0.5": _rate(Harvester.build(a=0.5, n=3, N=3, k=-0.5), 0.01, 256, 4, t_run),
+        },
+        "equal_error": lambda: _equal_error(quick),
+        "bias": lambda: _bias_study(quick),
+        "noise_correlation_time": lambda: _tau_study(quick),
+        "steep_walls": lambda: _steep_study(quick),
+        "control_variates": lambda: _control_variates(quick),
+        "martingale": lambda: martingale_rows(quick),
+        # the coverage studies take minutes: full mode only (quick runs feed `harvester validate`)
+        "martingale_coverage": lambda: martingale_coverage(quick) if not quick else {
+            "note": "full mode only; CI smoke test: tests/montecarlo/test_martingale.py"},
+        "time_step_policy": lambda: policy_rows(quick),
+        "end_of_window_terms": lambda: boundary_rows(quick),
+        "time_step_policy_coverage": lambda: policy_coverage(quick) if not quick else {
+            "note": "full mode only (~8 min); CI checks: tests/montecarlo/test_extrapolate.py"},
+        "kink_dt": lambda: _kink_dt_study(quick),
+        "series": lambda: series(quick, res),
     }
-    res["equal_error"] = _equal_error(quick)
-    res["bias"] = _bias_study(quick)
-    res["noise_correlation_time"] = _tau_study(quick)
-    res["steep_walls"] = _steep_study(quick)
-    res["control_variates"] = _control_variates(quick)
-    res["martingale"] = martingale_rows(quick)
-    # the coverage study takes minutes: full mode only (quick runs feed `harvester validate`)
-    res["martingale_coverage"] = martingale_coverage(quick) if not quick else {
-        "note": "full mode only; CI smoke test: tests/montecarlo/test_martingale.py"}
-    res["time_step_policy"] = policy_rows(quick)
-    res["end_of_window_terms"] = boundary_rows(quick)
-    res["time_step_policy_coverage"] = policy_coverage(quick) if not quick else {
-        "note": "full mode only (~8 min); CI checks: tests/montecarlo/test_extrapolate.py"}
-    res["kink_dt"] = _kink_dt_study(quick)
-    res["series"] = series(quick, res)
+    for name in STUDIES:
+        key = "rng_ns_per_normal" if name == "rng" else name
+        res[key] = steps[name]() if name in chosen else {
+            "note": "not run here: python -m validation.bench.montecarlo [--quick] runs every study"}
     save_benchmark(res, out, STEM, _plot)
     return res
 
@@ -825,7 +852,7 @@ def _plot(res: dict[str, Any], path: Path) -> None:
     ax1.set_title("n = 1, a = 0.5, N = 1")
     ax1.legend(fontsize=7)
     for name, st in res["bias"].items():
-        if "rows" not in st:
+        if not isinstance(st, dict) or "rows" not in st:
             continue
         rows = st["rows"]
         ax2.errorbar([r["dt"] for r in rows], [abs(r["rel_diff"]) for r in rows],
@@ -837,7 +864,7 @@ def _plot(res: dict[str, Any], path: Path) -> None:
     ax2.set_xlabel("dt")
     ax2.set_ylabel("|eta(dt/2) - eta(dt)| / eta")
     ax2.legend(fontsize=7)
-    cvs = {k: v for k, v in res.get("control_variates", {}).items() if v.get("vrf")}
+    cvs = {k: v for k, v in res.get("control_variates", {}).items() if isinstance(v, dict) and v.get("vrf")}
     if cvs:
         names = list(cvs)
         y = np.arange(len(names))
@@ -850,7 +877,7 @@ def _plot(res: dict[str, Any], path: Path) -> None:
         ax3.legend(fontsize=7)
         ax3.set_title("control variates (harmonic twin)")
     _plot_kink(res.get("kink_dt", {}), ax4)
-    thr = res["throughput"]
+    thr = {k: v for k, v in res["throughput"].items() if isinstance(v, dict)}
     fig.suptitle("Monte Carlo: " + ", ".join(f"{k} {v['path_steps_per_s']:.2g}/s" for k, v in thr.items()),
                  fontsize=8)
     fig.tight_layout()
