@@ -184,6 +184,13 @@ def _judge(label: str, method: str, run: Callable[[], Stats], h: Harvester,
     return out
 
 
+#: Monte Carlo tolerance on eta of a stress case that has no reference number (the strong kink
+#: n = 1, a = 2, where Fokker-Planck does not converge): its status and the two identities are all
+#: that is judged, and they hold at any accuracy. Its accuracy is checked in the error-bar
+#: section (coverage against a recorded long run). At 0.005 the run took 27 s, at 0.02 6 s.
+IDENTITIES_TOL = 0.02
+
+
 def _nonlinear_cases(ctx: Context) -> list[tuple[str, Callable[[], list[CheckResult]]]]:
     def run(h: Harvester, method: str) -> Stats:
         # a Monte Carlo run (result or reference) at an accuracy at which the check's cap can be met
@@ -201,12 +208,14 @@ def _nonlinear_cases(ctx: Context) -> list[tuple[str, Callable[[], list[CheckRes
 
         def result() -> Stats:
             # narrowed to the cap only when a reference number is there to compare with; without
-            # one the result is judged by its status and the identities, at the run's settings
+            # one the result is judged by its status and the identities only, at IDENTITIES_TOL
             try:
                 usable = ref is not None and (r := ref()).ok and r.eta is not None
             except HarvesterError:
                 usable = False
-            return run(h, "mc") if usable else ctx.solve(h, "mc")
+            if usable or expected is not None or ctx.quick:
+                return run(h, "mc")
+            return ctx.solve(h, "mc", tol=max(IDENTITIES_TOL, ctx.mc_options["tol"]))
 
         return (f"{label} [mc]", lambda: _judge(label, "mc", result, h, ref, ctx.quick, expected))
 
