@@ -124,10 +124,8 @@ def _table_reference(case: CoverageCase, method: str = "mc", max_rel_err: float 
     relative error on eta exceeds ``max_rel_err``)."""
     from . import reftable
 
-    entry = reftable.lookup(case.h, method)
-    if entry is None or not entry["eta_err"] <= max_rel_err * abs(entry["eta"]):
-        return None
-    return reftable.as_stats(entry)
+    entry = reftable.lookup(case.h, method, max_rel_err)
+    return None if entry is None else reftable.as_stats(entry)
 
 
 def _reference(case: CoverageCase, seed: int) -> Stats:

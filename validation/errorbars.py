@@ -167,29 +167,37 @@ def _mc_reference(n: float, a: float) -> Stats:
     return ref
 
 
-def _fpe_reference(ctx: Context, case: FpeCase) -> Stats:
-    """The Fokker--Planck reference ``ref_tol``: the reference table's value when it is at least
-    that accurate (computed once, with its commit recorded), else solved in this run."""
+def _table_fpe(case: FpeCase) -> dict[str, Any] | None:
+    """The reference table's Fokker--Planck entry of ``case`` when it is at least ``ref_tol``
+    accurate and has a number (computed once, with its commit recorded), else None."""
     from . import reftable
 
-    d = reftable.lookup(case.h, "fpe")
-    tol = float(case.ref_tol or 0.0)
-    if d is not None and d["eta_err"] <= tol * abs(d["eta"]) and d["status"] in ("stable", "not_converged"):
+    d = reftable.lookup(case.h, "fpe", float(case.ref_tol or 0.0))
+    return d if d is not None and d["status"] in ("stable", "not_converged") else None
+
+
+#: Settings of a Fokker--Planck reference solved in the run (tol: the case's ``ref_tol``).
+_REF_SECONDS = 600.0
+
+
+def _fpe_reference(ctx: Context, case: FpeCase) -> Stats:
+    """The Fokker--Planck reference ``ref_tol``: the reference table's value (:func:`_table_fpe`),
+    else solved in this run."""
+    from . import reftable
+
+    d = _table_fpe(case)
+    if d is not None:
         return reftable.as_stats(d, Status.STABLE)
-    return ctx.solve(case.h, "fpe", tol=tol, max_seconds=600.0)
+    return ctx.solve(case.h, "fpe", tol=float(case.ref_tol or 0.0), max_seconds=_REF_SECONDS)
 
 
 def prefetch(ctx: Context) -> None:
     """Announce the Fokker--Planck solves of the bounds (:meth:`Context.prefetch`): the references
     solved in the run, then every tolerance of every case without a weight object."""
-    from . import reftable
-
     cases = QUICK_FPE if ctx.quick else FULL_FPE
     for case in cases:
-        if case.reference != "mc" and case.ref_tol is not None:
-            d = reftable.lookup(case.h, "fpe")
-            if d is None or d["eta_err"] > case.ref_tol * abs(d["eta"]):
-                ctx.prefetch(case.h, "fpe", tol=float(case.ref_tol), max_seconds=600.0)
+        if case.reference != "mc" and case.ref_tol is not None and _table_fpe(case) is None:
+            ctx.prefetch(case.h, "fpe", tol=float(case.ref_tol), max_seconds=_REF_SECONDS)
     for case in cases:
         if not case.options():
             for tol in case.tols:

@@ -108,13 +108,15 @@ def load(path: Path = PATH) -> dict[str, dict[str, Any]]:
     return json.loads(path.read_text()) if path.exists() else {}
 
 
-def lookup(h: Harvester, method: str, path: Path = PATH) -> dict[str, Any] | None:
+def lookup(h: Harvester, method: str, max_rel_err: float = math.inf, path: Path = PATH) -> dict[str, Any] | None:
     """The table's entry for system ``h`` solved by ``method`` (with its ``label`` added), or
-    None when the table has none or it carries no error."""
+    None when the table has none, it carries no error, or its relative error on eta exceeds
+    ``max_rel_err``."""
     table = load(path)
     for c in CASES:
         if c.method == method and c.h == h and table.get(c.label, {}).get("eta_err") is not None:
-            return {**table[c.label], "label": c.label}
+            entry = table[c.label]
+            return {**entry, "label": c.label} if entry["eta_err"] <= max_rel_err * abs(entry["eta"]) else None
     return None
 
 

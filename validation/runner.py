@@ -139,11 +139,16 @@ def _run_steps(ctx: Context, plan: list, order: list[int], done: dict[int, Secti
         sec = holder[0] if holder else Section(str(module).rsplit(".", 1)[-1], title)
         sec.title = title
         sec.checks += crash
-        sec.seconds = time.perf_counter() - t0
-        sec.cpu_seconds = cpu_time() - c0
-        done[i] = sec
-        if finished:
-            finished(sec)
+        done[i] = _finish(sec, t0, c0, finished)
+
+
+def _finish(sec: Section, t0: float, c0: float, finished: Callable[[Section], None] | None) -> Section:
+    """Stamp the section's wall and processor time since ``t0``, ``c0`` and hand it to ``finished``."""
+    sec.seconds = time.perf_counter() - t0
+    sec.cpu_seconds = cpu_time() - c0
+    if finished:
+        finished(sec)
+    return sec
 
 
 def validate(
@@ -222,12 +227,7 @@ def validate(
     if progress:
         progress("Identities")
     t0, c0 = time.perf_counter(), cpu_time()
-    sec = _identities(ctx)
-    sec.seconds = time.perf_counter() - t0
-    sec.cpu_seconds = cpu_time() - c0
-    report.sections.append(sec)
-    if finished:
-        finished(sec)
+    report.sections.append(_finish(_identities(ctx), t0, c0, finished))
     if ctx.cache.dropped:
         report.meta["solver options not supported (dropped)"] = "; ".join(
             f"{m}: {', '.join(sorted(o))}" for m, o in ctx.cache.dropped.items())

@@ -70,3 +70,16 @@ def test_xmesh_series_converges_on_both_meshes_and_plots(tmp_path):
         assert errors[-1] < errors[0], (mesh, errors)
     xmesh._plot({"mesh_series": [series]}, tmp_path / "x.png")
     assert (tmp_path / "x.png").stat().st_size > 0
+
+
+def test_montecarlo_bench_runs_a_subset_of_its_studies(tmp_path):
+    """Studies not asked for are listed as not run, and the plot is drawn without them."""
+    import pytest
+
+    from validation.bench import montecarlo
+
+    res = montecarlo.run(quick=True, out=tmp_path, studies=("rng",))
+    assert "note" in res["equal_error"] and "note" in res["series"]
+    assert (tmp_path / f"{montecarlo.STEM}.png").exists()
+    with pytest.raises(ValueError, match="studies must be among"):
+        montecarlo.run(quick=True, studies=("no such study",))
