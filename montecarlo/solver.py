@@ -196,8 +196,8 @@ class MonteCarlo:
     martingale : bool
         Accumulate the martingale control sums (:mod:`montecarlo._martingale`: basis functions
         of the state times the noise drawn after it, mean 0 exactly, for any potential and
-        ring) and use them as control variates, alone or with the twin's, whichever gives eta
-        the smaller variance (:func:`montecarlo.estimate`). The default ``t_run`` is then 400
+        ring) and use them as control variates, alone or with the twin's: the richest set the
+        replicas allow (:func:`montecarlo.estimate.choose_controls`). The default ``t_run`` is then 400
         instead of 100 when ``tol <= 1e-3``. Default True.
     extrapolate : bool
         With ``richardson``: run a third level at ``2 dt`` and report the Richardson extrapolation
