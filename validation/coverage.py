@@ -107,8 +107,11 @@ FULL_CASES = (
     CoverageCase("harmonic N = 3, k = -0.3", Harvester.build(a=0.5, N=3, k=-0.3), _FULL_OPTS),
     CoverageCase("n = 1, a = 0.5", Harvester.build(a=0.5, n=1.0), _FULL_OPTS),
     CoverageCase("n = 1, a = 1", Harvester.build(a=1.0, n=1.0), _FULL_OPTS),
-    # the Fokker-Planck solver does not converge at the strong kink: independent long run
-    CoverageCase("n = 1, a = 2", Harvester.build(a=2.0, n=1.0), _FULL_OPTS, ref_method="mc", runs=4),
+    # the Fokker-Planck solver does not converge at the strong kink: independent long run. Its
+    # results run at tol 2e-2: eta is small there (0.12), and tol 1e-2 needs ~200 replicas (13 s
+    # a result, against 3-6 s with 55-64 replicas at 2e-2)
+    CoverageCase("n = 1, a = 2", Harvester.build(a=2.0, n=1.0), {**_FULL_OPTS, "tol": 2e-2}, ref_method="mc",
+                 runs=4),
     CoverageCase("n = 1.5, a = 1", Harvester.build(a=1.0, n=1.5), _FULL_OPTS),
     CoverageCase("n = 3, a = 0.5", Harvester.build(a=0.5, n=3.0), _FULL_OPTS),
     CoverageCase("n = 4, a = 1", Harvester.build(a=1.0, n=4.0), _FULL_OPTS),
