@@ -364,10 +364,12 @@ def choose_controls(sizes: dict[str, int]) -> str:
     400 seeds each, z against Fokker--Planck at 1e-4): n = 3, a = 0.5, rms z of eta 1.137 with
     the least-variance choice (twin 361 times, martingale 39), 1.083 with the twin always, 0.986
     with the martingale set always (its error 1.4x the chosen one's); n = 8, a = 0.5: 1.009, 1.024
-    and 0.948. The sets nest (the twin's and the boundary terms add to the martingale
-    sums), and a richer set never has a larger residual variance in the population; it costs
-    degrees of freedom only, which :func:`montecarlo.control.enough_dof` keeps at most a factor
-    2 of variance.
+    and 0.948. Each set is contained in the richer ones that add to it (martingale within
+    martingale+twin and martingale+boundary, all within martingale+boundary+twin; twin within
+    martingale+twin), and a set that contains another never has a larger residual variance in the
+    population: the extra controls cost degrees of freedom only, which
+    :func:`montecarlo.control.enough_dof` keeps within a factor 2 of variance. The two sets that
+    do not contain each other (martingale+twin, martingale+boundary) are ordered by size.
 
     >>> choose_controls({"twin": 11, "martingale": 15})
     'martingale'
