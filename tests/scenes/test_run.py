@@ -260,6 +260,33 @@ def test_parallel_workers_match_serial(tmp_path: Path, monkeypatch) -> None:
         scene_run.run_scene(sc, tmp_path, workers=0)
 
 
+def test_auto_falls_back_to_monte_carlo_when_fokker_planck_misses_the_tolerance(tmp_path, monkeypatch):
+    # Fokker-Planck returns numbers whose error exceeds the scene's rtol (as at n = 1.25,
+    # a = 2): Monte Carlo is tried, and kept when it reaches the tolerance or does better
+    from dataclasses import replace
+
+    from fpe_harvester.result import Status
+
+    exact = solve(Harvester.build(a=2.0, n=2), "exact")
+    fpe = replace(exact, method="fpe", status=Status.NOT_CONVERGED, eta_err=0.01 * exact.eta,
+                  message="fpe stopped")
+    outcomes = {"fpe": fpe, "mc": replace(exact, method="mc", eta_err=0.004 * exact.eta, message="mc ok")}
+    monkeypatch.setattr(scene_run, "solve", lambda h, method, **opts: outcomes[method])
+    scene = Scene(name="miss", system=Harvester.build(a=2.0, n=1.25), observables=("eta",), rtol=5e-3,
+                  outputs=())
+    row = scene_run.run_scene(scene, tmp_path / "ok", progress=False, workers=1).rows[0]
+    assert row.method == "mc" and row.status == "stable"
+    assert "Fokker-Planck did not reach the tolerance" in row.message and "fpe stopped" in row.message
+    # Monte Carlo not converged either: the smaller relative error wins, the message says why
+    outcomes["mc"] = replace(fpe, method="mc", eta_err=0.02 * exact.eta, message="mc stopped")
+    row = scene_run.run_scene(scene, tmp_path / "worse", progress=False, workers=1).rows[0]
+    assert row.method == "fpe" and row.status == "not_converged"
+    assert "Monte Carlo did no better (mc stopped)" in row.message
+    outcomes["mc"] = replace(fpe, method="mc", eta_err=0.007 * exact.eta, message="mc stopped")
+    row = scene_run.run_scene(scene, tmp_path / "better", progress=False, workers=1).rows[0]
+    assert row.method == "mc" and row.status == "not_converged"
+
+
 def test_auto_falls_back_to_monte_carlo_when_fokker_planck_gives_no_result(tmp_path):
     # n = 1, a = 2: the kink force exceeds the drive most of the time; the Hermite expansion
     # cannot resolve that density and Fokker-Planck returns NOT_CONVERGED without numbers.
