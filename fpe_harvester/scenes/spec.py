@@ -351,7 +351,9 @@ class Scene:
         Wanted relative accuracy on eta, in (0, 1). Passed as ``tol`` to the
         Fokker--Planck and Monte Carlo solvers; ignored by the exact solver.
     method : {"auto", "exact", "fpe", "mc"}
-        ``"auto"`` picks the cheapest adequate solver per point.
+        ``"auto"`` picks the cheapest adequate solver per point; a Fokker--Planck point that
+        misses ``rtol`` (no numbers, or an error above it) is tried again with Monte Carlo,
+        which is kept when it reaches ``rtol`` or has the smaller relative error on eta.
     options : mapping of method name to mapping
         Extra constructor settings per solver (e.g. ``{"mc": {"dt": 0.01}}``).
     optimize : Optimize or None
