@@ -328,9 +328,8 @@ def estimate(e: Ensemble, h: Harvester, order: float | None = None, control: boo
     controls_used = (C, mu) if use else (None, None)
     bias, bias_se = dict(zero), dict(zero)
     if coarse is not None:
-        # e(h) = C h^p gives fine - coarse = (1 - 2^p) e(h/2)
-        # the twin runs at the fine step only: its controls are used for the coarse - fine
-        # difference when they lower the variance of eta's difference, which is rare
+        # e(h) = C h^p gives fine - coarse = (1 - 2^p) e(h/2); the controls are the fine
+        # level's (the twin runs at the fine step only)
         bias, bias_se = _scaled_difference(coarse[valid] - Ff, *controls_used, mean, R, scale)
     residual, residual_se = dict(zero), dict(zero)
     if coarsest is not None:
@@ -412,26 +411,26 @@ def _regression(Y: np.ndarray, C: np.ndarray, mu: np.ndarray) -> tuple[np.ndarra
 
 def _scaled_difference(D: np.ndarray, C: np.ndarray | None, mu: np.ndarray | None, mean: np.ndarray, R: float,
                        factor: float) -> tuple[dict[str, float], dict[str, float]]:
-    """Mean and standard error of a per-replica difference between levels (:func:`_best`, controls
-    where they help), times ``factor``, per observable and for eta (to first order)."""
-    d_mean, d_cov = _best(D, C, mu, mean, R)
+    """Mean and standard error of a per-replica difference between levels or windows, times
+    ``factor``, per observable and for eta (to first order): the regression on the controls
+    ``C`` (expectation ``mu``) when given, the plain mean otherwise.
+
+    No choice between the two by their estimated variances: that choice favours whichever
+    variance happens to be underestimated. Measured (tol 1e-2, 32 replicas, 400 seeds each of
+    harmonic, n = 3 and n = 8 at a = 0.5; z against the mean over seeds of the plain estimate):
+    rms z of eta's time-step difference 0.93 / 0.94 / 0.87 with regression, 1.04 / 1.03 / 0.98
+    plain, 1.06 / 1.07 / 1.00 choosing; of the burn-in drift 0.90 / 0.91 / 0.94 with regression
+    (whose actual spread is 1.5x smaller than plain's), 0.94 / 0.95 / 0.98 choosing.
+    """
+    if C is None:
+        d_mean, d_cov = _plain(D)
+    else:
+        d_mean, d_cov, _ = _regression(D, C, mu)
     value = {name: float(d_mean[i]) * factor for i, name in enumerate(_NAMES)}
     se = {name: math.sqrt(max(float(d_cov[i, i]), 0.0)) * factor for i, name in enumerate(_NAMES)}
     b, b_se = _linear_eta(d_mean, d_cov, mean, R)
     value["eta"], se["eta"] = b * factor, b_se * factor
     return value, se
-
-
-def _best(Y: np.ndarray, C: np.ndarray | None, mu: np.ndarray | None, ref: np.ndarray,
-          R: float) -> tuple[np.ndarray, np.ndarray]:
-    """Plain or regression mean of Y, whichever gives eta's linear combination less variance."""
-    mean, cov = _plain(Y)
-    if C is None:
-        return mean, cov
-    reg_mean, reg_cov, _ = _regression(Y, C, mu)
-    if _linear_eta(reg_mean, reg_cov, ref, R)[1] < _linear_eta(mean, cov, ref, R)[1]:
-        return reg_mean, reg_cov
-    return mean, cov
 
 
 def _mean_se(x: np.ndarray) -> tuple[float, float]:
