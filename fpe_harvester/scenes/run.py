@@ -223,7 +223,8 @@ def _solve_point(h: Harvester, method: str, opts: dict[str, Any],
     if res.eta is None:
         note = f"Fokker-Planck gave no result ({res.message}); Monte Carlo used instead"
     elif second.ok or _relative_eta_error(second) < _relative_eta_error(res):
-        note = (f"Fokker-Planck did not reach the tolerance (eta = {res.eta:.6g} +- {res.eta_err:.2g}: "
+        err = "no error estimate" if res.eta_err is None else f"+- {res.eta_err:.2g}"
+        note = (f"Fokker-Planck did not reach the tolerance (eta = {res.eta:.6g} {err}: "
                 f"{res.message}); Monte Carlo used instead")
     else:
         return replace(res, message=f"{res.message}; Monte Carlo did no better ({second.message})")

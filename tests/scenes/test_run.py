@@ -285,6 +285,10 @@ def test_auto_falls_back_to_monte_carlo_when_fokker_planck_misses_the_tolerance(
     outcomes["mc"] = replace(fpe, method="mc", eta_err=0.007 * exact.eta, message="mc stopped")
     row = scene_run.run_scene(scene, tmp_path / "better", progress=False, workers=1).rows[0]
     assert row.method == "mc" and row.status == "not_converged"
+    # numbers without an error estimate lose to any that have one
+    outcomes["fpe"] = replace(fpe, eta_err=None)
+    row = scene_run.run_scene(scene, tmp_path / "no_error", progress=False, workers=1).rows[0]
+    assert row.method == "mc" and "no error estimate" in row.message
 
 
 def test_auto_falls_back_to_monte_carlo_when_fokker_planck_gives_no_result(tmp_path):
