@@ -367,6 +367,26 @@ class SolveCache:
             self.seconds[method] = self.seconds.get(method, 0.0) + time.perf_counter() - t0
         return self._store[key]
 
+    def worker_cpu(self) -> float:
+        """Processor time [s] used so far by the live worker process (0 without one).
+
+        A running child is not in ``getrusage(RUSAGE_CHILDREN)`` until it has ended and been
+        waited for (:meth:`close`), so it is read from ``/proc/<pid>/stat`` (Linux; elsewhere
+        0, and the sections' processor times leave the worker out).
+        """
+        import os
+
+        total = 0.0
+        for pid in list(getattr(self._pool, "_processes", None) or {}):
+            try:
+                with open(f"/proc/{pid}/stat") as f:
+                    # fields after the command name (which may hold spaces): utime, stime are 14, 15
+                    rest = f.read().rsplit(")", 1)[1].split()
+                total += (int(rest[11]) + int(rest[12])) / os.sysconf("SC_CLK_TCK")
+            except (OSError, ValueError, IndexError):
+                continue
+        return total
+
     def close(self) -> None:
         """Stop the worker process; solves announced but never asked for are dropped."""
         if self._pool is not None:

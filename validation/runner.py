@@ -55,10 +55,12 @@ STEPS: tuple[tuple[str, str], ...] = (
 )
 
 
-def cpu_time() -> float:
-    """Processor time [s] used so far by this process (all threads) and its finished children."""
+def cpu_time(cache: SolveCache | None = None) -> float:
+    """Processor time [s] used so far by this process (all threads), its finished children and
+    the live worker process of ``cache`` (a :class:`~.checks.SolveCache`, if given)."""
     own, kids = resource.getrusage(resource.RUSAGE_SELF), resource.getrusage(resource.RUSAGE_CHILDREN)
-    return own.ru_utime + own.ru_stime + kids.ru_utime + kids.ru_stime
+    worker = cache.worker_cpu() if cache is not None else 0.0
+    return own.ru_utime + own.ru_stime + kids.ru_utime + kids.ru_stime + worker
 
 
 def _identities(ctx: Context) -> Section:
@@ -123,7 +125,7 @@ def _run_steps(ctx: Context, plan: list, order: list[int], done: dict[int, Secti
         module, title = plan[i]
         if progress:
             progress(title)
-        t0, c0 = time.perf_counter(), cpu_time()
+        t0, c0 = time.perf_counter(), cpu_time(ctx.cache)
         holder: list[Section] = []
 
         def step(module: str | Callable[[Context], Section] = module) -> list:
@@ -139,13 +141,16 @@ def _run_steps(ctx: Context, plan: list, order: list[int], done: dict[int, Secti
         sec = holder[0] if holder else Section(str(module).rsplit(".", 1)[-1], title)
         sec.title = title
         sec.checks += crash
-        done[i] = _finish(sec, t0, c0, finished)
+        done[i] = _finish(sec, t0, c0, finished, ctx.cache)
 
 
-def _finish(sec: Section, t0: float, c0: float, finished: Callable[[Section], None] | None) -> Section:
-    """Stamp the section's wall and processor time since ``t0``, ``c0`` and hand it to ``finished``."""
+def _finish(sec: Section, t0: float, c0: float, finished: Callable[[Section], None] | None,
+            cache: SolveCache | None = None) -> Section:
+    """Stamp the section's wall and processor time since ``t0``, ``c0`` (:func:`cpu_time` of
+    ``cache``: the worker process's time counts in the section it was used in) and hand it to
+    ``finished``."""
     sec.seconds = time.perf_counter() - t0
-    sec.cpu_seconds = cpu_time() - c0
+    sec.cpu_seconds = cpu_time(cache) - c0
     if finished:
         finished(sec)
     return sec
@@ -210,7 +215,7 @@ def validate(
     first = RUN_FIRST if quick else RUN_FIRST_FULL
     order = sorted(range(len(plan)), key=lambda i: (first.index(plan[i][0]) if plan[i][0] in first
                                                      else len(first), i))
-    c_start = cpu_time()
+    c_start = cpu_time(ctx.cache)
     problems = _announce(ctx, [plan[i][0] for i in order])
     if problems:
         report.meta["announcing solves failed (the steps solved them themselves)"] = "; ".join(problems)

@@ -138,3 +138,25 @@ def test_python_m_validation_unwritable_out_is_a_one_line_error(capsys):
     assert runner.main(["--out", "/dev/null/x", "--no-progress"]) == 2
     err = capsys.readouterr().err
     assert err.count("\n") == 1 and "--out '/dev/null/x': cannot create the output folder" in err
+
+
+@pytest.mark.skipif(not __import__("os").path.exists("/proc/self/stat"), reason="reads /proc (Linux)")
+def test_processor_time_counts_the_live_worker_process():
+    # the full run's worker solves Fokker-Planck problems for the sections; until it ends it is
+    # not among the finished children, so the sections' CPU time reads it from /proc
+    from fpe_harvester import Harvester
+    from validation.checks import SolveCache
+
+    cache = SolveCache(background=True)
+    assert cache.worker_cpu() == 0.0
+    h = Harvester.build(a=0.5, n=3)
+    before = runner.cpu_time(cache)
+    try:
+        cache.prefetch(h, "fpe", tol=1e-3)
+        cache.solve(h, "fpe", tol=1e-3)
+        worker = cache.worker_cpu()
+        assert worker > 0.0
+        assert runner.cpu_time(cache) - before >= worker
+    finally:
+        cache.close()
+    assert cache.worker_cpu() == 0.0
