@@ -353,7 +353,9 @@ class Scene:
     method : {"auto", "exact", "fpe", "mc"}
         ``"auto"`` picks the cheapest adequate solver per point; a Fokker--Planck point that
         misses ``rtol`` (no numbers, or an error above it) is tried again with Monte Carlo,
-        which is kept when it reaches ``rtol`` or has the smaller relative error on eta.
+        which is kept when it reaches ``rtol`` or has the smaller relative error on eta (the
+        Monte Carlo settings are ``options["mc"]``; its wall-time budget ``max_time`` is 600 s
+        per point unless set there).
     options : mapping of method name to mapping
         Extra constructor settings per solver (e.g. ``{"mc": {"dt": 0.01}}``).
     optimize : Optimize or None
