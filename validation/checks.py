@@ -18,6 +18,7 @@ from __future__ import annotations
 
 import enum
 import math
+import os
 import signal
 import time
 import traceback
@@ -374,8 +375,6 @@ class SolveCache:
         waited for (:meth:`close`), so it is read from ``/proc/<pid>/stat`` (Linux; elsewhere
         0, and the sections' processor times leave the worker out).
         """
-        import os
-
         total = 0.0
         for pid in list(getattr(self._pool, "_processes", None) or {}):
             try:

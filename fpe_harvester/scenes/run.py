@@ -232,6 +232,7 @@ def _solve_point(h: Harvester, method: str, opts: dict[str, Any],
 
 
 def _relative_eta_error(res: Stats) -> float:
+    """eta_err / |eta|; inf when either is missing or eta is 0."""
     if res.eta is None or res.eta_err is None or res.eta == 0:
         return math.inf
     return res.eta_err / abs(res.eta)
@@ -264,7 +265,8 @@ def _row(scene: Scene, index: int, point: Mapping[str, float], h: Harvester,
     # that misses the scene's accuracy on eta is not converged; the message keeps the solver's
     if res.ok and res.eta is not None and not (res.eta_err is not None
                                                and res.eta_err <= scene.rtol * abs(res.eta)):
-        rel = "unknown" if res.eta_err is None or res.eta == 0 else f"{res.eta_err / abs(res.eta):.2g}"
+        rel_err = _relative_eta_error(res)
+        rel = "unknown" if math.isinf(rel_err) else f"{rel_err:.2g}"
         status = Status.NOT_CONVERGED.value
         message += (f"; accuracy not met: eta_err/eta = {rel} > rtol = {scene.rtol:g} "
                     f"(the numbers are the best estimate; tighten the solver settings or loosen rtol)")
