@@ -212,11 +212,11 @@ def _writable_folder(flag: str, path: str) -> str:
 
 def cmd_validate(args: argparse.Namespace) -> int:
     """Run the validation suite; its runner prints the summary and writes the report."""
-    from validation.runner import run_cli
+    from validation.harness.runner import run_cli
 
     if args.bench is not None and not os.path.isdir(args.bench):
         raise ParameterError(f"--bench {args.bench!r}: not a folder (give the --out folder of "
-                             "python -m validation.bench.fpe, .montecarlo or .exact)")
+                             "python -m validation.studies.fpe, .montecarlo or .exact)")
     return run_cli(quick=args.quick, out=_writable_folder("--out", args.out), seed=args.seed,
                    progress=not args.no_progress, bench=args.bench)
 
@@ -328,7 +328,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--seed", type=int, default=2017, help="base Monte Carlo seed (default 2017)")
     p.add_argument("--no-progress", action="store_true", help="no progress bar")
     p.add_argument("--bench", default=None, metavar="DIR",
-                   help="include the exhaustive benchmarks written by python -m validation.bench.* --out DIR")
+                   help="include the exhaustive benchmarks written by python -m validation.studies.* --out DIR")
 
     p = sub.add_parser("scene", help="declarative studies: the paper's figures and more")
     scene_sub = p.add_subparsers(dest="action", required=True, parser_class=_Parser)

@@ -1,19 +1,17 @@
 """Validation of fpe-harvester: cross-checks, the paper's numbers, stress tests, benchmarks
 and the report written by ``harvester validate`` (or ``python -m validation``).
 
-Steps (each ``run(ctx) -> Section``, or two such functions): :mod:`.crosscheck`, :mod:`.paper`,
-:mod:`.beyond`, :mod:`.stress`, :mod:`.figures` (the shipped scenes), :mod:`.bench.combined`
-(runs the benchmark modules of :mod:`.bench`); :mod:`.runner` orders them and writes the
-report (:mod:`.report`); :mod:`.checks` holds the pass/fail/skip logic and
-:mod:`.references` the independent references of the exact solver (40-digit Lyapunov solve,
-rational arithmetic).
+* :mod:`.harness`: the pipeline (runner, checks, report);
+* :mod:`.sections`: one module per section of the report;
+* :mod:`.references`: independent references and the table of long runs;
+* :mod:`.studies`: the benchmarks and design studies, each ``python -m validation.studies.<name>``.
 """
 
 from __future__ import annotations
 
-from .checks import CheckResult, Context, Outcome, SolveCache, agree, expect
-from .report import Figure, Report, Section, Table, summary_text, write_html, write_markdown
-from .runner import run_cli, validate
+from .harness.checks import CheckResult, Context, Outcome, SolveCache, agree, expect
+from .harness.report import Figure, Report, Section, Table, summary_text, write_html, write_markdown
+from .harness.runner import run_cli, validate
 
 __all__ = [
     "CheckResult",

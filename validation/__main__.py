@@ -4,6 +4,6 @@ from __future__ import annotations
 
 import sys
 
-from .runner import main
+from .harness.runner import main
 
 sys.exit(main())

@@ -234,8 +234,8 @@ def test_shipped_harmonic_scene_quick(tmp_path: Path) -> None:
                                   "fig5_optimum_vs_N", "fig6_eta_vs_k_several_a", "kdi_map"])
 def test_shipped_scene_quick_runs(tmp_path: Path, name: str) -> None:
     """Every figure drawn, every status true for its system, the accuracy asked for met by every
-    stable row, harmonic rows equal to the 60-digit closed form (validation.figures.row_checks)."""
-    from validation.figures import row_checks
+    stable row, harmonic rows equal to the 60-digit closed form (validation.sections.figures.row_checks)."""
+    from validation.sections.figures import row_checks
 
     res = scene_run.run_scene(load_scene(name), tmp_path, quick=True, progress=False)
     assert res.rows and len(res.figures) == len(res.scene.figures)

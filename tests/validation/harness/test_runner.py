@@ -1,0 +1,162 @@
+"""The runner and the command line, on tiny fake steps (the real suite runs in CI separately)."""
+
+from __future__ import annotations
+
+import pytest
+
+import validation.harness.runner as runner
+from fpe_harvester.cli import build_parser, main
+from validation.harness.checks import expect
+from validation.harness.report import Section
+
+
+def _passing(ctx):
+    sec = Section("ok", "Passing step")
+    sec.checks += [expect(f"fine {i}", "Passing step", True, "ok") for i in range(40)]
+    return sec
+
+
+def _few_passing(ctx):
+    sec = Section("few", "Few checks")
+    sec.checks.append(expect("fine", "Few checks", True, "ok"))
+    return sec
+
+
+def _failing(ctx):
+    sec = Section("bad", "Failing step")
+    sec.checks.append(expect("wrong", "Failing step", False, "must fail"))
+    return sec
+
+
+def _crashing(ctx):
+    raise RuntimeError("step exploded")
+
+
+def _skipping(ctx):
+    from validation.harness.checks import skipped
+
+    sec = Section("skip", "Skipping step")
+    sec.checks.append(skipped("never ran", "Skipping step", "the quick run's overall time budget was used up"))
+    return sec
+
+
+def test_validate_writes_both_reports(tmp_path):
+    rep = runner.validate(quick=True, out=tmp_path, steps=[(_passing, "Passing step")])
+    assert not rep.failed
+    assert (tmp_path / "report.md").is_file() and (tmp_path / "report.html").is_file()
+    assert "Passing step" in (tmp_path / "report.md").read_text()
+    # the closing identities section reports every solver that produced nothing as skipped ...
+    skips = [c.name for c in rep.skipped]
+    assert skips == ["identities [exact]", "identities [fpe]", "identities [mc]"]
+    # ... which a quick run may do (3 of 43 checks), a full run may not
+    assert runner.exit_code(rep, quick=True) == 0 and runner.exit_code(rep, quick=False) == 1
+
+
+def test_a_quick_run_fails_when_too_few_checks_ran(tmp_path):
+    """1 check ran and 3 were skipped: 25 % ran, below QUICK_MIN_RAN."""
+    rep = runner.validate(quick=True, out=tmp_path, steps=[(_few_passing, "Few checks")])
+    assert not rep.failed and len(rep.skipped) == 3
+    assert runner.exit_code(rep, quick=True) == 1
+    rep.sections[0].checks += [expect(f"more {i}", "Few checks", True, "ok") for i in range(26)]
+    assert runner.exit_code(rep, quick=True) == 0        # 27 of 30 ran: exactly 90 %
+    rep.sections[0].checks.pop()
+    assert runner.exit_code(rep, quick=True) == 1        # 26 of 29
+
+
+def test_a_crashing_step_becomes_a_failed_check(tmp_path):
+    rep = runner.validate(out=tmp_path, steps=[(_crashing, "Crashing step")])
+    assert rep.failed
+    assert any("step exploded" in c.detail for c in rep.checks)
+
+
+def test_validate_rejects_a_negative_seed(tmp_path):
+    from fpe_harvester import ParameterError
+
+    with pytest.raises(ParameterError, match="seed"):
+        runner.validate(out=tmp_path, seed=-1, steps=[])
+
+
+def test_cli_arguments():
+    args = build_parser().parse_args(["validate", "--quick", "--out", "somewhere"])
+    assert args.command == "validate" and args.quick and args.out == "somewhere" and args.seed == 2017
+    args = build_parser().parse_args(["validate"])
+    assert not args.quick and args.out == "validation_report"
+    with pytest.raises(SystemExit) as exc:
+        build_parser().parse_args(["validate", "--seed", "abc"])
+    assert exc.value.code == 2
+    with pytest.raises(SystemExit) as exc:
+        build_parser().parse_args(["validate", "--bogus"])
+    assert exc.value.code == 2
+
+
+@pytest.mark.parametrize(("steps", "quick", "code"), [
+    (((_passing, "Passing step"),), True, 0),
+    (((_passing, "Passing step"), (_failing, "Failing step")), True, 1),
+    (((_passing, "Passing step"), (_skipping, "Skipping step")), True, 0),
+    (((_passing, "Passing step"), (_skipping, "Skipping step")), False, 1),
+])
+def test_cli_exit_code(monkeypatch, tmp_path, capsys, steps, quick, code):
+    """A failure fails any run; a skip fails the full run, and a quick run names every skip."""
+    monkeypatch.setattr(runner, "STEPS", steps)
+    assert main(["validate", *(["--quick"] if quick else []), "--no-progress", "--out", str(tmp_path)]) == code
+    captured = capsys.readouterr()
+    out = captured.out
+    assert "passed" in out and "report.md" in out
+    # each step's wall time is printed as soon as it ends (a long full run shows where it is)
+    assert all(f"{title}: " in captured.err for _, title in steps)
+    assert ("1 FAILED" in captured.err) == any(title == "Failing step" for _, title in steps)
+    assert (tmp_path / "report.html").is_file()
+    if any(title == "Skipping step" for _, title in steps):
+        assert "SKIP    never ran" in out and "check(s) SKIPPED" in out
+        assert ("a quick run fails below 90%" in out) == quick
+
+
+def test_cli_negative_seed_is_a_clean_error(monkeypatch, tmp_path, capsys):
+    monkeypatch.setattr(runner, "STEPS", ())
+    assert main(["validate", "--seed", "-3", "--no-progress", "--out", str(tmp_path)]) == 2
+    assert "seed" in capsys.readouterr().err
+
+
+def test_python_m_validation_parser():
+    args = runner.build_parser().parse_args(["--quick", "--out", "d"])
+    assert args.quick and args.out == "d"
+
+
+def test_module_steps_are_imported_and_a_missing_one_fails(tmp_path):
+    rep = runner.validate(out=tmp_path, steps=[("validation.no_such_module:run", "Missing step")])
+    assert rep.failed
+    (sec,) = [s for s in rep.sections if s.title == "Missing step"]
+    assert "ModuleNotFoundError" in sec.checks[0].detail
+
+
+def test_report_keeps_the_plan_order(tmp_path):
+    rep = runner.validate(out=tmp_path, steps=[(_failing, "Failing step"), (_passing, "Passing step")])
+    assert [s.title for s in rep.sections][:2] == ["Failing step", "Passing step"]
+
+
+def test_python_m_validation_unwritable_out_is_a_one_line_error(capsys):
+    assert runner.main(["--out", "/dev/null/x", "--no-progress"]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and "--out '/dev/null/x': cannot create the output folder" in err
+
+
+@pytest.mark.skipif(not __import__("os").path.exists("/proc/self/stat"), reason="reads /proc (Linux)")
+def test_processor_time_counts_the_live_worker_process():
+    # the full run's worker solves Fokker-Planck problems for the sections; until it ends it is
+    # not among the finished children, so the sections' CPU time reads it from /proc
+    from fpe_harvester import Harvester
+    from validation.harness.checks import SolveCache
+
+    cache = SolveCache(background=True)
+    assert cache.worker_cpu() == 0.0
+    h = Harvester.build(a=0.5, n=3)
+    before = runner.cpu_time(cache)
+    try:
+        cache.prefetch(h, "fpe", tol=1e-3)
+        cache.solve(h, "fpe", tol=1e-3)
+        worker = cache.worker_cpu()
+        assert worker > 0.0
+        assert runner.cpu_time(cache) - before >= worker
+    finally:
+        cache.close()
+    assert cache.worker_cpu() == 0.0

@@ -1,0 +1,107 @@
+"""Coverage of the Monte Carlo error bars: fractions within 1, 2, 3 errors of another solver."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from fpe_harvester import Harvester, solve
+from validation.sections.coverage import (NORMAL_COVERAGE, QUICK_CASES, CoverageCase, binomial_limits, coverage_checks,
+                                 mc_coverage)
+
+
+def test_quick_cases_use_other_solvers_and_the_kink() -> None:
+    methods = {c.label: c.method for c in QUICK_CASES}
+    assert methods == {"harmonic N = 1, a = 0.5": "exact", "n = 3, a = 0.5": "fpe", "n = 1, a = 0.5": "fpe"}
+
+
+def test_quick_coverage_against_other_solvers() -> None:
+    res = mc_coverage(quick=True, runs=6)
+    assert res["count"] == 18
+    assert [c["reference_method"] for c in res["cases"]] == ["exact", "fpe", "fpe"]
+    z = {q: [v for c in res["cases"] for v in c["z"][q]] for q in res["fractions"]}
+    failed = [(label, detail) for label, ok, detail in coverage_checks(z) if not ok]
+    assert not failed, failed
+
+
+def test_binomial_limits() -> None:
+    lo, hi = binomial_limits(100, 0.6827)
+    assert 0.5 < lo < 0.6 and 0.78 < hi < 0.85
+    assert binomial_limits(100, 0.9973)[0] > 0.96
+
+
+def test_checks_fail_when_the_bars_are_too_small_or_too_large() -> None:
+    """Honest bars pass; the same z with bars 1.5x too small, or 2x too large, fail, at the full
+    grid's number of results per quantity (104: over 200 seeds honest bars passed 99 %, and a
+    quantity's 1.5x too small bars failed one of its checks 97 % of the time)."""
+    from validation.sections.coverage import FULL_CASES, FULL_RUNS
+
+    count = sum(c.runs or FULL_RUNS for c in FULL_CASES)
+    assert count >= 100
+    rng = np.random.default_rng(5)
+    z = {q: list(rng.standard_normal(count)) for q in ("eta", "V2", "Pin")}
+    assert all(ok for _, ok, _ in coverage_checks(z))
+    shrunk = {q: [1.5 * v for v in zq] for q, zq in z.items()}        # reported errors / 1.5
+    for q in shrunk:
+        assert not all(ok for _, ok, _ in coverage_checks({q: shrunk[q]})), q
+    widened = {q: [0.5 * v for v in zq] for q, zq in z.items()}
+    assert not any(ok for label, ok, _ in coverage_checks(widened) if "within 1 " in label)
+    assert NORMAL_COVERAGE[0] == pytest.approx(0.6827, abs=1e-4)
+
+
+def test_coverage_fails_for_a_wrong_reference() -> None:
+    # the check can fail: a reference off by a few error bars is caught
+    h = Harvester.build(a=0.5)
+    wrong = CoverageCase("harmonic, wrong reference", h,
+                         {"tol": 0.05, "paths": 8, "t_run": 50.0, "progress": False},
+                         reference=solve(h.replace(a=0.55), "exact"))
+    res = mc_coverage(cases=(wrong,), runs=4)
+    assert res["fractions"]["eta"][2] < 0.5
+
+
+def test_coverage_rejects_too_few_runs() -> None:
+    with pytest.raises(ValueError, match="runs must be an integer in"):
+        mc_coverage(runs=1)
+
+
+@pytest.mark.slow
+def test_full_coverage() -> None:
+    res = mc_coverage(quick=False)
+    z = {q: [v for c in res["cases"] for v in c["z"][q]] for q in res["fractions"]}
+    failed = [(label, detail) for label, ok, detail in coverage_checks(z) if not ok]
+    assert not failed, failed
+
+
+def test_a_reference_short_of_its_tolerance_serves_only_when_precise_enough() -> None:
+    from fpe_harvester import Stats, Status
+    from validation.sections.coverage import REF_MAX_SHARE, usable_reference
+
+    def ref(rel: float, status: Status = Status.NOT_CONVERGED) -> Stats:
+        return Stats(V2=1.0, V2_err=rel, Pin=2.0, Pin_err=2.0 * rel, eta=0.5, eta_err=0.5 * rel, status=status,
+                     method="mc", message="budget ran out")
+
+    assert usable_reference(ref(0.9 * REF_MAX_SHARE * 1e-2), 1e-2) is None
+    assert "budget ran out" in usable_reference(ref(1.1 * REF_MAX_SHARE * 1e-2), 1e-2)
+    assert usable_reference(ref(0.5, Status.STABLE), 1e-2) is None
+    assert usable_reference(ref(1e-4, Status.UNSTABLE), 1e-2) is not None
+
+
+def test_an_unusable_reference_is_reported_and_the_other_cases_run() -> None:
+    from fpe_harvester import Stats, Status
+
+    h = Harvester.build(a=0.5)
+    bad = CoverageCase("no reference", h, {"tol": 0.05, "paths": 8, "t_run": 50.0, "progress": False},
+                       reference=Stats(status=Status.NOT_CONVERGED, method="mc", message="no numbers"))
+    good = CoverageCase("harmonic", h, {"tol": 0.05, "paths": 8, "t_run": 50.0, "progress": False})
+    res = mc_coverage(cases=(bad, good), runs=3)
+    assert res["cases"][0]["unusable_reference"].startswith("not_converged")
+    assert res["count"] == 3 and len(res["cases"][1]["z"]["eta"]) == 3
+
+
+def test_the_full_grid_takes_its_monte_carlo_references_from_the_table() -> None:
+    from validation.sections.coverage import FULL_CASES, _table_reference
+
+    for case in FULL_CASES:
+        if case.method == "mc":
+            r = _table_reference(case)
+            assert r is not None and r.eta_err is not None and "reference table" in r.message, case.label

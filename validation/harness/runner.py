@@ -1,0 +1,343 @@
+"""Run the whole validation and write the report: ``harvester validate [--quick] [--out DIR]``.
+
+Steps, in order (each a module with ``run(ctx) -> Section``): the cross-checks, the paper
+comparison, beyond the paper, the stress tests, the paper's figures (scenes), the
+benchmarks, and last the stationary identities (docs/model.md §2) on every result computed in
+the run.
+A step that crashes becomes a failed check; the run always ends with a report.
+"""
+
+from __future__ import annotations
+
+import argparse
+import importlib
+import os
+import platform
+import resource
+import sys
+import time
+from collections.abc import Callable, Sequence
+from datetime import datetime, timezone
+from pathlib import Path
+
+from fpe_harvester.errors import ParameterError, check_int
+from fpe_harvester.result import Status
+from fpe_harvester.solve import METHODS
+
+from .checks import Context, SolveCache, guarded, skipped
+from .report import Report, Section, summary_text, write_html, write_markdown
+
+__all__ = ["STEPS", "QUICK_BUDGET", "QUICK_MIN_RAN", "validate", "exit_code", "run_cli", "main", "build_parser"]
+
+#: Steps run before the others (cheapest per check first); unlisted steps follow in plan order.
+RUN_FIRST = ("validation.sections.stress:run_exact", "validation.sections.figures:run_exact", "validation.sections.crosscheck",
+             "validation.sections.paper", "validation.sections.beyond", "validation.sections.stress:run_solvers")
+#: The full run's order: the Monte Carlo-only steps (beyond the paper, the paper's rings) run
+#: while the worker process solves the Fokker-Planck problems the later steps announced.
+RUN_FIRST_FULL = ("validation.sections.stress:run_exact", "validation.sections.figures:run_exact", "validation.sections.beyond",
+                  "validation.sections.paper", "validation.sections.crosscheck", "validation.sections.stress:run_solvers")
+
+#: Wall-time budget [s] of the checks in quick mode; checks that would start later are skipped
+#: (and listed as such), so that CI always gets its report within 3 minutes.
+QUICK_BUDGET = 165.0
+
+#: (module, title) of each step, run in this order.
+STEPS: tuple[tuple[str, str], ...] = (
+    ("validation.sections.crosscheck", "Cross-checks"),
+    ("validation.sections.errorbars", "Error bars: Monte Carlo coverage and Fokker-Planck bounds"),
+    ("validation.sections.paper", "Paper comparison"),
+    ("validation.sections.beyond", "Beyond the paper"),
+    ("validation.sections.stress:run_exact", "Stress tests: exact solver"),
+    ("validation.sections.stress:run_solvers", "Stress tests: Fokker-Planck and Monte Carlo"),
+    ("validation.sections.figures:run_exact", "The paper's figures: harmonic scenes (exact)"),
+    ("validation.sections.figures:run_solvers", "The paper's figures: nonlinear scenes (Fokker-Planck, Monte Carlo)"),
+    ("validation.sections.benchmarks", "Benchmarks: error versus wall time"),
+)
+
+
+def cpu_time(cache: SolveCache | None = None) -> float:
+    """Processor time [s] used so far by this process (all threads), its finished children and
+    the live worker process of ``cache`` (a :class:`~.checks.SolveCache`, if given)."""
+    own, kids = resource.getrusage(resource.RUSAGE_SELF), resource.getrusage(resource.RUSAGE_CHILDREN)
+    worker = cache.worker_cpu() if cache is not None else 0.0
+    return own.ru_utime + own.ru_stime + kids.ru_utime + kids.ru_stime + worker
+
+
+def _identities(ctx: Context) -> Section:
+    from ..sections.crosscheck import describe, identity_checks, results_table
+
+    sec = Section("identities", "Stationary identities, docs/model.md §2 (every solver, every result of this run)")
+    sec.text.append(
+        "For every result computed in this run that describes a stationary state (stable, marginal, "
+        "not converged with its best estimate and error, or metastable with no escaped path): V2 = Kc tau_p vV (d<V^2>/dt = 0) and "
+        "Pin = m gamma v2 + Kv vV (power balance), each within 4 combined error bars of the "
+        "result's own errors (exact: relative floor 1e-12)."
+    )
+    excluded = []
+    for h, method, r in ctx.cache.results():
+        escaped = r.info.get("escape_fraction") != 0
+        if r.status is Status.UNSTABLE or (r.status is Status.METASTABLE and escaped) or r.V2 is None:
+            # No stationary state (a metastable one that no path left counts as quasi-stationary):
+            # the identities are properties of a stationary state, so they do not apply.
+            excluded.append(f"{method} at {describe(h)} ({r.status.value})")
+            continue
+        label = describe(h) + (f", {r.status.value}" if not r.ok else "")
+        sec.checks += guarded(f"identities [{method}] {label}", sec.title,
+                              lambda h=h, r=r, label=label: identity_checks(label, r, h, sec.title))
+    if excluded:
+        sec.text.append("Not checked (no stationary state, so the identities do not apply): "
+                        + "; ".join(excluded) + ".")
+    sec.tables.append(results_table(ctx))
+    methods = {m for _, m, _ in ctx.cache.results()}
+    sec.checks += [skipped(f"identities [{m}]", sec.title, f"no {m!r} result was computed in this run "
+                           "(solver not available)") for m in METHODS if m not in methods]
+    return sec
+
+
+def _announce(ctx: Context, modules: Sequence[str | Callable[[Context], Section]]) -> list[str]:
+    """Call each step module's ``prefetch(ctx)``, if it has one, in run order: the solves it
+    announces start in the background (:meth:`SolveCache.prefetch`; full run only). Returns
+    what went wrong (a step then solves in this process what it could not announce)."""
+    problems: list[str] = []
+    if not ctx.cache.background:
+        return problems
+    seen = set()
+    for module in modules:
+        if not isinstance(module, str):
+            continue
+        name = module.partition(":")[0]
+        if name in seen:
+            continue
+        seen.add(name)
+        try:
+            hook = getattr(importlib.import_module(name), "prefetch", None)
+        except Exception:  # noqa: BLE001 - the step reports its own import failure
+            continue
+        if hook is not None:
+            problems += [f"{name}: {c.detail}" for c in guarded(f"prefetch {name}", name, lambda: hook(ctx) or [])
+                         if not c.passed]
+    return problems
+
+
+def _run_steps(ctx: Context, plan: list, order: list[int], done: dict[int, Section],
+               progress: Callable[[str], None] | None, finished: Callable[[Section], None] | None) -> None:
+    for i in order:
+        module, title = plan[i]
+        if progress:
+            progress(title)
+        t0, c0 = time.perf_counter(), cpu_time(ctx.cache)
+        holder: list[Section] = []
+
+        def step(module: str | Callable[[Context], Section] = module) -> list:
+            if isinstance(module, str):
+                name, _, func = module.partition(":")
+                fn = getattr(importlib.import_module(name), func or "run")
+            else:
+                fn = module
+            holder.append(fn(ctx))
+            return []
+
+        crash = guarded(title, title, step)
+        sec = holder[0] if holder else Section(str(module).rsplit(".", 1)[-1], title)
+        sec.title = title
+        sec.checks += crash
+        done[i] = _finish(sec, t0, c0, finished, ctx.cache)
+
+
+def _finish(sec: Section, t0: float, c0: float, finished: Callable[[Section], None] | None,
+            cache: SolveCache | None = None) -> Section:
+    """Stamp the section's wall and processor time since ``t0``, ``c0`` (:func:`cpu_time` of
+    ``cache``: the worker process's time counts in the section it was used in) and hand it to
+    ``finished``."""
+    sec.seconds = time.perf_counter() - t0
+    sec.cpu_seconds = cpu_time(cache) - c0
+    if finished:
+        finished(sec)
+    return sec
+
+
+def validate(
+    quick: bool = False,
+    out: Path | str = "validation_report",
+    seed: int = 2017,
+    steps: Sequence[tuple[str | Callable[[Context], Section], str]] | None = None,
+    progress: Callable[[str], None] | None = None,
+    bench: Path | str | None = None,
+    finished: Callable[[Section], None] | None = None,
+) -> Report:
+    """Run the validation steps and write ``report.md`` and ``report.html`` into ``out``.
+
+    Parameters
+    ----------
+    quick : bool
+        CI mode (subsets, short budgets; < 3 minutes on 2 cores).
+    out : path
+        Output folder, created if needed.
+    seed : int
+        Base seed of the Monte Carlo runs, >= 0.
+    steps : sequence of (module or callable, title), optional
+        The steps to run (default :data:`STEPS`); ``"module"`` means its ``run(ctx) -> Section``,
+        ``"module:function"`` that function.
+    progress : callable, optional
+        Called with the title of each step before it starts.
+    bench : path, optional
+        Folder written by ``python -m validation.studies.fpe --out DIR`` (and the other
+        benchmark modules): their exhaustive results are included in the report. The
+        report's own benchmark section always runs the short benchmarks.
+    finished : callable, optional
+        Called with each section (its ``seconds`` and checks filled in) as soon as it is done.
+
+    Returns
+    -------
+    Report
+        All sections and checks; ``report.failed`` says whether any check failed.
+    """
+    seed = check_int("seed", seed, low=0)
+    if bench is not None and not Path(bench).is_dir():
+        raise ParameterError(f"bench must be a folder written by python -m validation.studies.*, got {str(bench)!r}")
+    out = Path(out)
+    out.mkdir(parents=True, exist_ok=True)
+    t_start = time.perf_counter()
+    # full run: Fokker-Planck solves in a second process beside the Monte Carlo ones (SolveCache)
+    ctx = Context(quick=quick, out=out.resolve(), cache=SolveCache(background=not quick), seed=seed,
+                  deadline=t_start + QUICK_BUDGET if quick else None,
+                  bench=None if bench is None else Path(bench).resolve())
+    report = Report("fpe-harvester validation report" + (" (quick)" if quick else ""))
+    report.meta.update({
+        "date (UTC)": datetime.now(timezone.utc).strftime("%Y-%m-%d %H:%M:%S"),
+        "mode": "quick (CI subset)" if quick else "full",
+        "machine": f"{platform.machine()}, {os.cpu_count()} cores, Python {platform.python_version()}",
+        "Monte Carlo seed": str(seed),
+    })
+    plan = list(STEPS if steps is None else steps)
+    # Cheap, exact-heavy steps run first so that a slow solver cannot crowd them out of the quick
+    # budget; the report keeps the reading order of ``plan``.
+    first = RUN_FIRST if quick else RUN_FIRST_FULL
+    order = sorted(range(len(plan)), key=lambda i: (first.index(plan[i][0]) if plan[i][0] in first
+                                                     else len(first), i))
+    c_start = cpu_time(ctx.cache)
+    problems = _announce(ctx, [plan[i][0] for i in order])
+    if problems:
+        report.meta["announcing solves failed (the steps solved them themselves)"] = "; ".join(problems)
+    done: dict[int, Section] = {}
+    try:
+        _run_steps(ctx, plan, order, done, progress, finished)
+    finally:
+        ctx.cache.close()
+    if ctx.cache.background:
+        report.meta["Fokker-Planck solves in a second process"] = (
+            f"{ctx.cache.announced} announced, {ctx.cache.prefetched} used; this process waited for them "
+            f"{ctx.cache.waited:.1f} s in all")
+    report.sections += [done[i] for i in range(len(plan))]
+    if progress:
+        progress("Identities")
+    t0, c0 = time.perf_counter(), cpu_time()
+    report.sections.append(_finish(_identities(ctx), t0, c0, finished))
+    if ctx.cache.dropped:
+        report.meta["solver options not supported (dropped)"] = "; ".join(
+            f"{m}: {', '.join(sorted(o))}" for m, o in ctx.cache.dropped.items())
+    report.meta["total wall time"] = f"{time.perf_counter() - t_start:.1f} s"
+    report.meta["total CPU time"] = f"{cpu_time() - c_start:.1f} s (all threads and processes)"
+    write_markdown(report, out / "report.md")
+    write_html(report, out / "report.html")
+    return report
+
+
+#: Least fraction of a quick run's checks that must have run (not skipped) for it to pass.
+QUICK_MIN_RAN = 0.9
+
+
+def exit_code(report: Report, quick: bool) -> int:
+    """1 if a check failed, if a full run skipped any check (nothing may go unchecked there),
+    or if a quick run skipped more than 1 - :data:`QUICK_MIN_RAN` of its checks (a quick run
+    may skip a few for its time budget, and says how many and which)."""
+    if report.failed:
+        return 1
+    n_skip, n_all = len(report.skipped), len(report.checks)
+    if quick:
+        return 1 if n_all == 0 or n_all - n_skip < QUICK_MIN_RAN * n_all else 0
+    return 1 if n_skip else 0
+
+
+def run_cli(quick: bool = False, out: Path | str = "validation_report", seed: int = 2017,
+            progress: bool = True, bench: Path | str | None = None) -> int:
+    """Run :func:`validate` over :data:`STEPS`, print the pass/fail summary.
+
+    Returns the exit code (:func:`exit_code`): 1 if any check failed or, in a full run, was
+    skipped; else 0.
+    """
+    steps = STEPS
+    bar = None
+    if progress:
+        from tqdm import tqdm
+
+        bar = tqdm(total=len(steps) + 1, desc="validate", unit="step", file=sys.stderr)
+    started: list[str] = []
+
+    def tick(title: str) -> None:
+        if bar is not None:
+            if started:
+                bar.update(1)
+            bar.set_postfix_str(title)
+        started.append(title)
+
+    def step_done(sec: Section) -> None:
+        failed = sum(c.outcome.value == "FAIL" for c in sec.checks)
+        line = (f"{time.perf_counter() - t0:7.1f} s  {sec.title}: {sec.seconds:.1f} s ({sec.cpu_seconds:.0f} CPU-s), "
+                f"{len(sec.checks)} checks"
+                + (f", {failed} FAILED" if failed else ""))
+        if bar is not None:
+            bar.write(line, file=sys.stderr)
+        else:
+            print(line, file=sys.stderr, flush=True)
+
+    t0 = time.perf_counter()
+    report = validate(quick=quick, out=out, seed=seed, steps=steps, progress=tick, bench=bench,
+                      finished=step_done)
+    if bar is not None:
+        bar.update(bar.total - bar.n)
+        bar.close()
+    print(summary_text(report))
+    skips = report.skipped
+    if skips:
+        ran = 1.0 - len(skips) / max(len(report.checks), 1)
+        print(f"{len(skips)} check(s) SKIPPED (listed above): "
+              + (f"{ran:.0%} of the checks ran; a quick run fails below {QUICK_MIN_RAN:.0%}, the full run "
+                 "on any skip." if quick else "the full run fails: every check must run."))
+    elif quick and not report.checks:
+        print("no check ran: the quick run fails.")
+    print(f"report: {Path(out) / 'report.md'} and {Path(out) / 'report.html'} "
+          f"({time.perf_counter() - t0:.1f} s)")
+    return exit_code(report, quick)
+
+
+def build_parser() -> argparse.ArgumentParser:
+    """Arguments of ``python -m validation`` (the same as ``harvester validate``)."""
+    p = argparse.ArgumentParser(prog="python -m validation", description=__doc__.splitlines()[0])
+    p.add_argument("--quick", action="store_true", help="CI subset, under 3 minutes")
+    p.add_argument("--out", default="validation_report", metavar="DIR",
+                   help="output folder (default ./validation_report)")
+    p.add_argument("--seed", type=int, default=2017, help="base Monte Carlo seed (default 2017)")
+    p.add_argument("--no-progress", action="store_true", help="no progress bar")
+    p.add_argument("--bench", default=None, metavar="DIR",
+                   help="include the output of python -m validation.studies.* --out DIR")
+    return p
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    """Entry point of ``python -m validation``; returns the exit code."""
+    args = build_parser().parse_args(argv)
+    if args.seed < 0:
+        print(f"python -m validation: error: --seed must be >= 0, got {args.seed}", file=sys.stderr)
+        return 2
+    try:
+        Path(args.out).mkdir(parents=True, exist_ok=True)
+    except OSError as exc:
+        print(f"python -m validation: error: --out {args.out!r}: cannot create the output folder "
+              f"({exc.strerror or exc})", file=sys.stderr)
+        return 2
+    if args.bench is not None and not Path(args.bench).is_dir():
+        print(f"python -m validation: error: --bench {args.bench!r}: not a folder", file=sys.stderr)
+        return 2
+    return run_cli(quick=args.quick, out=args.out, seed=args.seed, progress=not args.no_progress,
+                   bench=args.bench)

@@ -1,0 +1,204 @@
+"""The project's own table of reference values: long runs, with how each was computed.
+
+``validation/references/data/reference_values.json`` holds, per case, eta, V2 and Pin with their errors,
+the solver and its settings, the seed, the command that regenerates it, the commit and the
+wall time: Fokker--Planck values at tight tolerances where the solver converges (single
+units), long Monte Carlo runs elsewhere (rings, the kink at a = 2). It is a regression
+anchor: the tests and the report compare fresh results against it, within the combined
+errors. It does not replace the cross-solver checks (a value and its reference here may
+come from the same solver).
+
+``python -m validation.references.reftable [--only LABEL ...] [--out PATH]`` regenerates it (all cases:
+about an hour on 2 cores); ``--only`` recomputes some cases and keeps the others.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import math
+import subprocess
+import sys
+import time
+from dataclasses import dataclass, field
+from datetime import datetime, timezone
+from pathlib import Path
+from typing import Any
+
+from fpe_harvester import Harvester, Stats, Status, solve
+
+__all__ = ["RefCase", "CASES", "PATH", "load", "lookup", "as_stats", "recorded_mc", "compute", "compare", "main"]
+
+#: Where the table lives.
+PATH = Path(__file__).parent / "data" / "reference_values.json"
+
+
+@dataclass(frozen=True)
+class RefCase:
+    """One entry: a label, the system (``Harvester.build`` arguments), the solver and its settings."""
+
+    label: str
+    system: dict[str, Any]
+    method: str
+    options: dict[str, Any] = field(default_factory=dict)
+
+    @property
+    def h(self) -> Harvester:
+        return Harvester.build(**self.system)
+
+
+def _fpe(n: float, a: float, tol: float) -> RefCase:
+    return RefCase(f"fpe n = {n:g}, a = {a:g}", {"n": n, "a": a}, "fpe", {"tol": tol, "max_seconds": 900.0})
+
+
+def _mc(label: str, system: dict[str, Any], tol: float, seed: int) -> RefCase:
+    return RefCase(label, system, "mc", {"tol": tol, "seed": seed, "max_time": 900.0, "progress": False})
+
+
+#: The cases: Fokker--Planck to 1e-7 for smooth walls (1e-6 where 1e-7 is out of reach in
+#: minutes), to 1e-5 for n = 1.5 and 1e-4 for the kink; Monte Carlo to 1e-3 elsewhere (the
+#: kink's long Monte Carlo runs to 3e-4 are in kink_mc_reference_values.json), and to 2e-4 for
+#: four single smooth units (the Fokker--Planck error bounds' independent references).
+CASES: tuple[RefCase, ...] = (
+    *(_fpe(n, a, 1e-7) for n in (3.0, 4.0) for a in (0.5, 1.0, 2.0)),
+    *(_fpe(n, a, 1e-6) for n in (6.0, 8.0) for a in (0.5, 1.0, 2.0)),
+    *(_fpe(1.5, a, 1e-5) for a in (0.5, 1.0, 2.0)),
+    _fpe(1.0, 0.5, 1e-4),
+    _fpe(1.0, 1.0, 1e-4),
+    _mc("mc n = 1, a = 2", {"n": 1.0, "a": 2.0}, 1e-3, 101),
+    # single smooth units by Monte Carlo: the independent references of the Fokker--Planck error bounds
+    _mc("mc n = 1.5, a = 1", {"n": 1.5, "a": 1.0}, 2e-4, 104),
+    _mc("mc n = 3, a = 0.5", {"n": 3.0, "a": 0.5}, 2e-4, 105),
+    _mc("mc n = 4, a = 1", {"n": 4.0, "a": 1.0}, 2e-4, 106),
+    _mc("mc n = 8, a = 0.5", {"n": 8.0, "a": 0.5}, 2e-4, 107),
+    _mc("mc n = 3, N = 3, a = 0.5, k = -0.5", {"n": 3.0, "a": 0.5, "N": 3, "k": -0.5}, 1e-3, 102),
+    _mc("mc n = 4, N = 3, a = 0.5, k = -0.5", {"n": 4.0, "a": 0.5, "N": 3, "k": -0.5}, 1e-3, 103),
+)
+
+
+def _commit() -> str:
+    try:
+        out = subprocess.run(["git", "rev-parse", "--short", "HEAD"], cwd=Path(__file__).parent,
+                             capture_output=True, text=True, timeout=10)
+        dirty = subprocess.run(["git", "status", "--porcelain", "--untracked-files=no"],
+                               cwd=Path(__file__).parent, capture_output=True, text=True, timeout=10)
+    except (OSError, subprocess.SubprocessError):
+        return "unknown"
+    return out.stdout.strip() + ("+changes" if dirty.stdout.strip() else "") if out.returncode == 0 else "unknown"
+
+
+def compute(case: RefCase) -> dict[str, Any]:
+    """Solve one case and describe how (JSON-ready)."""
+    t0 = time.perf_counter()
+    r = solve(case.h, case.method, **case.options)
+    entry: dict[str, Any] = {
+        "system": case.system, "method": case.method, "options": case.options, "status": r.status.value,
+        "message": r.message, "seconds": round(time.perf_counter() - t0, 1), "commit": _commit(),
+        "date": datetime.now(timezone.utc).strftime("%Y-%m-%d %H:%M UTC"),
+        "command": f"python -m validation.references.reftable --only '{case.label}'",
+    }
+    for q in ("eta", "V2", "Pin"):
+        v, e = r.value(q)
+        entry[q], entry[q + "_err"] = v, e
+    return entry
+
+
+def load(path: Path = PATH) -> dict[str, dict[str, Any]]:
+    """The table: label -> entry (empty if it does not exist)."""
+    return json.loads(path.read_text()) if path.exists() else {}
+
+
+def lookup(h: Harvester, method: str, max_rel_err: float = math.inf, path: Path = PATH) -> dict[str, Any] | None:
+    """The table's entry for system ``h`` solved by ``method`` (with its ``label`` added), or
+    None when the table has none, it carries no error, or its relative error on eta exceeds
+    ``max_rel_err``."""
+    table = load(path)
+    for c in CASES:
+        if c.method == method and c.h == h and table.get(c.label, {}).get("eta_err") is not None:
+            entry = table[c.label]
+            return {**entry, "label": c.label} if entry["eta_err"] <= max_rel_err * abs(entry["eta"]) else None
+    return None
+
+
+def as_stats(entry: dict[str, Any], status: Status | None = None) -> Stats:
+    """A table entry (:func:`lookup`) as a result, with its origin in the message; ``status``
+    replaces the recorded one (e.g. STABLE for a reference known to be accurate enough)."""
+    values = {q: entry[q] for q in ("eta", "V2", "Pin")} | {q + "_err": entry[q + "_err"] for q in ("eta", "V2", "Pin")}
+    return Stats(**values, status=status or Status(entry["status"]), method=entry["method"],
+                 message=f"reference table '{entry['label']}' ({entry['status']}, {entry['date']}, commit "
+                         f"{entry['commit']}, seed {entry['options'].get('seed')}): {entry['message']}")
+
+
+def recorded_mc(h: Harvester) -> Stats | None:
+    """The independent long Monte Carlo run recorded for the single unit ``h``: the kink's own
+    file (``validation/references/data/kink_mc_reference_values.json``, n = 1), else this table; None if
+    there is none."""
+    if h.N == 1 and h.n == 1.0:
+        from ..studies.kinkref import recorded_reference
+
+        d = recorded_reference(h.a)
+        if d is None:
+            return None
+        return Stats(status=Status.STABLE, method="mc", eta=d["eta"], eta_err=d["eta_err"],
+                     message=f"long run in validation/references/data/kink_mc_reference_values.json (seed {d.get('seed')}): "
+                             f"{d['message']}",
+                     V2=d["V2"], V2_err=d["V2_err"], Pin=d["Pin"], Pin_err=d["Pin_err"])
+    entry = lookup(h, "mc")
+    return None if entry is None else as_stats(entry, Status.STABLE)
+
+
+def compare(label: str, r: Stats, sigmas: float = 4.0, path: Path = PATH) -> list[tuple[str, bool, str]]:
+    """``r`` against the table's entry ``label``, per quantity: |r - ref| <= sigmas x the
+    combined error (Monte Carlo standard errors and Fokker--Planck bounds alike; an entry that
+    stopped short of its tolerance counts with the error it reached). Returns (label, passed,
+    detail) triples; an entry that is missing or has no error fails."""
+    entry = load(path).get(label)
+    if entry is None or entry.get("eta_err") is None:
+        why = "missing" if entry is None else f"without an error ({entry.get('status')}: {entry.get('message')})"
+        return [(f"reference table: {label}", False, f"entry {why} (python -m validation.references.reftable)")]
+    out = []
+    for q in ("eta", "V2", "Pin"):
+        v, e = r.value(q)
+        ref, ref_e = entry[q], entry[q + "_err"] or 0.0
+        if v is None or e is None:
+            out.append((f"reference table: {label}: {q}", False, f"{r.method} gave no {q} ({r.status.value})"))
+            continue
+        comb = math.hypot(e, ref_e)
+        ok = abs(v - ref) <= sigmas * comb
+        out.append((f"reference table: {label}: {q}", ok,
+                    f"{v:.8g} +- {e:.2g} vs table {ref:.8g} +- {ref_e:.2g} ({entry['method']}, {entry['status']}, "
+                    f"{entry['date']}, "
+                    f"commit {entry['commit']}): |diff| = {abs(v - ref):.2g} vs {sigmas:g} x {comb:.2g}"))
+    return out
+
+
+def main(argv: list[str] | None = None) -> int:
+    """Command line: recompute all cases or those named by ``--only`` and write the table."""
+    p = argparse.ArgumentParser(prog="python -m validation.references.reftable", description=__doc__.splitlines()[0])
+    p.add_argument("--only", nargs="+", metavar="LABEL", help="labels to recompute (default: all)")
+    p.add_argument("--out", default=str(PATH), help=f"table to update (default {PATH})")
+    p.add_argument("--list", action="store_true", help="list the cases and exit")
+    args = p.parse_args(argv)
+    labels = [c.label for c in CASES]
+    if args.list:
+        print("\n".join(labels))
+        return 0
+    unknown = sorted(set(args.only or ()) - set(labels))
+    if unknown:
+        print(f"python -m validation.references.reftable: error: --only: unknown labels {unknown}; see --list", file=sys.stderr)
+        return 2
+    out = Path(args.out)
+    table = load(out)
+    for case in CASES:
+        if args.only and case.label not in args.only:
+            continue
+        entry = compute(case)
+        table[case.label] = entry
+        out.write_text(json.dumps(table, indent=1, sort_keys=True) + "\n")
+        print(f"{case.label:40s} {entry['status']:14s} eta {entry['eta']} +- {entry['eta_err']} "
+              f"({entry['seconds']} s)", flush=True)
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())

@@ -1,0 +1,61 @@
+"""Command line and output files shared by the benchmark modules.
+
+Each module (:mod:`.exact`, :mod:`.fpe`, :mod:`.montecarlo`) has ``run(quick, out) -> dict``,
+writes ``<STEM>.json`` and ``<STEM>.png`` with :func:`save_benchmark`, and runs as
+``python -m validation.studies.<module> [--quick] [--out DIR]`` through :func:`bench_main`.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+from collections.abc import Callable, Sequence
+from pathlib import Path
+
+__all__ = ["bench_main", "save_benchmark"]
+
+
+def save_benchmark(res: dict, out: Path | str | None, stem: str, plot: Callable[[dict, Path], None]) -> None:
+    """Write a benchmark's ``{stem}.json`` and ``{stem}.png`` into ``out`` (nothing if None)."""
+    if out is None:
+        return
+    out = Path(out)
+    out.mkdir(parents=True, exist_ok=True)
+    (out / f"{stem}.json").write_text(json.dumps(res, indent=2))
+    plot(res, out / f"{stem}.png")
+
+
+def bench_main(run: Callable[..., dict], doc: str | None, drop: Sequence[str] = (),
+               argv: Sequence[str] | None = None) -> dict:
+    """Command line of a benchmark module: ``python -m validation.studies.X [--quick] [--out DIR]``.
+
+    Parses the arguments, calls ``run(quick=..., out=...)`` and prints the result as JSON
+    without the keys in ``drop`` (bulky tables that are in the written JSON file anyway).
+
+    Parameters
+    ----------
+    run : callable
+        The benchmark's ``run(quick: bool, out: Path | None) -> dict``.
+    doc : str or None
+        The module docstring; its first line is the ``--help`` description.
+    drop : sequence of str, optional
+        Top-level keys of the result left out of the printed JSON (default: none).
+    argv : sequence of str, optional
+        Arguments to parse instead of ``sys.argv[1:]``.
+
+    Returns
+    -------
+    dict
+        The full result of ``run``.
+    """
+    spec = getattr(sys.modules["__main__"], "__spec__", None)
+    prog = f"python -m {spec.name}" if spec is not None else None  # not the bare "fpe.py"
+    ap = argparse.ArgumentParser(prog=prog, description=doc.splitlines()[0] if doc else None)
+    ap.add_argument("--quick", action="store_true", help="small subset, well under a minute")
+    ap.add_argument("--out", type=Path, default=Path("validation_report"), metavar="DIR",
+                    help="folder for the JSON and PNG (default ./validation_report)")
+    args = ap.parse_args(argv)
+    res = run(quick=args.quick, out=args.out)
+    print(json.dumps({k: v for k, v in res.items() if k not in drop}, indent=2))
+    return res
