@@ -1,4 +1,6 @@
-"""Command-line interface: ``harvester stats``, ``threshold``, ``optimize``, ``scene``, ``validate``.
+"""Command-line interface: ``harvester stats``, ``threshold``, ``optimize``, ``scene``, and the
+subcommands other packages add through the entry-point group :data:`COMMAND_GROUP` (the
+validation's ``validate``).
 
 Every command prints a readable table, or one JSON object with ``--json``. Never a traceback:
 bad input (an argument out of range, a parameter set whose answer is beyond double precision,
@@ -14,7 +16,10 @@ import json
 import os
 import re
 import sys
+import tomllib
 from collections.abc import Callable, Sequence
+from importlib.metadata import EntryPoint, entry_points
+from pathlib import Path
 from typing import Any, NoReturn
 
 from .errors import HarvesterError, ParameterError
@@ -23,7 +28,12 @@ from .model import MAX_EXPONENT, Harvester, Params
 from .result import QUANTITIES
 from .solve import METHODS, choose_method, solve
 
-__all__ = ["main", "build_parser"]
+__all__ = ["COMMAND_GROUP", "main", "build_parser"]
+
+#: Entry-point group of the subcommands other packages add to ``harvester``: each entry is a
+#: function ``register(subparsers) -> handler`` that adds its parser and returns the function
+#: that runs it (``handler(args) -> exit code``).
+COMMAND_GROUP = "fpe_harvester.commands"
 
 
 class _Parser(argparse.ArgumentParser):
@@ -210,17 +220,6 @@ def _writable_folder(flag: str, path: str) -> str:
     return path
 
 
-def cmd_validate(args: argparse.Namespace) -> int:
-    """Run the validation suite; its runner prints the summary and writes the report."""
-    from validation.harness.runner import run_cli
-
-    if args.bench is not None and not os.path.isdir(args.bench):
-        raise ParameterError(f"--bench {args.bench!r}: not a folder (give the --out folder of "
-                             "python -m validation.studies.fpe, .montecarlo or .exact)")
-    return run_cli(quick=args.quick, out=_writable_folder("--out", args.out), seed=args.seed,
-                   progress=not args.no_progress, bench=args.bench)
-
-
 def _scheduler(args: argparse.Namespace) -> str | None:
     """Where scene points run: ``--scheduler``, ``--dask local``, else ``DASK_SCHEDULER_ADDRESS``
     unless ``--workers`` asks for local processes, else this process (``None``)."""
@@ -267,7 +266,6 @@ def cmd_scene(args: argparse.Namespace) -> int:
 COMMANDS: dict[str, Callable[[argparse.Namespace], int]] = {
     "scene": cmd_scene,
     "stats": cmd_stats,
-    "validate": cmd_validate,
     "threshold": cmd_threshold,
     "optimize": cmd_optimize,
 }
@@ -280,6 +278,30 @@ def _harvester_arguments(p: argparse.ArgumentParser, N: int) -> None:
     p.add_argument("--N", type=int, default=N, help=f"number of units in the ring (default {N})")
     p.add_argument("--param", type=_key_value, action="append", default=[], metavar="NAME=VALUE",
                    help="physical parameter (m, gamma, Kv, Kc, sigma, tau, D, tau_p, R); repeatable")
+
+
+def command_plugins() -> list[EntryPoint]:
+    """The entry points of :data:`COMMAND_GROUP`: from the installed metadata, else from the
+    pyproject.toml of the source tree this module runs from (an editable install made before
+    the group was declared has none in its metadata until it is reinstalled)."""
+    found = list(entry_points(group=COMMAND_GROUP))
+    pyproject = Path(__file__).resolve().parents[1] / "pyproject.toml"
+    if found or not pyproject.is_file():
+        return found
+    declared = tomllib.loads(pyproject.read_text()).get("project", {}).get("entry-points", {})
+    return [EntryPoint(name, value, COMMAND_GROUP) for name, value in declared.get(COMMAND_GROUP, {}).items()]
+
+
+def _add_plugins(sub: Any) -> None:
+    """Let each :func:`command_plugins` entry add its subcommand; one whose package cannot be
+    imported is left out (``harvester`` works without it)."""
+    for ep in command_plugins():
+        try:
+            register = ep.load()
+        except ImportError:
+            continue
+        handler = register(sub)
+        sub.choices[ep.name].set_defaults(handler=handler)
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -321,15 +343,6 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--json", action="store_true", help="print one JSON object")
     p.add_argument("--no-progress", action="store_true", help="no progress bar")
 
-    p = sub.add_parser("validate", help="cross-checks, paper comparison, stress tests, benchmarks -> report")
-    p.add_argument("--quick", action="store_true", help="CI subset, under 3 minutes")
-    p.add_argument("--out", default="validation_report", metavar="DIR",
-                   help="output folder for report.md, report.html, figures (default ./validation_report)")
-    p.add_argument("--seed", type=int, default=2017, help="base Monte Carlo seed (default 2017)")
-    p.add_argument("--no-progress", action="store_true", help="no progress bar")
-    p.add_argument("--bench", default=None, metavar="DIR",
-                   help="include the exhaustive benchmarks written by python -m validation.studies.* --out DIR")
-
     p = sub.add_parser("scene", help="declarative studies: the paper's figures and more")
     scene_sub = p.add_subparsers(dest="action", required=True, parser_class=_Parser)
     q = scene_sub.add_parser("list", help="shipped scenes")
@@ -350,6 +363,7 @@ def build_parser() -> argparse.ArgumentParser:
                             "(default: $DASK_SCHEDULER_ADDRESS if set and --workers is not given)")
     where.add_argument("--dask", choices=("local",),
                        help="run the points on a local Dask cluster (one worker per CPU)")
+    _add_plugins(sub)
     return parser
 
 
@@ -364,7 +378,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     args = parser.parse_args(argv)
     prefix = f"harvester {args.command}"
     try:
-        return COMMANDS[args.command](args)
+        return COMMANDS[args.command](args) if args.command in COMMANDS else args.handler(args)
     except HarvesterError as exc:
         print(f"{prefix}: error: {_one_line(exc)}", file=sys.stderr)
         return 2

@@ -1,4 +1,4 @@
-"""Run the whole validation and write the report: ``harvester validate [--quick] [--out DIR]``.
+"""Run the whole validation and write the report (``harvester validate``, ``python -m validation``).
 
 Steps, in order (each a module with ``run(ctx) -> Section``): the cross-checks, the paper
 comparison, beyond the paper, the stress tests, the paper's figures (scenes), the
@@ -9,7 +9,6 @@ A step that crashes becomes a failed check; the run always ends with a report.
 
 from __future__ import annotations
 
-import argparse
 import importlib
 import os
 import platform
@@ -27,7 +26,7 @@ from fpe_harvester.solve import METHODS
 from .checks import Context, SolveCache, guarded, skipped
 from .report import Report, Section, summary_text, write_html, write_markdown
 
-__all__ = ["STEPS", "QUICK_BUDGET", "QUICK_MIN_RAN", "validate", "exit_code", "run_cli", "main", "build_parser"]
+__all__ = ["STEPS", "QUICK_BUDGET", "QUICK_MIN_RAN", "validate", "exit_code", "run_cli"]
 
 #: Steps run before the others (cheapest per check first); unlisted steps follow in plan order.
 RUN_FIRST = ("validation.sections.stress:run_exact", "validation.sections.figures:run_exact", "validation.sections.crosscheck",
@@ -310,34 +309,3 @@ def run_cli(quick: bool = False, out: Path | str = "validation_report", seed: in
           f"({time.perf_counter() - t0:.1f} s)")
     return exit_code(report, quick)
 
-
-def build_parser() -> argparse.ArgumentParser:
-    """Arguments of ``python -m validation`` (the same as ``harvester validate``)."""
-    p = argparse.ArgumentParser(prog="python -m validation", description=__doc__.splitlines()[0])
-    p.add_argument("--quick", action="store_true", help="CI subset, under 3 minutes")
-    p.add_argument("--out", default="validation_report", metavar="DIR",
-                   help="output folder (default ./validation_report)")
-    p.add_argument("--seed", type=int, default=2017, help="base Monte Carlo seed (default 2017)")
-    p.add_argument("--no-progress", action="store_true", help="no progress bar")
-    p.add_argument("--bench", default=None, metavar="DIR",
-                   help="include the output of python -m validation.studies.* --out DIR")
-    return p
-
-
-def main(argv: Sequence[str] | None = None) -> int:
-    """Entry point of ``python -m validation``; returns the exit code."""
-    args = build_parser().parse_args(argv)
-    if args.seed < 0:
-        print(f"python -m validation: error: --seed must be >= 0, got {args.seed}", file=sys.stderr)
-        return 2
-    try:
-        Path(args.out).mkdir(parents=True, exist_ok=True)
-    except OSError as exc:
-        print(f"python -m validation: error: --out {args.out!r}: cannot create the output folder "
-              f"({exc.strerror or exc})", file=sys.stderr)
-        return 2
-    if args.bench is not None and not Path(args.bench).is_dir():
-        print(f"python -m validation: error: --bench {args.bench!r}: not a folder", file=sys.stderr)
-        return 2
-    return run_cli(quick=args.quick, out=args.out, seed=args.seed, progress=not args.no_progress,
-                   bench=args.bench)

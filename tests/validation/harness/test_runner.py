@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import pytest
 
+import validation.harness.cli as vcli
 import validation.harness.runner as runner
 from fpe_harvester.cli import build_parser, main
 from validation.harness.checks import expect
@@ -118,7 +119,7 @@ def test_cli_negative_seed_is_a_clean_error(monkeypatch, tmp_path, capsys):
 
 
 def test_python_m_validation_parser():
-    args = runner.build_parser().parse_args(["--quick", "--out", "d"])
+    args = vcli.build_parser().parse_args(["--quick", "--out", "d"])
     assert args.quick and args.out == "d"
 
 
@@ -135,7 +136,7 @@ def test_report_keeps_the_plan_order(tmp_path):
 
 
 def test_python_m_validation_unwritable_out_is_a_one_line_error(capsys):
-    assert runner.main(["--out", "/dev/null/x", "--no-progress"]) == 2
+    assert vcli.main(["--out", "/dev/null/x", "--no-progress"]) == 2
     err = capsys.readouterr().err
     assert err.count("\n") == 1 and "--out '/dev/null/x': cannot create the output folder" in err
 
