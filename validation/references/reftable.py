@@ -27,10 +27,13 @@ from typing import Any
 
 from fpe_harvester import Harvester, Stats, Status, solve
 
-__all__ = ["RefCase", "CASES", "PATH", "load", "lookup", "as_stats", "recorded_mc", "compute", "compare", "main"]
+__all__ = ["RefCase", "CASES", "PATH", "KINK_PATH", "load", "lookup", "as_stats", "recorded_kink", "recorded_mc",
+           "compute", "compare", "main"]
 
 #: Where the table lives.
 PATH = Path(__file__).parent / "data" / "reference_values.json"
+#: The kink's (n = 1) long Monte Carlo runs, one entry per a (``"a0.5"``, ``"a1"``, ``"a2"``).
+KINK_PATH = Path(__file__).parent / "data" / "kink_mc_reference_values.json"
 
 
 @dataclass(frozen=True)
@@ -129,14 +132,20 @@ def as_stats(entry: dict[str, Any], status: Status | None = None) -> Stats:
                          f"{entry['commit']}, seed {entry['options'].get('seed')}): {entry['message']}")
 
 
+def recorded_kink(a: float) -> dict[str, Any] | None:
+    """The long Monte Carlo run of the kink (n = 1) at ``a`` recorded in :data:`KINK_PATH`
+    (eta, V2, Pin with errors, seed, dt, ...), or None if none is recorded for that ``a``."""
+    if not KINK_PATH.exists():
+        return None
+    return json.loads(KINK_PATH.read_text()).get(f"a{a:g}")
+
+
 def recorded_mc(h: Harvester) -> Stats | None:
     """The independent long Monte Carlo run recorded for the single unit ``h``: the kink's own
     file (``validation/references/data/kink_mc_reference_values.json``, n = 1), else this table; None if
     there is none."""
     if h.N == 1 and h.n == 1.0:
-        from ..studies.kinkref import recorded_reference
-
-        d = recorded_reference(h.a)
+        d = recorded_kink(h.a)
         if d is None:
             return None
         return Stats(status=Status.STABLE, method="mc", eta=d["eta"], eta_err=d["eta_err"],

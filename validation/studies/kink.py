@@ -35,7 +35,7 @@ from fpe_harvester.fpe import stationary
 from fpe_harvester.fpe.kinkdisc import KinkDG, KinkSettings
 from validation.studies.cli import bench_main, save_benchmark
 from validation.sections.kinkdensity import v_concentration
-from validation.studies.kinkref import recorded_reference
+from validation.references.reftable import recorded_kink
 
 __all__ = ["STEM", "TARGETS", "run", "convergence", "table"]
 
@@ -147,7 +147,7 @@ def run(quick: bool = False, out: pathlib.Path | None = None) -> dict:
         if not quick:
             case["previous_scheme"] = _run(h, 1e-3, 300.0, scheme="x")
             case["monte_carlo"] = mc = _monte_carlo(h, 3e-3, 600.0)
-        long_mc = None if quick else recorded_reference(a)
+        long_mc = None if quick else recorded_kink(a)
         if long_mc is not None:
             case["monte_carlo_reference"] = {k: long_mc[k] for k in ("eta", "eta_err", "V2", "V2_err", "Pin",
                                                                       "Pin_err", "seed", "dt")}

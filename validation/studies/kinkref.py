@@ -415,17 +415,3 @@ def main(argv: list[str] | None = None) -> dict[str, Any]:
 
 if __name__ == "__main__":  # pragma: no cover
     main()
-
-
-def recorded_reference(a: float) -> dict[str, Any] | None:
-    """The long Monte Carlo run of the kink (n = 1) at ``a`` recorded in
-    ``validation/references/data/kink_mc_reference_values.json`` (eta, V2, Pin with errors, seed, dt,
-    ...), or None if none is recorded for that ``a``."""
-    import json
-    from pathlib import Path
-
-    path = Path(__file__).parent.parent / "references" / "data" / "kink_mc_reference_values.json"
-    if not path.exists():
-        return None
-    return json.loads(path.read_text()).get(f"a{a:g}")
-
