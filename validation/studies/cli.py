@@ -1,7 +1,7 @@
-"""Command line and output files shared by the benchmark modules.
+"""Command line and output files shared by the studies.
 
-Each module (:mod:`.exact`, :mod:`.fpe`, :mod:`.montecarlo`) has ``run(quick, out) -> dict``,
-writes ``<STEM>.json`` and ``<STEM>.png`` with :func:`save_benchmark`, and runs as
+Each study module has ``run(quick, out) -> dict``, writes ``<STEM>.json`` and ``<STEM>.png``
+with :func:`save_benchmark` (a one-panel study through :func:`run_study`), and runs as
 ``python -m validation.studies.<module> [--quick] [--out DIR]`` through :func:`bench_main`.
 """
 
@@ -10,10 +10,12 @@ from __future__ import annotations
 import argparse
 import json
 import sys
+import time
 from collections.abc import Callable, Sequence
 from pathlib import Path
+from typing import Any
 
-__all__ = ["bench_main", "save_benchmark"]
+__all__ = ["bench_main", "save_benchmark", "run_study", "axes_plot"]
 
 
 def save_benchmark(res: dict, out: Path | str | None, stem: str, plot: Callable[[dict, Path], None]) -> None:
@@ -24,6 +26,37 @@ def save_benchmark(res: dict, out: Path | str | None, stem: str, plot: Callable[
     out.mkdir(parents=True, exist_ok=True)
     (out / f"{stem}.json").write_text(json.dumps(res, indent=2))
     plot(res, out / f"{stem}.png")
+
+
+def axes_plot(draw: Callable[[dict, Any], None], size: tuple[float, float] = (6.0, 4.2)
+              ) -> Callable[[dict, Path], None]:
+    """A ``plot(res, path)`` for :func:`save_benchmark` that draws ``res`` on one panel with
+    ``draw(res, ax)`` (``size`` in inches)."""
+
+    def plot(res: dict, path: Path) -> None:
+        import matplotlib
+
+        matplotlib.use("Agg")
+        import matplotlib.pyplot as plt
+
+        fig, ax = plt.subplots(figsize=size)
+        draw(res, ax)
+        fig.tight_layout()
+        fig.savefig(path, dpi=110)
+        plt.close(fig)
+
+    return plot
+
+
+def run_study(study: Callable[[bool], dict], stem: str, draw: Callable[[dict, Any], None], quick: bool,
+              out: Path | str | None) -> dict[str, Any]:
+    """Run a one-panel study: ``study(quick)``, with ``quick`` and the wall time [s] added,
+    written as ``{stem}.json`` and ``{stem}.png`` (drawn by ``draw(res, ax)``) into ``out``."""
+    t0 = time.perf_counter()
+    res = {"quick": quick, **study(quick)}
+    res["wall_s"] = time.perf_counter() - t0
+    save_benchmark(res, out, stem, axes_plot(draw))
+    return res
 
 
 def bench_main(run: Callable[..., dict], doc: str | None, drop: Sequence[str] = (),

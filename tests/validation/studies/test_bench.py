@@ -83,3 +83,33 @@ def test_montecarlo_bench_runs_a_subset_of_its_studies(tmp_path):
     assert (tmp_path / f"{montecarlo.STEM}.png").exists()
     with pytest.raises(ValueError, match="studies must be among"):
         montecarlo.run(quick=True, studies=("no such study",))
+
+
+def test_each_monte_carlo_study_is_a_module_the_benchmark_runs():
+    """Every study of the Monte Carlo benchmark comes from a study module with its own
+    ``run``, ``STEM`` and ``draw`` (so ``python -m validation.studies.<name>`` writes it alone)."""
+    import importlib
+
+    from validation.studies import montecarlo
+
+    modules = {importlib.import_module(fn.__module__) for fn in montecarlo.STUDIES.values()
+               if fn.__module__ != montecarlo.__name__}
+    assert len(modules) == 11
+    for mod in modules:
+        assert mod.__name__.startswith("validation.studies.mc_")
+        assert callable(mod.run) and callable(mod.draw) and mod.STEM.startswith("bench_montecarlo_")
+
+
+def test_recorded_policy_and_martingale_runs_draw(tmp_path):
+    """The recorded full runs in validation/data have the shape their study's figure reads."""
+    import json
+
+    from validation.studies import mc_martingale, mc_policy
+    from validation.studies.cli import axes_plot
+
+    data = Path(__file__).parents[3] / "validation" / "data"
+    policy = json.loads((data / "bench_montecarlo_policy.json").read_text())
+    axes_plot(mc_policy.draw)(policy, tmp_path / "policy.png")
+    rows = json.loads((data / "bench_montecarlo_martingale_rows.json").read_text())
+    axes_plot(mc_martingale.draw)(rows, tmp_path / "martingale.png")
+    assert (tmp_path / "policy.png").stat().st_size > 0 and (tmp_path / "martingale.png").stat().st_size > 0
