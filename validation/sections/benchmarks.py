@@ -1,7 +1,7 @@
 """Benchmarks: run each solver's benchmark module and combine their error-versus-wall-time curves.
 
-The modules :mod:`validation.studies.exact`, :mod:`validation.studies.fpe` and
-:mod:`validation.studies.montecarlo` each provide ``run(quick, out) -> dict`` and write their own
+The study modules :mod:`validation.studies.exact`, :mod:`validation.studies.fpe` and
+:mod:`validation.studies.montecarlo` (:func:`bench_modules`) each provide ``run(quick, out) -> dict`` and write their own
 JSON and PNG (named by their ``STEM``). Each may also return ``"series"``: a list of curves
 
 ``{"problem": key of PROBLEMS, "method": str, "points": [{"seconds": float, "error": float}
@@ -21,21 +21,24 @@ the machine, correctness to the checks.
 
 from __future__ import annotations
 
-import importlib
 import json
 import math
 from collections.abc import Iterator, Mapping
+from types import ModuleType
 from typing import Any
 
-from ..harness.checks import CheckResult, Context, expect, skipped
+from ..harness.checks import CheckResult, Context, expect
 from ..harness.report import Figure, Section, Table, new_figure, save_figure
 
-__all__ = ["BENCH_MODULES", "PROBLEMS", "error_time_pairs", "resolve_series", "run"]
+__all__ = ["bench_modules", "PROBLEMS", "error_time_pairs", "resolve_series", "run"]
 
 _SECTION = "Benchmarks: error versus wall time"
-#: Benchmark modules and the solver each measures.
-BENCH_MODULES = (("validation.studies.exact", "exact"), ("validation.studies.fpe", "fpe"),
-                 ("validation.studies.montecarlo", "mc"))
+def bench_modules() -> tuple[ModuleType, ...]:
+    """The study modules this section runs, one per solver: exact, Fokker--Planck, Monte Carlo
+    (imported when the section runs: importing them loads every solver)."""
+    from ..studies import exact, fpe, montecarlo
+
+    return exact, fpe, montecarlo
 
 
 def _is_time(key: str) -> bool:
@@ -213,12 +216,8 @@ def _include(ctx: Context, mod: Any, sec: Section, targets: Table) -> None:
                             note=f"All measurements: {path}."))
 
 
-def _run_one(ctx: Context, module: str, solver: str, sec: Section,
-             curves: list[dict[str, Any]], targets: Table) -> list[CheckResult]:
-    try:
-        mod = importlib.import_module(module)
-    except ImportError as exc:
-        return [skipped(f"benchmark {module}", _SECTION, f"module not available ({exc})")]
+def _run_one(ctx: Context, mod: ModuleType, sec: Section, curves: list[dict[str, Any]],
+             targets: Table) -> list[CheckResult]:
     out = ctx.out / "bench"
     out.mkdir(parents=True, exist_ok=True)
     # a module's REPORT_KW narrows its short run to what this section needs (its own CLI runs all)
@@ -230,7 +229,7 @@ def _run_one(ctx: Context, module: str, solver: str, sec: Section,
     for label, t, target in _targets(data):
         targets.rows.append((name, label, f"{t:.4g}", f"{target:.4g}", "yes" if t <= target else "NO"))
     for png in sorted(out.glob(f"{name}*.png")):
-        sec.figures.append(Figure(png, f"{name}: {png.stem} (written by {module})"))
+        sec.figures.append(Figure(png, f"{name}: {png.stem} (written by {mod.__name__})"))
     table = Table(f"{name}: error/time pairs", ("quantity", "wall time [s]", "error"),
                   [(lbl, f"{t:.4g}", f"{e:.3g}") for lbl, t, e in pairs[:60]],
                   note=f"All measurements: bench/{name}.json." if (out / f"{name}.json").exists() else "")
@@ -248,9 +247,9 @@ def run(ctx: Context) -> Section:
     curves: list[dict[str, Any]] = []
     targets = Table("Speed targets (reported, not failed)", ("benchmark", "measurement", "time [s]", "target [s]",
                                                              "met"))
-    for module, solver in BENCH_MODULES:
-        sec.checks += ctx.check(f"benchmark {module}", _SECTION,
-                              lambda module=module, solver=solver: _run_one(ctx, module, solver, sec, curves, targets))
+    for mod in bench_modules():
+        sec.checks += ctx.check(f"benchmark {mod.__name__}", _SECTION,
+                                lambda mod=mod: _run_one(ctx, mod, sec, curves, targets))
     if curves:
         sec.figures.insert(0, _plot(ctx, curves))
     if targets.rows:
