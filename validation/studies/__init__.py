@@ -1,19 +1,22 @@
-"""Benchmarks: error versus wall time of each solver, with the baselines it replaces.
+"""Benchmarks and design studies: one module per study, each runnable on its own with
+``python -m validation.studies.<name> [--quick] [--out DIR]``, writing ``<STEM>.json`` and
+``<STEM>.png`` (:mod:`.cli` is their shared command line and output).
 
-One module per solver, each runnable on its own and writing ``<STEM>.json`` and ``<STEM>.png``:
+* benchmarks, error against wall time, whose short versions the report's benchmark section runs
+  (:mod:`validation.sections.benchmarks`): :mod:`.exact` (against scipy's dense Lyapunov solve),
+  :mod:`.fpe` (Fokker--Planck; :mod:`.kink` and :mod:`.xmesh` are its kink and x-mesh parts) and
+  :mod:`.montecarlo` (which runs the Monte Carlo studies below in one go);
+* Monte Carlo design studies: :mod:`.mc_rng`, :mod:`.mc_throughput`, :mod:`.mc_equal_error`,
+  :mod:`.mc_bias`, :mod:`.mc_tau`, :mod:`.mc_steep`, :mod:`.mc_controls`, :mod:`.mc_martingale`,
+  :mod:`.mc_policy`, :mod:`.mc_boundary`, :mod:`.mc_kink_dt`;
+* the kink (n = 1): :mod:`.kinkstudy` (its time-step law) and :mod:`.kinkref` (an independent
+  reference scheme with exact crossings).
 
-* ``python -m validation.studies.exact``: the exact solver against scipy's dense Lyapunov solve;
-* ``python -m validation.studies.fpe``: Fokker--Planck error against wall time, time to a tolerance;
-* ``python -m validation.studies.montecarlo``: Monte Carlo speed, cost at equal error, time-step
-  bias, against a plain numpy Euler--Maruyama loop;
-
-(each takes ``--quick`` and ``--out DIR``; :mod:`.cli` is their shared command line).
-:mod:`validation.sections.benchmarks` is the report step of ``harvester validate``: it runs the three and puts
-their error/time pairs on one plot. The modules are imported when run, not here.
+The modules are imported when run, not here.
 """
 
 from __future__ import annotations
 
-from .cli import bench_main, save_benchmark
+from .cli import axes_plot, bench_main, run_study, save_benchmark
 
-__all__ = ["bench_main", "save_benchmark"]
+__all__ = ["axes_plot", "bench_main", "run_study", "save_benchmark"]
