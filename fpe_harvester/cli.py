@@ -28,7 +28,7 @@ from .model import MAX_EXPONENT, Harvester, Params
 from .result import QUANTITIES
 from .solve import METHODS, choose_method, solve
 
-__all__ = ["COMMAND_GROUP", "main", "build_parser"]
+__all__ = ["COMMAND_GROUP", "main", "build_parser", "writable_folder"]
 
 #: Entry-point group of the subcommands other packages add to ``harvester``: each entry is a
 #: function ``register(subparsers) -> handler`` that adds its parser and returns the function
@@ -209,7 +209,7 @@ def cmd_optimize(args: argparse.Namespace) -> int:
     return 0
 
 
-def _writable_folder(flag: str, path: str) -> str:
+def writable_folder(flag: str, path: str) -> str:
     """``path`` after creating it, or a :class:`ParameterError` naming ``flag`` if that fails."""
     try:
         os.makedirs(path, exist_ok=True)
@@ -243,7 +243,7 @@ def cmd_scene(args: argparse.Namespace) -> int:
         _print_table([(s.name, f"{s.n_points}/{s.variant(True).n_points}", s.title) for s in scenes],
                      ("scene", "points (full/quick)", "title"))
         return 0
-    result = run_scene(load_scene(args.scene), _writable_folder("--out", args.out), quick=args.quick,
+    result = run_scene(load_scene(args.scene), writable_folder("--out", args.out), quick=args.quick,
                        progress=False if args.no_progress or args.json else None, workers=args.workers,
                        scheduler=_scheduler(args))
     if args.json:

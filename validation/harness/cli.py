@@ -15,6 +15,7 @@ import sys
 from collections.abc import Callable, Sequence
 from typing import Any
 
+from fpe_harvester.cli import writable_folder
 from fpe_harvester.errors import ParameterError
 
 from .runner import run_cli
@@ -33,17 +34,6 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                    help="include the exhaustive benchmarks written by python -m validation.studies.* --out DIR")
 
 
-def _output_folder(path: str) -> str:
-    """``path`` after creating it, or a :class:`ParameterError` naming ``--out``."""
-    try:
-        os.makedirs(path, exist_ok=True)
-    except OSError as exc:
-        raise ParameterError(f"--out {path!r}: cannot create the output folder ({exc.strerror or exc})") from None
-    if not os.access(path, os.W_OK):
-        raise ParameterError(f"--out {path!r}: the output folder is not writable")
-    return path
-
-
 def run(args: argparse.Namespace) -> int:
     """Run the validation with parsed ``args``; returns the exit code of :func:`.runner.run_cli`.
 
@@ -57,7 +47,7 @@ def run(args: argparse.Namespace) -> int:
     if args.bench is not None and not os.path.isdir(args.bench):
         raise ParameterError(f"--bench {args.bench!r}: not a folder (give the --out folder of "
                              "python -m validation.studies.fpe, .montecarlo or .exact)")
-    return run_cli(quick=args.quick, out=_output_folder(args.out), seed=args.seed,
+    return run_cli(quick=args.quick, out=writable_folder("--out", args.out), seed=args.seed,
                    progress=not args.no_progress, bench=args.bench)
 
 

@@ -15,7 +15,7 @@ from collections.abc import Callable, Sequence
 from pathlib import Path
 from typing import Any
 
-__all__ = ["bench_main", "save_benchmark", "run_study", "axes_plot"]
+__all__ = ["bench_main", "save_benchmark", "run_study", "study_runner", "axes_plot"]
 
 
 def save_benchmark(res: dict, out: Path | str | None, stem: str, plot: Callable[[dict, Path], None]) -> None:
@@ -57,6 +57,18 @@ def run_study(study: Callable[[bool], dict], stem: str, draw: Callable[[dict, An
     res["wall_s"] = time.perf_counter() - t0
     save_benchmark(res, out, stem, axes_plot(draw))
     return res
+
+
+def study_runner(study: Callable[[bool], dict], stem: str, draw: Callable[[dict, Any], None]
+                 ) -> Callable[..., dict[str, Any]]:
+    """The ``run(quick=False, out=None) -> dict`` of a one-panel study: :func:`run_study` of
+    ``study``, written as ``{stem}.json`` and ``{stem}.png`` (drawn by ``draw``)."""
+
+    def run(quick: bool = False, out: Path | str | None = None) -> dict[str, Any]:
+        return run_study(study, stem, draw, quick, out)
+
+    run.__doc__ = f"Run :func:`{study.__module__}.{study.__name__}`; write ``{stem}.json`` and ``.png`` into ``out``."
+    return run
 
 
 def bench_main(run: Callable[..., dict], doc: str | None, drop: Sequence[str] = (),

@@ -11,14 +11,13 @@ a = 2 and the steep n = 1.1 potential, and the naive scheme's error at a = 2;
 from __future__ import annotations
 
 import math
-from pathlib import Path
 from typing import Any
 
 import numpy as np
 
 from fpe_harvester import Harvester
 from montecarlo import estimate, simulate, simulate_naive
-from validation.studies.cli import bench_main, run_study
+from validation.studies.cli import bench_main, study_runner
 
 __all__ = ["STEM", "bias_study", "coupled_diff", "draw", "run"]
 
@@ -101,9 +100,8 @@ def draw(res: dict[str, Any], ax: Any) -> None:
     ax.legend(fontsize=7)
 
 
-def run(quick: bool = False, out: Path | None = None) -> dict[str, Any]:
-    """The time-step bias (:func:`bias_study`); writes ``{STEM}.json`` and ``.png`` into ``out`` when given."""
-    return run_study(bias_study, STEM, draw, quick, out)
+#: The time-step bias (:func:`bias_study`), written as ``{STEM}.json`` and ``.png`` into ``out`` when given.
+run = study_runner(bias_study, STEM, draw)
 
 
 if __name__ == "__main__":  # pragma: no cover

@@ -11,7 +11,6 @@ t_run (:func:`boundary_rows`).
 from __future__ import annotations
 
 import time
-from pathlib import Path
 from typing import Any
 
 import numpy as np
@@ -19,7 +18,7 @@ import numpy as np
 from fpe_harvester import Harvester
 from fpe_harvester.errors import ParameterError
 from montecarlo import MonteCarlo, estimate, simulate
-from validation.studies.cli import bench_main, run_study
+from validation.studies.cli import bench_main, study_runner
 
 __all__ = ["STEM", "boundary_rows", "run"]
 
@@ -75,9 +74,8 @@ def draw(res: dict[str, Any], ax: Any) -> None:
     ax.legend(fontsize=6)
 
 
-def run(quick: bool = False, out: Path | None = None) -> dict[str, Any]:
-    """The end-of-window terms (:func:`boundary_rows`); writes ``{STEM}.json`` and ``.png`` into ``out`` when given."""
-    return run_study(boundary_rows, STEM, draw, quick, out)
+#: The end-of-window terms (:func:`boundary_rows`), written as ``{STEM}.json`` and ``.png`` into ``out`` when given.
+run = study_runner(boundary_rows, STEM, draw)
 
 
 if __name__ == "__main__":  # pragma: no cover

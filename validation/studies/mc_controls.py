@@ -13,7 +13,6 @@ budget and, where the budget runs out, extrapolated as ``wall * (se / se_needed)
 from __future__ import annotations
 
 import math
-from pathlib import Path
 from typing import Any
 
 import numpy as np
@@ -21,7 +20,7 @@ import numpy as np
 from fpe_harvester import Harvester, solve
 from montecarlo import MonteCarlo, estimate, simulate
 from montecarlo.simulate import default_threads
-from validation.studies.cli import bench_main, run_study
+from validation.studies.cli import bench_main, study_runner
 
 __all__ = ["STEM", "CV_CASES", "QUICK_CV_CASES", "CV_TARGET", "control_variates", "draw", "run"]
 
@@ -129,9 +128,8 @@ def draw(res: dict[str, Any], ax: Any) -> None:
         ax.set_title("control variates (harmonic twin)")
 
 
-def run(quick: bool = False, out: Path | None = None) -> dict[str, Any]:
-    """The control-variate study (:func:`control_variates`); writes ``{STEM}.json`` and ``.png`` into ``out`` when given."""
-    return run_study(control_variates, STEM, draw, quick, out)
+#: The control-variate study (:func:`control_variates`), written as ``{STEM}.json`` and ``.png`` into ``out`` when given.
+run = study_runner(control_variates, STEM, draw)
 
 
 if __name__ == "__main__":  # pragma: no cover

@@ -15,14 +15,13 @@ evaluated with measured inputs, labelled as such).
 from __future__ import annotations
 
 import math
-from pathlib import Path
 from typing import Any
 
 import numpy as np
 
 from fpe_harvester import Harvester
 from montecarlo import estimate, simulate, simulate_naive
-from validation.studies.cli import bench_main, run_study
+from validation.studies.cli import bench_main, study_runner
 
 __all__ = ["STEM", "TARGET", "equal_error", "draw", "run"]
 
@@ -146,9 +145,8 @@ def draw(eq: dict[str, Any], ax: Any) -> None:
     ax.set_title("n = 1, a = 0.5, N = 1")
 
 
-def run(quick: bool = False, out: Path | None = None) -> dict[str, Any]:
-    """The engine against the numpy loop at equal error (:func:`equal_error`); writes ``{STEM}.json`` and ``.png`` into ``out`` when given."""
-    return run_study(equal_error, STEM, draw, quick, out)
+#: The engine against the numpy loop at equal error (:func:`equal_error`), written as ``{STEM}.json`` and ``.png`` into ``out`` when given.
+run = study_runner(equal_error, STEM, draw)
 
 
 if __name__ == "__main__":  # pragma: no cover

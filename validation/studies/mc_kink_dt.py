@@ -14,12 +14,11 @@ reference of :mod:`validation.studies.kinkref` on common noise.
 
 from __future__ import annotations
 
-from pathlib import Path
 from typing import Any
 
 import numpy as np
 
-from validation.studies.cli import bench_main, run_study
+from validation.studies.cli import bench_main, study_runner
 
 __all__ = ["STEM", "kink_dt_study", "draw", "run"]
 
@@ -84,9 +83,8 @@ def draw(kink: dict[str, Any], ax: Any) -> None:
         ax.legend(fontsize=6)
 
 
-def run(quick: bool = False, out: Path | None = None) -> dict[str, Any]:
-    """The kink's time-step law (:func:`kink_dt_study`); writes ``{STEM}.json`` and ``.png`` into ``out`` when given."""
-    return run_study(kink_dt_study, STEM, draw, quick, out)
+#: The kink's time-step law (:func:`kink_dt_study`), written as ``{STEM}.json`` and ``.png`` into ``out`` when given.
+run = study_runner(kink_dt_study, STEM, draw)
 
 
 if __name__ == "__main__":  # pragma: no cover

@@ -11,14 +11,13 @@ from __future__ import annotations
 
 import time
 from concurrent.futures import ThreadPoolExecutor
-from pathlib import Path
 from typing import Any
 
 import numpy as np
 from numba import njit, prange
 
 from montecarlo.simulate import default_threads
-from validation.studies.cli import bench_main, run_study
+from validation.studies.cli import bench_main, study_runner
 
 __all__ = ["STEM", "rng_costs", "run"]
 
@@ -96,9 +95,8 @@ def draw(res: dict[str, Any], ax: Any) -> None:
     ax.tick_params(axis="y", labelsize=6)
 
 
-def run(quick: bool = False, out: Path | None = None) -> dict[str, Any]:
-    """The generators' costs (:func:`study`); writes ``{STEM}.json`` and ``.png`` into ``out`` when given."""
-    return run_study(study, STEM, draw, quick, out)
+#: The generators' costs (:func:`study`), written as ``{STEM}.json`` and ``.png`` into ``out`` when given.
+run = study_runner(study, STEM, draw)
 
 
 if __name__ == "__main__":  # pragma: no cover

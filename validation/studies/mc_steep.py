@@ -11,11 +11,10 @@ time-step difference eta(0.01) - eta(0.02).
 from __future__ import annotations
 
 import math
-from pathlib import Path
 from typing import Any
 
 from fpe_harvester import Harvester, solve
-from validation.studies.cli import bench_main, run_study
+from validation.studies.cli import bench_main, study_runner
 from validation.studies.mc_bias import coupled_diff
 from validation.studies.mc_throughput import rate
 
@@ -76,9 +75,8 @@ def draw(res: dict[str, Any], ax: Any) -> None:
     ax.legend(fontsize=7)
 
 
-def run(quick: bool = False, out: Path | None = None) -> dict[str, Any]:
-    """The steep-wall study (:func:`steep_study`); writes ``{STEM}.json`` and ``.png`` into ``out`` when given."""
-    return run_study(steep_study, STEM, draw, quick, out)
+#: The steep-wall study (:func:`steep_study`), written as ``{STEM}.json`` and ``.png`` into ``out`` when given.
+run = study_runner(steep_study, STEM, draw)
 
 
 if __name__ == "__main__":  # pragma: no cover

@@ -11,11 +11,10 @@ default and the frozen-xi step.
 from __future__ import annotations
 
 import math
-from pathlib import Path
 from typing import Any
 
 from fpe_harvester import Harvester, solve
-from validation.studies.cli import bench_main, run_study
+from validation.studies.cli import bench_main, study_runner
 from validation.studies.mc_bias import coupled_diff
 
 __all__ = ["STEM", "TAUS", "tau_study", "run"]
@@ -68,9 +67,8 @@ def draw(res: dict[str, Any], ax: Any) -> None:
     ax.legend(fontsize=7)
 
 
-def run(quick: bool = False, out: Path | None = None) -> dict[str, Any]:
-    """The correlation-time study (:func:`tau_study`); writes ``{STEM}.json`` and ``.png`` into ``out`` when given."""
-    return run_study(tau_study, STEM, draw, quick, out)
+#: The correlation-time study (:func:`tau_study`), written as ``{STEM}.json`` and ``.png`` into ``out`` when given.
+run = study_runner(tau_study, STEM, draw)
 
 
 if __name__ == "__main__":  # pragma: no cover

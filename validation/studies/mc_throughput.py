@@ -10,13 +10,12 @@ and N = 3 (harmonic, n = 3); with the CPU seconds, for a machine shared with oth
 from __future__ import annotations
 
 import time
-from pathlib import Path
 from typing import Any
 
 from fpe_harvester import Harvester
 from montecarlo import simulate
 from montecarlo.simulate import default_threads
-from validation.studies.cli import bench_main, run_study
+from validation.studies.cli import bench_main, study_runner
 
 __all__ = ["STEM", "rate", "throughput", "run"]
 
@@ -63,9 +62,8 @@ def draw(res: dict[str, Any], ax: Any) -> None:
     ax.legend(fontsize=7)
 
 
-def run(quick: bool = False, out: Path | None = None) -> dict[str, Any]:
-    """The engine's throughput (:func:`throughput`); writes ``{STEM}.json`` and ``.png`` into ``out`` when given."""
-    return run_study(throughput, STEM, draw, quick, out)
+#: The engine's throughput (:func:`throughput`), written as ``{STEM}.json`` and ``.png`` into ``out`` when given.
+run = study_runner(throughput, STEM, draw)
 
 
 if __name__ == "__main__":  # pragma: no cover

@@ -19,7 +19,6 @@ Two parts, both in one run so that the two meshes share the machine's load:
 
 from __future__ import annotations
 
-import dataclasses
 import pathlib
 import time
 from typing import Any
