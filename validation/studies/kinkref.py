@@ -40,7 +40,7 @@ from montecarlo.estimate import student_factor
 from montecarlo.scheme import physical_vector, step_coefficients
 from montecarlo.simulate import default_threads
 
-__all__ = ["reference_run", "summarize", "MOMENTS"]
+__all__ = ["reference_run", "summarize", "draw", "main", "MOMENTS"]
 
 #: Event budget of one noise interval (counted when exhausted; the unit keeps its state).
 MAX_EVENTS = 100000
@@ -383,8 +383,22 @@ def summarize(run: dict[str, Any]) -> dict[str, Any]:
     return out
 
 
+def draw(res: dict[str, Any], ax: Any) -> None:
+    """Scheme minus reference of eta (relative, with its error over replicas) per level and a."""
+    for key, st in res.items():
+        levels = {k: v for k, v in st["levels"].items() if "minus_ref_eta" in v}
+        ref = st["levels"]["reference"]["eta"]
+        ax.errorbar(range(len(levels)), [v["minus_ref_eta"] / ref for v in levels.values()],
+                    yerr=[v["minus_ref_eta_se"] / ref for v in levels.values()], fmt="o", capsize=3, label=key)
+        ax.set_xticks(range(len(levels)), list(levels), fontsize=6, rotation=20)
+    ax.axhline(0.0, color="k", lw=0.8)
+    ax.set_ylabel("(scheme - reference) / reference, eta")
+    ax.legend(fontsize=7)
+
+
 def main(argv: list[str] | None = None) -> dict[str, Any]:
-    """Command line: scheme minus reference per a, written with the per-level summary to JSON."""
+    """Command line: scheme minus reference per a, written with the per-level summary to JSON
+    (``--out``) and drawn next to it (the same name with ``.png``)."""
     import argparse
     import json
     from pathlib import Path
@@ -410,6 +424,9 @@ def main(argv: list[str] | None = None) -> dict[str, Any]:
                          "t_run": run["t_run"]}
         args.out.write_text(json.dumps(res, indent=1))
         print(a, json.dumps(res[f"a{a:g}"]["levels"]), flush=True)
+    from validation.studies.cli import axes_plot
+
+    axes_plot(draw)(res, args.out.with_suffix(".png"))
     return res
 
 

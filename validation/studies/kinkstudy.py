@@ -204,7 +204,8 @@ def rule_comparison(a: float, dts: tuple[float, ...], *, replicas: int, seed: in
 
 
 def main(argv: list[str] | None = None) -> dict[str, Any]:
-    """Command line: run sweeps for the given a and write them (with the fits) to a JSON file."""
+    """Command line: run sweeps for the given a and write them (with the fits) to a JSON file
+    (``--out``), drawn next to it (the same name with ``.png``)."""
     import argparse
     import json
     from pathlib import Path
@@ -236,6 +237,10 @@ def main(argv: list[str] | None = None) -> dict[str, Any]:
         res["sweeps"][f"a{a:g}"] = sweep(a, tuple(args.dts), seed=args.seed + 100 * i,
                                          target=per_a(args.target, i), budget=per_a(args.budget, i), log=log)
         args.out.write_text(json.dumps(res, indent=1))
+    from validation.studies.cli import axes_plot
+    from validation.studies.mc_kink_dt import draw
+
+    axes_plot(draw)(res["sweeps"], args.out.with_suffix(".png"))
     return res
 
 
