@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import os
 from html.parser import HTMLParser
 from pathlib import Path
 
@@ -46,9 +47,20 @@ def anchors(path: Path) -> Anchors:
     return parser
 
 
+def unavailable(reason: str) -> None:
+    """Skip the test, or fail it where the site and the browser must be there.
+
+    ``.ci/run`` sets ``DOCS_SITE_REQUIRED=1`` after building the site and installing Chromium,
+    so that a missing piece fails CI instead of skipping the check silently.
+    """
+    if os.environ.get("DOCS_SITE_REQUIRED") == "1":
+        pytest.fail(reason)
+    pytest.skip(reason)
+
+
 @pytest.fixture(scope="session")
 def site() -> Path:
     """The built site's folder; skips the test when the site is not built."""
     if not (SITE / "index.html").exists():
-        pytest.skip(f"docs site not built ({SITE / 'index.html'} missing): build it with {BUILD}")
+        unavailable(f"docs site not built ({SITE / 'index.html'} missing): build it with {BUILD}")
     return SITE
