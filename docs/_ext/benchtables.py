@@ -14,7 +14,6 @@ from pathlib import Path
 from typing import Any
 
 from docutils import nodes
-from docutils.statemachine import StringList
 from sphinx.application import Sphinx
 from sphinx.util.docutils import SphinxDirective
 
@@ -157,12 +156,29 @@ TABLES: dict[str, tuple[str, Callable[[dict[str, Any]], Table]]] = {
 }
 
 
-def _list_table(head: list[str], rows: Iterable[list[str]]) -> list[str]:
-    lines = [".. list-table::", "   :header-rows: 1", ""]
-    for row in [head, *rows]:
-        lines.append(f"   * - {row[0]}")
-        lines += [f"     - {cell}" for cell in row[1:]]
-    return lines
+def _cell(text: str) -> nodes.Node:
+    """One cell: ``code`` as a literal, **text** as strong, anything else as text."""
+    if len(text) > 4 and text.startswith("``") and text.endswith("``"):
+        return nodes.literal(text=text[2:-2])
+    if len(text) > 4 and text.startswith("**") and text.endswith("**"):
+        return nodes.strong(text=text[2:-2])
+    return nodes.Text(text)
+
+
+def _row(cells: list[str]) -> nodes.row:
+    row = nodes.row()
+    for cell in cells:
+        row += nodes.entry("", nodes.paragraph("", "", _cell(cell)))
+    return row
+
+
+def table_node(head: list[str], rows: Iterable[list[str]]) -> nodes.table:
+    """A docutils table (built as nodes, so it renders the same from Markdown and reST)."""
+    group = nodes.tgroup(cols=len(head))
+    group += [nodes.colspec(colwidth=1) for _ in head]
+    group += nodes.thead("", _row(head))
+    group += nodes.tbody("", *(_row(r) for r in rows))
+    return nodes.table("", group)
 
 
 class BenchTable(SphinxDirective):
@@ -178,10 +194,9 @@ class BenchTable(SphinxDirective):
         path = Path(self.config.bench_data_dir) / filename
         self.env.note_dependency(str(path))
         head, rows, source, command = build(json.loads(path.read_text()))
-        lines = _list_table(head, rows) + ["", f"*Data:* ``{source}``; *regenerate:* ``{command}``.", ""]
-        container = nodes.container(classes=["bench-table"])
-        self.state.nested_parse(StringList(lines, source=str(path)), self.content_offset, container)
-        return [container]
+        note = nodes.paragraph("", "", nodes.emphasis(text="Data: "), nodes.literal(text=source),
+                               nodes.Text("; "), nodes.emphasis(text="regenerate: "), nodes.literal(text=command))
+        return [nodes.container("", table_node(head, rows), note, classes=["bench-table"])]
 
 
 def setup(app: Sphinx) -> dict[str, Any]:
