@@ -120,7 +120,7 @@ def escape_study(
     dt : float
         Time step, > 0.
     threshold : float
-        Escape amplitude on |x_j|, > 0.
+        Escape amplitude on ``|x_j|``, > 0.
     seed : int or None
         Root seed.
     points : int

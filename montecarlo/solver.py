@@ -163,7 +163,7 @@ class MonteCarlo:
     max_time : float
         Wall-time budget in seconds, > 0. Default 600.
     escape : float or None
-        Escape threshold on |x_j|, > 0. None (default): 100, or for a metastable ring four
+        Escape threshold on ``|x_j|``, > 0. None (default): 100, or for a metastable ring four
         times the barrier amplitude :math:`x^* = (a n / (4|k| s))^{1/(2-n)}` where the
         anti-phase coupling force :math:`4|k| s x` (:math:`s = \\max_q \\sin^2(\\pi q/N)`)
         overtakes the on-site force, if that is larger; for a confined system
