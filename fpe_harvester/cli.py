@@ -10,6 +10,7 @@ code 2; an interrupt exits 130; anything else is a one-line internal error with 
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import json
 import os
 import re
@@ -126,7 +127,7 @@ def _fpe_bar(h: Harvester) -> Any:
 
 
 def cmd_stats(args: argparse.Namespace) -> int:
-    h = Harvester.build(a=args.a, n=args.n, N=args.N, k=args.k)
+    h = Harvester.build(a=args.a, n=args.n, N=args.N, k=args.k, k4=args.k4, k3=args.k3)
     h = h.replace(params=_params(args.param))
     method = args.method if args.method != "auto" else choose_method(h)
     options = _solver_options(args, method)
@@ -144,7 +145,7 @@ def cmd_stats(args: argparse.Namespace) -> int:
         print(json.dumps(out, indent=2))
         return 0
     print(
-        f"Harvester: U(x) = {h.a:g}|x|^{h.n:g}, N = {h.N}, k = {h.k:g}; "
+        f"Harvester: U(x) = {h.a:g}|x|^{h.n:g}, N = {h.N}, k = {h.k:g}{_higher_couplings(h)}; "
         f"method = {result.method}; status = {result.status.value}"
     )
     if result.message and result.message != "stable":
@@ -156,8 +157,13 @@ def cmd_stats(args: argparse.Namespace) -> int:
     return 0
 
 
+def _higher_couplings(h: Harvester) -> str:
+    """``", k4 = .., k3 = .."`` for the couplings beyond the diffusive one that are nonzero."""
+    return "".join(f", {name} = {value:g}" for name, value in (("k4", h.k4), ("k3", h.k3)) if value != 0.0)
+
+
 def cmd_threshold(args: argparse.Namespace) -> int:
-    th = threshold(args.N, args.a)
+    th = threshold(args.N, args.a, args.k4)
     if args.json:
         print(json.dumps(th.to_dict(), indent=2))
         return 0
@@ -174,7 +180,7 @@ def cmd_optimize(args: argparse.Namespace) -> int:
     """The coupling (or other parameter) that maximizes eta, with error bars."""
     from .optimum import optimize
 
-    h = Harvester.build(a=args.a, n=args.n, N=args.N).replace(params=_params(args.param))
+    h = Harvester.build(a=args.a, n=args.n, N=args.N, k4=args.k4, k3=args.k3).replace(params=_params(args.param))
     opt = optimize(h, args.over, None if args.bounds is None else tuple(args.bounds), args.maximize,
                    method=args.method, tol=args.tol, seed=args.seed, batches=args.batches,
                    replicas=args.replicas, progress=False if args.no_progress or args.json else None)
@@ -183,7 +189,7 @@ def cmd_optimize(args: argparse.Namespace) -> int:
         out["harvester"] = h.to_dict()
         print(json.dumps(out, indent=2))
         return 0
-    print(f"Harvester: U(x) = {h.a:g}|x|^{h.n:g}, N = {h.N}; maximize {opt.maximize} over {opt.over}; "
+    print(f"Harvester: U(x) = {h.a:g}|x|^{h.n:g}, N = {h.N}{_higher_couplings(h)}; maximize {opt.maximize} over {opt.over}; "
           f"method = {opt.method}; status = {opt.status.value}")
     print(opt.message)
     level = f"{opt.confidence:.0%} interval"
@@ -231,6 +237,15 @@ def _scheduler(args: argparse.Namespace) -> str | None:
     return None
 
 
+def _with_couplings(scene: Any, args: argparse.Namespace) -> Any:
+    """``scene`` (and its quick variant) with ``--k4`` / ``--k3`` set in its system, if given."""
+    changes = {name: value for name, value in (("k4", args.k4), ("k3", args.k3)) if value is not None}
+    if not changes:
+        return scene
+    quick = None if scene.quick is None else _with_couplings(scene.quick, args)
+    return dataclasses.replace(scene, system=scene.system.replace(**changes), quick=quick)
+
+
 def cmd_scene(args: argparse.Namespace) -> int:
     """List the shipped scenes, or run one and print its table and output paths."""
     from .scenes import list_scenes, load_scene, run_scene
@@ -244,7 +259,8 @@ def cmd_scene(args: argparse.Namespace) -> int:
         _print_table([(s.name, f"{s.n_points}/{s.variant(True).n_points}", s.title) for s in scenes],
                      ("scene", "points (full/quick)", "title"))
         return 0
-    result = run_scene(load_scene(args.scene), _writable_folder("--out", args.out), quick=args.quick,
+    result = run_scene(_with_couplings(load_scene(args.scene), args), _writable_folder("--out", args.out),
+                       quick=args.quick,
                        progress=False if args.no_progress or args.json else None, workers=args.workers,
                        scheduler=_scheduler(args))
     if args.json:
@@ -273,11 +289,20 @@ COMMANDS: dict[str, Callable[[argparse.Namespace], int]] = {
 }
 
 
+def _coupling_arguments(p: argparse.ArgumentParser, default: float | None = 0.0) -> None:
+    """--k4 and --k3, the couplings beyond the diffusive one."""
+    p.add_argument("--k4", type=_number, default=default,
+                   help="bi-Laplacian coupling k4, any real (default 0): adds k4 mu_q^2 to mode q's stiffness")
+    p.add_argument("--k3", type=_number, default=default,
+                   help="cubic bond coupling k3 >= 0 (default 0): bond energy (k3/4) d^4; nonlinear")
+
+
 def _harvester_arguments(p: argparse.ArgumentParser, N: int) -> None:
-    """--n, --a, --N (default ``N``) and --param: the harvester of ``stats`` and ``optimize``."""
+    """--n, --a, --N (default ``N``), --k4, --k3 and --param: the harvester of ``stats`` and ``optimize``."""
     p.add_argument("--n", type=_number, default=2.0, help=f"potential exponent n in [1, {MAX_EXPONENT:g}] (default 2)")
     p.add_argument("--a", type=_number, default=0.5, help="potential strength a > 0 (default 0.5)")
     p.add_argument("--N", type=int, default=N, help=f"number of units in the ring (default {N})")
+    _coupling_arguments(p)
     p.add_argument("--param", type=_key_value, action="append", default=[], metavar="NAME=VALUE",
                    help="physical parameter (m, gamma, Kv, Kc, sigma, tau, D, tau_p, R); repeatable")
 
@@ -303,6 +328,7 @@ def build_parser() -> argparse.ArgumentParser:
     p = sub.add_parser("threshold", help="diffusive-instability threshold k_di of a harmonic ring")
     p.add_argument("--N", type=int, default=3, help="number of units (default 3)")
     p.add_argument("--a", type=_number, default=0.5, help="potential strength a > 0 (default 0.5)")
+    p.add_argument("--k4", type=_number, default=0.0, help="bi-Laplacian coupling k4, any real (default 0)")
     p.add_argument("--json", action="store_true", help="print one JSON object")
 
     p = sub.add_parser("optimize", help="the coupling k (or another parameter) that maximizes eta, with errors")
@@ -339,6 +365,7 @@ def build_parser() -> argparse.ArgumentParser:
     q.add_argument("--out", default="scene_output", metavar="DIR",
                    help="output folder; its points.jsonl cache is reused by later runs (default ./scene_output)")
     q.add_argument("--quick", action="store_true", help="the scene's reduced variant")
+    _coupling_arguments(q, default=None)
     q.add_argument("--json", action="store_true", help="print one JSON object")
     q.add_argument("--no-progress", action="store_true", help="no progress bar")
     q.add_argument("--workers", type=int, default=None, metavar="P",

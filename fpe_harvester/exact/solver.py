@@ -39,7 +39,7 @@ class Exact:
 
     def unsupported_reason(self, h: Harvester) -> str | None:
         """``None`` if this solver handles ``h``, else why not."""
-        if not h.is_linear:
+        if not h.potential.is_harmonic:
             return (f"the exact solver needs a harmonic potential (n = 2), got n = {h.n:g}; "
                     "use method='fpe' (N = 1) or 'mc'")
         if h.k3 != 0.0:
