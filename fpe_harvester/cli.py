@@ -1,4 +1,5 @@
-"""Command-line interface: ``harvester stats``, ``threshold``, ``optimize``, ``scene``, ``validate``.
+"""Command-line interface: ``harvester stats``, ``threshold``, ``optimize``, ``landscape``, ``scene``,
+``validate``.
 
 Every command prints a readable table, or one JSON object with ``--json``. Never a traceback:
 bad input (an argument out of range, a parameter set whose answer is beyond double precision,
@@ -205,6 +206,34 @@ def cmd_optimize(args: argparse.Namespace) -> int:
     return 0
 
 
+def cmd_landscape(args: argparse.Namespace) -> int:
+    """Equilibria of the coupled potential, with energies and Morse index; buckling for n = 1."""
+    from .landscape import RingEnergy, landscape
+
+    ls = landscape(RingEnergy(n=args.n, a=args.a, N=args.N, k=args.k, k4=args.k4, k3=args.k3))
+    if args.json:
+        print(json.dumps(ls.to_dict(), indent=2))
+        return 0
+    e = ls.energy
+    print(f"E(x) = sum {e.a:g}|x_j|^{e.n:g} + ({e.k:g}/2) sum d^2 + ({e.k4:g}/2) sum (Lx)^2 + ({e.k3:g}/4) sum d^4, "
+          f"N = {e.N}")
+    print(ls.message)
+    if ls.buckling is not None:
+        b = ls.buckling
+        rows = [("k_sn (fold)", f"{b.k_sn:.10g}"), ("k_co (coexistence)", f"{b.k_co:.10g}")]
+        rows += [(name, "-" if value is None else f"{value:.10g}") for name, value in (
+            ("u_s", b.u_s), ("u_plus", b.u_plus), ("escape_barrier", b.escape_barrier),
+            ("return_barrier", b.return_barrier), ("u_hop", b.u_hop), ("hop_barrier", b.hop_barrier))]
+        _print_table(rows, ("single-site buckling", "value"))
+        print()
+    rows = [(q.kind, f"{q.energy:.10g}", str(q.index), " ".join(f"{v:.6g}" for v in q.x))
+            for q in ls.equilibria[:args.max_rows]]
+    _print_table(rows, ("equilibrium", "energy", "index", "x"))
+    if len(ls.equilibria) > args.max_rows:
+        print(f"... {len(ls.equilibria) - args.max_rows} more (--max-rows, or --json for all)")
+    return 0
+
+
 def _writable_folder(flag: str, path: str) -> str:
     """``path`` after creating it, or a :class:`ParameterError` naming ``flag`` if that fails."""
     try:
@@ -286,6 +315,7 @@ COMMANDS: dict[str, Callable[[argparse.Namespace], int]] = {
     "validate": cmd_validate,
     "threshold": cmd_threshold,
     "optimize": cmd_optimize,
+    "landscape": cmd_landscape,
 }
 
 
@@ -346,6 +376,15 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--seed", type=int, default=2017, help="base random seed, >= 0 (default 2017)")
     p.add_argument("--json", action="store_true", help="print one JSON object")
     p.add_argument("--no-progress", action="store_true", help="no progress bar")
+
+    p = sub.add_parser("landscape", help="equilibria of the coupled potential: energies, Morse index, barriers")
+    p.add_argument("--n", type=_number, default=1.0, help=f"potential exponent n in [1, {MAX_EXPONENT:g}] (default 1)")
+    p.add_argument("--a", type=_number, default=1.0, help="potential strength a > 0 (default 1)")
+    p.add_argument("--N", type=int, default=3, help="number of units, 1 to 6 (default 3)")
+    p.add_argument("--k", type=_number, default=0.0, help="diffusive coupling k (default 0)")
+    _coupling_arguments(p)
+    p.add_argument("--max-rows", type=int, default=40, help="equilibria listed in the table (default 40)")
+    p.add_argument("--json", action="store_true", help="print one JSON object")
 
     p = sub.add_parser("validate", help="cross-checks, paper comparison, stress tests, benchmarks -> report")
     p.add_argument("--quick", action="store_true", help="CI subset, under 3 minutes")

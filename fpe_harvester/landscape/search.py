@@ -27,7 +27,7 @@ from .energy import RingEnergy
 
 __all__ = ["Equilibrium", "find_equilibria", "MAX_SEARCH_N"]
 
-#: Largest ring searched: the search tries all 3^N sign patterns (729 at N = 6, a few seconds).
+#: Largest ring searched: the search tries the 3^N sign patterns up to symmetry (56 classes at N = 6).
 MAX_SEARCH_N = 6
 
 #: Seed amplitudes, relative to the landscape's length scale (:func:`_length_scale`).
@@ -97,7 +97,8 @@ def _solve_pattern(e: RingEnergy, s: np.ndarray, scale: float) -> list[np.ndarra
     import scipy.optimize
 
     free = np.flatnonzero(s)
-    weights = (np.ones(free.size), 1.0 + 0.5 * np.cos(2.0 * np.pi * np.arange(free.size) / max(free.size, 1) + 0.3))
+    graded = 1.0 + 0.5 * np.cos(2.0 * np.pi * np.arange(free.size) / max(free.size, 1) + 0.3)
+    weights = (np.ones(free.size), graded, graded[::-1])
 
     def embed(y: np.ndarray) -> np.ndarray:
         x = np.zeros(e.N)
@@ -145,11 +146,27 @@ def _accept(e: RingEnergy, x: np.ndarray) -> Equilibrium | None:
                        degenerate=degenerate)
 
 
-def find_equilibria(e: RingEnergy) -> tuple[Equilibrium, ...]:
-    """All equilibria the search finds, by increasing energy (the origin is always one).
+def _images(x: tuple) -> list[tuple]:
+    """``x`` under the ring's symmetries, which leave E unchanged: rotations, the reflection
+    j -> -j, and x -> -x (U and every coupling term are even)."""
+    out = []
+    for y in (x, x[::-1]):
+        for r in range(len(x)):
+            rolled = y[r:] + y[:r]
+            out.extend((rolled, tuple(0.0 - v for v in rolled)))
+    return out
 
-    Deterministic: every sign pattern, 18 seeds each (9 amplitudes over four decades around
-    the landscape's length scale, uniform and graded across the displaced units).
+
+def find_equilibria(e: RingEnergy) -> tuple[Equilibrium, ...]:
+    """The equilibria a multi-start search finds, by increasing energy (the origin is always one).
+
+    A search, not a proof: a root no seed leads to is missed (at N = 3 with n = 1 it finds every
+    state of the closed forms in :mod:`.reduction`; at N >= 4 runs with other seeds found the
+    same lowest states but different numbers of high-index saddles).
+
+    Deterministic: one sign pattern of each class under the ring's symmetries (:func:`_images`),
+    27 seeds each (9 amplitudes over four decades around the landscape's length scale, uniform
+    and graded both ways across the displaced units); each root found stands for all its images.
 
     Raises
     ------
@@ -157,19 +174,22 @@ def find_equilibria(e: RingEnergy) -> tuple[Equilibrium, ...]:
         ``N`` above :data:`MAX_SEARCH_N`.
     """
     if e.N > MAX_SEARCH_N:
-        raise ParameterError(f"N must be in [1, {MAX_SEARCH_N}] for the equilibrium search (it tries all 3^N "
-                             f"sign patterns), got N = {e.N}")
+        raise ParameterError(f"N must be in [1, {MAX_SEARCH_N}] for the equilibrium search (it tries the 3^N "
+                             f"sign patterns up to symmetry), got N = {e.N}")
     scale = _length_scale(e)
     candidates = [np.zeros(e.N)]
     for s in itertools.product((-1, 0, 1), repeat=e.N):
-        if any(s):
+        if any(s) and s == min(_images(s)):
             candidates.extend(_solve_pattern(e, np.array(s, dtype=float), scale))
     found: list[Equilibrium] = []
+
+    def known(x: np.ndarray | tuple) -> bool:
+        return any(np.allclose(x, other.x, rtol=1e-7, atol=1e-9 * scale) for other in found)
+
     for x in candidates:
-        eq = _accept(e, x)
-        if eq is None:
-            continue
-        if any(np.allclose(eq.x, other.x, rtol=1e-7, atol=1e-9 * scale) for other in found):
-            continue
-        found.append(eq)
+        eq = None if known(x) else _accept(e, x)
+        for image in [] if eq is None else sorted(set(_images(eq.x))):
+            image_eq = None if known(image) else _accept(e, np.array(image))
+            if image_eq is not None:
+                found.append(image_eq)
     return tuple(sorted(found, key=lambda q: (q.energy, q.x)))
