@@ -269,3 +269,17 @@ def test_landscape_table_and_json(capsys):
     assert code == 0 and "k_sn (fold)" in out and "-1.190550789" in out and "22 more" in out
     code, out, _ = run(capsys, "landscape", "--k", "-0.5")
     assert code == 0 and "no global minimum" in out
+
+
+def test_scene_couplings_reach_the_system_and_its_quick_variant():
+    import argparse
+
+    from fpe_harvester.cli import _with_couplings
+    from fpe_harvester.scenes import load_scene
+
+    scene = load_scene("fig4_eta_vs_k_harmonic")
+    same = _with_couplings(scene, argparse.Namespace(k4=None, k3=None))
+    assert same is scene
+    changed = _with_couplings(scene, argparse.Namespace(k4=0.05, k3=None))
+    assert changed.system.k4 == 0.05 and changed.variant(True).system.k4 == 0.05
+    assert changed.system.k3 == 0.0
