@@ -100,7 +100,7 @@ def _sweep_block(a: np.ndarray, k: np.ndarray, N: int, params: Params, k4: float
 
 
 def _sweep_block_in(num: type, a: np.ndarray, k: np.ndarray, N: int, params: Params,
-                    k4: float) -> dict[str, np.ndarray]:
+                    k4: float = 0.0) -> dict[str, np.ndarray]:
     """:func:`_sweep_block` in the arithmetic ``num`` (:class:`Wide` or :class:`Float`)."""
     kappa, scale = wide_mode_stiffness(a, k, N, num, k4)
     soft = np.where(k < 0, N // 2, 0) if k4 == 0.0 else np.argmin(kappa.to_float(), axis=-1)
