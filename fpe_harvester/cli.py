@@ -1,5 +1,5 @@
-"""Command-line interface: ``harvester stats``, ``threshold``, ``optimize``, ``scene``, and the
-subcommands other packages add through the entry-point group :data:`COMMAND_GROUP` (the
+"""Command-line interface: ``harvester stats``, ``threshold``, ``optimize``, ``landscape``, ``scene``,
+and the subcommands other packages add through the entry-point group :data:`COMMAND_GROUP` (the
 validation's ``validate``).
 
 Every command prints a readable table, or one JSON object with ``--json``. Never a traceback:
@@ -12,6 +12,7 @@ code 2; an interrupt exits 130; anything else is a one-line internal error with 
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import json
 import os
 import re
@@ -136,7 +137,7 @@ def _fpe_bar(h: Harvester) -> Any:
 
 
 def cmd_stats(args: argparse.Namespace) -> int:
-    h = Harvester.build(a=args.a, n=args.n, N=args.N, k=args.k)
+    h = Harvester.build(a=args.a, n=args.n, N=args.N, k=args.k, k4=args.k4, k3=args.k3)
     h = h.replace(params=_params(args.param))
     method = args.method if args.method != "auto" else choose_method(h)
     options = _solver_options(args, method)
@@ -154,7 +155,7 @@ def cmd_stats(args: argparse.Namespace) -> int:
         print(json.dumps(out, indent=2))
         return 0
     print(
-        f"Harvester: U(x) = {h.a:g}|x|^{h.n:g}, N = {h.N}, k = {h.k:g}; "
+        f"Harvester: U(x) = {h.a:g}|x|^{h.n:g}, N = {h.N}, k = {h.k:g}{_higher_couplings(h)}; "
         f"method = {result.method}; status = {result.status.value}"
     )
     if result.message and result.message != "stable":
@@ -166,8 +167,13 @@ def cmd_stats(args: argparse.Namespace) -> int:
     return 0
 
 
+def _higher_couplings(h: Harvester) -> str:
+    """``", k4 = .., k3 = .."`` for the couplings beyond the diffusive one that are nonzero."""
+    return "".join(f", {name} = {value:g}" for name, value in (("k4", h.k4), ("k3", h.k3)) if value != 0.0)
+
+
 def cmd_threshold(args: argparse.Namespace) -> int:
-    th = threshold(args.N, args.a)
+    th = threshold(args.N, args.a, args.k4)
     if args.json:
         print(json.dumps(th.to_dict(), indent=2))
         return 0
@@ -184,7 +190,7 @@ def cmd_optimize(args: argparse.Namespace) -> int:
     """The coupling (or other parameter) that maximizes eta, with error bars."""
     from .optimum import optimize
 
-    h = Harvester.build(a=args.a, n=args.n, N=args.N).replace(params=_params(args.param))
+    h = Harvester.build(a=args.a, n=args.n, N=args.N, k4=args.k4, k3=args.k3).replace(params=_params(args.param))
     opt = optimize(h, args.over, None if args.bounds is None else tuple(args.bounds), args.maximize,
                    method=args.method, tol=args.tol, seed=args.seed, batches=args.batches,
                    replicas=args.replicas, progress=False if args.no_progress or args.json else None)
@@ -193,7 +199,7 @@ def cmd_optimize(args: argparse.Namespace) -> int:
         out["harvester"] = h.to_dict()
         print(json.dumps(out, indent=2))
         return 0
-    print(f"Harvester: U(x) = {h.a:g}|x|^{h.n:g}, N = {h.N}; maximize {opt.maximize} over {opt.over}; "
+    print(f"Harvester: U(x) = {h.a:g}|x|^{h.n:g}, N = {h.N}{_higher_couplings(h)}; maximize {opt.maximize} over {opt.over}; "
           f"method = {opt.method}; status = {opt.status.value}")
     print(opt.message)
     level = f"{opt.confidence:.0%} interval"
@@ -206,6 +212,34 @@ def cmd_optimize(args: argparse.Namespace) -> int:
                  ("quantity", "value", "error", level))
     if "wall_time" in opt.info:
         print(f"{opt.info.get('evaluations')} Monte Carlo runs in {opt.info['wall_time']:.1f} s")
+    return 0
+
+
+def cmd_landscape(args: argparse.Namespace) -> int:
+    """Equilibria of the coupled potential, with energies and Morse index; buckling for n = 1."""
+    from .landscape import RingEnergy, landscape
+
+    ls = landscape(RingEnergy(n=args.n, a=args.a, N=args.N, k=args.k, k4=args.k4, k3=args.k3))
+    if args.json:
+        print(json.dumps(ls.to_dict(), indent=2))
+        return 0
+    e = ls.energy
+    print(f"E(x) = sum {e.a:g}|x_j|^{e.n:g} + ({e.k:g}/2) sum d^2 + ({e.k4:g}/2) sum (Lx)^2 + ({e.k3:g}/4) sum d^4, "
+          f"N = {e.N}")
+    print(ls.message)
+    if ls.buckling is not None:
+        b = ls.buckling
+        rows = [("k_sn (fold)", f"{b.k_sn:.10g}"), ("k_co (coexistence)", f"{b.k_co:.10g}")]
+        rows += [(name, "-" if value is None else f"{value:.10g}") for name, value in (
+            ("u_s", b.u_s), ("u_plus", b.u_plus), ("escape_barrier", b.escape_barrier),
+            ("return_barrier", b.return_barrier), ("u_hop", b.u_hop), ("hop_barrier", b.hop_barrier))]
+        _print_table(rows, ("single-site buckling", "value"))
+        print()
+    rows = [(q.kind, f"{q.energy:.10g}", str(q.index), " ".join(f"{v:.6g}" for v in q.x))
+            for q in ls.equilibria[:args.max_rows]]
+    _print_table(rows, ("equilibrium", "energy", "index", "x"))
+    if len(ls.equilibria) > args.max_rows:
+        print(f"... {len(ls.equilibria) - args.max_rows} more (--max-rows, or --json for all)")
     return 0
 
 
@@ -230,6 +264,15 @@ def _scheduler(args: argparse.Namespace) -> str | None:
     return None
 
 
+def _with_couplings(scene: Any, args: argparse.Namespace) -> Any:
+    """``scene`` (and its quick variant) with ``--k4`` / ``--k3`` set in its system, if given."""
+    changes = {name: value for name, value in (("k4", args.k4), ("k3", args.k3)) if value is not None}
+    if not changes:
+        return scene
+    quick = None if scene.quick is None else _with_couplings(scene.quick, args)
+    return dataclasses.replace(scene, system=scene.system.replace(**changes), quick=quick)
+
+
 def cmd_scene(args: argparse.Namespace) -> int:
     """List the shipped scenes, or run one and print its table and output paths."""
     from .scenes import list_scenes, load_scene, run_scene
@@ -243,7 +286,8 @@ def cmd_scene(args: argparse.Namespace) -> int:
         _print_table([(s.name, f"{s.n_points}/{s.variant(True).n_points}", s.title) for s in scenes],
                      ("scene", "points (full/quick)", "title"))
         return 0
-    result = run_scene(load_scene(args.scene), writable_folder("--out", args.out), quick=args.quick,
+    result = run_scene(_with_couplings(load_scene(args.scene), args), writable_folder("--out", args.out),
+                       quick=args.quick,
                        progress=False if args.no_progress or args.json else None, workers=args.workers,
                        scheduler=_scheduler(args))
     if args.json:
@@ -268,14 +312,24 @@ COMMANDS: dict[str, Callable[[argparse.Namespace], int]] = {
     "stats": cmd_stats,
     "threshold": cmd_threshold,
     "optimize": cmd_optimize,
+    "landscape": cmd_landscape,
 }
 
 
+def _coupling_arguments(p: argparse.ArgumentParser, default: float | None = 0.0) -> None:
+    """--k4 and --k3, the couplings beyond the diffusive one."""
+    p.add_argument("--k4", type=_number, default=default,
+                   help="bi-Laplacian coupling k4, any real (default 0): adds k4 mu_q^2 to mode q's stiffness")
+    p.add_argument("--k3", type=_number, default=default,
+                   help="cubic bond coupling k3 >= 0 (default 0): bond energy (k3/4) d^4; nonlinear")
+
+
 def _harvester_arguments(p: argparse.ArgumentParser, N: int) -> None:
-    """--n, --a, --N (default ``N``) and --param: the harvester of ``stats`` and ``optimize``."""
+    """--n, --a, --N (default ``N``), --k4, --k3 and --param: the harvester of ``stats`` and ``optimize``."""
     p.add_argument("--n", type=_number, default=2.0, help=f"potential exponent n in [1, {MAX_EXPONENT:g}] (default 2)")
     p.add_argument("--a", type=_number, default=0.5, help="potential strength a > 0 (default 0.5)")
     p.add_argument("--N", type=int, default=N, help=f"number of units in the ring (default {N})")
+    _coupling_arguments(p)
     p.add_argument("--param", type=_key_value, action="append", default=[], metavar="NAME=VALUE",
                    help="physical parameter (m, gamma, Kv, Kc, sigma, tau, D, tau_p, R); repeatable")
 
@@ -325,6 +379,7 @@ def build_parser() -> argparse.ArgumentParser:
     p = sub.add_parser("threshold", help="diffusive-instability threshold k_di of a harmonic ring")
     p.add_argument("--N", type=int, default=3, help="number of units (default 3)")
     p.add_argument("--a", type=_number, default=0.5, help="potential strength a > 0 (default 0.5)")
+    p.add_argument("--k4", type=_number, default=0.0, help="bi-Laplacian coupling k4, any real (default 0)")
     p.add_argument("--json", action="store_true", help="print one JSON object")
 
     p = sub.add_parser("optimize", help="the coupling k (or another parameter) that maximizes eta, with errors")
@@ -343,6 +398,15 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--json", action="store_true", help="print one JSON object")
     p.add_argument("--no-progress", action="store_true", help="no progress bar")
 
+    p = sub.add_parser("landscape", help="equilibria of the coupled potential: energies, Morse index, barriers")
+    p.add_argument("--n", type=_number, default=1.0, help=f"potential exponent n in [1, {MAX_EXPONENT:g}] (default 1)")
+    p.add_argument("--a", type=_number, default=1.0, help="potential strength a > 0 (default 1)")
+    p.add_argument("--N", type=int, default=3, help="number of units, 1 to 6 (default 3)")
+    p.add_argument("--k", type=_number, default=0.0, help="diffusive coupling k (default 0)")
+    _coupling_arguments(p)
+    p.add_argument("--max-rows", type=int, default=40, help="equilibria listed in the table (default 40)")
+    p.add_argument("--json", action="store_true", help="print one JSON object")
+
     p = sub.add_parser("scene", help="declarative studies: the paper's figures and more")
     scene_sub = p.add_subparsers(dest="action", required=True, parser_class=_Parser)
     q = scene_sub.add_parser("list", help="shipped scenes")
@@ -352,6 +416,7 @@ def build_parser() -> argparse.ArgumentParser:
     q.add_argument("--out", default="scene_output", metavar="DIR",
                    help="output folder; its points.jsonl cache is reused by later runs (default ./scene_output)")
     q.add_argument("--quick", action="store_true", help="the scene's reduced variant")
+    _coupling_arguments(q, default=None)
     q.add_argument("--json", action="store_true", help="print one JSON object")
     q.add_argument("--no-progress", action="store_true", help="no progress bar")
     q.add_argument("--workers", type=int, default=None, metavar="P",

@@ -7,13 +7,22 @@ oscillator)
 
     dx_j &= v_j\\,dt \\\\
     m\\,dv_j &= [-U'(x_j) - m\\gamma v_j - K_v V_j + \\sigma\\xi_j
-               + k(x_{j+1} - 2x_j + x_{j-1})]\\,dt \\\\
+               + F_j(x)]\\,dt \\\\
     dV_j &= (K_c v_j - V_j/\\tau_p)\\,dt \\\\
     \\tau\\,d\\xi_j &= -\\xi_j\\,dt + \\sqrt{2D}\\,dW_j
 
-with :math:`U(x) = a|x|^n`. For ``N = 2`` both neighbours are the same unit, so the
-coupling force is :math:`2k(x_{other} - x_j)`. ``k > 0`` is in-phase (diffusive)
-coupling, ``k < 0`` counter-phase (anti-diffusive).
+with :math:`U(x) = a|x|^n` and the coupling force, :math:`L` the ring Laplacian
+:math:`(Lx)_j = x_{j+1} - 2x_j + x_{j-1}` and :math:`d_j = x_{j+1} - x_j` the bonds,
+
+.. math::
+
+    F_j = k(Lx)_j - k_4(L^2x)_j + k_3(d_j^3 - d_{j-1}^3) = -\\partial E_c/\\partial x_j,\\qquad
+    E_c = \\frac k2\\sum_j d_j^2 + \\frac{k_4}2\\sum_j (Lx)_j^2 + \\frac{k_3}4\\sum_j d_j^4.
+
+For ``N = 2`` the ring has two bonds, both between the two units, so the diffusive force
+is :math:`2k(x_{other} - x_j)`. ``k > 0`` is in-phase (diffusive) coupling, ``k < 0``
+counter-phase (anti-diffusive); ``k4`` (bi-Laplacian) and ``k3`` (cubic bonds) are the
+next terms of the coupling (docs/model.md §6).
 
 All quantities are dimensionless, in the paper's units.
 """
@@ -59,7 +68,9 @@ class Params:
     gamma : float
         Mechanical damping rate :math:`\\gamma`, >= 0. Default 1.
     Kv : float
-        Electromechanical coupling on the mechanical side :math:`K_v`, > 0. Default 1.
+        Electromechanical coupling on the mechanical side :math:`K_v`, >= 0. Default 1.
+        ``Kv = 0``: the circuit does not act back on the mechanics (then ``gamma`` must be > 0,
+        or nothing damps the oscillator).
     Kc : float
         Electromechanical coupling on the circuit side :math:`K_c`, > 0. Default 1.
     sigma : float
@@ -95,11 +106,14 @@ class Params:
     def __post_init__(self) -> None:
         for f in dataclasses.fields(self):
             value = getattr(self, f.name)
-            if f.name == "gamma":
-                checked = check_real("gamma", value, low=0.0)
+            if f.name in ("gamma", "Kv"):
+                checked = check_real(f.name, value, low=0.0)
             else:
                 checked = check_real(f.name, value, low=0.0, low_open=True)
             object.__setattr__(self, f.name, checked)
+        if self.gamma == 0.0 and self.Kv == 0.0:
+            raise ParameterError("gamma = 0 and Kv = 0 leave the oscillator undamped (no stationary state): "
+                                 "gamma must be > 0 when Kv = 0, or Kv > 0 when gamma = 0")
 
     def replace(self, **changes: float) -> Params:
         """Return a copy with some fields changed (validated again)."""
@@ -212,19 +226,31 @@ class Potential:
 
 @dataclass(frozen=True)
 class Harvester:
-    """A harvester of ``N`` identical units in a periodic ring with coupling ``k``.
+    """A harvester of ``N`` identical units in a periodic ring with couplings ``k``, ``k4``, ``k3``.
+
+    The coupling force on unit j is :math:`k(Lx)_j - k_4(L^2x)_j + k_3(d_j^3 - d_{j-1}^3)`
+    (see the module docstring). A single unit (``N = 1``) has no neighbours: the three
+    couplings have no effect there and must be 0 (their defaults).
 
     Parameters
     ----------
     potential : Potential
         The on-site potential :math:`U(x) = a|x|^n`. Default ``Potential(a=0.5, n=2)``.
     N : int
-        Number of units, >= 1. ``N = 1`` is a single oscillator (``k`` is ignored and
-        must be 0 or left at its default).
+        Number of units, >= 1. ``N = 1`` is a single oscillator.
     k : float
-        Nearest-neighbour coupling, any finite real; > 0 in-phase, < 0 counter-phase.
+        Diffusive nearest-neighbour coupling :math:`k`, any finite real; > 0 in-phase,
+        < 0 counter-phase. Default 0.
     params : Params
         Physical parameters shared by all units.
+    k4 : float
+        Bi-Laplacian coupling :math:`k_4`, any finite real; it adds :math:`k_4\\mu_q^2` to the
+        stiffness of ring mode q (:math:`\\mu_q = 4\\sin^2(\\pi q/N)`): > 0 stiffens short
+        wavelengths, < 0 softens them. Linear (the exact solver handles it). Default 0.
+    k3 : float
+        Cubic bond coupling :math:`k_3`, >= 0 (a negative one would make every ring with
+        n < 4 unbounded below); energy :math:`(k_3/4)\\sum_j d_j^4`. Nonlinear: a harmonic
+        ring with ``k3 > 0`` is solved by Monte Carlo, not exactly. Default 0.
 
     Examples
     --------
@@ -237,6 +263,8 @@ class Harvester:
     N: int = 1
     k: float = 0.0
     params: Params = field(default_factory=Params)
+    k4: float = 0.0
+    k3: float = 0.0
 
     def __post_init__(self) -> None:
         if not isinstance(self.potential, Potential):
@@ -249,22 +277,26 @@ class Harvester:
                 f"params must be a Params, got {self.params!r} (type {type(self.params).__name__})"
             )
         object.__setattr__(self, "N", check_int("N", self.N, low=1))
-        k = check_real("k", self.k)
-        if self.N == 1 and k != 0.0:
-            raise ParameterError(f"k must be 0 for a single unit (N = 1), got {k!r}")
-        object.__setattr__(self, "k", k)
+        couplings = {"k": check_real("k", self.k), "k4": check_real("k4", self.k4),
+                     "k3": check_real("k3", self.k3, low=0.0)}
+        for name, value in couplings.items():
+            if self.N == 1 and value != 0.0:
+                raise ParameterError(f"{name} must be 0 for a single unit (N = 1: no neighbours, the "
+                                     f"coupling has no effect), got {value!r}")
+            object.__setattr__(self, name, value)
 
     @classmethod
     def build(
-        cls, a: float = 0.5, n: float = 2.0, N: int = 1, k: float = 0.0, **params: float
+        cls, a: float = 0.5, n: float = 2.0, N: int = 1, k: float = 0.0, k4: float = 0.0,
+        k3: float = 0.0, **params: float
     ) -> Harvester:
-        """Shortcut: ``Harvester.build(a=0.5, n=1, N=3, k=-0.01, tau_p=2)``."""
-        return cls(Potential(a, n), N, k, Params().replace(**params))
+        """Shortcut: ``Harvester.build(a=0.5, n=1, N=3, k=-0.01, k3=0.1, tau_p=2)``."""
+        return cls(Potential(a, n), N, k, Params().replace(**params), k4=k4, k3=k3)
 
     def replace(self, **changes: object) -> Harvester:
         """Copy with fields changed; ``a``, ``n`` and any :class:`Params` name are accepted too."""
         pot = {key: changes.pop(key) for key in ("a", "n") if key in changes}
-        own = {key: changes.pop(key) for key in ("potential", "N", "k", "params") if key in changes}
+        own = {key: changes.pop(key) for key in ("potential", "N", "k", "params", "k4", "k3") if key in changes}
         new = dataclasses.replace(self, **own)
         if pot:
             new = dataclasses.replace(new, potential=dataclasses.replace(new.potential, **pot))
@@ -282,32 +314,53 @@ class Harvester:
 
     @property
     def is_linear(self) -> bool:
-        """True when every force is linear (harmonic potential)."""
-        return self.potential.is_harmonic
+        """True when every force is linear (harmonic potential and no cubic coupling)."""
+        return self.potential.is_harmonic and self.k3 == 0.0
 
     @property
     def confinement(self) -> str:
         """``"confined"``, ``"metastable"`` or ``"linear"`` (see docs/model.md §3).
 
-        For ``n < 2`` any ``k < 0`` makes the coupled potential unbounded below at large
-        amplitude (the ring is only metastable); for ``n > 2`` it is always confined.
-        The harmonic case is decided by the mode stiffnesses (:mod:`.exact.stability`).
+        For ``n < 2`` without cubic coupling (``k3 = 0``), a ring whose linear coupling softens
+        some mode (:math:`k\\mu_q + k_4\\mu_q^2 < 0` for a q >= 1; for ``k4 = 0``: any ``k < 0``)
+        is unbounded below at large amplitude (only metastable); ``k3 > 0`` confines every
+        ring (each bond's energy is at least :math:`-k^2/(4k_3)` for ``k4 = 0``, and the quartic
+        bonds outgrow any quadratic term); for ``n > 2`` it is always confined. The linear case
+        is decided by the mode stiffnesses (:mod:`.exact.stability`).
         """
         if self.is_linear:
             return "linear"
-        if self.N > 1 and self.k < 0 and self.n < 2:
+        if self.N > 1 and self.n < 2 and self.k3 == 0.0 and np.any(self.coupling_stiffness()[1:] < 0.0):
             return "metastable"
         return "confined"
 
+    def coupling_stiffness(self) -> np.ndarray:
+        """Stiffness the linear coupling adds to ring mode q, :math:`k\\mu_q + k_4\\mu_q^2`,
+        :math:`\\mu_q = 4\\sin^2(\\pi q/N)`, q = 0..N-1 (0 for q = 0)."""
+        mu = 4.0 * mode_sin2(self.N)
+        return self.k * mu + self.k4 * mu**2
+
     def mode_stiffness(self) -> np.ndarray:
-        """Harmonic mode stiffnesses :math:`\\kappa_q = 2a + 4k\\sin^2(\\pi q/N)`, q = 0..N-1.
+        """Harmonic mode stiffnesses :math:`\\kappa_q = 2a + k\\mu_q + k_4\\mu_q^2`, q = 0..N-1,
+        :math:`\\mu_q = 4\\sin^2(\\pi q/N)`.
 
         Meaningful for ``n = 2`` only (for other n, it is the stiffness the coupling adds
         to a unit stiffness ``2a``). Values beyond the double range are ``inf`` or ``-inf``
         (:func:`fpe_harvester.exact.wide_mode_stiffness` keeps them exactly).
         """
-        return (2.0 * Wide.of(self.a) + 4.0 * Wide.of(self.k) * Wide.of(mode_sin2(self.N))).to_float()
+        s2 = Wide.of(mode_sin2(self.N))
+        kappa = 2.0 * Wide.of(self.a) + 4.0 * Wide.of(self.k) * s2
+        if self.k4 != 0.0:
+            kappa = kappa + 16.0 * Wide.of(self.k4) * s2 * s2
+        return kappa.to_float()
 
     def to_dict(self) -> dict[str, object]:
-        """Plain-dict description (for JSON)."""
-        return {"a": self.a, "n": self.n, "N": self.N, "k": self.k, "params": self.params.to_dict()}
+        """Plain-dict description (for JSON).
+
+        ``k4`` and ``k3`` appear only when nonzero, so that a ring without them has the same
+        description as before they existed (scene caches and seeds are derived from it).
+        """
+        out: dict[str, object] = {"a": self.a, "n": self.n, "N": self.N, "k": self.k}
+        out.update({name: value for name, value in (("k4", self.k4), ("k3", self.k3)) if value != 0.0})
+        out["params"] = self.params.to_dict()
+        return out

@@ -330,7 +330,7 @@ def default_bounds(h: Harvester, over: str) -> tuple[float, float]:
         raise ParameterError(f"bounds: no default search interval for over = {over!r}; give bounds=(low, high)")
     if h.N == 1:
         raise ParameterError("over = 'k' needs a ring: N >= 2 (N = 1 has no coupling); got N = 1")
-    kd = k_di(h.N, h.a)
+    kd = k_di(h.N, h.a, h.k4)
     assert kd is not None
     return (kd, 0.0) if h.is_linear else (3.0 * kd, 0.0)
 
@@ -389,7 +389,7 @@ def _optimize_exact(h: Harvester, over: str, maximize: str, lo: float, hi: float
     if not math.isfinite(y_opt):
         return Optimum(over, maximize, None, None, None, None, status=Status.NOT_CONVERGED, method="exact",
                        info=info, message=f"not converged: no stationary state in {over} in [{lo:.6g}, {hi:.6g}]")
-    kd = k_di(h.N, h.a) if h.N > 1 else None
+    kd = k_di(h.N, h.a, h.k4) if h.N > 1 else None
     final = solve(h.replace(**{over: x_opt}), "exact")
     if final.status is Status.MARGINAL and over == "k":
         return Optimum(over, maximize, x_opt, 0.0, y_opt, 0.0, (x_opt, x_opt), (y_opt, y_opt),

@@ -52,7 +52,9 @@ def _solver_class(name: str) -> type:
 
 
 def choose_method(h: Harvester) -> str:
-    """The cheapest adequate method: harmonic -> exact, single nonlinear -> fpe, else mc."""
+    """The cheapest adequate method: linear (harmonic, ``k3 = 0``, any ``k`` and ``k4``) -> exact,
+    single nonlinear unit -> fpe (a single unit has no coupling), else mc (so a harmonic ring
+    with cubic coupling ``k3 != 0`` goes to Monte Carlo)."""
     if h.is_linear:
         return "exact"
     if h.N == 1:

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+import re
 
 import pytest
 
@@ -216,3 +217,69 @@ def test_stats_fuzz_numbers_or_one_line_error(fuzz):
     """``harvester stats`` on arbitrary numbers (any notation, any size, nan/inf, negative, subnormal):
     exit 0 with finite numbers and errors below their values, or exit 2 with one line naming the argument."""
     fuzz(_check_cli, {"ci": 40, "long": 3000}, argv=_argv())
+
+
+@pytest.mark.parametrize(("N", "k4", "k_di", "modes"), [
+    ("4", "0.1", -0.9, [2]), ("4", "0.5", -2.0, [1, 3]), ("6", "0.5", -13 / 6, [2, 4]), ("64", "0.5", -2.0, [16, 48]),
+])
+def test_threshold_with_k4(capsys, N, k4, k_di, modes):
+    code, out, _ = run(capsys, "threshold", "--N", N, "--a", "1", "--k4", k4, "--json")
+    d = json.loads(out)
+    assert code == 0 and d["k_di"] == pytest.approx(k_di, abs=1e-12) and d["critical_mode"] == modes
+    assert d["k4"] == float(k4)
+
+
+def test_stats_with_k4_and_kv_zero(capsys):
+    code, out, _ = run(capsys, "stats", "--N", "3", "--k", "-0.5", "--k4", "0.1", "--json")
+    shifted = json.loads(run(capsys, "stats", "--N", "3", "--k", "-0.2", "--json")[1])
+    d = json.loads(out)
+    assert code == 0 and d["eta"] == pytest.approx(shifted["eta"], rel=1e-12)
+    assert d["harvester"]["k4"] == 0.1 and "k3" not in d["harvester"]
+    code, out, _ = run(capsys, "stats", "--param", "Kv=0", "--json")
+    # without back-action Pin = D sigma^2 (tau + tau_p)/d1, d1 = m(tau + tau_p)(1 + gamma tau) + 2a tau^2 (tau + tau_p)
+    assert code == 0 and json.loads(out)["Pin"] == pytest.approx(3.0 / 9.0, rel=1e-14)
+
+
+@pytest.mark.parametrize(("argv", "match"), [
+    (("stats", "--N", "3", "--k3", "0.1"), "k3 = 0.1: Monte Carlo does not simulate the k3 coupling yet"),
+    (("stats", "--N", "3", "--k3", "0.1", "--method", "exact"), r"k3 = 0.1 \(cubic coupling\) is nonlinear"),
+    (("stats", "--n", "3", "--N", "3", "--k4", "0.1"), "k4 = 0.1: Monte Carlo does not simulate the k4 coupling yet"),
+    (("stats", "--k4", "0.1"), r"k4 must be 0 for a single unit \(N = 1"),
+    (("stats", "--N", "3", "--k3", "-1"), r"k3 must be in \[0, inf\), got -1"),
+    (("stats", "--param", "Kv=0", "--param", "gamma=0"), "gamma = 0 and Kv = 0 leave the oscillator undamped"),
+    (("landscape", "--N", "7"), r"N must be in \[1, 6\]"),
+])
+def test_higher_couplings_refused_in_one_line(capsys, argv, match):
+    code, out, err = run(capsys, *argv)
+    assert code == 2 and out == "" and len(err.strip().splitlines()) == 1
+    assert re.search(match, err)
+
+
+def test_landscape_table_and_json(capsys):
+    code, out, _ = run(capsys, "landscape", "--n", "1", "--a", "1", "--N", "3", "--k", "-2", "--k3", "1", "--json")
+    d = json.loads(out)
+    assert code == 0 and d["bounded"] is True
+    b = d["buckling"]
+    assert b["k_sn"] == pytest.approx(-(27 / 16) ** (1 / 3), abs=1e-8) and b["k_co"] == pytest.approx(-1.5, abs=1e-8)
+    assert b["escape_barrier"] == pytest.approx(0.127088, abs=5e-7)
+    assert b["return_barrier"] == pytest.approx(0.782190, abs=5e-7)
+    assert b["hop_barrier"] == pytest.approx(0.193831, abs=5e-7)
+    assert sum(q["kind"] == "minimum" for q in d["equilibria"]) == 7
+    code, out, _ = run(capsys, "landscape", "--k", "-2", "--k3", "1", "--max-rows", "3")
+    assert code == 0 and "k_sn (fold)" in out and "-1.190550789" in out and "22 more" in out
+    code, out, _ = run(capsys, "landscape", "--k", "-0.5")
+    assert code == 0 and "no global minimum" in out
+
+
+def test_scene_couplings_reach_the_system_and_its_quick_variant():
+    import argparse
+
+    from fpe_harvester.cli import _with_couplings
+    from fpe_harvester.scenes import load_scene
+
+    scene = load_scene("fig4_eta_vs_k_harmonic")
+    same = _with_couplings(scene, argparse.Namespace(k4=None, k3=None))
+    assert same is scene
+    changed = _with_couplings(scene, argparse.Namespace(k4=0.05, k3=None))
+    assert changed.system.k4 == 0.05 and changed.variant(True).system.k4 == 0.05
+    assert changed.system.k3 == 0.0

@@ -10,7 +10,7 @@ import pytest
 
 from fpe_harvester import Harvester, ParameterError, Params, Potential
 
-POSITIVE = ["m", "Kv", "Kc", "sigma", "tau", "D", "tau_p", "R"]
+POSITIVE = ["m", "Kc", "sigma", "tau", "D", "tau_p", "R"]
 
 
 def test_paper_defaults():
@@ -30,6 +30,43 @@ def test_gamma_may_be_zero_but_not_negative():
     assert Params(gamma=0).gamma == 0.0
     with pytest.raises(ParameterError, match=r"gamma must be in \[0, inf\)"):
         Params(gamma=-0.1)
+
+
+def test_kv_may_be_zero_but_not_with_gamma_zero():
+    assert Params(Kv=0).Kv == 0.0
+    with pytest.raises(ParameterError, match=r"Kv must be in \[0, inf\), got -1"):
+        Params(Kv=-1)
+    with pytest.raises(ParameterError, match="gamma = 0 and Kv = 0 leave the oscillator undamped"):
+        Params(Kv=0, gamma=0)
+
+
+def test_higher_couplings_default_zero_and_validated():
+    h = Harvester.build(N=3, k=-0.1)
+    assert (h.k4, h.k3) == (0.0, 0.0)
+    assert "k4" not in h.to_dict() and "k3" not in h.to_dict()
+    h = Harvester.build(N=3, k=-0.1, k4=0.2, k3=0.5)
+    assert (h.to_dict()["k4"], h.to_dict()["k3"]) == (0.2, 0.5)
+    assert h.replace(k4=0.0).k4 == 0.0 and h.replace(k3=1).k3 == 1.0
+    with pytest.raises(ParameterError, match=r"k3 must be in \[0, inf\), got -0.1"):
+        Harvester.build(N=3, k3=-0.1)
+    with pytest.raises(ParameterError, match="k4 must be finite"):
+        Harvester.build(N=3, k4=math.inf)
+    for name in ("k", "k4", "k3"):
+        with pytest.raises(ParameterError, match=rf"{name} must be 0 for a single unit \(N = 1: no neighbours"):
+            Harvester.build(N=1, **{name: 0.1})
+
+
+def test_k4_mode_stiffness_and_confinement():
+    h = Harvester.build(a=1.0, n=2, N=4, k=-0.5, k4=0.1)
+    mu = 4 * np.sin(np.pi * np.arange(4) / 4) ** 2
+    assert np.allclose(h.mode_stiffness(), 2 + -0.5 * mu + 0.1 * mu**2, rtol=0, atol=1e-15)
+    assert h.is_linear and not h.replace(k3=0.1).is_linear
+    kink = Harvester.build(a=1.0, n=1, N=3, k=-0.5)
+    assert kink.confinement == "metastable"
+    assert kink.replace(k3=0.1).confinement == "confined"
+    # k4 > 0 can hold the softening of every mode: k mu + k4 mu^2 >= 0 for mu in {3} (N = 3)
+    assert kink.replace(k4=0.2).confinement == "confined"
+    assert kink.replace(k4=0.1).confinement == "metastable"
 
 
 @pytest.mark.parametrize("bad", [math.nan, math.inf, -math.inf])

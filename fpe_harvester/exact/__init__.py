@@ -1,7 +1,8 @@
 """The exact solver for harmonic harvesters (n = 2), any ring size.
 
 A harmonic ring's Fourier modes decouple into single units of stiffness
-:math:`\\kappa_q = 2a + 4k\\sin^2(\\pi q/N)`, whose stationary moments are closed-form
+:math:`\\kappa_q = 2a + k\\mu_q + k_4\\mu_q^2`, :math:`\\mu_q = 4\\sin^2(\\pi q/N)`, whose
+stationary moments are closed-form
 (:mod:`.moments`). :mod:`.stability` gives the diffusive-instability threshold ``k_di``, the
 critical mode and the growth rate beyond it; :mod:`.solver` holds the solver object
 :class:`Exact` (``method="exact"``), the vectorized :func:`exact_sweep` and

@@ -24,7 +24,8 @@ The stationary covariance :math:`P` solves the Lyapunov equation
     d_2 = \\gamma m + \\gamma^2 m\\tau_p + K_cK_v\\tau_p + K_cK_v\\gamma\\tau_p^2 + \\gamma\\kappa\\tau_p^2.
 
 A ring's drift is circulant, so its Fourier modes decouple: mode ``q`` is a single unit
-with stiffness :math:`\\kappa_q = 2a + 4k\\sin^2(\\pi q/N)` and its own independent noise,
+with stiffness :math:`\\kappa_q = 2a + k\\mu_q + k_4\\mu_q^2`, :math:`\\mu_q = 4\\sin^2(\\pi q/N)`
+(the eigenvalues of minus the ring Laplacian), and its own independent noise,
 and ring averages are the means over modes of the single-unit moments.
 """
 
@@ -34,7 +35,7 @@ import math
 
 import numpy as np
 
-from ..model import Harvester, Params, mode_sin2
+from ..model import Harvester, Params
 from ..wide import Float, Wide
 
 __all__ = [
@@ -153,12 +154,16 @@ def lyapunov_covariance(kappa: float, params: Params) -> np.ndarray:
 
 
 def ring_drift_matrix(h: Harvester) -> np.ndarray:
-    """Dense 4N x 4N drift matrix of the ring, state ordered unit by unit (x, v, V, xi)."""
+    """Dense 4N x 4N drift matrix of the ring, state ordered unit by unit (x, v, V, xi).
+
+    The coupling block is :math:`(kL - k_4L^2)/m`, L the ring Laplacian built entry by entry
+    (independent of the Fourier modes it cross-checks).
+    """
     p, N = h.params, h.N
     A = np.kron(np.eye(N), drift_matrix(2.0 * h.a, p))
     if N > 1:
         L = -2.0 * np.eye(N) + np.roll(np.eye(N), 1, axis=1) + np.roll(np.eye(N), -1, axis=1)
-        A[1::4, 0::4] += h.k * L / p.m
+        A[1::4, 0::4] += (h.k * L - h.k4 * (L @ L)) / p.m
     return A
 
 
@@ -191,14 +196,14 @@ def closure_mismatch(h: Harvester, log_kappa: float) -> float:
         c_n = a n\\,2^{n/2}\\Gamma(\\tfrac{n+1}{2})/\\sqrt\\pi,
 
     with x Gaussian of the variance :math:`s^2` of the harmonic ring of on-site stiffness
-    :math:`\\kappa` (mode stiffnesses :math:`\\kappa + 4k\\sin^2(\\pi q/N)`, the mean over modes;
+    :math:`\\kappa` (mode stiffnesses :math:`\\kappa + k\\mu_q + k_4\\mu_q^2`, the mean over modes;
     one unit for N = 1), from the closed form (a numerical Lyapunov solve loses positivity at
     extreme :math:`\\kappa`). Its root is the equivalent stiffness; the Fokker--Planck frame
     (:func:`fpe_harvester.fpe.hermite.equivalent_harmonic`) and the Monte Carlo twin
     (:func:`montecarlo.twin.linearized_stiffness`) both solve it.
     """
     kappa = math.exp(log_kappa)
-    kap = kappa + 4.0 * h.k * mode_sin2(h.N) if h.N > 1 else np.array([kappa])
+    kap = kappa + h.coupling_stiffness() if h.N > 1 else np.array([kappa])
     s2 = float(np.mean(mode_moments(kap, h.params)["x2"]))
     n, a = h.n, h.a
     c_n = a * n * 2.0 ** (n / 2) * math.gamma((n + 1) / 2) / math.sqrt(math.pi)

@@ -9,12 +9,12 @@ from typing import Any, ClassVar
 
 import numpy as np
 
-from ..errors import MethodNotAvailableError, ParameterError, check_int
-from ..model import Harvester, Params, mode_sin2
+from ..errors import MethodNotAvailableError, ParameterError, check_int, check_real
+from ..model import Harvester, Params
 from ..result import Stats, Status
 from ..wide import LARGEST, SMALLEST_NORMAL, Float, Wide
 from .moments import wide_mode_moments
-from .stability import classify_modes, k_di, kappa_min, wide_growth_rate, wide_mode_stiffness
+from .stability import classify_modes, k_di, kappa_min, softest_mode, wide_growth_rate, wide_mode_stiffness
 
 __all__ = ["Exact", "MAX_N", "exact_stats", "exact_sweep", "out_of_range_message"]
 
@@ -25,7 +25,7 @@ class Exact:
 
     Cost is O(N) closed-form evaluations. The reported errors are floating-point round-off
     bounds (~1e-16 relative, larger only for ``x2`` next to the threshold, where it diverges).
-    Handles only ``n = 2``.
+    Handles only linear rings: ``n = 2``, any ``k`` and ``k4``, no cubic coupling (``k3 = 0``).
 
     Examples
     --------
@@ -39,9 +39,12 @@ class Exact:
 
     def unsupported_reason(self, h: Harvester) -> str | None:
         """``None`` if this solver handles ``h``, else why not."""
-        if not h.is_linear:
+        if not h.potential.is_harmonic:
             return (f"the exact solver needs a harmonic potential (n = 2), got n = {h.n:g}; "
                     "use method='fpe' (N = 1) or 'mc'")
+        if h.k3 != 0.0:
+            return (f"the exact solver needs linear forces, but k3 = {h.k3:g} (cubic coupling) is nonlinear; "
+                    "use method='mc' (or 'auto'), or k3 = 0")
         if h.N > MAX_N:
             return (f"the exact solver evaluates every mode of the ring: N must be in [1, {MAX_N}], "
                     f"got N = {h.N}")
@@ -82,7 +85,7 @@ def _wide_ring(kappa: Wide | Float, scale: Wide | Float, marginal: np.ndarray,
     return mom, err
 
 
-def _sweep_block(a: np.ndarray, k: np.ndarray, N: int, params: Params) -> dict[str, np.ndarray]:
+def _sweep_block(a: np.ndarray, k: np.ndarray, N: int, params: Params, k4: float) -> dict[str, np.ndarray]:
     """:func:`exact_sweep` on 1-D arrays of points; plain arrays, NaN where a value does not exist.
 
     Evaluated in plain floats first (:class:`~fpe_harvester.wide.Float`, ~10x faster), and again
@@ -91,15 +94,17 @@ def _sweep_block(a: np.ndarray, k: np.ndarray, N: int, params: Params) -> dict[s
     """
     try:
         with np.errstate(all="raise"):
-            return _sweep_block_in(Float, a, k, N, params)
+            return _sweep_block_in(Float, a, k, N, params, k4)
     except FloatingPointError:
-        return _sweep_block_in(Wide, a, k, N, params)
+        return _sweep_block_in(Wide, a, k, N, params, k4)
 
 
-def _sweep_block_in(num: type, a: np.ndarray, k: np.ndarray, N: int, params: Params) -> dict[str, np.ndarray]:
+def _sweep_block_in(num: type, a: np.ndarray, k: np.ndarray, N: int, params: Params,
+                    k4: float = 0.0) -> dict[str, np.ndarray]:
     """:func:`_sweep_block` in the arithmetic ``num`` (:class:`Wide` or :class:`Float`)."""
-    kappa, scale = wide_mode_stiffness(a, k, N, num)
-    kappa_min = kappa.to_float()[np.arange(a.size), np.where(k < 0, N // 2, 0)]
+    kappa, scale = wide_mode_stiffness(a, k, N, num, k4)
+    soft = np.where(k < 0, N // 2, 0) if k4 == 0.0 else np.argmin(kappa.to_float(), axis=-1)
+    kappa_min = kappa.to_float()[np.arange(a.size), soft]
     marginal_q, unstable_q = classify_modes(kappa, scale)
     stable = ~unstable_q.any(axis=-1)
     marginal = stable & marginal_q.any(axis=-1)
@@ -131,6 +136,7 @@ def exact_sweep(
     k: np.ndarray | float,
     N: int = 3,
     params: Params | None = None,
+    k4: float = 0.0,
 ) -> dict[str, np.ma.MaskedArray]:
     """Vectorized exact statistics of harmonic rings over arrays of ``a`` and ``k``.
 
@@ -142,6 +148,8 @@ def exact_sweep(
         Ring size, in [1, :data:`MAX_N`] (for N = 1, ``k`` must be 0).
     params : Params, optional
         Physical parameters (paper's defaults).
+    k4 : float
+        Bi-Laplacian coupling shared by every point, any finite real (default 0; 0 for N = 1).
 
     Returns
     -------
@@ -170,9 +178,12 @@ def exact_sweep(
         raise ParameterError("k must be finite everywhere in the sweep")
     if N == 1 and np.any(k_arr != 0):
         raise ParameterError("k must be 0 for a single unit (N = 1)")
+    k4 = check_real("k4", k4)
+    if N == 1 and k4 != 0.0:
+        raise ParameterError(f"k4 must be 0 for a single unit (N = 1), got {k4!r}")
     flat_a, flat_k = a_arr.ravel(), k_arr.ravel()
     step = max(1, _BLOCK // N)
-    blocks = [_sweep_block(flat_a[i:i + step], flat_k[i:i + step], N, params)
+    blocks = [_sweep_block(flat_a[i:i + step], flat_k[i:i + step], N, params, k4)
               for i in range(0, max(flat_a.size, 1), step)]
     out: dict[str, np.ma.MaskedArray] = {}
     for key in blocks[0]:
@@ -199,15 +210,15 @@ def exact_stats(hs: Sequence[Harvester]) -> list[Stats]:
         ``V2``, ``Pin`` or ``eta`` of a stable harvester is outside the normal double range; the
         message names the most extreme parameter and the range that keeps them representable.
     """
-    groups: dict[tuple[int, Params], list[int]] = {}
+    groups: dict[tuple[int, Params, float], list[int]] = {}
     for i, h in enumerate(hs):
         reason = Exact().unsupported_reason(h)
         if reason:
             raise MethodNotAvailableError(reason)
-        groups.setdefault((h.N, h.params), []).append(i)
+        groups.setdefault((h.N, h.params, h.k4), []).append(i)
     results: dict[int, Stats] = {}
-    for (N, params), idx in groups.items():
-        sweep = exact_sweep(np.array([hs[i].a for i in idx]), np.array([hs[i].k for i in idx]), N, params)
+    for (N, params, k4), idx in groups.items():
+        sweep = exact_sweep(np.array([hs[i].a for i in idx]), np.array([hs[i].k for i in idx]), N, params, k4)
         for j, i in enumerate(idx):
             results[i] = _point_stats(hs[i], {key: val[j] for key, val in sweep.items()})
     return [results[i] for i in range(len(hs))]
@@ -226,7 +237,7 @@ def _point_stats(h: Harvester, point: dict[str, Any]) -> Stats:
     """:class:`Stats` of ``h`` from its entries of :func:`exact_sweep`."""
     kmin = float(point["kappa_min"])
     kmin_w = kappa_min(h)
-    kd = k_di(h.N, h.a)
+    kd = k_di(h.N, h.a, h.k4)
     rate_w = wide_growth_rate(kmin_w, h.params)
     rate = float(rate_w.to_float()) if rate_w is not None and rate_w.representable() else None
     info = {"N": h.N, "kappa_min": kmin, "k_di": kd}
@@ -240,7 +251,7 @@ def _point_stats(h: Harvester, point: dict[str, Any]) -> Stats:
             growth_rate=rate,
             info=info,
             message=(
-                f"unstable: k = {h.k:g} is beyond k_di = {kd:.10g}; mode q = {h.N // 2} has stiffness "
+                f"unstable: k = {h.k:g} is beyond k_di = {kd:.10g}; mode q = {softest_mode(h)} has stiffness "
                 f"{_sci(kmin_w)} < 0 and grows like {grows}. Choose k > k_di."
             ),
         )
@@ -284,9 +295,9 @@ def _wide_required(h: Harvester) -> dict[str, Wide]:
     """``V2``, ``Pin`` and ``eta`` of a stable ``h`` as :class:`Wide` (mirror modes evaluated once)."""
     q = np.arange(h.N // 2 + 1)
     weight = np.where((q == 0) | (2 * q == h.N), 1.0, 2.0)
-    s2 = Wide.of(mode_sin2(h.N)[q])
-    kappa = 2.0 * Wide.of(h.a) + 4.0 * Wide.of(h.k) * s2
-    marginal, _ = classify_modes(kappa, 2.0 * Wide.of(h.a) + 4.0 * Wide.of(abs(h.k)) * s2)
+    kappa, scale = wide_mode_stiffness(h.a, h.k, h.N, k4=h.k4)
+    kappa, scale = kappa[q], scale[q]
+    marginal, _ = classify_modes(kappa, scale)
     mom = wide_mode_moments(Wide.where(marginal, 0.0, kappa), h.params)
     scale = Wide.of(q.size / h.N)
     out = {key: (mom[key] * weight).mean() * scale for key in ("V2", "Pin")}

@@ -1,19 +1,23 @@
 """Stability of harmonic rings: the diffusive-instability threshold k_di and growth rates.
 
 Mode ``q`` of a harmonic ring is a single unit with stiffness
-:math:`\\kappa_q = 2a + 4k\\sin^2(\\pi q/N)`. A unit is stable iff its stiffness is
-positive (Routh--Hurwitz on the cubic of the (x, v, V) block, for any positive
-parameters), so the ring loses its stationary state when some :math:`\\kappa_q < 0`:
+:math:`\\kappa_q = 2a + k\\mu_q + k_4\\mu_q^2`, :math:`\\mu_q = 4\\sin^2(\\pi q/N)`. A unit is
+stable iff its stiffness is positive (Routh--Hurwitz on the cubic of the (x, v, V) block, for
+any positive parameters), so the ring loses its stationary state when some
+:math:`\\kappa_q < 0`. Since :math:`\\mu_q > 0` for q >= 1, that happens for k below
 
 .. math::
 
-    k_{di} = -\\frac{2a}{4\\max_q \\sin^2(\\pi q/N)} =
+    k_{di}(k_4) = -\\min_{q \\ge 1}\\Big(\\frac{2a}{\\mu_q} + k_4\\mu_q\\Big),\\qquad
+    k_{di}(0) = -\\frac{2a}{4\\max_q \\sin^2(\\pi q/N)} =
     \\begin{cases} -a/2 & N \\text{ even} \\\\ -a/(2\\cos^2(\\pi/2N)) & N \\text{ odd} \\end{cases}
 
-The critical mode is :math:`q^* = \\lfloor N/2 \\rfloor` (with its mirror image
-:math:`N - q^*` for odd N). At :math:`k = k_{di}` its x diffuses (zero stiffness) while
-V stays finite; beyond, it grows as :math:`e^{\\lambda t}` with :math:`\\lambda` the largest
-real root of the characteristic polynomial.
+Without ``k4`` (and for ``k4 < 0``, which softens short wavelengths further) the critical
+mode is :math:`q^* = \\lfloor N/2 \\rfloor` (with its mirror image :math:`N - q^*` for odd N);
+``k4 > 0`` moves it to the mode whose :math:`\\mu_q` is nearest :math:`\\sqrt{2a/k_4}` from
+either side. At :math:`k = k_{di}` its x diffuses (zero stiffness) while V stays finite;
+beyond, it grows as :math:`e^{\\lambda t}` with :math:`\\lambda` the largest real root of the
+characteristic polynomial.
 """
 
 from __future__ import annotations
@@ -40,6 +44,7 @@ __all__ = [
     "classify",
     "classify_modes",
     "kappa_min",
+    "softest_mode",
     "ring_spectrum",
     "wide_mode_stiffness",
     "wide_growth_rate",
@@ -60,8 +65,19 @@ def max_sin2(N: int) -> float:
     return math.cos(math.pi / (2 * N)) ** 2
 
 
-def k_di(N: int, a: float) -> float | None:
+def _softening(N: int, a: float, k4: float) -> np.ndarray:
+    """:math:`2a/\\mu_q + k_4\\mu_q` for q = 1..N//2 (the coupling k that zeroes mode q is minus it)."""
+    mu = 4.0 * mode_sin2(N)[1:N // 2 + 1]
+    return 2.0 * a / mu + k4 * mu
+
+
+def k_di(N: int, a: float, k4: float = 0.0) -> float | None:
     """Diffusive-instability threshold of a harmonic ring (``None`` for N = 1).
+
+    .. math::
+
+        k_{di} = -\\min_{q \\ge 1}\\Big(\\frac{2a}{\\mu_q} + k_4\\mu_q\\Big),\\qquad
+        \\mu_q = 4\\sin^2(\\pi q/N)
 
     Parameters
     ----------
@@ -69,6 +85,9 @@ def k_di(N: int, a: float) -> float | None:
         Number of units, >= 1.
     a : float
         Potential strength, > 0 (unit stiffness 2a).
+    k4 : float
+        Bi-Laplacian coupling, any finite real (default 0). Every k above the returned value
+        is stable, every k below it unstable, for either sign of ``k4``.
 
     Examples
     --------
@@ -76,26 +95,40 @@ def k_di(N: int, a: float) -> float | None:
     -0.333333333333
     >>> k_di(4, 0.5)
     -0.25
+    >>> round(k_di(6, 1.0, k4=0.5), 12)
+    -2.166666666667
     """
     a = check_real("a", a, low=0.0, low_open=True)
+    k4 = check_real("k4", k4)
     s2 = max_sin2(N)
     if s2 == 0.0:
         return None
-    return float((-2.0 * Wide.of(a) / (4.0 * s2)).to_float())
+    if k4 == 0.0:
+        return float((-2.0 * Wide.of(a) / (4.0 * s2)).to_float())
+    return -float(_softening(N, a, k4).min())
 
 
-def critical_mode(N: int) -> tuple[int, ...]:
-    """Index (or mirror pair of indices) of the mode that goes soft first for k < 0."""
+def critical_mode(N: int, a: float = 1.0, k4: float = 0.0) -> tuple[int, ...]:
+    """Index (or mirror pair, or tied set) of the mode(s) that go soft first as k decreases.
+
+    ``a`` matters only with ``k4 != 0``; modes whose softening coupling ties the least to
+    round-off (1e-12 relative) are all returned, each with its mirror image ``N - q``.
+    """
     N = check_int("N", N, low=1)
     if N == 1:
         return (0,)
-    q = N // 2
-    return (q,) if N % 2 == 0 else (q, N - q)
+    if k4 == 0.0:
+        q = N // 2
+        return (q,) if N % 2 == 0 else (q, N - q)
+    f = _softening(N, check_real("a", a, low=0.0, low_open=True), check_real("k4", k4))
+    lowest = 1 + np.flatnonzero(f <= f.min() + 1e-12 * np.abs(f).max())
+    return tuple(sorted({int(q) for q in lowest} | {int(N - q) for q in lowest}))
 
 
 def wide_mode_stiffness(a: np.ndarray | float, k: np.ndarray | float, N: int,
-                        num: type = Wide) -> tuple[Wide, Wide]:
-    """Mode stiffnesses :math:`\\kappa_q = 2a + 4k\\sin^2(\\pi q/N)` and their round-off scales.
+                        num: type = Wide, k4: float = 0.0) -> tuple[Wide, Wide]:
+    """Mode stiffnesses :math:`\\kappa_q = 2a + 4k s_q + 16k_4 s_q^2`, :math:`s_q = \\sin^2(\\pi q/N)`,
+    and their round-off scales.
 
     Parameters
     ----------
@@ -103,23 +136,26 @@ def wide_mode_stiffness(a: np.ndarray | float, k: np.ndarray | float, N: int,
         Potential strengths and couplings (broadcast); the modes go along a new last axis.
     N : int
         Ring size, >= 1.
-
-    Returns
-    -------
     num : type
         :class:`~fpe_harvester.wide.Wide` (default) or :class:`~fpe_harvester.wide.Float` (fast path).
+    k4 : float
+        Bi-Laplacian coupling, shared by all points (default 0: the term is not evaluated).
 
     Returns
     -------
     kappa, scale : Wide
         :math:`\\kappa_q` rounded as float arithmetic rounds it (never overflowing), and
-        :math:`2a + 4|k|\\sin^2(\\pi q/N)`, the size of the terms whose cancellation can leave
+        :math:`2a + 4|k|s_q + 16|k_4|s_q^2`, the size of the terms whose cancellation can leave
         round-off in :math:`\\kappa_q` (at most a few ulps of it).
     """
     a_w = num.of(np.asarray(a, dtype=float)[..., None])
     k_arr = np.asarray(k, dtype=float)[..., None]
     s2 = num.of(mode_sin2(N))
-    return 2.0 * a_w + 4.0 * num.of(k_arr) * s2, 2.0 * a_w + 4.0 * num.of(np.abs(k_arr)) * s2
+    kappa, scale = 2.0 * a_w + 4.0 * num.of(k_arr) * s2, 2.0 * a_w + 4.0 * num.of(np.abs(k_arr)) * s2
+    if k4 != 0.0:
+        quartic = 16.0 * s2 * s2
+        kappa, scale = kappa + num.of(k4) * quartic, scale + num.of(abs(k4)) * quartic
+    return kappa, scale
 
 
 def classify_modes(kappa: Wide | Float, scale: Wide | Float) -> tuple[np.ndarray, np.ndarray]:
@@ -277,7 +313,7 @@ def wide_growth_rate(kappa: float | Wide, params: Params) -> Wide | None:
 
 def ring_spectrum(h: Harvester) -> np.ndarray:
     """All 4N eigenvalues of the ring's drift, mode by mode (shape (N, 4))."""
-    kappa, _ = wide_mode_stiffness(h.a, h.k, h.N)
+    kappa, _ = wide_mode_stiffness(h.a, h.k, h.N, k4=h.k4)
     return np.array([mode_eigenvalues(kappa[q], h.params) for q in range(h.N)])
 
 
@@ -291,12 +327,23 @@ def mode_growth_rate(kappa: float, params: Params) -> float:
     return math.nan if rate is None else float(rate.to_float())
 
 
+def softest_mode(h: Harvester) -> int:
+    """Mode of least stiffness: without ``k4``, 0 for ``k >= 0`` and ``N // 2`` for ``k < 0``;
+    with ``k4``, the least of :math:`\\kappa_q` over q = 0..N//2."""
+    if h.k4 == 0.0:
+        return h.N // 2 if h.k < 0 else 0
+    return int(np.argmin(h.mode_stiffness()[:h.N // 2 + 1]))
+
+
 def kappa_min(h: Harvester) -> Wide:
-    """Smallest mode stiffness: mode 0 for ``k >= 0``, the critical mode ``N // 2`` for ``k < 0``.
+    """Smallest mode stiffness, that of :func:`softest_mode`.
 
     Computed for that mode alone, with the same operations as :func:`wide_mode_stiffness`.
     """
-    q = np.array([h.N // 2 if h.k < 0 else 0])
+    if h.k4 != 0.0:
+        kappa, _ = wide_mode_stiffness(h.a, h.k, h.N, k4=h.k4)
+        return kappa[softest_mode(h)]
+    q = np.array([softest_mode(h)])
     s2 = np.sin(math.pi * np.minimum(q, h.N - q) / h.N) ** 2  # as in mode_sin2
     return (2.0 * Wide.of(h.a) + 4.0 * Wide.of(h.k) * Wide.of(s2))[0]
 
@@ -314,7 +361,7 @@ def classify(h: Harvester) -> tuple[str, float]:
     ``k = k_di`` typed in floating point is marginal while e.g. ``k = 1e14`` or ``a = 1e-14`` with
     ``k = 1`` stays stable. The stiffness is returned as a float (``inf`` past the double range).
     """
-    kappa, scale = wide_mode_stiffness(h.a, h.k, h.N)
+    kappa, scale = wide_mode_stiffness(h.a, h.k, h.N, k4=h.k4)
     marginal, unstable = classify_modes(kappa, scale)
     kmin = float(kappa_min(h).to_float())
     if unstable.any():
@@ -334,12 +381,15 @@ class Threshold:
         Coupling below which the ring has no stationary state (``None`` for N = 1: always stable).
     critical_mode : tuple of int
         Mode index (or mirror pair) whose stiffness vanishes at ``k_di``.
+    k4 : float
+        Bi-Laplacian coupling the threshold is for (default 0).
     """
 
     N: int
     a: float
     k_di: float | None
     critical_mode: tuple[int, ...]
+    k4: float = 0.0
 
     @property
     def explanation(self) -> str:
@@ -347,8 +397,9 @@ class Threshold:
         if self.k_di is None:
             return "a single unit (N = 1) has no coupling and is stable for every a > 0"
         q = " and ".join(f"q = {c}" for c in self.critical_mode)
+        stiffness = "2a + 4k sin^2(pi q/N)" if self.k4 == 0.0 else "2a + k mu_q + k4 mu_q^2 (mu_q = 4 sin^2(pi q/N))"
         return (
-            f"for k < {self.k_di:.10g} mode {q} has negative stiffness 2a + 4k sin^2(pi q/N) and "
+            f"for k < {self.k_di:.10g} mode {q} has negative stiffness {stiffness} and "
             f"grows without bound; at k = k_di it is marginal (x diffuses, V stays finite); "
             f"every k > k_di is stable"
         )
@@ -357,13 +408,23 @@ class Threshold:
         return {
             "N": self.N,
             "a": self.a,
+            "k4": self.k4,
             "k_di": self.k_di,
             "critical_mode": list(self.critical_mode),
             "explanation": self.explanation,
         }
 
 
-def threshold(N: int, a: float) -> Threshold:
-    """Closed-form threshold of a harmonic ring of ``N`` units with strength ``a``."""
+def threshold(N: int, a: float, k4: float = 0.0) -> Threshold:
+    """Closed-form threshold of a harmonic ring of ``N`` units with strength ``a`` (and ``k4``).
+
+    Examples
+    --------
+    >>> th = threshold(4, 1.0, k4=0.1)
+    >>> round(th.k_di, 12), th.critical_mode
+    (-0.9, (2,))
+    """
     N = check_int("N", N, low=1)
-    return Threshold(N, check_real("a", a, low=0.0, low_open=True), k_di(N, a), critical_mode(N))
+    a = check_real("a", a, low=0.0, low_open=True)
+    k4 = check_real("k4", k4)
+    return Threshold(N, a, k_di(N, a, k4), critical_mode(N, a, k4), k4)

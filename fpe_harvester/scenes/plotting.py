@@ -67,7 +67,7 @@ def _series(rows: Sequence[SceneRow], spec: FigureSpec) -> dict[Any, list[SceneR
 def _threshold(scene: Scene, row: SceneRow) -> float | None:
     fixed = {k: v for k, v in row.point.items() if k in AXIS_NAMES and k != "k" and v is not None}
     h = scene.harvester(fixed)
-    return k_di(h.N, h.a)
+    return k_di(h.N, h.a, h.k4)
 
 
 def _normalized(scene: Scene, row: SceneRow, x: str) -> SceneRow:

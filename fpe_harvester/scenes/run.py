@@ -250,7 +250,7 @@ def _row(scene: Scene, index: int, point: Mapping[str, float], h: Harvester,
     values: dict[str, float | None] = {}
     for obs in scene.observables:
         if obs == "k_di":
-            values["k_di"] = k_di(h.N, h.a)
+            values["k_di"] = k_di(h.N, h.a, h.k4)
         elif isinstance(res, Stats):
             values[obs], values[obs + "_err"] = res.value(obs)
         else:

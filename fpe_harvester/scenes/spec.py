@@ -226,7 +226,7 @@ class Optimize:
         """Numeric bounds for the point ``h`` (``"k_di"`` resolved; N = 1 gives (0, 0))."""
         if self.over == "k" and h.N == 1:
             return 0.0, 0.0
-        kd = k_di(h.N, h.a)
+        kd = k_di(h.N, h.a, h.k4)
         lo, hi = (kd if b == "k_di" else float(b) for b in self.bounds)
         return (lo, hi) if lo <= hi else (hi, lo)
 
@@ -435,7 +435,7 @@ class Scene:
             for ax in self.axes:
                 if ax.unit == "k_di":
                     h = self.harvester({key: v for key, v in point.items() if key != "k"})
-                    kd = k_di(h.N, h.a)
+                    kd = k_di(h.N, h.a, h.k4)
                     point["k"] = 0.0 if kd is None else point["k"] * kd
             yield point
 
@@ -497,7 +497,7 @@ def scene_from_dict(data: Mapping[str, Any], name: str | None = None) -> Scene:
             merged["optimize"] = {**dict(data.get("optimize", {})), **dict(overrides.pop("optimize"))}
         merged.update(overrides)
         quick = scene_from_dict(merged, name)
-    sys_table = _keys("system", data.get("system", {}), ("a", "n", "N", "k", "params", *_PARAMS))
+    sys_table = _keys("system", data.get("system", {}), ("a", "n", "N", "k", "k4", "k3", "params", *_PARAMS))
     params = dict(_keys("system.params", sys_table.pop("params", {}), _PARAMS))
     params.update({key: sys_table.pop(key) for key in _PARAMS if key in sys_table})
     try:

@@ -109,7 +109,7 @@ BAD = [
     ("name = 'x'\nmethod = 'rk4'", "method must be one of 'auto', 'exact', 'fpe', 'mc'; got 'rk4'"),
     ("name = 'x'\nrtol = 2.0", r"rtol must be in \(0, 1\), got 2.0"),
     ("name = 'x'\nrtol = 'tight'", "rtol must be a real number"),
-    ("name = 'x'\n[system]\nb = 1", "system: unknown key 'b'; valid keys: a, n, N, k, params"),
+    ("name = 'x'\n[system]\nb = 1", "system: unknown key 'b'; valid keys: a, n, N, k, k4, k3, params"),
     ("name = 'x'\n[system]\na = -1.0", r"a must be in \(0, inf\), got -1.0"),
     ("name = 'x'\n[system]\nN = 2.5", r"N must be an integer in \[1, inf\], got 2.5"),
     ("name = 'x'\n[system]\nparams = { mass = 2 }", "system.params: unknown key 'mass'; valid keys: m, gamma"),
