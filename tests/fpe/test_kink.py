@@ -10,8 +10,8 @@ import scipy.sparse as sp
 
 from fpe_harvester import Harvester, ParameterError, Status, solve
 from fpe_harvester.fpe import HermiteBasis, stationary
-from fpe_harvester.fpe import kink
-from fpe_harvester.fpe.kinkdisc import KinkDG, KinkSettings, kink_domain
+from fpe_harvester.fpe.schemes.xv import kink
+from fpe_harvester.fpe.schemes.xv.kinkdisc import KinkDG, KinkSettings, kink_domain
 from fpe_harvester.fpe.plane import DGLine, PlaneMesh, lobatto_points
 
 
@@ -190,7 +190,7 @@ def test_energy_cdf_integrates_the_marginal(small: tuple[Harvester, KinkDG]) -> 
 
 def test_weight_belongs_to_the_one_dimensional_scheme() -> None:
     from fpe_harvester.fpe import stationary
-    from fpe_harvester.fpe.discretize import Whitening
+    from fpe_harvester.fpe.schemes.x.discretize import Whitening
 
     h = Harvester.build(a=0.5, n=1)
     with pytest.raises(ParameterError, match="weight is the Gaussian weight of scheme 'x'"):

@@ -7,11 +7,11 @@ import math
 import pytest
 
 from fpe_harvester import Harvester, ParameterError, Status, solve
-from fpe_harvester.fpe import discretize
+from fpe_harvester.fpe.schemes.x import discretize
 from fpe_harvester.fpe import refine as refine_mod
-from fpe_harvester.fpe.discretize import Whitening, solve_level
+from fpe_harvester.fpe.schemes.x.discretize import Whitening, solve_level
 from fpe_harvester.fpe.hermite import equivalent_harmonic
-from fpe_harvester.fpe.stationary import default_plan
+from fpe_harvester.fpe.schemes.x import XMeshRule
 
 
 @pytest.mark.parametrize("a", [1e-6, 0.5, 1.7, 1.77, 2.0, 100.0, 1e6])
@@ -50,9 +50,7 @@ def test_strong_kink_does_not_crash() -> None:
 
 def _level(h: Harvester, M: int, half: int):
     w = Whitening.of(h)
-    plan = default_plan(h)
-    mesh = plan.mesh(h, w, half)
-    return solve_level(h, M, mesh, plan.order, w)
+    return solve_level(h, M, XMeshRule.of(h).build(h, w, half), 3, w)
 
 
 def test_low_degree_level_of_sub_quadratic_potential_is_not_degenerate() -> None:
@@ -98,7 +96,7 @@ def test_memory_bound_stops_before_a_level_too_large() -> None:
     assert r.status is Status.NOT_CONVERGED
     assert "max_gb" in r.message and "GB" in r.message
     assert r.info["M"] <= 8 and r.eta is not None and r.eta_err > 0.0
-    assert refine_mod.level_gigabytes(8, 8, 3) <= 0.3 < refine_mod.level_gigabytes(10, 8, 3)
+    assert discretize.level_gigabytes(8, 8, 3) <= 0.3 < discretize.level_gigabytes(10, 8, 3)
 
 
 def test_memory_bound_is_checked() -> None:
@@ -114,7 +112,7 @@ def test_predicted_cost_scales_with_block_size() -> None:
     nb = {m: 4 * math.comb(m + 3, 3) for m in (4, 6, 8)}
     h = Harvester.build(a=0.5, n=4)
     w = discretize.Whitening.of(h)
-    disc = discretize.HermiteDG(h, default_plan(h).mesh(h, w), 3, w)
+    disc = discretize.HermiteDG(h, XMeshRule.of(h).build(h, w, 8), 3, w)
     # one measured level: the asymptotic cubic growth of the dense block LU
     cache = {(6, 8): _Lv(1.0)}
     assert refine_mod._predicted_seconds(cache, 8, 8, disc) == pytest.approx((nb[8] / nb[6]) ** 3)

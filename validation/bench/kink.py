@@ -32,7 +32,7 @@ import numpy as np
 
 from fpe_harvester import Harvester
 from fpe_harvester.fpe import stationary
-from fpe_harvester.fpe.kinkdisc import KinkDG, KinkSettings
+from fpe_harvester.fpe.schemes.xv.kinkdisc import KinkDG, KinkSettings
 from validation.bench.cli import bench_main, save_benchmark
 from validation.kinkdensity import v_concentration
 from validation.kinkref import recorded_reference

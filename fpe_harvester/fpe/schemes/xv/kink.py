@@ -64,11 +64,12 @@ import numpy as np
 import scipy.sparse as sp
 import scipy.sparse.linalg as spla
 
-from ..errors import NotConvergedError
-from ..model import Harvester
-from .blocksolve import _blas
-from .hermite import HermiteBasis
-from .plane import DGLine, PlaneMesh
+from ....errors import NotConvergedError
+from ....model import Harvester
+from ...blocksolve import blas_controller
+from ...hermite import HermiteBasis
+from ...moments import conditional_fields, harvester_moments
+from ...plane import DGLine, PlaneMesh
 
 __all__ = ["KinkFrame", "KinkLevel", "solve_kink_level", "ModePreconditioner"]
 
@@ -465,6 +466,11 @@ class KinkLevel:
         """Rectangles of the whole plane (twice the half plane's)."""
         return 2 * self.mesh.elements
 
+    @property
+    def half_width(self) -> float:
+        """Half-width :math:`L_x` of the domain in x."""
+        return self.mesh.Lx
+
     def info(self) -> dict[str, Any]:
         """Discretization details for the result's ``info``."""
         return {"scheme": "xv", "M": self.M, "order": self.order, "elements": self.elements,
@@ -491,12 +497,7 @@ class KinkLevel:
                "V_mean": X.evaluate(wc[:, 0] + b[0] * vc0, ax) + c[0] * ax * X.evaluate(c0v, ax),
                "xi_mean": X.evaluate(wc[:, 1] + b[1] * vc0, ax) + c[1] * ax * X.evaluate(c0v, ax)}
         dens = np.where(np.abs(x) <= X.nodes[-1], dens, 0.0)
-        mask = dens < 1e-9 * max(float(dens.max()), 1e-300)
-        safe = np.where(mask, 1.0, dens)
-        out: dict[str, np.ndarray] = {"density": dens}
-        for name, val in num.items():
-            out[name] = np.ma.masked_array(np.where(mask, 0.0, sign * val / safe), mask=mask)
-        return out
+        return conditional_fields(dens, {name: sign * val for name, val in num.items()})
 
     def summary(self) -> dict[str, Any]:
         """JSON-ready description (for the refinement history)."""
@@ -576,14 +577,8 @@ def _moments(h: Harvester, pl: _Plane, hi: _Hierarchy, frame: KinkFrame, C: np.n
     xw = xw1 + b * xv + c * x2
     ww = (ww1 + np.outer(b, vw1) + np.outer(vw1, b) + np.outer(c, xw1) + np.outer(xw1, c)
           + np.outer(b, b) * v2 + np.outer(c, c) * x2 + (np.outer(b, c) + np.outer(c, b)) * xv)
-    vV, vxi, V2 = vw[0], vw[1], ww[0, 0]
-    Pin = p.sigma * vxi
-    return {
-        "V2": float(V2), "Pin": float(Pin), "eta": float(V2 / (p.R * Pin)), "v2": v2, "vV": float(vV),
-        "vxi": float(vxi), "x2": x2, "xv": xv, "xV": float(xw[0]), "xxi": float(xw[1]),
-        "res_V2": float((V2 - p.Kc * p.tau_p * vV) / V2),
-        "res_power": float((Pin - p.m * p.gamma * v2 - p.Kv * vV) / Pin),
-    }
+    return {**harvester_moments(p, v2, vw[0], vw[1], ww[0, 0], x2),
+            "xv": xv, "xV": float(xw[0]), "xxi": float(xw[1])}
 
 
 def solve_kink_level(h: Harvester, M: int, mesh: PlaneMesh, order: int, frame: KinkFrame,
@@ -599,7 +594,7 @@ def solve_kink_level(h: Harvester, M: int, mesh: PlaneMesh, order: int, frame: K
     """
     # single-threaded BLAS: the dense products are small (the modes of one degree), and
     # threads only add overhead and contention
-    with _blas().limit(limits=1, user_api="blas"):
+    with blas_controller().limit(limits=1, user_api="blas"):
         return _solve(h, M, mesh, order, frame, rtol, guess, maxiter, coarse, deadline)
 
 

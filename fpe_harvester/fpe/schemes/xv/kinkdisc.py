@@ -29,10 +29,11 @@ import time
 from dataclasses import dataclass, field
 from typing import Any
 
-from ..model import Harvester
-from .hermite import equivalent_harmonic
+from ....model import Harvester
+from ...hermite import equivalent_harmonic
+from ...plane import PlaneMesh
+from ...protocol import Discretization
 from .kink import CoarseCorrection, KinkFrame, KinkLevel, solve_kink_level
-from .plane import PlaneMesh
 
 __all__ = ["KinkDG", "kink_domain", "KinkSettings", "COARSE_DEGREE"]
 
@@ -129,8 +130,8 @@ def _drive_sd(h: Harvester, mo: dict[str, float]) -> float:
 
 
 @dataclass(frozen=True)
-class KinkDG:
-    """The kink discretization seen by the refinement (:class:`~.refine.Discretization`)."""
+class KinkDG(Discretization):
+    """The kink discretization seen by the refinement (:class:`~fpe_harvester.fpe.protocol.Discretization`)."""
 
     h: Harvester
     base: PlaneMesh
