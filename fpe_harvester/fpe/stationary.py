@@ -1,7 +1,7 @@
 """Stationary Fokker--Planck solution of a single nonlinear harvester.
 
-:func:`stationary` refines the discretization of a scheme (see :mod:`.refine`, :mod:`.schemes`) until the
-requested relative error on :math:`\\eta` is met and returns an :class:`FPESolution`:
+:func:`stationary` refines the discretization of a scheme (see :mod:`.schemes`, :mod:`.refine`)
+until the requested relative error on :math:`\\eta` is met and returns an :class:`FPESolution`:
 the statistics (a :class:`~fpe_harvester.result.Stats`), the x-marginal density
 :math:`p(x) = c_0(x)`, the conditional means
 

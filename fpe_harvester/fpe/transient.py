@@ -255,7 +255,7 @@ def transient(
     mesh = XMeshRule.of(h, theta=theta).build(h, w, half_elements)
     # The start is a centred Gaussian and the dynamics are mirror-symmetric, so the density
     # stays symmetric: the half mesh [0, L] with the mirror condition at 0 (see
-    # :mod:`.discretize`) evolves the same discrete density with half the unknowns.
+    # :mod:`.schemes.x.discretize`) evolves the same discrete density with half the unknowns.
     hb, F, X, A, _ = assemble_level(h, M, mesh, order, w, half=True)
     G = (-(sp.kron(_mass_inverse(X, order + 1), sp.identity(hb.size)) @ A)).tocsr()
 

@@ -7,9 +7,9 @@ import pytest
 
 from fpe_harvester import Harvester, solve
 from fpe_harvester.fpe import XMesh, stationary
+from fpe_harvester.fpe.schemes.x import XMeshRule
 from fpe_harvester.fpe.schemes.x.adapt import AdaptiveHermiteDG, element_indicators, mark
 from fpe_harvester.fpe.schemes.x.discretize import Whitening, solve_level
-from fpe_harvester.fpe.schemes.x import XMeshRule
 
 
 def _marked(n: float, a: float, M: int) -> tuple[np.ndarray, np.ndarray]:

@@ -10,9 +10,9 @@ import scipy.sparse as sp
 
 from fpe_harvester import Harvester, ParameterError, Status, solve
 from fpe_harvester.fpe import HermiteBasis, stationary
+from fpe_harvester.fpe.plane import DGLine, PlaneMesh, lobatto_points
 from fpe_harvester.fpe.schemes.xv import kink
 from fpe_harvester.fpe.schemes.xv.kinkdisc import KinkDG, KinkSettings, kink_domain
-from fpe_harvester.fpe.plane import DGLine, PlaneMesh, lobatto_points
 
 
 def test_lobatto_points_are_the_extrema_of_legendre() -> None:

@@ -8,11 +8,10 @@ import numpy as np
 import pytest
 
 from fpe_harvester import Harvester, Status, solve
-from fpe_harvester.fpe.schemes.x import discretize
 from fpe_harvester.fpe import refine as refine_mod
 from fpe_harvester.fpe import stationary
+from fpe_harvester.fpe.schemes.x import XMeshRule, XScheme, discretize
 from fpe_harvester.fpe.schemes.x.discretize import Whitening, solve_level
-from fpe_harvester.fpe.schemes.x import XMeshRule, XScheme
 from fpe_harvester.fpe.settings import Settings
 
 

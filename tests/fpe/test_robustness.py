@@ -7,11 +7,10 @@ import math
 import pytest
 
 from fpe_harvester import Harvester, ParameterError, Status, solve
-from fpe_harvester.fpe.schemes.x import discretize
 from fpe_harvester.fpe import refine as refine_mod
-from fpe_harvester.fpe.schemes.x.discretize import Whitening, solve_level
 from fpe_harvester.fpe.hermite import equivalent_harmonic
-from fpe_harvester.fpe.schemes.x import XMeshRule
+from fpe_harvester.fpe.schemes.x import XMeshRule, discretize
+from fpe_harvester.fpe.schemes.x.discretize import Whitening, solve_level
 
 
 @pytest.mark.parametrize("a", [1e-6, 0.5, 1.7, 1.77, 2.0, 100.0, 1e6])

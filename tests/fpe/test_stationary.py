@@ -11,10 +11,10 @@ import pytest
 from fpe_harvester import Harvester, MethodNotAvailableError, ParameterError, Status, solve
 from fpe_harvester.exact import lyapunov_covariance, mode_moments
 from fpe_harvester.fpe import FokkerPlanck, stationary
-from fpe_harvester.fpe.schemes.x.discretize import Whitening, solve_level
 from fpe_harvester.fpe.estimate import mesh_error, tail_error
 from fpe_harvester.fpe.refine import default_memory_gb
 from fpe_harvester.fpe.schemes.x import XMeshRule, level_gigabytes
+from fpe_harvester.fpe.schemes.x.discretize import Whitening, solve_level
 
 
 def _level(h: Harvester, M: int, half: int, order: int = 3):

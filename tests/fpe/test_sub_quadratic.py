@@ -9,8 +9,8 @@ import pytest
 
 from fpe_harvester import Harvester, ParameterError, solve
 from fpe_harvester.fpe import stationary
-from fpe_harvester.fpe.schemes.x.discretize import Whitening, solve_level
 from fpe_harvester.fpe.schemes.x import XMeshRule
+from fpe_harvester.fpe.schemes.x.discretize import Whitening, solve_level
 
 
 def test_mesh_error_falls_geometrically_with_layers() -> None:

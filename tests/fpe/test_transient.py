@@ -10,8 +10,8 @@ import numpy as np
 import pytest
 
 from fpe_harvester import Harvester, MethodNotAvailableError, NotConvergedError, ParameterError
-from fpe_harvester.fpe.schemes.x.discretize import Whitening, solve_level
 from fpe_harvester.fpe.schemes.x import XMeshRule
+from fpe_harvester.fpe.schemes.x.discretize import Whitening, solve_level
 from fpe_harvester.fpe.transient import lyapunov_transient, transient
 
 

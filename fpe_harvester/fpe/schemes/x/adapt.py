@@ -18,7 +18,7 @@ density's top x-mode). Where the solution is smooth and resolved it falls like
 *Marking* (:func:`mark`): Dörfler's bulk criterion, the fewest elements that carry the
 share :data:`DORFLER` of :math:`\\sum_K \\eta_K^2`.
 
-*Discretization* (:class:`AdaptiveHermiteDG`): the refinement (:mod:`.refine`) asks for
+*Discretization* (:class:`AdaptiveHermiteDG`): the refinement (:mod:`...refine`) asks for
 meshes of sizes :math:`N_h 2^g`; here mesh g + 1 is mesh g with its marked elements
 bisected, marked by the indicator of the highest Hermite degree solved on mesh g (the
 mirror images follow: the half mesh is refined). Meshes coarser than the first are
@@ -89,7 +89,7 @@ def mark(indicators: np.ndarray, share: float = DORFLER) -> np.ndarray:
 
 class AdaptiveHermiteDG(Discretization):
     """Hermite functions of (v, V, xi) times DG in x, with element-wise mesh refinement
-    (:class:`~.refine.Discretization`; ``size`` is the nominal elements per half,
+    (:class:`~fpe_harvester.fpe.protocol.Discretization`; ``size`` is the nominal elements per half,
     :attr:`~.mesh.XMesh.size`).
 
     Parameters

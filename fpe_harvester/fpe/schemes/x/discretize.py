@@ -1,7 +1,7 @@
 """One discretization level: build the Hermite-DG system, solve it, read off the moments.
 
 A level is fixed by the Hermite degree M, the mesh and the polynomial order p. The
-stationary coefficients solve :math:`A c = 0` (see :mod:`.assemble`) with the density's
+stationary coefficients solve :math:`A c = 0` (see :mod:`...assemble`) with the density's
 normalization :math:`\\int c_0\\,dx = 1`. The operator is nonsingular only through the
 (exponentially small) outflow at :math:`\\pm L`, so two steps of inverse iteration from
 :math:`b_{i0} = \\int\\psi_i\\,dx` give the null vector up to that outflow; it is then
@@ -12,7 +12,7 @@ linear, so the stationary density is invariant under :math:`(x, y) \\to (-x, -y)
 a weight centred on :math:`b x` the coefficients obey
 :math:`c_\\alpha(-x) = (-1)^{|\\alpha|} c_\\alpha(x)`. The stationary levels are solved on
 the half mesh :math:`[0, L]` with that reflection as the inflow condition at 0
-(:func:`~.assemble.dg_operator`): half the unknowns, and on a mirror-symmetric mesh the
+(:func:`~...assemble.dg_operator`): half the unknowns, and on a mirror-symmetric mesh the
 same discrete solution as the full mesh (the full discrete problem has the same symmetry
 and a unique solution). The second moments are even, so their half-domain integrals
 normalized by the half-domain mass are the full-domain values.
@@ -317,7 +317,7 @@ _X_LOCK = threading.Lock()  # scenes may solve points in threads
 
 
 def x_matrices(h: Harvester, mesh: XMesh, order: int, half: bool = False, curved: bool = False) -> XMatrices:
-    """:func:`~.assemble.assemble_x` for the force :math:`-U'(x)/m` of ``h``, cached (read-only);
+    """:func:`~...assemble.assemble_x` for the force :math:`-U'(x)/m` of ``h``, cached (read-only);
     on the half mesh :math:`[0, L]` with a mirror at 0 if ``half``; with the matrices of a
     weight whose centre follows the force if ``curved`` (:math:`u' = -U''/m`, n > 2)."""
     nodes = mesh.half_nodes() if half else mesh.nodes()
@@ -437,7 +437,7 @@ def level_gigabytes(M: int, half_elements: int, order: int) -> float:
 
 @dataclass(frozen=True)
 class HermiteDG(Discretization):
-    """The 1-D discretization as seen by the refinement (:class:`~.refine.Discretization`):
+    """The 1-D discretization as seen by the refinement (:class:`~fpe_harvester.fpe.protocol.Discretization`):
     Hermite functions of (v, V, xi) times DG in x on ``base`` with ``size`` elements per half."""
 
     h: Harvester

@@ -3,7 +3,7 @@
 For :math:`U = a|x|`, the velocity's density concentrates at the trap (x, v) = (0, 0)
 like a power of the energy :math:`E = v^2/2 + a|x|` (docs/model.md §3), which a smooth
 basis in v cannot follow. This discretization keeps x *and* v on a mesh
-(:mod:`.plane`, graded toward the origin) and expands only the linear variables
+(:mod:`...plane`, graded toward the origin) and expands only the linear variables
 :math:`w = (V, \\xi)` in Hermite functions around a Gaussian weight :math:`N(b v, \\Sigma)`:
 
 .. math::
@@ -39,7 +39,7 @@ maps the mode of node :math:`\\lambda` to that of :math:`-\\lambda` with a sign.
 For :math:`U = a|x|^n` with 1 < n < 2 the same hierarchy holds with :math:`a_0` replaced
 by the force :math:`-(a n/m)\\,x^{n-1}` (the frame then must not shift with v): the speed of
 a mode along a face v = const falls monotonically in x, so the upwind split of every face
-is still exact (:meth:`~.plane.DGLine.signed_parts`), and the :math:`x^{n-1}` masses use
+is still exact (:meth:`~...plane.DGLine.signed_parts`), and the :math:`x^{n-1}` masses use
 Gauss--Jacobi on the element at x = 0. There is no trap for n > 1 (the density is bounded),
 so the mesh needs no layers toward the origin.
 
@@ -534,7 +534,7 @@ class KinkLevel:
         (elsewhere its error is of the order of the density's jump across element edges).
         Near the origin the density vanishes like :math:`E^{\\beta - 3/2}` or diverges like
         it (:math:`P(E < \\varepsilon) \\sim \\varepsilon^\\beta`); below the innermost layer of
-        the mesh (:meth:`~.plane.PlaneMesh.x_nodes`) a level can only follow it polynomially.
+        the mesh (:meth:`~...plane.PlaneMesh.x_nodes`) a level can only follow it polynomially.
         """
         if self.hierarchy.A:
             raise ValueError("energy_cdf is the kink's (n = 1: E = m v^2/2 + a|x|); this level has 1 < n < 2")
