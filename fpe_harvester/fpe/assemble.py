@@ -324,7 +324,7 @@ def dg_operator(X: XMatrices, F: np.ndarray, K0: sp.spmatrix, K1: sp.spmatrix,
     """The global DG operator :math:`A` (see module docstring), x outer, alpha inner.
 
     ``K2`` (optional) multiplies x, from a weight centred on a conditional mean linear in x
-    (:func:`fpe_harvester.fpe.discretize.hierarchy_matrices`): adds :math:`-M_x \\otimes K_2`.
+    (:func:`fpe_harvester.fpe.schemes.x.discretize.hierarchy_matrices`): adds :math:`-M_x \\otimes K_2`.
 
     On a half mesh (``X.xreflect`` set) the solution is continued to x < 0 by the mirror
     symmetry :math:`c_\\alpha(-x) = (-1)^{|\\alpha|} c_\\alpha(x)` (``parity`` =

@@ -47,7 +47,8 @@ from ..errors import NotConvergedError
 from .estimate import mesh_error, tail_error
 from .protocol import Discretization, Level
 
-__all__ = ["Plan", "Estimate", "RefinementResult", "refine", "default_memory_gb", "MESH_SHARE"]
+__all__ = ["Plan", "Estimate", "RefinementResult", "refine", "default_memory_gb", "MESH_SHARE", "Levels",
+           "hermite_estimate", "predicted_seconds", "stalled"]
 
 #: Observables carried through the refinement (each gets its own estimate).
 OBSERVABLES = ("eta", "V2", "Pin", "v2", "vV", "x2")
@@ -156,7 +157,7 @@ class _Stop(Exception):
     """A limit of the plan, or the failure of a level that would carry the result."""
 
 
-class _Levels:
+class Levels:
     """Solved levels of one refinement, keyed by (M, size), with the plan's limits."""
 
     def __init__(self, disc: Discretization, plan: Plan, progress: Callable[[str], None] | None) -> None:
@@ -183,7 +184,7 @@ class _Levels:
             return (f"memory: level M = {M}, {disc.describe(nh)} would need about {gb:.3g} GB, more "
                     f"than max_gb = {plan.memory_limit:.3g} GB")
         if plan.max_seconds is not None:
-            need = _predicted_seconds(self.cache, M, nh, disc)
+            need = predicted_seconds(self.cache, M, nh, disc)
             if self.elapsed + need > plan.max_seconds:
                 return (f"time budget max_seconds = {plan.max_seconds:g} s: {self.elapsed:.3g} s used, "
                         f"the next level (M = {M}, {disc.describe(nh)}) would need about {need:.3g} s more")
@@ -241,7 +242,7 @@ def refine(disc: Discretization, tol: float, plan: Plan, progress: Callable[[str
     meets tol, or at a limit the one with the smallest estimated error) and the history of
     the levels.
     """
-    levels = _Levels(disc, plan, progress)
+    levels = Levels(disc, plan, progress)
     found: list[Estimate] = []
     try:
         if plan.fixed:
@@ -276,7 +277,7 @@ def refine(disc: Discretization, tol: float, plan: Plan, progress: Callable[[str
         return _stopped(str(stop), found, levels, tol)
 
 
-def _hermite(levels: _Levels, nh: int, M: int, tol: float, mesh: float, found: list[Estimate]
+def _hermite(levels: Levels, nh: int, M: int, tol: float, mesh: float, found: list[Estimate]
              ) -> tuple[Estimate | None, str]:
     """Raise M (steps of 2) on ``nh`` elements per half until the Hermite error is below
     ``(1 - MESH_SHARE) * tol`` (returns ``"converged"``), the sequence stops contracting at
@@ -299,7 +300,7 @@ def _hermite(levels: _Levels, nh: int, M: int, tol: float, mesh: float, found: l
     while True:
         if M > levels.disc.max_degree(nh):
             return est, "resolution"
-        est = _hermite_estimate(levels, nh, M, algebraic, mesh)
+        est = hermite_estimate(levels, nh, M, algebraic, mesh)
         m_check = levels.disc.mesh_check_degree
         if est is not None and M >= m_check + 4 and not math.isfinite(mesh):
             est = _mesh_check(levels, est, nh, M - 2, enough=MESH_SHARE * tol)
@@ -311,12 +312,12 @@ def _hermite(levels: _Levels, nh: int, M: int, tol: float, mesh: float, found: l
             found.append(est)
             if est.error_M <= (1.0 - MESH_SHARE) * tol * abs(est.moments["eta"]):
                 return est, "converged"
-            if M >= 10 and _stalled([lv.moments["eta"] for lv in _sequence(levels, nh, M)][-3:]):
+            if M >= 10 and stalled([lv.moments["eta"] for lv in _sequence(levels, nh, M)][-3:]):
                 return est, "stalled"
         M += 2
 
 
-def _stalled(values: Sequence[float]) -> bool:
+def stalled(values: Sequence[float]) -> bool:
     """True if the last step of a refinement sequence is not smaller than the one before,
     or at least half of it with the opposite sign (not a converging sequence)."""
     if len(values) < 3:
@@ -325,7 +326,7 @@ def _stalled(values: Sequence[float]) -> bool:
     return abs(e2) >= abs(e1) or (e1 * e2 < 0.0 and abs(e2) >= 0.5 * abs(e1))
 
 
-def _sequence(levels: _Levels, nh: int, M: int) -> list[Level]:
+def _sequence(levels: Levels, nh: int, M: int) -> list[Level]:
     """The levels M - 6, M - 4, M - 2, M on ``nh`` (lower ones solved as needed); a failed
     lower level ends the sequence (a low Hermite truncation may lose positivity)."""
     seq = [levels.get(M, nh)]
@@ -337,8 +338,8 @@ def _sequence(levels: _Levels, nh: int, M: int) -> list[Level]:
     return seq
 
 
-def _hermite_estimate(levels: _Levels, nh: int, M: int, algebraic: bool, mesh_guess: float
-                      ) -> Estimate | None:
+def hermite_estimate(levels: Levels, nh: int, M: int, algebraic: bool, mesh_guess: float
+                     ) -> Estimate | None:
     """Estimate at degree M on ``nh``: the Hermite part from the levels M - 6 .. M (steps
     of 2; a failed lower level ends the sequence), the mesh part ``mesh_guess`` (relative,
     from the last mesh check; infinite before the first). None while fewer than three
@@ -363,7 +364,7 @@ def _hermite_estimate(levels: _Levels, nh: int, M: int, algebraic: bool, mesh_gu
     return Estimate(moments, hermite, mesh, top)
 
 
-def _mesh_check(levels: _Levels, est: Estimate, nh: int, Mc: int | None = None,
+def _mesh_check(levels: Levels, est: Estimate, nh: int, Mc: int | None = None,
                 enough: float = 0.0) -> Estimate:
     """The mesh error of ``nh`` elements per half, measured at M - 4 (at least its
     ``mesh_check_degree``, and at least the discretization's ``check_floor`` if that is
@@ -404,7 +405,7 @@ def _mesh_check(levels: _Levels, est: Estimate, nh: int, Mc: int | None = None,
     return Estimate(est.moments, est.hermite, mesh, est.level, True)
 
 
-def _fixed(levels: _Levels, M: int, nh: int) -> Estimate:
+def _fixed(levels: Levels, M: int, nh: int) -> Estimate:
     """A fixed level with the error of one refinement step of each knob: the Hermite part
     :math:`|f(M) - f(M+2)|` plus the tail of M - 2, M, M + 2, the mesh part the difference
     to twice the elements."""
@@ -420,7 +421,7 @@ def _fixed(levels: _Levels, M: int, nh: int) -> Estimate:
     return Estimate(dict(top.moments), hermite, mesh, top, True)
 
 
-def _stopped(why: str, found: list[Estimate], levels: _Levels, tol: float) -> RefinementResult:
+def _stopped(why: str, found: list[Estimate], levels: Levels, tol: float) -> RefinementResult:
     """NOT_CONVERGED: the estimate with the smallest error found so far, if it means anything.
 
     If no estimate has a measured mesh error yet, the one with the smallest Hermite error
@@ -477,8 +478,8 @@ def default_memory_gb() -> float:
     return max(0.5 * total / 1e9, 1.0)
 
 
-def _predicted_seconds(cache: dict[tuple[int, int], Level], M: int, nh: int, disc: Discretization
-                       ) -> float:
+def predicted_seconds(cache: dict[tuple[int, int], Level], M: int, nh: int, disc: Discretization
+                      ) -> float:
     """Predicted wall time (s) of level (M, nh) from the costliest measured level.
 
     Cost :math:`w\\,u^q` with ``(w, u) = disc.work(M, nh)`` (1-D: elements and the block

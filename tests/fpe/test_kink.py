@@ -101,11 +101,11 @@ def test_mode_operator_matches_the_assembled_hierarchy(small: tuple[Harvester, K
     hierarchy in the Hermite basis (assembled term by term), with a shifted frame."""
     h, disc = small
     fr = kink.KinkFrame(disc.frame.Sigma, np.array([0.1, 0.4]), np.array([0.3, 0.0]))
-    hi = kink._Hierarchy.of(h, 3, fr)
-    pl = kink._plane(h, disc.base, 3, hi.gamma_e, hi.kappa)
-    parts = kink._face_parts(pl, hi)
-    T = kink._mode_transport(pl, hi, parts)
-    op = kink._ModeOperator(pl, hi, parts)
+    hi = kink.KinkHierarchy.of(h, 3, fr)
+    pl = kink.kink_plane(h, disc.base, 3, hi.gamma_e, hi.kappa)
+    parts = kink.face_parts(pl, hi)
+    T = kink.mode_transport(pl, hi, parts)
+    op = kink.ModeOperator(pl, hi, parts)
     rng = np.random.default_rng(1)
     D = rng.standard_normal((pl.S_I.shape[0], hi.hb.size))
     blocks = sp.block_diag(T, format="csr")

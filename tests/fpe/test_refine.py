@@ -86,8 +86,8 @@ def test_sub_quadratic_error_includes_the_slow_moment() -> None:
     h = Harvester.build(a=0.5, n=1.5)
     plan = XScheme().plan(h, Settings())
     w = discretize.Whitening.of(h)
-    levels = refine_mod._Levels(discretize.HermiteDG(h, XMeshRule.of(h).build(h, w, plan.size), 3, w), plan, None)
-    est = refine_mod._hermite_estimate(levels, 8, 10, True, math.inf)
+    levels = refine_mod.Levels(discretize.HermiteDG(h, XMeshRule.of(h).build(h, w, plan.size), 3, w), plan, None)
+    est = refine_mod.hermite_estimate(levels, 8, 10, True, math.inf)
     own = refine_mod.tail_error([levels.cache[(m, 8)].moments["eta"] for m in (6, 8, 10)], [6, 8, 10])[0]
     slow = max(est.hermite[k] / est.moments[k] for k in ("V2", "Pin"))
     assert est.hermite["eta"] >= max(own, slow * est.moments["eta"])

@@ -114,24 +114,24 @@ def test_predicted_cost_scales_with_block_size() -> None:
     disc = discretize.HermiteDG(h, XMeshRule.of(h).build(h, w, 8), 3, w)
     # one measured level: the asymptotic cubic growth of the dense block LU
     cache = {(6, 8): _Lv(1.0)}
-    assert refine_mod._predicted_seconds(cache, 8, 8, disc) == pytest.approx((nb[8] / nb[6]) ** 3)
-    assert refine_mod._predicted_seconds(cache, 6, 16, disc) == pytest.approx(2.0)
+    assert refine_mod.predicted_seconds(cache, 8, 8, disc) == pytest.approx((nb[8] / nb[6]) ** 3)
+    assert refine_mod.predicted_seconds(cache, 6, 16, disc) == pytest.approx(2.0)
     # measured growth between M = 4 and 6 is used, clipped to [2, 3]
     cache = {(4, 8): _Lv((nb[4] / nb[6]) ** 2.5), (6, 8): _Lv(1.0)}
-    assert refine_mod._predicted_seconds(cache, 8, 8, disc) == pytest.approx((nb[8] / nb[6]) ** 2.5)
+    assert refine_mod.predicted_seconds(cache, 8, 8, disc) == pytest.approx((nb[8] / nb[6]) ** 2.5)
     cache = {(4, 8): _Lv(0.9), (6, 8): _Lv(1.0)}
-    assert refine_mod._predicted_seconds(cache, 8, 8, disc) == pytest.approx((nb[8] / nb[6]) ** 2)
+    assert refine_mod.predicted_seconds(cache, 8, 8, disc) == pytest.approx((nb[8] / nb[6]) ** 2)
     cache = {(4, 8): _Lv(1e-9), (6, 8): _Lv(1.0)}
-    assert refine_mod._predicted_seconds(cache, 8, 8, disc) == pytest.approx((nb[8] / nb[6]) ** 3)
+    assert refine_mod.predicted_seconds(cache, 8, 8, disc) == pytest.approx((nb[8] / nb[6]) ** 3)
 
 
 def test_stalled_hermite_sequence_is_recognized() -> None:
     # converging (geometric or algebraic, one sign): keep refining M
-    assert not refine_mod._stalled([1.1, 1.01, 1.001])
-    assert not refine_mod._stalled([0.6108, 0.6106, 0.61052])
-    assert not refine_mod._stalled([1.0, 1.1])
+    assert not refine_mod.stalled([1.1, 1.01, 1.001])
+    assert not refine_mod.stalled([0.6108, 0.6106, 0.61052])
+    assert not refine_mod.stalled([1.0, 1.1])
     # n = 8 on 16 elements at M = 14, 16 (steps -1.5e-6, -5.2e-6) and 16, 18, 20 (sign change)
-    assert refine_mod._stalled([0.4722468805, 0.4722454166, 0.4722402627])
-    assert refine_mod._stalled([0.4722402627, 0.4722339567, 0.4722402847])
+    assert refine_mod.stalled([0.4722468805, 0.4722454166, 0.4722402627])
+    assert refine_mod.stalled([0.4722402627, 0.4722339567, 0.4722402847])
     # a small step of the other sign is still convergence
-    assert not refine_mod._stalled([1.0, 1.01, 1.008])
+    assert not refine_mod.stalled([1.0, 1.01, 1.008])
