@@ -2,8 +2,9 @@
 upwind discontinuous Galerkin in x (scikit-fem), tolerance-driven refinement. For the kink
 n = 1 and 1 < n < 2 (default there): discontinuous Galerkin in (x, v) on a mesh
 graded geometrically toward the trap at (0, 0), Hermite functions in (V, xi) only
-(:mod:`.kink`, :mod:`.kinkdisc`, :mod:`.plane`), behind the same refinement and error
-estimate. The x mesh refines uniformly or element by element (:mod:`.adapt`).
+(:mod:`.schemes.xv`), behind the same refinement and error estimate. The x mesh of scheme
+``"x"`` (:mod:`.schemes.x`) refines uniformly or element by element. Each scheme follows
+the protocol of :mod:`.protocol` and is found through the registry of :mod:`.schemes`.
 
 Public API: the solver object :class:`FokkerPlanck` (``method="fpe"``), the richer
 :func:`stationary` returning an :class:`FPESolution` (density, conditional means,
@@ -15,7 +16,7 @@ harmonic reference :func:`lyapunov_transient`), and the building blocks
 from __future__ import annotations
 
 from .hermite import HermiteBasis
-from .mesh import XMesh
+from .schemes.x import XMesh
 from .solver import FokkerPlanck
 from .stationary import FPESolution, stationary
 from .transient import TransientSolution, lyapunov_transient, transient

@@ -48,7 +48,7 @@ from skfem import (
     asm,
 )
 
-__all__ = ["XMatrices", "assemble_x", "jacobi_rule", "split_flux", "upwind_parts", "dg_operator"]
+__all__ = ["XMatrices", "assemble_x", "dg_element", "jacobi_rule", "split_flux", "upwind_parts", "dg_operator"]
 
 
 @dataclass(frozen=True)
@@ -107,7 +107,9 @@ class XMatrices:
         return 1.0 if self.xreflect is None else 2.0
 
 
-def _element(order: int) -> ElementDG:
+def dg_element(order: int) -> ElementDG:
+    """The discontinuous Lagrange element of degree ``order`` on a line (a fresh one:
+    scikit-fem's ElementLinePp caches reference values by array shape only)."""
     if order == 1:
         return ElementDG(ElementLineP1())
     if order == 2:
@@ -170,7 +172,7 @@ def _singular_mass(mesh, order: int, u: Callable[[np.ndarray], np.ndarray], sing
         if elems.size == 0:
             continue
         pts = t if end == 0 else 1.0 - t
-        basis = Basis(mesh, _element(order), quadrature=(pts[None, :], w / t**singular), elements=elems)
+        basis = Basis(mesh, dg_element(order), quadrature=(pts[None, :], w / t**singular), elements=elems)
         part = asm(BilinearForm(lambda a, b, w_: u(w_.x[0]) * a * b), basis)
         out = part if out is None else out + part
     return out
@@ -204,7 +206,7 @@ def assemble_x(mesh_nodes: np.ndarray, order: int, u: Callable[[np.ndarray], np.
     from skfem import MeshLine
 
     mesh = MeshLine(np.asarray(mesh_nodes, dtype=float))
-    e = _element(order)
+    e = dg_element(order)
     q = intorder or 2 * order + 6
     basis = Basis(mesh, e, intorder=q)
     perm = _element_major(basis)
@@ -220,7 +222,7 @@ def assemble_x(mesh_nodes: np.ndarray, order: int, u: Callable[[np.ndarray], np.
             raise ValueError("singular needs a node at x = 0")
         mass_u = _singular_mass(mesh, order, u, singular)
         if not at0.all():
-            rest = Basis(mesh, _element(order), intorder=q, elements=np.flatnonzero(~at0))
+            rest = Basis(mesh, dg_element(order), intorder=q, elements=np.flatnonzero(~at0))
             mass_u = mass_u + asm(BilinearForm(lambda a, b, w: u(w.x[0]) * a * b), rest)
     mass_x = asm(BilinearForm(lambda a, b, w: w.x[0] * a * b), basis)
     deriv = asm(BilinearForm(lambda a, b, w: a * b.grad[0]), basis)
@@ -242,7 +244,7 @@ def assemble_x(mesh_nodes: np.ndarray, order: int, u: Callable[[np.ndarray], np.
     pos = BilinearForm(lambda a, b, w: (w.n[0] > 0) * a * b)
     neg = BilinearForm(lambda a, b, w: (w.n[0] < 0) * a * b)
     if mesh.t.shape[1] > 1:
-        sides = [InteriorFacetBasis(mesh, _element(order), side=s) for s in (0, 1)]
+        sides = [InteriorFacetBasis(mesh, dg_element(order), side=s) for s in (0, 1)]
         P = {(s, t): (asm(pos, sides[t], sides[s]), asm(neg, sides[t], sides[s]))
              for s in (0, 1) for t in (0, 1)}
         xplus = P[0, 0][0] - P[1, 0][0] - P[0, 1][1] + P[1, 1][1]
@@ -255,7 +257,7 @@ def assemble_x(mesh_nodes: np.ndarray, order: int, u: Callable[[np.ndarray], np.
     if reflect and abs(mesh_nodes[0]) > 1e-12 * abs(mesh_nodes[-1]):
         raise ValueError(f"reflect=True needs a half mesh starting at x = 0, got {mesh_nodes[0]!r}")
     for facet in mesh.boundary_facets():
-        fb = FacetBasis(mesh, _element(order), facets=np.array([facet]))
+        fb = FacetBasis(mesh, dg_element(order), facets=np.array([facet]))
         xplus = xplus + asm(pos, fb)
         xminus = xminus - asm(neg, fb)
         if reflect and mesh.p[0, facet] < 0.5 * mesh_nodes[-1]:
@@ -322,7 +324,7 @@ def dg_operator(X: XMatrices, F: np.ndarray, K0: sp.spmatrix, K1: sp.spmatrix,
     """The global DG operator :math:`A` (see module docstring), x outer, alpha inner.
 
     ``K2`` (optional) multiplies x, from a weight centred on a conditional mean linear in x
-    (:func:`fpe_harvester.fpe.discretize.hierarchy_matrices`): adds :math:`-M_x \\otimes K_2`.
+    (:func:`fpe_harvester.fpe.schemes.x.discretize.hierarchy_matrices`): adds :math:`-M_x \\otimes K_2`.
 
     On a half mesh (``X.xreflect`` set) the solution is continued to x < 0 by the mirror
     symmetry :math:`c_\\alpha(-x) = (-1)^{|\\alpha|} c_\\alpha(x)` (``parity`` =

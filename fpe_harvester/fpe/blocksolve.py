@@ -36,7 +36,7 @@ import scipy.linalg as sl
 import scipy.sparse as sp
 from threadpoolctl import ThreadpoolController
 
-__all__ = ["BlockTridiagonal"]
+__all__ = ["BlockTridiagonal", "blas_controller"]
 
 #: Pivots of the rank-revealing QR below this fraction of the largest are dropped from a
 #: coupling block (a relative perturbation of the operator at round-off level).
@@ -44,7 +44,7 @@ RANK_TOL = 1e-14
 
 
 @functools.cache
-def _blas() -> ThreadpoolController:
+def blas_controller() -> ThreadpoolController:
     """The thread-pool controller, made once (``threadpool_limits`` rescans the loaded
     libraries on every call: ~2 ms, a few per cent of a low level)."""
     return ThreadpoolController()
@@ -159,7 +159,7 @@ class BlockTridiagonal:
 
     def __init__(self, A: sp.spmatrix, block: int, threads: int = 2,
                  kron: Sequence[tuple[sp.spmatrix, np.ndarray]] | None = None) -> None:
-        with _blas().limit(limits=1, user_api="blas"):
+        with blas_controller().limit(limits=1, user_api="blas"):
             self._factor(A, block, threads, kron)
 
     def _factor(self, A: sp.spmatrix, block: int, threads: int,
@@ -254,7 +254,7 @@ class BlockTridiagonal:
             from_right(Z, m)
         # Both sweeps are done: the middle block may use both cores (LAPACK's threaded LU
         # is 1.2-1.6x faster than one thread at these sizes, measured n_b = 660-2720).
-        with _blas().limit(limits=threads, user_api="blas"):
+        with blas_controller().limit(limits=threads, user_api="blas"):
             self.lu[m] = sl.lu_factor(Z, check_finite=False, overwrite_a=True)
 
     def solve(self, rhs: np.ndarray) -> np.ndarray:

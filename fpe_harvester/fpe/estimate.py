@@ -31,7 +31,7 @@ converges with q ~ 1; that limit happens to agree with the kink scheme's certifi
 extrapolation gave error bars that did not bound the change to the next level (n = 1.5,
 a = 1: 0.387893 +- 2.8e-5 at M = 14, 0.387850 +- 1.4e-5 at M = 16), and an extrapolation
 whose error cannot be bounded is not shipped: Richardson in M was dropped. At n = 1 the
-default is the kink scheme (:mod:`.kink`), whose Hermite series runs only in (V, xi).
+default is the kink scheme (:mod:`.schemes.xv.kink`), whose Hermite series runs only in (V, xi).
 
 *Mesh* (:func:`mesh_error`): Richardson from three meshes of sizes :math:`s_0 < s_1 < s_2`
 (any ratios) with the observed order capped at the DG order p + 1.

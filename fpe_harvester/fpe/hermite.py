@@ -66,7 +66,7 @@ class HermiteBasis:
         Total degree, >= 2 (second moments must be resolved).
     dim : int
         Number of variables: 3 for (v, V, xi) of the 1-D solver, 2 for (V, xi) of the
-        kink solver (:mod:`.kink`).
+        kink solver (:mod:`.schemes.xv.kink`).
 
     Examples
     --------

@@ -1,6 +1,6 @@
 """The (x, v) plane of the kink solver: 1-D DG spaces and the tensor mesh graded toward the trap.
 
-The kink solver (:mod:`.kink`) discretizes the position x and the velocity v by
+The kink solver (:mod:`.schemes.xv.kink`) discretizes the position x and the velocity v by
 discontinuous Galerkin on a tensor mesh of rectangles. Every 2-D matrix it needs is a
 Kronecker product of two 1-D matrices (x outer, v inner), so this module only builds 1-D
 DG spaces (:class:`DGLine`) and the node sets of the two axes (:class:`PlaneMesh`).

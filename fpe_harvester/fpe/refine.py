@@ -1,6 +1,6 @@
 """Tolerance-driven choice of the Hermite degree M and the mesh, with error estimates.
 
-The refinement raises M (steps of 2) on a mesh of ``half_elements`` elements per half
+The refinement raises M (steps of 2) on a mesh of knob ``size`` (scheme x: elements per half)
 (:func:`_hermite`) until the Hermite error (:func:`~.estimate.tail_error` of the last three
 levels; for n < 2 at least the relative tail of V2 and of Pin, see :mod:`.estimate`) is below
 :math:`(1 - s)\\,tol` (s = :data:`MESH_SHARE`). Then the mesh is checked
@@ -20,7 +20,7 @@ at M = 12 (n = 6, a = 1: 16 elements are 1.4e-4 off at M = 6 and 1.7e-5 at M = 1
 chose meshes 1.5 times finer than needed. The numbers of the alternatives are in
 :mod:`validation.bench.fpe`.
 
-With the element-wise discretization (:class:`~.adapt.AdaptiveHermiteDG`, ``mesh="adaptive"``)
+With the element-wise discretization (:class:`~.schemes.x.adapt.AdaptiveHermiteDG`, ``mesh="adaptive"``)
 "twice the elements" is the mesh whose marked elements are bisected (all of them when M
 outgrows the mesh), the first mesh check refines at once if it finds more than
 :data:`EARLY_SHARE` of tol, and checks from M = 10 on are made at M >= 8.
@@ -39,18 +39,16 @@ import os
 import time
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
-from typing import Any, Protocol
+from typing import Any
 
 import numpy as np
 
 from ..errors import NotConvergedError
-from ..model import Harvester
-from .discretize import Whitening, level_gigabytes
 from .estimate import mesh_error, tail_error
-from .mesh import XMesh
+from .protocol import Discretization, Level
 
-__all__ = ["Plan", "Estimate", "RefinementResult", "refine", "level_gigabytes", "default_memory_gb",
-           "MESH_SHARE", "Discretization", "LevelLike"]
+__all__ = ["Plan", "Estimate", "RefinementResult", "refine", "default_memory_gb", "MESH_SHARE", "Levels",
+           "hermite_estimate", "predicted_seconds", "stalled"]
 
 #: Observables carried through the refinement (each gets its own estimate).
 OBSERVABLES = ("eta", "V2", "Pin", "v2", "vV", "x2")
@@ -66,131 +64,45 @@ MESH_SHARE = 0.25
 #: threshold of MESH_SHARE: 5.1 s against 3.4 s, the coarse mesh met tol as it was).
 EARLY_SHARE = 0.5
 
-#: Lowest Hermite degree of a mesh check of the 1-D discretization (lower levels say little
-#: about the mesh); a discretization may set its own (``mesh_check_degree``).
-M_CHECK = 6
-
-
-
-class LevelLike(Protocol):
-    """What the refinement reads of a solved level (:class:`~.discretize.Level`,
-    :class:`~.kink.KinkLevel`)."""
-
-    M: int
-    moments: dict[str, float]
-    seconds: float
-    dofs: int
-
-    @property
-    def size(self) -> int: ...  # the mesh knob the level was solved on
-
-    @property
-    def elements(self) -> int: ...
-
-    def summary(self) -> dict[str, Any]: ...
-
-
-class Discretization(Protocol):
-    """A family of levels indexed by the Hermite degree M and an integer mesh size (one
-    refinement step doubles it): the 1-D Hermite x DG discretization
-    (:class:`~.discretize.HermiteDG`, size = elements per half) or the kink's
-    (:class:`~.kinkdisc.KinkDG`, size = subdivisions of the base (x, v) mesh)."""
-
-    order: int
-    #: Hermite errors with algebraic tails (potentials with n < 2, see :mod:`.estimate`).
-    algebraic: bool
-    #: What a user can do when no level gives an error estimate (ends the stop message).
-    advice: str
-
-    def solve(self, M: int, size: int, lower: LevelLike | None = None) -> LevelLike:
-        """Solve level (M, size); ``lower`` is a solved lower degree on the same mesh."""
-        ...
-
-    def unknowns(self, M: int, size: int) -> int: ...
-
-    def gigabytes(self, M: int, size: int) -> float: ...
-
-    def max_degree(self, size: int) -> int:
-        """The highest M the mesh of ``size`` carries."""
-        ...
-
-    def work(self, M: int, size: int) -> tuple[float, float]:
-        """Cost model of a level, ``(w, u)``: the time scales like :math:`w\\,u^q`, q in
-        :attr:`work_exponents` (measured from the solved levels)."""
-        ...
-
-    work_exponents: tuple[float, float]
-
-    def describe(self, size: int) -> str:
-        """The mesh of ``size`` in words (e.g. '16 elements')."""
-        ...
-
-    #: Lowest Hermite degree at which a mesh check is meaningful.
-    mesh_check_degree: int
-
 
 @dataclass(frozen=True)
 class Plan:
-    """Discretization settings and limits of the refinement.
+    """Starting level and limits of the refinement (made by a scheme,
+    :meth:`~.protocol.Scheme.plan`).
 
     Attributes
     ----------
     M : int
         Hermite degree to start from (fixed with ``fixed``), >= 2.
-    half_elements : int
-        Elements per half-domain of the first mesh (fixed with ``fixed``).
-    order : int
-        DG polynomial order p.
-    theta : float
-        Domain factor :math:`U(L)/T_{eff}`.
-    grading : float
-        Mesh grading toward x = 0.
-    wall : float
-        Wall weight of the mesh monitor.
+    size : int
+        The discretization's mesh knob to start from (fixed with ``fixed``); one refinement
+        step doubles it.
     fixed : bool
-        If True, solve at (M, half_elements) and estimate the error from one refinement
-        step of each knob (M + 2, twice the elements); no adaptation.
-    max_M, max_half_elements, max_dofs : int
+        If True, solve at (M, size) and estimate the error from one refinement step of each
+        knob (M + 2, twice the size); no adaptation.
+    max_M, max_size, max_dofs : int
         Limits; the solve reports NOT_CONVERGED when tol needs more. ``max_dofs`` counts
-        the unknowns of the whole mesh, twice those of the half mesh that is solved.
+        the unknowns of the whole domain (:meth:`~.protocol.Discretization.unknowns`).
     max_seconds : float or None
         Wall-time budget (s); no level starts whose predicted cost would exceed it.
     max_gb : float or None
-        Memory bound of one level's factorization in GB (:func:`level_gigabytes`); default
-        (None): half the physical memory.
-    layers : int
-        Geometric layers toward x = 0 splitting the first element of each half (0: none,
-        the algebraic mesh); see :class:`~.mesh.XMesh`.
-    ratio : float
-        Ratio of successive geometric layers, in (0, 1).
+        Memory bound of one level in GB (:meth:`~.protocol.Discretization.gigabytes`);
+        default (None): half the physical memory.
     """
 
     M: int
-    half_elements: int
-    order: int
-    theta: float
-    grading: float
-    wall: float
+    size: int
     fixed: bool = False
     max_M: int = 24
-    max_half_elements: int = 256
+    max_size: int = 256
     max_dofs: int = 600_000
     max_seconds: float | None = None
     max_gb: float | None = None
-    layers: int = 0
-    ratio: float = 0.15
 
     @property
     def memory_limit(self) -> float:
         """The memory bound in GB (``max_gb`` or half the physical memory)."""
         return default_memory_gb() if self.max_gb is None else self.max_gb
-
-    def mesh(self, h: Harvester, w: Whitening, half_elements: int | None = None) -> XMesh:
-        """The x mesh of this plan for ``h``: domain :math:`U(L) = \\Theta T_{eff}` of the
-        weight ``w``, ``half_elements`` (default the plan's) elements per half."""
-        nh = self.half_elements if half_elements is None else half_elements
-        return XMesh(w.domain(h, self.theta), nh, n=h.n, scale=math.sqrt(w.x2), theta=self.theta,
-                     wall=self.wall, grading=self.grading, layers=self.layers, ratio=self.ratio)
 
 
 @dataclass(frozen=True)
@@ -206,7 +118,7 @@ class Estimate:
     moments: dict[str, float]
     hermite: dict[str, float]
     mesh: dict[str, float]
-    level: LevelLike
+    level: Level
     mesh_checked: bool = False
 
     @property
@@ -245,12 +157,12 @@ class _Stop(Exception):
     """A limit of the plan, or the failure of a level that would carry the result."""
 
 
-class _Levels:
+class Levels:
     """Solved levels of one refinement, keyed by (M, size), with the plan's limits."""
 
     def __init__(self, disc: Discretization, plan: Plan, progress: Callable[[str], None] | None) -> None:
         self.disc, self.plan, self.progress = disc, plan, progress
-        self.cache: dict[tuple[int, int], LevelLike] = {}
+        self.cache: dict[tuple[int, int], Level] = {}
         self.failed: dict[tuple[int, int], str] = {}
         self.t0 = time.perf_counter()
 
@@ -263,8 +175,8 @@ class _Levels:
         plan, disc = self.plan, self.disc
         if M > plan.max_M:
             return f"Hermite degree M = {M} would exceed max_M = {plan.max_M}"
-        if nh > plan.max_half_elements:
-            return f"{disc.describe(nh)} would exceed {disc.describe(plan.max_half_elements)}"
+        if nh > plan.max_size:
+            return f"{disc.describe(nh)} would exceed {disc.describe(plan.max_size)}"
         if disc.unknowns(M, nh) > plan.max_dofs:
             return f"unknowns would exceed max_dofs = {plan.max_dofs}"
         gb = disc.gigabytes(M, nh)
@@ -272,13 +184,13 @@ class _Levels:
             return (f"memory: level M = {M}, {disc.describe(nh)} would need about {gb:.3g} GB, more "
                     f"than max_gb = {plan.memory_limit:.3g} GB")
         if plan.max_seconds is not None:
-            need = _predicted_seconds(self.cache, M, nh, disc)
+            need = predicted_seconds(self.cache, M, nh, disc)
             if self.elapsed + need > plan.max_seconds:
                 return (f"time budget max_seconds = {plan.max_seconds:g} s: {self.elapsed:.3g} s used, "
                         f"the next level (M = {M}, {disc.describe(nh)}) would need about {need:.3g} s more")
         return ""
 
-    def get(self, M: int, nh: int) -> LevelLike:
+    def get(self, M: int, nh: int) -> Level:
         """Level (M, nh); raises :class:`_Stop` at a limit or if it fails."""
         key = (M, nh)
         if key in self.cache:
@@ -304,7 +216,7 @@ class _Levels:
                           f"({lv.seconds:.2f} s)")
         return lv
 
-    def get_or_none(self, M: int, nh: int) -> LevelLike | None:
+    def get_or_none(self, M: int, nh: int) -> Level | None:
         """Level (M, nh), or None if it fails (limits still raise)."""
         if (M, nh) not in self.cache and (M, nh) not in self.failed:
             why = self.limit(M, nh)
@@ -325,27 +237,25 @@ def refine(disc: Discretization, tol: float, plan: Plan, progress: Callable[[str
            ) -> RefinementResult:
     """Refine M and the mesh of ``disc`` until the estimated relative error on eta is below ``tol``.
 
-    See the module docstring. ``plan`` gives the starting level (``M``, ``half_elements``:
-    the discretization's mesh size) and the limits. Returns the best estimate (the one that
+    See the module docstring. ``plan`` gives the starting level (``M``, ``size``:
+    the discretization's mesh knob) and the limits. Returns the best estimate (the one that
     meets tol, or at a limit the one with the smallest estimated error) and the history of
     the levels.
     """
-    levels = _Levels(disc, plan, progress)
+    levels = Levels(disc, plan, progress)
     found: list[Estimate] = []
     try:
         if plan.fixed:
-            est = _fixed(levels, plan.M, plan.half_elements)
+            est = _fixed(levels, plan.M, plan.size)
             ok = est.relative <= tol
-            reason = "" if ok else (f"fixed M = {plan.M}, {disc.describe(plan.half_elements)}: estimated "
+            reason = "" if ok else (f"fixed M = {plan.M}, {disc.describe(plan.size)}: estimated "
                                     f"relative error {est.relative:.2g} > tol = {tol:.2g}")
             return RefinementResult(est, ok, reason, levels.history(), levels.elapsed)
-        M, nh, mesh = plan.M, plan.half_elements, math.inf
+        M, nh, mesh = plan.M, plan.size, math.inf
         while True:
             est, why = _hermite(levels, nh, M, tol, mesh, found)
             if why == "resolution":
-                outgrown = getattr(disc, "outgrown", None)
-                if outgrown is not None:
-                    outgrown(nh)  # an element-wise refinement bisects all elements this time
+                disc.outgrown(nh)  # an element-wise refinement bisects all elements this time
                 nh *= 2  # M is at the most this mesh carries: twice the elements, same M
                 M = est.level.M if est is not None else M
                 continue
@@ -367,7 +277,7 @@ def refine(disc: Discretization, tol: float, plan: Plan, progress: Callable[[str
         return _stopped(str(stop), found, levels, tol)
 
 
-def _hermite(levels: _Levels, nh: int, M: int, tol: float, mesh: float, found: list[Estimate]
+def _hermite(levels: Levels, nh: int, M: int, tol: float, mesh: float, found: list[Estimate]
              ) -> tuple[Estimate | None, str]:
     """Raise M (steps of 2) on ``nh`` elements per half until the Hermite error is below
     ``(1 - MESH_SHARE) * tol`` (returns ``"converged"``), the sequence stops contracting at
@@ -376,7 +286,7 @@ def _hermite(levels: _Levels, nh: int, M: int, tol: float, mesh: float, found: l
     estimate on the way is appended to ``found``, its mesh part the last relative mesh
     error ``mesh``.
 
-    The first estimate at M >= M_CHECK + 4 on a mesh not yet checked gets a mesh check at
+    The first estimate at M >= ``mesh_check_degree`` + 4 on a mesh not yet checked gets a mesh check at
     M - 2 while that is cheap, so that every later estimate (and a stop at a limit)
     carries a measured mesh error. A discretization whose refinement step is cheap
     (``refine_early``, the element-wise one) refines right away when that check fails
@@ -390,24 +300,24 @@ def _hermite(levels: _Levels, nh: int, M: int, tol: float, mesh: float, found: l
     while True:
         if M > levels.disc.max_degree(nh):
             return est, "resolution"
-        est = _hermite_estimate(levels, nh, M, algebraic, mesh)
+        est = hermite_estimate(levels, nh, M, algebraic, mesh)
         m_check = levels.disc.mesh_check_degree
         if est is not None and M >= m_check + 4 and not math.isfinite(mesh):
             est = _mesh_check(levels, est, nh, M - 2, enough=MESH_SHARE * tol)
             mesh = est.error_x / abs(est.moments["eta"])
-            if getattr(levels.disc, "refine_early", False) and mesh > EARLY_SHARE * tol:
+            if levels.disc.refine_early and mesh > EARLY_SHARE * tol:
                 found.append(est)
                 return est, "mesh"
         if est is not None:
             found.append(est)
             if est.error_M <= (1.0 - MESH_SHARE) * tol * abs(est.moments["eta"]):
                 return est, "converged"
-            if M >= 10 and _stalled([lv.moments["eta"] for lv in _sequence(levels, nh, M)][-3:]):
+            if M >= 10 and stalled([lv.moments["eta"] for lv in _sequence(levels, nh, M)][-3:]):
                 return est, "stalled"
         M += 2
 
 
-def _stalled(values: Sequence[float]) -> bool:
+def stalled(values: Sequence[float]) -> bool:
     """True if the last step of a refinement sequence is not smaller than the one before,
     or at least half of it with the opposite sign (not a converging sequence)."""
     if len(values) < 3:
@@ -416,7 +326,7 @@ def _stalled(values: Sequence[float]) -> bool:
     return abs(e2) >= abs(e1) or (e1 * e2 < 0.0 and abs(e2) >= 0.5 * abs(e1))
 
 
-def _sequence(levels: _Levels, nh: int, M: int) -> list[LevelLike]:
+def _sequence(levels: Levels, nh: int, M: int) -> list[Level]:
     """The levels M - 6, M - 4, M - 2, M on ``nh`` (lower ones solved as needed); a failed
     lower level ends the sequence (a low Hermite truncation may lose positivity)."""
     seq = [levels.get(M, nh)]
@@ -428,8 +338,8 @@ def _sequence(levels: _Levels, nh: int, M: int) -> list[LevelLike]:
     return seq
 
 
-def _hermite_estimate(levels: _Levels, nh: int, M: int, algebraic: bool, mesh_guess: float
-                      ) -> Estimate | None:
+def hermite_estimate(levels: Levels, nh: int, M: int, algebraic: bool, mesh_guess: float
+                     ) -> Estimate | None:
     """Estimate at degree M on ``nh``: the Hermite part from the levels M - 6 .. M (steps
     of 2; a failed lower level ends the sequence), the mesh part ``mesh_guess`` (relative,
     from the last mesh check; infinite before the first). None while fewer than three
@@ -454,7 +364,7 @@ def _hermite_estimate(levels: _Levels, nh: int, M: int, algebraic: bool, mesh_gu
     return Estimate(moments, hermite, mesh, top)
 
 
-def _mesh_check(levels: _Levels, est: Estimate, nh: int, Mc: int | None = None,
+def _mesh_check(levels: Levels, est: Estimate, nh: int, Mc: int | None = None,
                 enough: float = 0.0) -> Estimate:
     """The mesh error of ``nh`` elements per half, measured at M - 4 (at least its
     ``mesh_check_degree``, and at least the discretization's ``check_floor`` if that is
@@ -475,7 +385,7 @@ def _mesh_check(levels: _Levels, est: Estimate, nh: int, Mc: int | None = None,
     """
     M = est.level.M
     if Mc is None:
-        floor = getattr(levels.disc, "check_floor", levels.disc.mesh_check_degree)
+        floor = levels.disc.check_floor
         Mc = min(M, max(M - 4, min(floor, M - 2), levels.disc.mesh_check_degree))
     a, b = levels.get(Mc, nh), levels.get(Mc, 2 * nh)
     # A third, coarser mesh gives the observed order, but only at a low degree: at high M
@@ -495,7 +405,7 @@ def _mesh_check(levels: _Levels, est: Estimate, nh: int, Mc: int | None = None,
     return Estimate(est.moments, est.hermite, mesh, est.level, True)
 
 
-def _fixed(levels: _Levels, M: int, nh: int) -> Estimate:
+def _fixed(levels: Levels, M: int, nh: int) -> Estimate:
     """A fixed level with the error of one refinement step of each knob: the Hermite part
     :math:`|f(M) - f(M+2)|` plus the tail of M - 2, M, M + 2, the mesh part the difference
     to twice the elements."""
@@ -511,7 +421,7 @@ def _fixed(levels: _Levels, M: int, nh: int) -> Estimate:
     return Estimate(dict(top.moments), hermite, mesh, top, True)
 
 
-def _stopped(why: str, found: list[Estimate], levels: _Levels, tol: float) -> RefinementResult:
+def _stopped(why: str, found: list[Estimate], levels: Levels, tol: float) -> RefinementResult:
     """NOT_CONVERGED: the estimate with the smallest error found so far, if it means anything.
 
     If no estimate has a measured mesh error yet, the one with the smallest Hermite error
@@ -550,7 +460,7 @@ def _stopped(why: str, found: list[Estimate], levels: _Levels, tol: float) -> Re
     return RefinementResult(best, False, reason, levels.history(), levels.elapsed)
 
 
-def _unphysical(lv: LevelLike) -> str:
+def _unphysical(lv: Level) -> str:
     """Why the moments of ``lv`` cannot be a density's (empty if they can)."""
     mo = lv.moments
     for name in ("V2", "Pin", "v2", "x2", "eta"):
@@ -568,8 +478,8 @@ def default_memory_gb() -> float:
     return max(0.5 * total / 1e9, 1.0)
 
 
-def _predicted_seconds(cache: dict[tuple[int, int], LevelLike], M: int, nh: int, disc: Discretization
-                       ) -> float:
+def predicted_seconds(cache: dict[tuple[int, int], Level], M: int, nh: int, disc: Discretization
+                      ) -> float:
     """Predicted wall time (s) of level (M, nh) from the costliest measured level.
 
     Cost :math:`w\\,u^q` with ``(w, u) = disc.work(M, nh)`` (1-D: elements and the block

@@ -2,16 +2,18 @@
 
 from __future__ import annotations
 
+import functools
 from collections.abc import Callable
 from dataclasses import dataclass
 from typing import ClassVar
 
 import numpy as np
 
-from ..errors import HarvesterError, MethodNotAvailableError, ParameterError, check_int, check_real
+from ..errors import HarvesterError, MethodNotAvailableError
 from ..model import Harvester
 from ..result import Stats, Status
-from .stationary import MESHES, SCHEMES, _ring_reason, resolve_scheme, stationary
+from .settings import Settings
+from .stationary import ring_reason, solve_settings
 
 __all__ = ["FokkerPlanck"]
 
@@ -49,7 +51,7 @@ class FokkerPlanck:
         True prints one line per level; a callable receives the lines.
     scheme : str
         ``"auto"`` (default): for 1 <= n < 2 DG in (x, v) with Hermite functions of
-        (V, xi) (``"xv"``, :mod:`~fpe_harvester.fpe.kink`; for 1 < n < 2 ``"x"`` if
+        (V, xi) (``"xv"``, :mod:`~fpe_harvester.fpe.schemes.xv`; for 1 < n < 2 ``"x"`` if
         ``mesh`` or ``elements`` is given), else DG in x with Hermite functions of
         (v, V, xi) (``"x"``). ``"x"`` forces the latter for 1 <= n < 2 too (benchmarks
         compare them). For ``"xv"``, ``elements`` is not used and ``order`` is the DG
@@ -59,7 +61,7 @@ class FokkerPlanck:
         (graded toward 0 for n < 2, toward the walls otherwise; a mesh step bisects every
         element), ``"geometric"`` (n < 2: layers toward 0) or ``"adaptive"`` (any n: a
         mesh step bisects only the elements an error indicator marks, see
-        :mod:`~fpe_harvester.fpe.adapt`).
+        :mod:`~fpe_harvester.fpe.schemes.x.adapt`).
 
     Examples
     --------
@@ -84,34 +86,22 @@ class FokkerPlanck:
     mesh: str = "auto"
 
     def __post_init__(self) -> None:
-        if self.scheme not in SCHEMES:
-            raise ParameterError(f"scheme must be one of {', '.join(map(repr, SCHEMES))}, got {self.scheme!r} "
-                                 f"(type {type(self.scheme).__name__})")
-        if self.mesh not in MESHES:
-            raise ParameterError(f"mesh must be one of {', '.join(map(repr, MESHES))}, got {self.mesh!r} "
-                                 f"(type {type(self.mesh).__name__})")
-        object.__setattr__(self, "tol", check_real("tol", self.tol, low=0.0, high=0.1, low_open=True))
-        if self.M is not None:
-            object.__setattr__(self, "M", check_int("M", self.M, low=2, high=60))
-        if self.elements is not None:
-            el = check_int("elements", self.elements, low=2, high=2048)
-            if el % 2:
-                raise MethodNotAvailableError(f"elements must be even (a node at x = 0), got {el}")
-            object.__setattr__(self, "elements", el)
-        if self.order is not None:
-            object.__setattr__(self, "order", check_int("order", self.order, low=2, high=5))
-        object.__setattr__(self, "domain", check_real("domain", self.domain, low=5.0, high=200.0))
-        object.__setattr__(self, "max_M", check_int("max_M", self.max_M, low=4, high=60))
-        if self.max_seconds is not None:
-            object.__setattr__(self, "max_seconds",
-                               check_real("max_seconds", self.max_seconds, low=0.0, low_open=True))
-        if self.max_gb is not None:
-            object.__setattr__(self, "max_gb", check_real("max_gb", self.max_gb, low=0.0, low_open=True))
+        settings = self.settings
+        for name in ("tol", "M", "elements", "order", "max_seconds", "max_gb"):
+            object.__setattr__(self, name, getattr(settings, name))
+        object.__setattr__(self, "domain", settings.theta)
+
+    @functools.cached_property
+    def settings(self) -> Settings:
+        """The validated settings of the stationary solve (made, and so checked, at construction)."""
+        return Settings(tol=self.tol, M=self.M, elements=self.elements, order=self.order, theta=self.domain,
+                        max_M=self.max_M, max_seconds=self.max_seconds, max_gb=self.max_gb,
+                        scheme=self.scheme, mesh=self.mesh)
 
     def unsupported_reason(self, h: Harvester) -> str | None:
         """``None`` for a single oscillator, else why not (rings: use mc, or exact if harmonic)."""
         if h.N != 1:
-            return _ring_reason(h)
+            return ring_reason(h)
         return None
 
     def solve(self, h: Harvester) -> Stats:
@@ -123,14 +113,7 @@ class FokkerPlanck:
         if progress is True:
             progress = print
         try:
-            sol = stationary(
-                h, self.tol, M=self.M,
-                half_elements=None if self.elements is None
-                or resolve_scheme(h, self.scheme, x_settings=h.n != 1.0) == "xv" else self.elements // 2,
-                order=self.order, theta=self.domain, max_M=max(self.max_M, self.M or 0),
-                max_seconds=self.max_seconds, max_gb=self.max_gb, grid=3, progress=progress or None,
-                scheme=self.scheme, mesh=self.mesh,
-            )
+            sol = solve_settings(h, self.settings, grid=3, progress=progress or None)
         except HarvesterError:
             raise
         except (ArithmeticError, ValueError, np.linalg.LinAlgError) as exc:

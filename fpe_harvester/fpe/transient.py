@@ -32,9 +32,9 @@ import scipy.sparse.linalg  # noqa: F401  (sp.linalg.spsolve)
 
 from ..errors import MethodNotAvailableError, NotConvergedError, ParameterError, check_int, check_real
 from ..model import Harvester
-from .discretize import Level, Whitening, _moments, assemble_level
 from .hermite import HermiteBasis
-from .stationary import default_plan
+from .schemes.x.discretize import Level, Whitening, assemble_level, level_moments
+from .schemes.x.scheme import XMeshRule
 
 __all__ = ["TransientSolution", "transient", "initial_coefficients", "lyapunov_transient"]
 
@@ -252,10 +252,10 @@ def transient(
     interval = t_end / 100 if interval is None else check_real("interval", interval, low=0.0, low_open=True)
 
     w = Whitening.of(h, curved=False)
-    mesh = default_plan(h, theta=theta).mesh(h, w, half_elements)
+    mesh = XMeshRule.of(h, theta=theta).build(h, w, half_elements)
     # The start is a centred Gaussian and the dynamics are mirror-symmetric, so the density
     # stays symmetric: the half mesh [0, L] with the mirror condition at 0 (see
-    # :mod:`.discretize`) evolves the same discrete density with half the unknowns.
+    # :mod:`.schemes.x.discretize`) evolves the same discrete density with half the unknowns.
     hb, F, X, A, _ = assemble_level(h, M, mesh, order, w, half=True)
     G = (-(sp.kron(_mass_inverse(X, order + 1), sp.identity(hb.size)) @ A)).tocsr()
 
@@ -286,8 +286,6 @@ def transient(
         solver_options.setdefault("rtol", 1e-8)
         solver_options.setdefault("atol", 1e-12)
 
-    from .stationary import _fields
-
     xs = np.linspace(-mesh.L, mesh.L, grid)
     records: list[tuple[float, dict[str, float], np.ndarray, float]] = []
 
@@ -298,14 +296,14 @@ def transient(
         mass = X.copies * float(C[:, 0] @ X.integral)
         # Moments of the density still in the domain (the outflow at +-L is a truncation
         # artefact, recorded in ``mass``).
-        mo = _moments(h, X, hb, C / mass if mass > 0 else C, w)
+        mo = level_moments(h, X, hb, C / mass if mass > 0 else C, w)
         if not (np.all(np.isfinite(C)) and abs(mass - mass0) < 1e-3 and mo["V2"] > 0 and mo["x2"] > 0):
             raise NotConvergedError(
                 f"transient run unstable at t = {t:.4g} (mass {mass:.6g}, V2 {mo['V2']:.4g}): the "
                 f"truncated hierarchy has a spurious growing mode at M = {M}, {mesh.elements} elements, "
                 f"theta = {theta:g}; use more elements, a smaller theta or a smaller M")
         lv = Level(M, order, mesh, C, mo, c0.size, 0.0, X, hb, w)
-        records.append((t, mo, _fields(lv, xs)["density"], mass))
+        records.append((t, mo, lv.fields(xs)["density"], mass))
 
     tracker = [pde.CallbackTracker(record, interrupts=interval), *(trackers or [])]
     eq = _Hierarchy()

@@ -6,7 +6,7 @@ from collections.abc import Callable
 
 import pytest
 
-from fpe_harvester.fpe import discretize
+from fpe_harvester.fpe.schemes.x import discretize
 
 
 @pytest.fixture

@@ -7,16 +7,16 @@ import pytest
 
 from fpe_harvester import Harvester, solve
 from fpe_harvester.fpe import XMesh, stationary
-from fpe_harvester.fpe.adapt import AdaptiveHermiteDG, element_indicators, mark
-from fpe_harvester.fpe.discretize import Whitening, solve_level
-from fpe_harvester.fpe.stationary import default_plan
+from fpe_harvester.fpe.schemes.x import XMeshRule
+from fpe_harvester.fpe.schemes.x.adapt import AdaptiveHermiteDG, element_indicators, mark
+from fpe_harvester.fpe.schemes.x.discretize import Whitening, solve_level
 
 
 def _marked(n: float, a: float, M: int) -> tuple[np.ndarray, np.ndarray]:
     """Marks and half nodes (relative to L) of the first mesh at degree M."""
     h = Harvester.build(a=a, n=n)
     w = Whitening.of(h)
-    mesh = default_plan(h).mesh(h, w, 8)
+    mesh = XMeshRule.of(h).build(h, w, 8)
     return mark(element_indicators(solve_level(h, M, mesh, 3, w))), mesh.half_nodes() / mesh.L
 
 
@@ -34,7 +34,7 @@ def test_indicator_marks_the_element_at_zero() -> None:
     marked at the first step and again after it was bisected (grading toward 0)."""
     h = Harvester.build(a=1.0, n=1.5)
     w = Whitening.of(h)
-    mesh = default_plan(h).mesh(h, w, 8)
+    mesh = XMeshRule.of(h).build(h, w, 8)
     first = mesh.half_nodes()[1]
     for _ in range(2):
         marked = mark(element_indicators(solve_level(h, 8, mesh, 3, w)))
@@ -51,8 +51,8 @@ def test_indicator_falls_with_the_element_size_where_smooth() -> None:
     convergence check)."""
     h = Harvester.build(a=1.0, n=2.0)
     w = Whitening.of(h)
-    plan = default_plan(h)
-    total = [np.sqrt(np.sum(element_indicators(solve_level(h, 2, plan.mesh(h, w, nh), 3, w)) ** 2))
+    rule = XMeshRule.of(h)
+    total = [np.sqrt(np.sum(element_indicators(solve_level(h, 2, rule.build(h, w, nh), 3, w)) ** 2))
              for nh in (8, 16, 32)]
     orders = np.log2(np.array(total[:-1]) / np.array(total[1:]))
     assert np.all((orders > 2.5) & (orders < 3.5)), orders
@@ -95,7 +95,7 @@ def test_adapted_mesh_carries_only_what_its_longest_elements_carry() -> None:
     1.1e-3 off there)."""
     h = Harvester.build(a=2.0, n=8.0)
     w = Whitening.of(h)
-    disc = AdaptiveHermiteDG(h, default_plan(h).mesh(h, w, 8), 3, w)
+    disc = AdaptiveHermiteDG(h, XMeshRule.of(h).build(h, w, 8), 3, w)
     disc.solve(8, 16)  # marks mesh 16 from a level on mesh 8
     assert disc.max_degree(16) == disc.max_degree(8) == 12
     disc.outgrown(16)
@@ -107,7 +107,7 @@ def test_adapted_mesh_carries_only_what_its_longest_elements_carry() -> None:
 def test_adaptive_discretization_reports_its_meshes() -> None:
     h = Harvester.build(a=1.0, n=6.0)
     w = Whitening.of(h)
-    disc = AdaptiveHermiteDG(h, default_plan(h).mesh(h, w, 4), 3, w)
+    disc = AdaptiveHermiteDG(h, XMeshRule.of(h).build(h, w, 4), 3, w)
     assert disc.mesh(8) is None  # nothing solved on the first mesh to mark it by
     disc.solve(4, 8)  # solves a level on the first mesh to mark the second
     assert disc.summary()["8"]["generation"] == 1

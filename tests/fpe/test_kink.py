@@ -10,9 +10,9 @@ import scipy.sparse as sp
 
 from fpe_harvester import Harvester, ParameterError, Status, solve
 from fpe_harvester.fpe import HermiteBasis, stationary
-from fpe_harvester.fpe import kink
-from fpe_harvester.fpe.kinkdisc import KinkDG, KinkSettings, kink_domain
 from fpe_harvester.fpe.plane import DGLine, PlaneMesh, lobatto_points
+from fpe_harvester.fpe.schemes.xv import kink
+from fpe_harvester.fpe.schemes.xv.kinkdisc import KinkDG, KinkSettings, kink_domain
 
 
 def test_lobatto_points_are_the_extrema_of_legendre() -> None:
@@ -101,11 +101,11 @@ def test_mode_operator_matches_the_assembled_hierarchy(small: tuple[Harvester, K
     hierarchy in the Hermite basis (assembled term by term), with a shifted frame."""
     h, disc = small
     fr = kink.KinkFrame(disc.frame.Sigma, np.array([0.1, 0.4]), np.array([0.3, 0.0]))
-    hi = kink._Hierarchy.of(h, 3, fr)
-    pl = kink._plane(h, disc.base, 3, hi.gamma_e, hi.kappa)
-    parts = kink._face_parts(pl, hi)
-    T = kink._mode_transport(pl, hi, parts)
-    op = kink._ModeOperator(pl, hi, parts)
+    hi = kink.KinkHierarchy.of(h, 3, fr)
+    pl = kink.kink_plane(h, disc.base, 3, hi.gamma_e, hi.kappa)
+    parts = kink.face_parts(pl, hi)
+    T = kink.mode_transport(pl, hi, parts)
+    op = kink.ModeOperator(pl, hi, parts)
     rng = np.random.default_rng(1)
     D = rng.standard_normal((pl.S_I.shape[0], hi.hb.size))
     blocks = sp.block_diag(T, format="csr")
@@ -190,7 +190,7 @@ def test_energy_cdf_integrates_the_marginal(small: tuple[Harvester, KinkDG]) -> 
 
 def test_weight_belongs_to_the_one_dimensional_scheme() -> None:
     from fpe_harvester.fpe import stationary
-    from fpe_harvester.fpe.discretize import Whitening
+    from fpe_harvester.fpe.schemes.x.discretize import Whitening
 
     h = Harvester.build(a=0.5, n=1)
     with pytest.raises(ParameterError, match="weight is the Gaussian weight of scheme 'x'"):

@@ -8,16 +8,16 @@ import numpy as np
 import pytest
 
 from fpe_harvester import Harvester, Status, solve
-from fpe_harvester.fpe import discretize
 from fpe_harvester.fpe import refine as refine_mod
 from fpe_harvester.fpe import stationary
-from fpe_harvester.fpe.discretize import Whitening, solve_level
-from fpe_harvester.fpe.stationary import default_plan
+from fpe_harvester.fpe.schemes.x import XMeshRule, XScheme, discretize
+from fpe_harvester.fpe.schemes.x.discretize import Whitening, solve_level
+from fpe_harvester.fpe.settings import Settings
 
 
 def _eta(h: Harvester, M: int, half: int) -> float:
     w = Whitening.of(h)
-    return solve_level(h, M, default_plan(h).mesh(h, w, half), 3, w).moments["eta"]
+    return solve_level(h, M, XMeshRule.of(h).build(h, w, half), 3, w).moments["eta"]
 
 
 def test_mesh_convergence_order_is_at_least_p_plus_1() -> None:
@@ -84,10 +84,10 @@ def test_sub_quadratic_error_includes_the_slow_moment() -> None:
     """n < 2: the Hermite part of eta's error is at least the larger relative Hermite error
     of V2 and Pin (the slow moment), not eta's own, pre-asymptotic, tail."""
     h = Harvester.build(a=0.5, n=1.5)
-    plan = default_plan(h)
+    plan = XScheme().plan(h, Settings())
     w = discretize.Whitening.of(h)
-    levels = refine_mod._Levels(discretize.HermiteDG(h, plan.mesh(h, w), plan.order, w), plan, None)
-    est = refine_mod._hermite_estimate(levels, 8, 10, True, math.inf)
+    levels = refine_mod.Levels(discretize.HermiteDG(h, XMeshRule.of(h).build(h, w, plan.size), 3, w), plan, None)
+    est = refine_mod.hermite_estimate(levels, 8, 10, True, math.inf)
     own = refine_mod.tail_error([levels.cache[(m, 8)].moments["eta"] for m in (6, 8, 10)], [6, 8, 10])[0]
     slow = max(est.hermite[k] / est.moments[k] for k in ("V2", "Pin"))
     assert est.hermite["eta"] >= max(own, slow * est.moments["eta"])

@@ -7,11 +7,10 @@ import math
 import pytest
 
 from fpe_harvester import Harvester, ParameterError, Status, solve
-from fpe_harvester.fpe import discretize
 from fpe_harvester.fpe import refine as refine_mod
-from fpe_harvester.fpe.discretize import Whitening, solve_level
 from fpe_harvester.fpe.hermite import equivalent_harmonic
-from fpe_harvester.fpe.stationary import default_plan
+from fpe_harvester.fpe.schemes.x import XMeshRule, discretize
+from fpe_harvester.fpe.schemes.x.discretize import Whitening, solve_level
 
 
 @pytest.mark.parametrize("a", [1e-6, 0.5, 1.7, 1.77, 2.0, 100.0, 1e6])
@@ -50,9 +49,7 @@ def test_strong_kink_does_not_crash() -> None:
 
 def _level(h: Harvester, M: int, half: int):
     w = Whitening.of(h)
-    plan = default_plan(h)
-    mesh = plan.mesh(h, w, half)
-    return solve_level(h, M, mesh, plan.order, w)
+    return solve_level(h, M, XMeshRule.of(h).build(h, w, half), 3, w)
 
 
 def test_low_degree_level_of_sub_quadratic_potential_is_not_degenerate() -> None:
@@ -98,7 +95,7 @@ def test_memory_bound_stops_before_a_level_too_large() -> None:
     assert r.status is Status.NOT_CONVERGED
     assert "max_gb" in r.message and "GB" in r.message
     assert r.info["M"] <= 8 and r.eta is not None and r.eta_err > 0.0
-    assert refine_mod.level_gigabytes(8, 8, 3) <= 0.3 < refine_mod.level_gigabytes(10, 8, 3)
+    assert discretize.level_gigabytes(8, 8, 3) <= 0.3 < discretize.level_gigabytes(10, 8, 3)
 
 
 def test_memory_bound_is_checked() -> None:
@@ -114,27 +111,27 @@ def test_predicted_cost_scales_with_block_size() -> None:
     nb = {m: 4 * math.comb(m + 3, 3) for m in (4, 6, 8)}
     h = Harvester.build(a=0.5, n=4)
     w = discretize.Whitening.of(h)
-    disc = discretize.HermiteDG(h, default_plan(h).mesh(h, w), 3, w)
+    disc = discretize.HermiteDG(h, XMeshRule.of(h).build(h, w, 8), 3, w)
     # one measured level: the asymptotic cubic growth of the dense block LU
     cache = {(6, 8): _Lv(1.0)}
-    assert refine_mod._predicted_seconds(cache, 8, 8, disc) == pytest.approx((nb[8] / nb[6]) ** 3)
-    assert refine_mod._predicted_seconds(cache, 6, 16, disc) == pytest.approx(2.0)
+    assert refine_mod.predicted_seconds(cache, 8, 8, disc) == pytest.approx((nb[8] / nb[6]) ** 3)
+    assert refine_mod.predicted_seconds(cache, 6, 16, disc) == pytest.approx(2.0)
     # measured growth between M = 4 and 6 is used, clipped to [2, 3]
     cache = {(4, 8): _Lv((nb[4] / nb[6]) ** 2.5), (6, 8): _Lv(1.0)}
-    assert refine_mod._predicted_seconds(cache, 8, 8, disc) == pytest.approx((nb[8] / nb[6]) ** 2.5)
+    assert refine_mod.predicted_seconds(cache, 8, 8, disc) == pytest.approx((nb[8] / nb[6]) ** 2.5)
     cache = {(4, 8): _Lv(0.9), (6, 8): _Lv(1.0)}
-    assert refine_mod._predicted_seconds(cache, 8, 8, disc) == pytest.approx((nb[8] / nb[6]) ** 2)
+    assert refine_mod.predicted_seconds(cache, 8, 8, disc) == pytest.approx((nb[8] / nb[6]) ** 2)
     cache = {(4, 8): _Lv(1e-9), (6, 8): _Lv(1.0)}
-    assert refine_mod._predicted_seconds(cache, 8, 8, disc) == pytest.approx((nb[8] / nb[6]) ** 3)
+    assert refine_mod.predicted_seconds(cache, 8, 8, disc) == pytest.approx((nb[8] / nb[6]) ** 3)
 
 
 def test_stalled_hermite_sequence_is_recognized() -> None:
     # converging (geometric or algebraic, one sign): keep refining M
-    assert not refine_mod._stalled([1.1, 1.01, 1.001])
-    assert not refine_mod._stalled([0.6108, 0.6106, 0.61052])
-    assert not refine_mod._stalled([1.0, 1.1])
+    assert not refine_mod.stalled([1.1, 1.01, 1.001])
+    assert not refine_mod.stalled([0.6108, 0.6106, 0.61052])
+    assert not refine_mod.stalled([1.0, 1.1])
     # n = 8 on 16 elements at M = 14, 16 (steps -1.5e-6, -5.2e-6) and 16, 18, 20 (sign change)
-    assert refine_mod._stalled([0.4722468805, 0.4722454166, 0.4722402627])
-    assert refine_mod._stalled([0.4722402627, 0.4722339567, 0.4722402847])
+    assert refine_mod.stalled([0.4722468805, 0.4722454166, 0.4722402627])
+    assert refine_mod.stalled([0.4722402627, 0.4722339567, 0.4722402847])
     # a small step of the other sign is still convergence
-    assert not refine_mod._stalled([1.0, 1.01, 1.008])
+    assert not refine_mod.stalled([1.0, 1.01, 1.008])

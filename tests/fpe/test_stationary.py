@@ -11,15 +11,15 @@ import pytest
 from fpe_harvester import Harvester, MethodNotAvailableError, ParameterError, Status, solve
 from fpe_harvester.exact import lyapunov_covariance, mode_moments
 from fpe_harvester.fpe import FokkerPlanck, stationary
-from fpe_harvester.fpe.discretize import Whitening, solve_level
 from fpe_harvester.fpe.estimate import mesh_error, tail_error
-from fpe_harvester.fpe.refine import default_memory_gb, level_gigabytes
-from fpe_harvester.fpe.stationary import _fields, default_plan
+from fpe_harvester.fpe.refine import default_memory_gb
+from fpe_harvester.fpe.schemes.x import XMeshRule, level_gigabytes
+from fpe_harvester.fpe.schemes.x.discretize import Whitening, solve_level
 
 
 def _level(h: Harvester, M: int, half: int, order: int = 3):
     w = Whitening.of(h)
-    return solve_level(h, M, default_plan(h).mesh(h, w, half), order, w)
+    return solve_level(h, M, XMeshRule.of(h).build(h, w, half), order, w)
 
 
 @pytest.mark.parametrize(("n", "M", "half"), [(3.0, 6, 4), (1.0, 6, 4), (8.0, 6, 4), (1.5, 4, 1)])
@@ -28,13 +28,13 @@ def test_half_mesh_with_mirror_equals_whole_mesh(n: float, M: int, half: int) ->
     weight, n = 1: kink, n = 8: steep walls, one element per half)."""
     h = Harvester.build(a=0.5, n=n)
     w = Whitening.of(h)
-    mesh = default_plan(h).mesh(h, w, half)
+    mesh = XMeshRule.of(h).build(h, w, half)
     whole, mirror = solve_level(h, M, mesh, 3, w, half=False), solve_level(h, M, mesh, 3, w)
     assert mirror.half and not whole.half and mirror.dofs * 2 == whole.dofs
     for key in ("eta", "V2", "Pin", "v2", "vV", "vxi", "x2"):
         assert mirror.moments[key] == pytest.approx(whole.moments[key], rel=1e-10), key
     x = np.linspace(-mesh.L, mesh.L, 41)
-    f, g = _fields(whole, x), _fields(mirror, x)
+    f, g = whole.fields(x), mirror.fields(x)
     assert np.allclose(f["density"], g["density"], rtol=1e-9, atol=1e-12 * f["density"].max())
     for key in ("v_mean", "V_mean", "xi_mean"):
         assert np.allclose(f[key], g[key], rtol=1e-8, atol=1e-10), key
@@ -192,7 +192,7 @@ def test_conditional_and_marginal_weights_agree_for_n3() -> None:
     mo = {}
     for cond in (True, False):
         w = Whitening.of(h, conditional=cond)
-        mesh = default_plan(h).mesh(h, w, 8)
+        mesh = XMeshRule.of(h).build(h, w, 8)
         mo[cond] = solve_level(h, 8, mesh, 3, w).moments
     for key in ("eta", "V2", "Pin", "x2"):
         assert mo[True][key] == pytest.approx(mo[False][key], rel=1e-4), key
@@ -210,7 +210,7 @@ def test_curved_centre_is_the_linear_one_for_n2() -> None:
     h = Harvester.build(a=0.5, n=2)
     w = _curved(h)
     assert w.curved and np.all(w.psi(np.linspace(-2.0, 2.0, 9)) == 0.0)
-    mesh = default_plan(h).mesh(h, w, 12)
+    mesh = XMeshRule.of(h).build(h, w, 12)
     mo = solve_level(h, 2, mesh, 3, w).moments
     linear = solve_level(h, 2, mesh, 3, Whitening.of(h)).moments
     for key in ("eta", "V2", "Pin", "x2"):

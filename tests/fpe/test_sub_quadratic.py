@@ -9,8 +9,8 @@ import pytest
 
 from fpe_harvester import Harvester, ParameterError, solve
 from fpe_harvester.fpe import stationary
-from fpe_harvester.fpe.discretize import Whitening, solve_level
-from fpe_harvester.fpe.stationary import default_plan
+from fpe_harvester.fpe.schemes.x import XMeshRule
+from fpe_harvester.fpe.schemes.x.discretize import Whitening, solve_level
 
 
 def test_mesh_error_falls_geometrically_with_layers() -> None:
@@ -18,11 +18,11 @@ def test_mesh_error_falls_geometrically_with_layers() -> None:
     falls by a factor of about 0.45 per layer (convergence in the layers, not correctness)."""
     h = Harvester.build(a=1.0, n=1.5)
     w = Whitening.of(h)
-    plan = default_plan(h, mesh="geometric")
+    rule = XMeshRule.of(h, mesh="geometric")
 
     def eta(layers: int) -> float:
-        mesh = dataclasses.replace(plan, layers=layers).mesh(h, w, 8)
-        return solve_level(h, 6, mesh, plan.order, w).moments["eta"]
+        mesh = dataclasses.replace(rule, layers=layers).build(h, w, 8)
+        return solve_level(h, 6, mesh, 3, w).moments["eta"]
 
     ref = eta(12)
     errors = np.array([abs(eta(k) - ref) for k in range(5)])
@@ -136,12 +136,15 @@ def test_kink_scheme_takes_sub_quadratic_n() -> None:
 def test_auto_scheme_for_sub_quadratic_n() -> None:
     """1 < n < 2 is solved by DG in (x, v) unless an x-only setting is given; the kink's
     energy distribution is refused there (its energy is a|x| + m v^2/2)."""
-    from fpe_harvester.fpe.stationary import resolve_scheme
+    from fpe_harvester.fpe.schemes import resolve_scheme
+    from fpe_harvester.fpe.settings import Settings
 
     h = Harvester.build(a=1.0, n=1.5)
-    assert resolve_scheme(h, "auto") == "xv"
-    assert resolve_scheme(h, "auto", x_settings=True) == "x"
-    assert resolve_scheme(Harvester.build(a=1.0, n=2.0), "auto") == "x"
+    assert resolve_scheme(h, Settings()).name == "xv"
+    assert resolve_scheme(h, Settings(mesh="algebraic")).name == "x"
+    assert resolve_scheme(h, Settings(half_elements=8)).name == "x"
+    assert resolve_scheme(Harvester.build(a=1.0, n=1.0), Settings(half_elements=8)).name == "xv"
+    assert resolve_scheme(Harvester.build(a=1.0, n=2.0), Settings()).name == "x"
     sol = stationary(h, tol=1e-2, M=4)
     assert sol.stats.info["scheme"] == "xv"
     with pytest.raises(ValueError, match="energy_cdf is the kink's"):

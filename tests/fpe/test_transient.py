@@ -10,8 +10,8 @@ import numpy as np
 import pytest
 
 from fpe_harvester import Harvester, MethodNotAvailableError, NotConvergedError, ParameterError
-from fpe_harvester.fpe.discretize import Whitening, solve_level
-from fpe_harvester.fpe.stationary import default_plan
+from fpe_harvester.fpe.schemes.x import XMeshRule
+from fpe_harvester.fpe.schemes.x.discretize import Whitening, solve_level
 from fpe_harvester.fpe.transient import lyapunov_transient, transient
 
 
@@ -40,7 +40,7 @@ def stationary_n3() -> tuple[Harvester, Mapping[str, float]]:
     # A module fixture is set up before the autouse strict-floats fixture of each test.
     with np.errstate(all="raise", under="ignore"):
         w = Whitening.of(h)
-        mesh = default_plan(h, theta=12.0).mesh(h, w, 8)
+        mesh = XMeshRule.of(h, theta=12.0).build(h, w, 8)
         st = solve_level(h, 4, mesh, 3, w).moments
     return h, MappingProxyType(dict(st))
 
@@ -60,7 +60,7 @@ def test_steep_wall_relaxes_with_default_mesh() -> None:
     the run approaches the stationary solution of the same discretization."""
     h = Harvester.build(a=0.5, n=8)
     w = Whitening.of(h)
-    st = solve_level(h, 4, default_plan(h, theta=12.0).mesh(h, w, 16), 3, w).moments
+    st = solve_level(h, 4, XMeshRule.of(h, theta=12.0).build(h, w, 16), 3, w).moments
     tr = transient(h, 12.0, M=4, interval=4.0, grid=5)
     assert tr.info["elements"] == 32
     gap = np.abs(tr.V2 - st["V2"]) / st["V2"]

@@ -81,7 +81,7 @@ class FpeCase:
         """Solver settings beyond ``tol`` (the weight)."""
         if self.weight == "default":
             return {}
-        from fpe_harvester.fpe.discretize import Whitening
+        from fpe_harvester.fpe.schemes.x.discretize import Whitening
 
         w = Whitening.of(self.h, conditional=self.weight != "marginal")
         if self.weight == "wide":

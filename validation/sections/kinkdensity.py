@@ -13,7 +13,7 @@ over energy shells,
     \\sqrt{\\frac{2}{m}}\\,\\frac{\\varepsilon^{3/2}}{a},
 
 (A the area of :math:`E < \\varepsilon`), from the Fokker--Planck level
-(:meth:`fpe_harvester.fpe.kink.KinkLevel.energy_cdf`) and from Monte Carlo states
+(:meth:`fpe_harvester.fpe.schemes.xv.kink.KinkLevel.energy_cdf`) and from Monte Carlo states
 (:func:`montecarlo.sample.sample_states`, error bars from the spread between paths).
 """
 
@@ -27,7 +27,7 @@ from pathlib import Path
 import numpy as np
 
 from fpe_harvester.fpe import stationary
-from fpe_harvester.fpe.kinkdisc import KinkDG, KinkSettings
+from fpe_harvester.fpe.schemes.xv.kinkdisc import KinkDG, KinkSettings
 from fpe_harvester.model import Harvester
 from fpe_harvester.result import Stats
 from montecarlo.sample import sample_states
@@ -65,7 +65,7 @@ def shell_area(eps: np.ndarray, a: float, m: float = 1.0) -> np.ndarray:
 
 
 def shell_density_fpe(level, edges: np.ndarray, label: str) -> ShellDensity:
-    """Shell densities of a Fokker--Planck kink level (:class:`~fpe_harvester.fpe.kink.KinkLevel`)."""
+    """Shell densities of a Fokker--Planck kink level (:class:`~fpe_harvester.fpe.schemes.xv.kink.KinkLevel`)."""
     P = level.energy_cdf(edges, nodes=48)
     A = shell_area(edges, level.mesh.a, level.mass)
     return ShellDensity(edges, np.diff(P) / np.diff(A), None, label)

@@ -56,7 +56,7 @@ was built; recorded numbers, not re-run by this module):
 
 *Uniform against element-wise mesh refinement* (:func:`meshes`, in the same run, interleaved):
 ``mesh="algebraic"`` (every element bisected at a mesh step, the previous design) against
-``mesh="adaptive"`` (only the elements that :mod:`fpe_harvester.fpe.adapt` marks) for
+``mesh="adaptive"`` (only the elements that :mod:`fpe_harvester.fpe.schemes.x.adapt` marks) for
 n in {1.25, 1.5, 1.75} x a in {0.5, 1, 2} and n = 8, a in {0.5, 1, 2} at 1e-4 and 1e-6,
 and n in {2, 3, 4, 6} x a in {0.5, 1, 2} at 1e-4 (the ratio of times, goal <= 1.2). Runs
 under 3 s are repeated (three of each mesh, alternating) and the medians compared; budgets
@@ -90,7 +90,8 @@ from typing import Any
 import numpy as np
 
 from fpe_harvester import Harvester
-from fpe_harvester.fpe import discretize, stationary
+from fpe_harvester.fpe import stationary
+from fpe_harvester.fpe.schemes.x import discretize
 from validation.studies.cli import bench_main, save_benchmark
 
 __all__ = ["STEM", "PREVIOUS", "PREVIOUS_SERIES_N3", "run", "run_meshes", "meshes", "run_schemes", "schemes", "run_convergence", "convergence", "work", "table", "series"]
@@ -136,7 +137,7 @@ def _tol_run(h: Harvester, tol: float, max_seconds: float) -> dict[str, Any]:
     emptied each time: every run starts cold) and ``seconds`` is their median."""
     times = []
     while True:
-        discretize._X_CACHE.clear()
+        discretize.clear_x_cache()
         t0 = time.perf_counter()
         sol = stationary(h, tol=tol, max_seconds=max_seconds, grid=3)
         times.append(time.perf_counter() - t0)
@@ -218,7 +219,7 @@ MESH_GOALS = {**{(n, a, 1e-4): 10.0 for n in (1.25, 1.5, 1.75) for a in (0.5, 1.
 
 
 def _mesh_run(h: Harvester, tol: float, mesh: str, budget: float) -> dict[str, Any]:
-    discretize._X_CACHE.clear()
+    discretize.clear_x_cache()
     t0 = time.perf_counter()
     s = stationary(h, tol=tol, max_seconds=budget, grid=3, mesh=mesh).stats
     sec = time.perf_counter() - t0
@@ -516,7 +517,7 @@ def schemes(quick: bool = False, mc_tol: float | None = 1e-3) -> dict[str, Any]:
         h = Harvester.build(a=a, n=n)
         case: dict[str, Any] = {"n": n, "a": a, "tol": tol}
         for scheme in ("x", "xv"):
-            discretize._X_CACHE.clear()
+            discretize.clear_x_cache()
             t0 = time.perf_counter()
             st = stationary(h, tol=tol, max_seconds=SCHEME_BUDGET, grid=3, scheme=scheme).stats
             case[scheme] = {"seconds": time.perf_counter() - t0, "eta": st.eta, "eta_err": st.eta_err,
@@ -564,9 +565,9 @@ def convergence(n: float = 1.5, a: float = 1.0, quick: bool = False) -> dict[str
     tolerance-driven ``"xv"`` run at 2e-5 (its reported error in the result; a convergence
     check: the reference shares the second family's discretization). Unknowns are those
     solved (half domain, half plane)."""
-    from fpe_harvester.fpe.discretize import Whitening, solve_level
-    from fpe_harvester.fpe.kinkdisc import KinkDG, KinkSettings
-    from fpe_harvester.fpe.stationary import default_plan
+    from fpe_harvester.fpe.schemes.x import XMeshRule
+    from fpe_harvester.fpe.schemes.x.discretize import Whitening, solve_level
+    from fpe_harvester.fpe.schemes.xv.kinkdisc import KinkDG, KinkSettings
 
     h = Harvester.build(a=a, n=n)
     ref_tol = 1e-3 if quick else 2e-5
@@ -576,12 +577,11 @@ def convergence(n: float = 1.5, a: float = 1.0, quick: bool = False) -> dict[str
                                                          "status": ref.status.value, "tol": ref_tol,
                                                          "seconds": time.perf_counter() - t0}, "series": {}}
     w = Whitening.of(h)
-    plan = default_plan(h, scheme="x")
     for nh, top in ((8, 8 if quick else 14), (16, 6 if quick else 12)):
         pts = []
         for M in range(4, top + 1, 2):
-            discretize._X_CACHE.clear()
-            lv = solve_level(h, M, plan.mesh(h, w, nh), plan.order, w)
+            discretize.clear_x_cache()
+            lv = solve_level(h, M, XMeshRule.of(h).build(h, w, nh), 3, w)
             pts.append({"M": M, "dofs": lv.dofs, "seconds": lv.seconds, "eta": lv.moments["eta"]})
         out["series"][f"x: DG in x, {2 * nh} elements"] = pts
     disc = KinkDG.build(h, KinkSettings(layers=1), ref_tol)

@@ -32,7 +32,7 @@ import numpy as np
 
 from fpe_harvester import Harvester
 from fpe_harvester.fpe import stationary
-from fpe_harvester.fpe.kinkdisc import KinkDG, KinkSettings
+from fpe_harvester.fpe.schemes.xv.kinkdisc import KinkDG, KinkSettings
 from validation.studies.cli import bench_main, save_benchmark
 from validation.sections.kinkdensity import v_concentration
 from validation.references.reftable import recorded_kink

@@ -24,9 +24,8 @@ import time
 from typing import Any
 
 from fpe_harvester import Harvester, solve
-from fpe_harvester.fpe import discretize
-from fpe_harvester.fpe.discretize import Whitening, solve_level
-from fpe_harvester.fpe.stationary import default_plan
+from fpe_harvester.fpe.schemes.x import XMeshRule, discretize
+from fpe_harvester.fpe.schemes.x.discretize import Whitening, solve_level
 from validation.studies.cli import bench_main, save_benchmark
 
 __all__ = ["STEM", "run", "mesh_series", "tol_case"]
@@ -47,10 +46,9 @@ def mesh_series(M: int, sizes: tuple[int, ...], n: float = 1.5, a: float = 1.0) 
     w = Whitening.of(h)
 
     def level(mesh: str, nh: int) -> dict[str, Any]:
-        plan = default_plan(h, mesh=mesh)
-        discretize._X_CACHE.clear()
+        discretize.clear_x_cache()
         t0 = time.perf_counter()
-        lv = solve_level(h, M, plan.mesh(h, w, nh), plan.order, w)
+        lv = solve_level(h, M, XMeshRule.of(h, mesh).build(h, w, nh), 3, w)
         return {"half_elements": nh, "elements": lv.elements, "dofs": 2 * lv.dofs,
                 "seconds": time.perf_counter() - t0, "eta": lv.moments["eta"]}
 
@@ -66,7 +64,7 @@ def mesh_series(M: int, sizes: tuple[int, ...], n: float = 1.5, a: float = 1.0) 
 
 def tol_case(n: float, a: float, tol: float, mesh: str = "auto") -> dict[str, Any]:
     """One tolerance-driven solve: status, eta and its error, solver seconds, M, elements."""
-    discretize._X_CACHE.clear()
+    discretize.clear_x_cache()
     r = solve(Harvester.build(a=a, n=n), "fpe", tol=tol, mesh=mesh, max_seconds=BUDGET)
     return {"n": n, "a": a, "tol": tol, "mesh": mesh, "status": r.status.value, "eta": r.eta,
             "eta_err": r.eta_err, "seconds": r.info.get("seconds"), "M": r.info.get("M"),

@@ -1,7 +1,7 @@
 """One discretization level: build the Hermite-DG system, solve it, read off the moments.
 
 A level is fixed by the Hermite degree M, the mesh and the polynomial order p. The
-stationary coefficients solve :math:`A c = 0` (see :mod:`.assemble`) with the density's
+stationary coefficients solve :math:`A c = 0` (see :mod:`...assemble`) with the density's
 normalization :math:`\\int c_0\\,dx = 1`. The operator is nonsingular only through the
 (exponentially small) outflow at :math:`\\pm L`, so two steps of inverse iteration from
 :math:`b_{i0} = \\int\\psi_i\\,dx` give the null vector up to that outflow; it is then
@@ -12,7 +12,7 @@ linear, so the stationary density is invariant under :math:`(x, y) \\to (-x, -y)
 a weight centred on :math:`b x` the coefficients obey
 :math:`c_\\alpha(-x) = (-1)^{|\\alpha|} c_\\alpha(x)`. The stationary levels are solved on
 the half mesh :math:`[0, L]` with that reflection as the inflow condition at 0
-(:func:`~.assemble.dg_operator`): half the unknowns, and on a mirror-symmetric mesh the
+(:func:`~...assemble.dg_operator`): half the unknowns, and on a mirror-symmetric mesh the
 same discrete solution as the full mesh (the full discrete problem has the same symmetry
 and a unique solution). The second moments are even, so their half-domain integrals
 normalized by the half-domain mass are the full-domain values.
@@ -28,15 +28,19 @@ from typing import Any
 
 import numpy as np
 import scipy.sparse as sp
+from skfem import Basis
 
-from ..model import Harvester, Potential
-from .assemble import XMatrices, assemble_x, dg_operator, upwind_parts
-from .blocksolve import BlockTridiagonal
-from .hermite import HermiteBasis, equivalent_harmonic, linear_drift
+from ....model import Harvester, Potential
+from ...assemble import XMatrices, assemble_x, dg_element, dg_operator, upwind_parts
+from ...blocksolve import BlockTridiagonal
+from ...hermite import HermiteBasis, equivalent_harmonic, linear_drift
+from ...moments import conditional_fields, harvester_moments
+from ...protocol import Discretization
 from .mesh import XMesh
 
 __all__ = ["Whitening", "Level", "solve_level", "assemble_level", "hierarchy_matrices", "x_matrices",
-           "HermiteDG", "level_gigabytes", "DEGREES_PER_ELEMENT"]
+           "level_moments", "HermiteDG", "level_gigabytes", "block_size", "clear_x_cache",
+           "DEGREES_PER_ELEMENT"]
 
 #: Noise correlation time from which the weight's centre of xi follows the force
 #: (:meth:`Whitening.of`, ``curved``; n > 2; the measurements are in its docstring).
@@ -48,6 +52,10 @@ CURVED_TAU = 10.0
 #: for 0.4722554 (n = 8, a = 0.5), M = 18 gives 0.2002 for 0.2069 (n = 1.5, a = 2) and
 #: 0.4463 for 0.44656 (n = 8, a = 1); M = 12 is within the mesh error in every case.
 DEGREES_PER_ELEMENT = 1.5
+
+#: What a user can do when no level of scheme x gives an error estimate.
+ADVICE = ("the Hermite expansion around the equivalent harmonic unit does not resolve this "
+          "density; use method='mc', or fix M and half_elements to inspect the levels")
 
 
 @dataclass(frozen=True)
@@ -247,6 +255,33 @@ class Level:
     def elements(self) -> int:
         return self.mesh.elements
 
+    @property
+    def half_width(self) -> float:
+        """Half-width L of the domain."""
+        return self.mesh.L
+
+    def fields(self, x: np.ndarray) -> dict[str, np.ndarray]:
+        """x-marginal density :math:`c_0(x)` and conditional means
+        :math:`\\langle y|x\\rangle = \\sum_\\alpha w_{y\\alpha} c_\\alpha(x)/c_0(x)` plus the
+        weight's centre :math:`b x + c\\,\\psi(x)`, y = v, V, xi, at points ``x`` (clipped to [-L, L])."""
+        X = self.xmat
+        x = np.clip(np.asarray(x, dtype=float), -self.mesh.L, self.mesh.L)
+        # A fresh element: ElementLinePp caches reference values by array shape only.
+        basis = Basis(X.basis.mesh, dg_element(self.order), intorder=2 * self.order + 6)
+        probe = basis.probes(np.atleast_2d(np.abs(x) if self.half else x))
+        u = np.zeros((basis.N, self.coef.shape[1]))
+        u[X.perm] = self.coef
+        vals = probe @ u
+        if self.half:
+            # Mirror image on x < 0: c_alpha(-x) = (-1)^|alpha| c_alpha(x).
+            vals = np.where((x < 0.0)[:, None], vals * self.hermite.parity(), vals)
+        num = vals @ self.hermite.first_moment_weights(self.whitening.chol).T
+        w = self.whitening
+        centre = np.multiply.outer(x, w.shift) + np.multiply.outer(w.psi(x), w.curve)
+        names = ("v_mean", "V_mean", "xi_mean")
+        return conditional_fields(vals[:, 0], {k: num[:, i] for i, k in enumerate(names)},
+                                  {k: centre[:, i] for i, k in enumerate(names)})
+
     def info(self) -> dict[str, Any]:
         """Discretization details for the result's ``info``."""
         return {"scheme": "x", "M": self.M, "order": self.order, "elements": self.mesh.elements,
@@ -282,7 +317,7 @@ _X_LOCK = threading.Lock()  # scenes may solve points in threads
 
 
 def x_matrices(h: Harvester, mesh: XMesh, order: int, half: bool = False, curved: bool = False) -> XMatrices:
-    """:func:`~.assemble.assemble_x` for the force :math:`-U'(x)/m` of ``h``, cached (read-only);
+    """:func:`~...assemble.assemble_x` for the force :math:`-U'(x)/m` of ``h``, cached (read-only);
     on the half mesh :math:`[0, L]` with a mirror at 0 if ``half``; with the matrices of a
     weight whose centre follows the force if ``curved`` (:math:`u' = -U''/m`, n > 2)."""
     nodes = mesh.half_nodes() if half else mesh.nodes()
@@ -306,8 +341,17 @@ def x_matrices(h: Harvester, mesh: XMesh, order: int, half: bool = False, curved
     return X
 
 
-def _moments(h: Harvester, X: XMatrices, hb: HermiteBasis, C: np.ndarray, w: Whitening) -> dict[str, float]:
-    # On a half mesh the (even) integrands count once more from the mirror image.
+def clear_x_cache() -> None:
+    """Empty the cache of :func:`x_matrices` (benchmarks time the assembly too)."""
+    with _X_LOCK:
+        _X_CACHE.clear()
+
+
+def level_moments(h: Harvester, X: XMatrices, hb: HermiteBasis, C: np.ndarray, w: Whitening) -> dict[str, float]:
+    """The moments of coefficients ``C`` (unit mass; :func:`~...moments.harvester_moments`).
+
+    On a half mesh the (even) integrands count once more from the mirror image.
+    """
     p = h.params
     C = X.copies * C
     # y = y' + b x + c psi(x) with y' = L z and psi = -r u - x (r = m / kappa):
@@ -324,15 +368,7 @@ def _moments(h: Harvester, X: XMatrices, hb: HermiteBasis, C: np.ndarray, w: Whi
         uy = w1 @ (C.T @ X.u1)
         Y = (Y + np.outer(cu, uy) + np.outer(uy, cu) + np.outer(cu, cu) * float(C[:, 0] @ X.u2)
              + (np.outer(b, cu) + np.outer(cu, b)) * float(C[:, 0] @ X.xu))
-    v2, vV, vxi, V2 = Y[0, 0], Y[0, 1], Y[0, 2], Y[1, 1]
-    Pin = p.sigma * vxi
-    res_V2 = (V2 - p.Kc * p.tau_p * vV) / V2
-    res_power = (Pin - p.m * p.gamma * v2 - p.Kv * vV) / Pin
-    return {
-        "V2": float(V2), "Pin": float(Pin), "eta": float(V2 / (p.R * Pin)), "v2": float(v2),
-        "vV": float(vV), "vxi": float(vxi), "x2": float(C[:, 0] @ X.x2),
-        "res_V2": float(res_V2), "res_power": float(res_power),
-    }
+    return harvester_moments(p, Y[0, 0], Y[0, 1], Y[0, 2], Y[1, 1], float(C[:, 0] @ X.x2))
 
 
 def solve_level(h: Harvester, M: int, mesh: XMesh, order: int, w: Whitening, half: bool = True) -> Level:
@@ -381,11 +417,11 @@ def solve_level(h: Harvester, M: int, mesh: XMesh, order: int, w: Whitening, hal
                                  f"integral of |c_0| {scale})")
     # Unit mass on the whole domain (a half mesh holds half of it).
     C /= X.copies * mass
-    moments = _moments(h, X, hb, C, w)
+    moments = level_moments(h, X, hb, C, w)
     return Level(M, order, mesh, C, moments, A.shape[0], time.perf_counter() - t0, X, hb, w)
 
 
-def _block_size(M: int, order: int) -> int:
+def block_size(M: int, order: int) -> int:
     """Unknowns per element, :math:`n_b = (p + 1)\\binom{M+3}{3}`."""
     return (order + 1) * math.comb(M + 3, 3)
 
@@ -395,13 +431,13 @@ def level_gigabytes(M: int, half_elements: int, order: int) -> float:
     half mesh (:math:`N_h n_b^2` doubles) plus half as much again for the coupling solves,
     the sparse operator and temporaries, plus 0.2 GB (measured peaks: 0.45 GB at M = 12 and
     1.58 GB at M = 16 with 8 elements per half, predicted 0.62 and 1.64)."""
-    nb = _block_size(M, order)
+    nb = block_size(M, order)
     return 1.5 * half_elements * nb * nb * 8 / 1e9 + 0.2
 
 
 @dataclass(frozen=True)
-class HermiteDG:
-    """The 1-D discretization as seen by the refinement (:class:`~.refine.Discretization`):
+class HermiteDG(Discretization):
+    """The 1-D discretization as seen by the refinement (:class:`~fpe_harvester.fpe.protocol.Discretization`):
     Hermite functions of (v, V, xi) times DG in x on ``base`` with ``size`` elements per half."""
 
     h: Harvester
@@ -410,8 +446,7 @@ class HermiteDG:
     w: Whitening
     work_exponents: tuple[float, float] = (2.0, 3.0)
     mesh_check_degree: int = 6
-    advice: str = ("the Hermite expansion around the equivalent harmonic unit does not resolve this "
-                   "density; use method='mc', or fix M and half_elements to inspect the levels")
+    advice: str = ADVICE
 
     @property
     def algebraic(self) -> bool:
@@ -422,7 +457,7 @@ class HermiteDG:
 
     def unknowns(self, M: int, size: int) -> int:
         """Unknowns of the whole mesh (twice those of the half mesh that is solved)."""
-        return 2 * (size + self.base.layers) * _block_size(M, self.order)
+        return 2 * (size + self.base.layers) * block_size(M, self.order)
 
     def gigabytes(self, M: int, size: int) -> float:
         return level_gigabytes(M, size + self.base.layers, self.order)
@@ -431,7 +466,7 @@ class HermiteDG:
         return int(DEGREES_PER_ELEMENT * size)
 
     def work(self, M: int, size: int) -> tuple[float, float]:
-        return float(size + self.base.layers), float(_block_size(M, self.order))
+        return float(size + self.base.layers), float(block_size(M, self.order))
 
     def describe(self, size: int) -> str:
         return f"{2 * (size + self.base.layers)} elements"

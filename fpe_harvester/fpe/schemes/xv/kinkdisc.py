@@ -1,6 +1,6 @@
 """The kink discretization as a refinement family: domain, base mesh, Gaussian frame, pilot.
 
-:class:`KinkDG` is what :func:`~.refine.refine` refines for the kink potential (n = 1):
+:class:`KinkDG` is what :func:`~...refine.refine` refines for the kink potential (n = 1):
 Hermite degree M in (V, xi) in steps of 2, and the DG degree p on a fixed (x, v) mesh
 (``size`` s = 1, 2, 4, ...: :math:`p = p_0 + \\log_2 s`; one refinement step raises p by
 one). The mesh is graded geometrically toward the trap, deep enough that the layers do not
@@ -11,7 +11,7 @@ moved eta by 8e-6, cutting every rectangle in four by 9e-6, at 1.6 and 4 times t
 unknowns. It is built in three steps (:meth:`KinkDG.build`):
 
 1. **First guess of the moments** from the equivalent harmonic unit
-   (:func:`~.hermite.equivalent_harmonic`), which for a strong kink is poor (a = 2: it gives
+   (:func:`~...hermite.equivalent_harmonic`), which for a strong kink is poor (a = 2: it gives
    :math:`\\langle v^2\\rangle = 0.005` for 0.018).
 2. **Pilot**: one level at M = 4 on the base mesh with the frame of the first guess; its
    moments give the frame of the refinement (:meth:`~.kink.KinkFrame.from_moments`) and the
@@ -29,10 +29,11 @@ import time
 from dataclasses import dataclass, field
 from typing import Any
 
-from ..model import Harvester
-from .hermite import equivalent_harmonic
+from ....model import Harvester
+from ...hermite import equivalent_harmonic
+from ...plane import PlaneMesh
+from ...protocol import Discretization
 from .kink import CoarseCorrection, KinkFrame, KinkLevel, solve_kink_level
-from .plane import PlaneMesh
 
 __all__ = ["KinkDG", "kink_domain", "KinkSettings", "COARSE_DEGREE"]
 
@@ -71,7 +72,7 @@ PILOT_DEGREES = (2, 4, 6)
 
 @dataclass(frozen=True)
 class KinkSettings:
-    """Base mesh of the kink discretization (see :class:`~.plane.PlaneMesh`).
+    """Base mesh of the kink discretization (see :class:`~...plane.PlaneMesh`).
 
     Attributes
     ----------
@@ -129,8 +130,8 @@ def _drive_sd(h: Harvester, mo: dict[str, float]) -> float:
 
 
 @dataclass(frozen=True)
-class KinkDG:
-    """The kink discretization seen by the refinement (:class:`~.refine.Discretization`)."""
+class KinkDG(Discretization):
+    """The kink discretization seen by the refinement (:class:`~fpe_harvester.fpe.protocol.Discretization`)."""
 
     h: Harvester
     base: PlaneMesh

@@ -37,7 +37,7 @@ from dataclasses import dataclass
 import numpy as np
 from skfem import MeshLine
 
-from ..errors import check_int, check_real
+from ....errors import check_int, check_real
 
 __all__ = ["XMesh"]
 

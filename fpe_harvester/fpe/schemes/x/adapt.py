@@ -18,7 +18,7 @@ density's top x-mode). Where the solution is smooth and resolved it falls like
 *Marking* (:func:`mark`): Dörfler's bulk criterion, the fewest elements that carry the
 share :data:`DORFLER` of :math:`\\sum_K \\eta_K^2`.
 
-*Discretization* (:class:`AdaptiveHermiteDG`): the refinement (:mod:`.refine`) asks for
+*Discretization* (:class:`AdaptiveHermiteDG`): the refinement (:mod:`...refine`) asks for
 meshes of sizes :math:`N_h 2^g`; here mesh g + 1 is mesh g with its marked elements
 bisected, marked by the indicator of the highest Hermite degree solved on mesh g (the
 mirror images follow: the half mesh is refined). Meshes coarser than the first are
@@ -32,9 +32,10 @@ from typing import Any
 import numpy as np
 from skfem import Basis
 
-from ..model import Harvester
-from .assemble import _element
-from .discretize import DEGREES_PER_ELEMENT, Level, Whitening, _block_size, level_gigabytes, solve_level
+from ....model import Harvester
+from ...assemble import dg_element
+from ...protocol import Discretization
+from .discretize import ADVICE, DEGREES_PER_ELEMENT, Level, Whitening, block_size, level_gigabytes, solve_level
 from .mesh import XMesh
 
 __all__ = ["element_indicators", "mark", "AdaptiveHermiteDG", "DORFLER"]
@@ -57,7 +58,7 @@ def element_indicators(lv: Level) -> np.ndarray:
     pts = 0.5 * (nodes[:-1] + nodes[1:])[:, None] + 0.5 * h[:, None] * t[None, :]
     X = lv.xmat
     # A fresh element: ElementLinePp caches reference values by array shape only.
-    basis = Basis(X.basis.mesh, _element(p), intorder=2 * p + 2)
+    basis = Basis(X.basis.mesh, dg_element(p), intorder=2 * p + 2)
     probe = basis.probes(pts.reshape(1, -1))
     u = np.zeros((basis.N, lv.coef.shape[1]))
     u[X.perm] = lv.coef
@@ -86,9 +87,9 @@ def mark(indicators: np.ndarray, share: float = DORFLER) -> np.ndarray:
     return out
 
 
-class AdaptiveHermiteDG:
+class AdaptiveHermiteDG(Discretization):
     """Hermite functions of (v, V, xi) times DG in x, with element-wise mesh refinement
-    (:class:`~.refine.Discretization`; ``size`` is the nominal elements per half,
+    (:class:`~fpe_harvester.fpe.protocol.Discretization`; ``size`` is the nominal elements per half,
     :attr:`~.mesh.XMesh.size`).
 
     Parameters
@@ -106,7 +107,7 @@ class AdaptiveHermiteDG:
     """
 
     work_exponents: tuple[float, float] = (2.0, 3.0)
-    #: Refine as soon as the first mesh check fails (:func:`~.refine._hermite`): a step
+    #: Refine as soon as the first mesh check fails (:func:`~fpe_harvester.fpe.refine.refine`): a step
     #: adds only the marked elements, so an early step costs little.
     refine_early: bool = True
     #: Mesh checks at M - 4 but, from M = 10 on, not below M = 8 (the uniform refinement:
@@ -116,8 +117,7 @@ class AdaptiveHermiteDG:
     #: two meshes differ by 1.3e-4 (relative eta), at M = 8 by 2e-6.
     check_floor: int = 8
     mesh_check_degree: int = 6
-    advice: str = ("the Hermite expansion around the equivalent harmonic unit does not resolve this "
-                   "density; use method='mc', or fix M and half_elements to inspect the levels")
+    advice: str = ADVICE
 
     def __init__(self, h: Harvester, base: XMesh, order: int, w: Whitening, share: float = DORFLER) -> None:
         self.h, self.base, self.order, self.w, self.share = h, base, order, w, share
@@ -170,7 +170,7 @@ class AdaptiveHermiteDG:
 
     def unknowns(self, M: int, size: int) -> int:
         """Unknowns of the whole mesh (twice those of the half mesh that is solved)."""
-        return 2 * self._half(size) * _block_size(M, self.order)
+        return 2 * self._half(size) * block_size(M, self.order)
 
     def gigabytes(self, M: int, size: int) -> float:
         return level_gigabytes(M, self._half(size), self.order)
@@ -196,7 +196,7 @@ class AdaptiveHermiteDG:
             self._uniform.add(2 * size)
 
     def work(self, M: int, size: int) -> tuple[float, float]:
-        return float(self._half(size)), float(_block_size(M, self.order))
+        return float(self._half(size)), float(block_size(M, self.order))
 
     def describe(self, size: int) -> str:
         mesh = self.mesh(size)

@@ -3,7 +3,7 @@
 For :math:`U = a|x|`, the velocity's density concentrates at the trap (x, v) = (0, 0)
 like a power of the energy :math:`E = v^2/2 + a|x|` (docs/model.md §3), which a smooth
 basis in v cannot follow. This discretization keeps x *and* v on a mesh
-(:mod:`.plane`, graded toward the origin) and expands only the linear variables
+(:mod:`...plane`, graded toward the origin) and expands only the linear variables
 :math:`w = (V, \\xi)` in Hermite functions around a Gaussian weight :math:`N(b v, \\Sigma)`:
 
 .. math::
@@ -39,7 +39,7 @@ maps the mode of node :math:`\\lambda` to that of :math:`-\\lambda` with a sign.
 For :math:`U = a|x|^n` with 1 < n < 2 the same hierarchy holds with :math:`a_0` replaced
 by the force :math:`-(a n/m)\\,x^{n-1}` (the frame then must not shift with v): the speed of
 a mode along a face v = const falls monotonically in x, so the upwind split of every face
-is still exact (:meth:`~.plane.DGLine.signed_parts`), and the :math:`x^{n-1}` masses use
+is still exact (:meth:`~...plane.DGLine.signed_parts`), and the :math:`x^{n-1}` masses use
 Gauss--Jacobi on the element at x = 0. There is no trap for n > 1 (the density is bounded),
 so the mesh needs no layers toward the origin.
 
@@ -64,13 +64,15 @@ import numpy as np
 import scipy.sparse as sp
 import scipy.sparse.linalg as spla
 
-from ..errors import NotConvergedError
-from ..model import Harvester
-from .blocksolve import _blas
-from .hermite import HermiteBasis
-from .plane import DGLine, PlaneMesh
+from ....errors import NotConvergedError
+from ....model import Harvester
+from ...blocksolve import blas_controller
+from ...hermite import HermiteBasis
+from ...moments import conditional_fields, harvester_moments
+from ...plane import DGLine, PlaneMesh
 
-__all__ = ["KinkFrame", "KinkLevel", "solve_kink_level", "ModePreconditioner"]
+__all__ = ["KinkFrame", "KinkLevel", "KinkHierarchy", "KinkPlane", "kink_plane", "face_parts", "mode_transport",
+           "ModeOperator", "ModePreconditioner", "CoarseCorrection", "solve_kink_level"]
 
 
 @dataclass(frozen=True)
@@ -143,7 +145,7 @@ class KinkFrame:
 
 
 @dataclass(frozen=True)
-class _Hierarchy:
+class KinkHierarchy:
     """Hermite matrices of one degree M in the frame, and G's eigen-decomposition."""
 
     hb: HermiteBasis
@@ -164,7 +166,7 @@ class _Hierarchy:
     q: float = 0.0
 
     @classmethod
-    def of(cls, h: Harvester, M: int, frame: KinkFrame) -> _Hierarchy:
+    def of(cls, h: Harvester, M: int, frame: KinkFrame) -> KinkHierarchy:
         p = h.params
         if h.n != 1.0 and np.any(frame.shift != 0.0):
             raise ValueError(f"a frame shifted with v needs the constant kink force (n = 1), got n = {h.n!r}")
@@ -193,8 +195,8 @@ class _Hierarchy:
 
 
 @dataclass(frozen=True)
-class _Plane:
-    """Scalar DG matrices of the (x, v) mesh (x outer, v inner): see :func:`_plane`."""
+class KinkPlane:
+    """Scalar DG matrices of the (x, v) mesh (x outer, v inner): see :func:`kink_plane`."""
 
     X: DGLine
     Vl: DGLine
@@ -209,7 +211,7 @@ class _Plane:
     integrals: dict[str, np.ndarray]
 
 
-def _plane(h: Harvester, mesh: PlaneMesh, p: int, gamma_e: float, kappa: float) -> _Plane:
+def kink_plane(h: Harvester, mesh: PlaneMesh, p: int, gamma_e: float, kappa: float) -> KinkPlane:
     """Assemble the scalar matrices of the upwind DG weak form on the half plane x > 0.
 
     Per element K and test function :math:`\\psi`, for every mode (velocity
@@ -256,11 +258,11 @@ def _plane(h: Harvester, mesh: PlaneMesh, p: int, gamma_e: float, kappa: float) 
     integrals = {"1": np.kron(Ix, Iv), "v": np.kron(Ix, Vl.integral(1)), "v2": np.kron(Ix, Vl.integral(2)),
                  "x2": np.kron(X.integral(2), Iv), "x": np.kron(X.integral(1), Iv),
                  "xv": np.kron(X.integral(1), Vl.integral(1))}
-    return _Plane(X, Vl, S_I.tocsr(), S_S.tocsr(), -sp.kron(Mx, Mv).tocsr(), -sp.kron(Mx, Mvv).tocsr(),
+    return KinkPlane(X, Vl, S_I.tocsr(), S_S.tocsr(), -sp.kron(Mx, Mv).tocsr(), -sp.kron(Mx, Mvv).tocsr(),
                   -sp.kron(X.mass(power=1), Mv).tocsr(), Mx, Dv, faces, integrals)
 
 
-def _face_parts(pl: _Plane, hi: _Hierarchy) -> tuple[np.ndarray, np.ndarray]:
+def face_parts(pl: KinkPlane, hi: KinkHierarchy) -> tuple[np.ndarray, np.ndarray]:
     """x-matrices of the upwind flux of every mode through every face v = v_j: the element
     masses weighted by the positive and negative part of the mode's speed
     :math:`a_0 - \\gamma_e v_j + \\kappa x + \\lambda_i` (linear in x along the face), shape
@@ -271,7 +273,7 @@ def _face_parts(pl: _Plane, hi: _Hierarchy) -> tuple[np.ndarray, np.ndarray]:
     return P.reshape(shape), N.reshape(shape)
 
 
-def _mode_transport(pl: _Plane, hi: _Hierarchy, parts: tuple[np.ndarray, np.ndarray]) -> list[sp.csr_matrix]:
+def mode_transport(pl: KinkPlane, hi: KinkHierarchy, parts: tuple[np.ndarray, np.ndarray]) -> list[sp.csr_matrix]:
     """The scalar transport matrix of every mode: ``S_I``, :math:`\\lambda_i` times the v
     derivative, and its upwind v-face terms. All modes share one sparsity pattern, so the
     entries are gathered once and summed per mode by one ``bincount``."""
@@ -308,12 +310,12 @@ def _mode_transport(pl: _Plane, hi: _Hierarchy, parts: tuple[np.ndarray, np.ndar
     return out
 
 
-class _ModeOperator:
+class ModeOperator:
     """The operator in the mode basis, applied to all modes at once: the mode-independent
     sparse parts as one sparse-times-dense product, the v faces (whose upwind side depends
     on the mode) by gathering the traces below and above every v node."""
 
-    def __init__(self, pl: _Plane, hi: _Hierarchy, parts: tuple[np.ndarray, np.ndarray]) -> None:
+    def __init__(self, pl: KinkPlane, hi: KinkHierarchy, parts: tuple[np.ndarray, np.ndarray]) -> None:
         self.pl, self.hi = pl, hi
         self.S_G = -sp.kron(pl.Mx, pl.Dv).tocsr()
         nvd, p1 = pl.Vl.size, pl.Vl.p + 1
@@ -355,7 +357,7 @@ class ModePreconditioner:
     solved together. Sparse LU (SuperLU) of systems of the size of the scalar (x, v) space.
     """
 
-    def __init__(self, T: list[sp.csr_matrix], pl: _Plane, hi: _Hierarchy) -> None:
+    def __init__(self, T: list[sp.csr_matrix], pl: KinkPlane, hi: KinkHierarchy) -> None:
         n = len(T)
         self.groups: list[tuple[np.ndarray, Any]] = []
         seen = np.zeros(n, dtype=bool)
@@ -390,11 +392,11 @@ class CoarseCorrection:
     """
 
     def __init__(self, h: Harvester, mesh: PlaneMesh, order: int, frame: KinkFrame, Mc: int = 2) -> None:
-        hi = _Hierarchy.of(h, Mc, frame)
-        pl = _plane(h, mesh, order, hi.gamma_e, hi.kappa)
+        hi = KinkHierarchy.of(h, Mc, frame)
+        pl = kink_plane(h, mesh, order, hi.gamma_e, hi.kappa)
         self.hermite = hi.hb
         nc = hi.hb.size
-        T = _mode_transport(pl, hi, _face_parts(pl, hi))
+        T = mode_transport(pl, hi, face_parts(pl, hi))
         # the Mc-truncated operator in the Hermite basis: transport from the mode basis
         blocks = sp.block_diag(T, format="csr")
         perm = np.arange(pl.S_I.shape[0] * nc).reshape(nc, -1).T.ravel()   # (mode, xv) -> (xv, mode)
@@ -412,7 +414,7 @@ class CoarseCorrection:
         self.z = self.lu.solve(self.u)
         self.nc = nc
 
-    def __call__(self, r: np.ndarray, hi: _Hierarchy) -> np.ndarray:
+    def __call__(self, r: np.ndarray, hi: KinkHierarchy) -> np.ndarray:
         """The correction (mode basis of ``hi``) for the residual ``r`` (mode basis of ``hi``)."""
         low = np.array([hi.hb.index[tuple(al)] for al in self.hermite.alphas])
         Rl = hi.R[low]
@@ -453,8 +455,8 @@ class KinkLevel:
     seconds: float
     iterations: int
     frame: KinkFrame = field(repr=False)
-    hierarchy: _Hierarchy = field(repr=False)
-    plane: _Plane = field(repr=False)
+    hierarchy: KinkHierarchy = field(repr=False)
+    plane: KinkPlane = field(repr=False)
     #: The refinement's mesh knob this level was solved at (:class:`~.kinkdisc.KinkDG`).
     size: int = 1
     #: The oscillator's mass m (for energies).
@@ -464,6 +466,11 @@ class KinkLevel:
     def elements(self) -> int:
         """Rectangles of the whole plane (twice the half plane's)."""
         return 2 * self.mesh.elements
+
+    @property
+    def half_width(self) -> float:
+        """Half-width :math:`L_x` of the domain in x."""
+        return self.mesh.Lx
 
     def info(self) -> dict[str, Any]:
         """Discretization details for the result's ``info``."""
@@ -491,12 +498,7 @@ class KinkLevel:
                "V_mean": X.evaluate(wc[:, 0] + b[0] * vc0, ax) + c[0] * ax * X.evaluate(c0v, ax),
                "xi_mean": X.evaluate(wc[:, 1] + b[1] * vc0, ax) + c[1] * ax * X.evaluate(c0v, ax)}
         dens = np.where(np.abs(x) <= X.nodes[-1], dens, 0.0)
-        mask = dens < 1e-9 * max(float(dens.max()), 1e-300)
-        safe = np.where(mask, 1.0, dens)
-        out: dict[str, np.ndarray] = {"density": dens}
-        for name, val in num.items():
-            out[name] = np.ma.masked_array(np.where(mask, 0.0, sign * val / safe), mask=mask)
-        return out
+        return conditional_fields(dens, {name: sign * val for name, val in num.items()})
 
     def summary(self) -> dict[str, Any]:
         """JSON-ready description (for the refinement history)."""
@@ -533,7 +535,7 @@ class KinkLevel:
         (elsewhere its error is of the order of the density's jump across element edges).
         Near the origin the density vanishes like :math:`E^{\\beta - 3/2}` or diverges like
         it (:math:`P(E < \\varepsilon) \\sim \\varepsilon^\\beta`); below the innermost layer of
-        the mesh (:meth:`~.plane.PlaneMesh.x_nodes`) a level can only follow it polynomially.
+        the mesh (:meth:`~...plane.PlaneMesh.x_nodes`) a level can only follow it polynomially.
         """
         if self.hierarchy.A:
             raise ValueError("energy_cdf is the kink's (n = 1: E = m v^2/2 + a|x|); this level has 1 < n < 2")
@@ -559,7 +561,7 @@ class KinkLevel:
         return out
 
 
-def _moments(h: Harvester, pl: _Plane, hi: _Hierarchy, frame: KinkFrame, C: np.ndarray) -> dict[str, float]:
+def _moments(h: Harvester, pl: KinkPlane, hi: KinkHierarchy, frame: KinkFrame, C: np.ndarray) -> dict[str, float]:
     # The half plane holds half of every (even) integral.
     p = h.params
     I = pl.integrals
@@ -576,14 +578,8 @@ def _moments(h: Harvester, pl: _Plane, hi: _Hierarchy, frame: KinkFrame, C: np.n
     xw = xw1 + b * xv + c * x2
     ww = (ww1 + np.outer(b, vw1) + np.outer(vw1, b) + np.outer(c, xw1) + np.outer(xw1, c)
           + np.outer(b, b) * v2 + np.outer(c, c) * x2 + (np.outer(b, c) + np.outer(c, b)) * xv)
-    vV, vxi, V2 = vw[0], vw[1], ww[0, 0]
-    Pin = p.sigma * vxi
-    return {
-        "V2": float(V2), "Pin": float(Pin), "eta": float(V2 / (p.R * Pin)), "v2": v2, "vV": float(vV),
-        "vxi": float(vxi), "x2": x2, "xv": xv, "xV": float(xw[0]), "xxi": float(xw[1]),
-        "res_V2": float((V2 - p.Kc * p.tau_p * vV) / V2),
-        "res_power": float((Pin - p.m * p.gamma * v2 - p.Kv * vV) / Pin),
-    }
+    return {**harvester_moments(p, v2, vw[0], vw[1], ww[0, 0], x2),
+            "xv": xv, "xV": float(xw[0]), "xxi": float(xw[1])}
 
 
 def solve_kink_level(h: Harvester, M: int, mesh: PlaneMesh, order: int, frame: KinkFrame,
@@ -599,7 +595,7 @@ def solve_kink_level(h: Harvester, M: int, mesh: PlaneMesh, order: int, frame: K
     """
     # single-threaded BLAS: the dense products are small (the modes of one degree), and
     # threads only add overhead and contention
-    with _blas().limit(limits=1, user_api="blas"):
+    with blas_controller().limit(limits=1, user_api="blas"):
         return _solve(h, M, mesh, order, frame, rtol, guess, maxiter, coarse, deadline)
 
 
@@ -607,17 +603,17 @@ def _solve(h: Harvester, M: int, mesh: PlaneMesh, order: int, frame: KinkFrame, 
            guess: KinkLevel | None, maxiter: int, coarse: CoarseCorrection | None,
            deadline: float | None) -> KinkLevel:
     t0 = time.perf_counter()
-    hi = _Hierarchy.of(h, M, frame)
-    pl = _plane(h, mesh, order, hi.gamma_e, hi.kappa)
-    parts = _face_parts(pl, hi)
-    T = _mode_transport(pl, hi, parts)
+    hi = KinkHierarchy.of(h, M, frame)
+    pl = kink_plane(h, mesh, order, hi.gamma_e, hi.kappa)
+    parts = face_parts(pl, hi)
+    T = mode_transport(pl, hi, parts)
     prec = ModePreconditioner(T, pl, hi)
     n, nh = pl.S_I.shape[0], hi.hb.size
     # bordering in the mode basis: u = w = (integral of the test functions) on beta = 0
     U = np.outer(pl.integrals["1"], hi.R[0])
     unorm = U / np.linalg.norm(U)
 
-    apply_A = _ModeOperator(pl, hi, parts)
+    apply_A = ModeOperator(pl, hi, parts)
 
     def matvec(d: np.ndarray) -> np.ndarray:
         D = d.reshape(n, nh)
@@ -662,7 +658,7 @@ def _solve(h: Harvester, M: int, mesh: PlaneMesh, order: int, frame: KinkFrame, 
                      mass=h.params.m)
 
 
-def _embed(level: KinkLevel, hi: _Hierarchy) -> np.ndarray:
+def _embed(level: KinkLevel, hi: KinkHierarchy) -> np.ndarray:
     """The coefficients of a lower level in the mode basis of ``hi`` (degrees above the
     lower level's are zero)."""
     C = np.zeros((level.coef.shape[0], hi.hb.size))

@@ -1,0 +1,11 @@
+"""Scheme ``"xv"``: DG in (x, v) graded toward the trap, Hermite functions of (V, xi)
+(:mod:`.kink` the level, :mod:`.kinkdisc` the refinement family, :mod:`.scheme` the plan
+and the registry entry)."""
+
+from __future__ import annotations
+
+from .kink import KinkFrame, KinkLevel, solve_kink_level
+from .kinkdisc import KinkDG, KinkSettings, kink_domain
+from .scheme import XVScheme
+
+__all__ = ["KinkDG", "KinkSettings", "KinkLevel", "KinkFrame", "solve_kink_level", "kink_domain", "XVScheme"]
