@@ -44,7 +44,7 @@ def _references(d: dict[str, Any]) -> Table:
     rows = [[f"``{name}``", _pm(e["eta"], e["eta_err"]), e["status"], _num(e["seconds"]), f"``{e['commit']}``",
              f"``{e['command']}``"] for name, e in d.items()]
     return (["entry", "eta ± error", "status", "s", "commit", "command"], rows, "reference_values.json",
-            "python -m validation.reftable")
+            "python -m validation.references.reftable")
 
 
 def _fpe_time(d: dict[str, Any]) -> Table:
@@ -57,7 +57,7 @@ def _fpe_time(d: dict[str, Any]) -> Table:
                          f"{ada['seconds']:.3g} ({ada['status']})"])
     head = ["case", "tol", "s, default mesh", "reported error", "actual error", "bar holds",
             "s, adaptive mesh"]
-    return head, rows, "bench_fpe_meshes.json", "python -m validation.bench.fpe --meshes"
+    return head, rows, "bench_fpe_meshes.json", "python -m validation.studies.fpe --meshes"
 
 
 def _yes(flag: bool | None) -> str:
@@ -74,7 +74,7 @@ def _fpe_schemes(d: dict[str, Any]) -> Table:
                      _pm(mc["eta"], mc["eta_err"]) if mc else "-"])
     head = ["case", "tol", "s, DG in x", "eta, DG in x", "s, DG in (x, v)", "eta, DG in (x, v)",
             "agree within bars", "eta, Monte Carlo"]
-    return head, rows, "bench_fpe_schemes.json", "python -m validation.bench.fpe --schemes"
+    return head, rows, "bench_fpe_schemes.json", "python -m validation.studies.fpe --schemes"
 
 
 def _mc_policy(d: dict[str, Any]) -> Table:
@@ -87,7 +87,7 @@ def _mc_policy(d: dict[str, Any]) -> Table:
                      _num(ha["cpu_s"]), _num(ha["dt"])])
     head = [f"case (tol {d['rows']['tol']:g})", "eta, extrapolation (opt-in)", "CPU s",
             "eta, halving rule (default)", "CPU s", "final dt"]
-    return head, rows, "bench_montecarlo_policy.json", "python -m validation.bench.montecarlo (policy_rows)"
+    return head, rows, "bench_montecarlo_policy.json", "python -m validation.studies.mc_policy (policy_rows)"
 
 
 def _mc_policy_coverage(d: dict[str, Any]) -> Table:
@@ -103,7 +103,7 @@ def _mc_policy_coverage(d: dict[str, Any]) -> Table:
                          _num(r["median_cpu_s"])])
     head = [f"case (tol {cov['tol']:g})", "time-step rule", "reference", "seeds", "within 1 error",
             "within 2 errors", "max abs z", "median CPU s"]
-    return head, rows, "bench_montecarlo_policy.json", "python -m validation.bench.montecarlo (policy_coverage)"
+    return head, rows, "bench_montecarlo_policy.json", "python -m validation.studies.mc_policy (policy_coverage)"
 
 
 def _mc_coverage(d: dict[str, Any]) -> Table:
@@ -116,7 +116,7 @@ def _mc_coverage(d: dict[str, Any]) -> Table:
     rows.append(["nominal (Gaussian)", "-", _pct(nominal["within_1"]), _pct(nominal["within_2"]), "-"])
     return (["check", "seeds", "within 1 error", "within 2 errors", "max abs z"], rows,
             "bench_montecarlo_martingale_coverage.json",
-            "python -m validation.bench.montecarlo (martingale_coverage)")
+            "python -m validation.studies.mc_martingale (martingale_coverage)")
 
 
 _CONTROL_SETS = ("plain", "twin", "martingale", "both")
@@ -132,7 +132,7 @@ def _mc_controls(d: dict[str, Any]) -> Table:
     head = ["case", "confinement", "variance reduction: twin", "martingale", "both",
             "s to 1e-4: plain", "twin", "martingale", "both"]
     return head, rows, "bench_montecarlo_martingale_rows.json", \
-        "python -m validation.bench.montecarlo (martingale_rows)"
+        "python -m validation.studies.mc_martingale (martingale_rows)"
 
 
 def _mc_boundary(d: dict[str, Any]) -> Table:
@@ -140,7 +140,7 @@ def _mc_boundary(d: dict[str, Any]) -> Table:
     rows = [[name] + [_vrf(r.get(s)) for s in sets] + [_num(r["cpu_s"])]
             for name, r in d.items() if isinstance(r, dict)]
     return (["case"] + [f"variance reduction: {s}" for s in sets] + ["CPU s"], rows,
-            "bench_montecarlo_boundary_rows.json", "python -m validation.bench.montecarlo (boundary_rows)")
+            "bench_montecarlo_boundary_rows.json", "python -m validation.studies.mc_boundary (boundary_rows)")
 
 
 #: Table name -> (JSON file in the data folder, builder).

@@ -18,7 +18,7 @@ NOT_CONVERGED after 49 s with eta wrong by 5e-4). Choosing the mesh at a low deg
 (M = 6, a ladder of meshes) was measured and dropped: the mesh error at M = 6 is not that
 at M = 12 (n = 6, a = 1: 16 elements are 1.4e-4 off at M = 6 and 1.7e-5 at M = 12), so it
 chose meshes 1.5 times finer than needed. The numbers of the alternatives are in
-:mod:`validation.bench.fpe`.
+:mod:`validation.studies.fpe`.
 
 With the element-wise discretization (:class:`~.schemes.x.adapt.AdaptiveHermiteDG`, ``mesh="adaptive"``)
 "twice the elements" is the mesh whose marked elements are bisected (all of them when M
