@@ -6,11 +6,11 @@ samples inside a path. Standard errors are Student-t scaled: the sample standard
 of freedom :math:`\\nu` at the one-sigma level (0.8413), so that the reported one-sigma interval
 covers 68 % also for few replicas (the factor is 1.84 for 2 replicas, 1.08 for 8, 1.02 for 32).
 With control variates in the ensemble, the means are the regression (control-variate)
-estimates of :mod:`.control`; without, plain means. Two kinds exist, both with an exactly known
-mean: the harmonic twin's moments (:mod:`.twin`; the paths must start from its stationary law)
-and the martingale sums of :mod:`montecarlo._martingale` (mean 0 for any start). The set used
+estimates of :mod:`.controls.regression`; without, plain means. Two kinds exist, both with an exactly known
+mean: the harmonic twin's moments (:mod:`.controls.twin`; the paths must start from its stationary law)
+and the martingale sums of :mod:`montecarlo.controls.martingale` (mean 0 for any start). The set used
 is the richest candidate (:data:`CONTROL_SETS`, most controls) among those whose residual degrees
-of freedom meet :func:`montecarlo.control.enough_dof`: a rule that does not look at the estimated
+of freedom meet :func:`montecarlo.controls.regression.enough_dof`: a rule that does not look at the estimated
 variances (see :func:`choose_controls`).
 
 Time-step error, two policies. Without extrapolation the reported numbers are the fine level's
@@ -37,17 +37,17 @@ import numpy as np
 from fpe_harvester.errors import ParameterError
 from fpe_harvester.model import Harvester
 
-from .control import enough_dof, regression_estimate
+from .controls.regression import enough_dof, regression_estimate
 from .scheme import KIND_KINK, scheme_kind
 from .simulate import Ensemble
-from .twin import TWIN_MOMENTS
+from .controls.twin import TWIN_MOMENTS
 
 __all__ = ["Estimate", "estimate", "BIAS_ORDER", "bias_order", "student_factor", "CONTROL_SETS", "choose_controls",
            "RESIDUAL_RULE"]
 
 #: Candidate sets of control variates, by name: the twin's moments, the martingale sums, both;
 #: and the martingale sums with the end-of-window terms (``bd_*`` of
-#: :func:`montecarlo._martingale.basis_names`), with and without the twin.
+#: :func:`montecarlo.controls.martingale.basis_names`), with and without the twin.
 CONTROL_SETS = ("twin", "martingale", "martingale+twin", "martingale+boundary", "martingale+boundary+twin")
 
 #: Weak order assumed when the coarse/fine difference is turned into a bias estimate of the
@@ -194,7 +194,7 @@ def _linear_eta(delta: np.ndarray, cov: np.ndarray, mean: np.ndarray, R: float) 
 def _control_columns(e: Ensemble, valid: np.ndarray, which: str, n: int) -> tuple | None:
     """Controls of one candidate set: (C, C over the first half, mu), or None where the set is not
     available (no twin started from its law or no martingale sums, an escaped path, too few
-    replicas for :func:`montecarlo.control.enough_dof`)."""
+    replicas for :func:`montecarlo.controls.regression.enough_dof`)."""
     if e.escaped_fraction() > 0.0:
         return None
     cols, first, mu = [], [], []
@@ -258,10 +258,10 @@ def estimate(e: Ensemble, h: Harvester, order: float | None = None, control: boo
     order : float, optional
         Weak order for the Richardson bias; default :func:`bias_order`.
     control : bool, optional
-        Use control variates (:mod:`.control`). None: whenever some set of
+        Use control variates (:mod:`.controls.regression`). None: whenever some set of
         :data:`CONTROL_SETS` is available (the twin's needs the paths started from its stationary
         law; either needs no escaped path and the degrees of freedom of
-        :func:`montecarlo.control.enough_dof`). True raises if none is.
+        :func:`montecarlo.controls.regression.enough_dof`). True raises if none is.
     controls : str, optional
         Use this set of :data:`CONTROL_SETS` only (raises if it is not available). None: the
         richest available set (:func:`choose_controls`).
@@ -367,7 +367,7 @@ def choose_controls(sizes: dict[str, int]) -> str:
     martingale+twin and martingale+boundary, all within martingale+boundary+twin; twin within
     martingale+twin), and a set that contains another never has a larger residual variance in the
     population: the extra controls cost degrees of freedom only, which
-    :func:`montecarlo.control.enough_dof` keeps within a factor 2 of variance. The two sets that
+    :func:`montecarlo.controls.regression.enough_dof` keeps within a factor 2 of variance. The two sets that
     do not contain each other (martingale+twin, martingale+boundary) are ordered by size.
 
     >>> choose_controls({"twin": 11, "martingale": 15})

@@ -41,8 +41,10 @@ from .estimate import Estimate, bias_order, estimate
 from .plan import FALLBACK_NOTE, burn_in, relaxation_time
 from .scheme import (JOINT_STEPS, KIND_KINK, KINK_WIDTH, SCHEME_NAMES, joint_step_refusal, scheme_kind,
                      uses_joint_step)
-from .simulate import Ensemble, default_threads, simulate
-from .twin import linearized_stiffness, natural_amplitude
+from fpe_harvester.parallel import default_threads
+
+from .simulate import Ensemble, simulate
+from .controls.twin import linearized_stiffness, natural_amplitude
 
 __all__ = ["MonteCarlo", "Plan"]
 
@@ -89,7 +91,7 @@ _T_RUN_MART_TOL = 1e-3
 
 
 #: A confined system's escape threshold is at least this many natural amplitudes
-#: (:func:`~montecarlo.twin.natural_amplitude`), and at least 100.
+#: (:func:`~montecarlo.controls.twin.natural_amplitude`), and at least 100.
 ESCAPE_AMPLITUDES = 30.0
 
 @dataclass(frozen=True)
@@ -168,7 +170,7 @@ class MonteCarlo:
         anti-phase coupling force :math:`4|k| s x` (:math:`s = \\max_q \\sin^2(\\pi q/N)`)
         overtakes the on-site force, if that is larger; for a confined system
         ``ESCAPE_AMPLITUDES`` (30) times the root-mean-square x of the equivalent harmonic
-        unit (:func:`~montecarlo.twin.natural_amplitude`), if that is larger (strong noise on
+        unit (:func:`~montecarlo.controls.twin.natural_amplitude`), if that is larger (strong noise on
         a weak wall: n = 1, D = 100 has sd(x) ~ 94, threshold ~2500).
     progress : bool or None
         tqdm bar on stderr; None shows it only for runs longer than 2 s.
@@ -185,7 +187,7 @@ class MonteCarlo:
     control : bool
         For a nonlinear potential, run the harmonic twin (stiffness from a pilot run's
         :math:`\\langle xU'\\rangle/\\langle x^2\\rangle`) on the same noise and use its
-        exactly known moments as control variates (:mod:`montecarlo.control`); the paths then
+        exactly known moments as control variates (:mod:`montecarlo.controls.regression`); the paths then
         start from the twin's stationary law. Used whenever a stable twin exists and no path
         escaped; ``info["variance_reduction"]`` gives the factor. Default True.
     joint : bool or None
@@ -194,7 +196,7 @@ class MonteCarlo:
         (default): joint when tau < 10 dt, where freezing xi is wrong
         (:data:`montecarlo.scheme.JOINT_STEPS`). The kink scheme (n near 1) has no joint step.
     martingale : bool
-        Accumulate the martingale control sums (:mod:`montecarlo._martingale`: basis functions
+        Accumulate the martingale control sums (:mod:`montecarlo.controls.martingale`: basis functions
         of the state times the noise drawn after it, mean 0 exactly, for any potential and
         ring) and use them as control variates, alone or with the twin's: the richest set the
         replicas allow (:func:`montecarlo.estimate.choose_controls`). The default ``t_run`` is then 400
@@ -308,7 +310,7 @@ class MonteCarlo:
 
         A nonlinear ring gets a short pilot run from rest (no twin) that measures
         :math:`\\kappa = \\langle xU'(x)\\rangle/\\langle x^2\\rangle`
-        (:func:`montecarlo.twin.linearized_stiffness`); failing a stable twin there, the
+        (:func:`montecarlo.controls.twin.linearized_stiffness`); failing a stable twin there, the
         Gaussian closure; failing that, no twin and a rest start.
         """
         if not math.isfinite(2.0 * h.a):

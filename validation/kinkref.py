@@ -38,7 +38,7 @@ from fpe_harvester.errors import ParameterError, check_real
 from montecarlo._kernels import KIND_KINK, N_TAYLOR, _d_step
 from montecarlo.estimate import student_factor
 from montecarlo.scheme import physical_vector, step_coefficients
-from montecarlo.simulate import default_threads
+from fpe_harvester.parallel import default_threads
 
 __all__ = ["reference_run", "summarize", "MOMENTS"]
 

@@ -16,7 +16,7 @@ Measured in one run:
   evaluated with measured inputs, labelled as such);
 * time-step bias: coupled (common-noise) differences eta(dt/2) - eta(dt) for the harmonic unit,
   the kink at a = 2 and the steep n = 1.1 potential, and the naive scheme's error at a = 2;
-* control variates (the harmonic twin, :mod:`montecarlo.control`) for single units n = 1 to 8
+* control variates (the harmonic twin, :mod:`montecarlo.controls.regression`) for single units n = 1 to 8
   and rings N = 3: the variance-reduction factor of eta, V2 and Pin on one ensemble, the
   twin's cost (interleaved timings, median ratio), and the solver's wall time to a relative
   error of 1e-4 with and without them, measured in the same run within a budget and, where
@@ -68,7 +68,7 @@ from numba import njit, prange
 from fpe_harvester import Harvester, solve
 from fpe_harvester.errors import ParameterError
 from montecarlo import MonteCarlo, estimate, simulate, simulate_naive
-from montecarlo.simulate import default_threads
+from fpe_harvester.parallel import default_threads
 from validation.bench.cli import bench_main, save_benchmark
 
 __all__ = ["STEM", "run", "martingale_rows", "martingale_coverage", "run_martingale", "policy_rows",
@@ -667,7 +667,7 @@ def martingale_coverage(quick: bool) -> dict[str, Any]:
     frozen step dt = 0.1), and the single n = 3 unit (a = 0.5) against the Fokker--Planck solver
     (extrapolated value mean - bias against hypot(se, bias_se), and the solver's own error
     hypot(se, bias) around the fine level)."""
-    from montecarlo.twin import twin_expectations
+    from montecarlo.controls.twin import twin_expectations
 
     seeds = 24 if quick else 100
     h2 = Harvester.build(a=0.5, N=2, k=-0.2)
