@@ -189,15 +189,20 @@ def _run(tag, gen, s, out) -> None:
         t_end = (it + 1) * h
         counters[4] += (3 if s.coupled else 1) * live
         _draw(gen, z1, z2, s.coupled)
+        ea, eb = e1, e2  # the fine substeps' noise, as the scheme's noise() returns it
         for sub in range(2 if s.coupled else 1):
             ee = noise(tag, cf_f, z1 if sub == 0 else z2, e1 if sub == 0 else e2)
+            if sub == 0:
+                ea = ee
+            else:
+                eb = ee
             n_upd += 1
             step(tag, f, ee, cf_f, pp, kind, scr, w, counters, gen)
             if s.twin:
                 step(tag, t, noise(tag, s.cf_t, z1 if sub == 0 else z2, et), s.cf_t, s.pp_t, KIND_LINEAR, scr,
                      w, counters, gen)
             if s.coupled and sub == 1:
-                compose(tag, cf_f, cf_c, e1, e2, ec)
+                compose(tag, cf_f, cf_c, ea, eb, ec)
                 step(tag, c, ec, cf_c, pp, kind, scr, w, counters, gen)
                 _check_escape(c.x, c.v, c.V, c.xi, c.F, c.stuck, w, thr, t_end, out.esc_time)
             _check_escape(f.x, f.v, f.V, f.xi, f.F, f.stuck, w, thr,
