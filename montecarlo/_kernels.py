@@ -51,7 +51,6 @@ amplitude (:data:`AVERAGE`).
 from __future__ import annotations
 
 import math
-from typing import NamedTuple
 
 import numpy as np
 from numba import njit
@@ -276,38 +275,6 @@ def _live(w: np.ndarray) -> int:
     return n
 
 
-
-class Level(NamedTuple):
-    """State of one time-step level (or the twin) of P rings of N units, arrays (N, P).
-
-    ``F`` is the kicked on-site force at the current x, ``stuck`` the kink's held units,
-    ``pvx`` the joint step's estimate of v xi (unused by the frozen-xi step)."""
-
-    x: np.ndarray
-    v: np.ndarray
-    V: np.ndarray
-    xi: np.ndarray
-    F: np.ndarray
-    stuck: np.ndarray
-    pvx: np.ndarray
-
-
-class Scratch(NamedTuple):
-    """Work arrays shared by the levels' steps: midpoints ``xm`` and external force ``fext``
-    (N, P), the kink's Taylor table ``cs``, the joint step's ``rbm``, ``rbx`` (N, P)."""
-
-    xm: np.ndarray
-    fext: np.ndarray
-    cs: np.ndarray
-    rbm: np.ndarray
-    rbx: np.ndarray
-
-
-@njit(cache=True, nogil=True)
-def new_level(N: int, P: int, xi: np.ndarray) -> Level:
-    """A level at rest whose noise is ``xi`` (shared with another level, or its own)."""
-    return Level(np.zeros((N, P)), np.zeros((N, P)), np.zeros((N, P)), xi, np.zeros((N, P)),
-                 np.zeros((N, P), dtype=np.bool_), np.zeros((N, P)))
 
 
 @njit(cache=True, nogil=True, inline="always")

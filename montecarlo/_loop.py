@@ -16,13 +16,12 @@ from typing import NamedTuple
 import numpy as np
 from numba import njit
 
-from ._kernels import (KIND_LINEAR, N_MOM, ROWS, Scratch, _check_escape, _clamp_start, _kick_force, _live,
-                       _measure, _start, new_level)
+from ._kernels import KIND_LINEAR, N_MOM, ROWS, _check_escape, _clamp_start, _kick_force, _live, _measure, _start
 from ._kink import N_TAYLOR
 from .controls.martingale import MG_DIST, mg_measure, n_state
 from .controls.twin import measure_twin
 from .steps import StepScheme
-from .steps.dispatch import advance, compose, noise, step, twin_xi
+from .steps.dispatch import advance, compose, noise, normals, step, twin_xi
 
 
 class Setup(NamedTuple):
@@ -123,50 +122,49 @@ def run_chunk(gen: np.random.Generator, scheme: StepScheme, s: Setup, out: Sums)
 
 @njit(cache=True, nogil=True)
 def _init_levels(s, f, c, cc, t) -> None:
-    """Every level starts where the fine level's start put it (with the same kicked force)."""
-    for j in range(s.N):
-        for p in range(s.P):
-            for lv in (c, cc):
-                lv.x[j, p], lv.v[j, p], lv.V[j, p], lv.xi[j, p] = f.x[j, p], f.v[j, p], f.V[j, p], f.xi[j, p]
-            t.x[j, p], t.v[j, p], t.V[j, p], t.xi[j, p] = f.x[j, p], f.v[j, p], f.V[j, p], f.xi[j, p]
-            if s.kind != KIND_LINEAR:
-                f.F[j, p] = _kick_force(f.x[j, p], s.pp)
-                c.F[j, p] = f.F[j, p]
-                cc.F[j, p] = f.F[j, p]
+    """Every level starts where the fine level's start put it (with the same kicked force);
+    levels are tuples (x, v, V, xi, F, stuck, pvx) of (N, P) arrays."""
+    x, v, V, xi, F = f[0], f[1], f[2], f[3], f[4]
+    for lv in (c, cc, t):
+        lv[0][:], lv[1][:], lv[2][:], lv[3][:] = x, v, V, xi
+    if s.kind != KIND_LINEAR:
+        for j in range(s.N):
+            for p in range(s.P):
+                F[j, p] = _kick_force(x[j, p], s.pp)
+        c[4][:], cc[4][:] = F, F
 
 
 @njit(cache=True, nogil=True)
-def _draw(gen, z1, z2, coupled: bool) -> None:
-    """The step's normals, unit by unit: z1 (and z2 for the second fine substep)."""
-    nz, N, P = z1.shape
-    for j in range(N):
-        for p in range(P):
-            for r in range(nz):
-                z1[r, j, p] = gen.standard_normal()
-            if coupled:
-                for r in range(nz):
-                    z2[r, j, p] = gen.standard_normal()
+def _level(N: int, P: int, xi: np.ndarray) -> tuple:
+    """A level at rest, (x, v, V, xi, F, stuck, pvx): ``F`` the kicked on-site force at the
+    current x, ``stuck`` the kink's held units, ``pvx`` the joint step's estimate of v xi."""
+    return (np.zeros((N, P)), np.zeros((N, P)), np.zeros((N, P)), xi, np.zeros((N, P)),
+            np.zeros((N, P), dtype=np.bool_), np.zeros((N, P)))
 
 
 @njit(cache=True, nogil=True)
 def _run(tag, gen, s, out) -> None:
-    N, P = s.N, s.P
-    third = s.third and s.coupled
-    cf_f, cf_c, cf_cc, pp, kind = s.cf_f, s.cf_c, s.cf_cc, s.pp, s.kind
-    sums, counts, counters, mg = out.sums, out.counts, out.counters, out.mart
+    # every array is a local of its own: reading them out of tuples inside the loop cost 5-20 %
+    # in reference counting at the solver's small chunks
+    N, P, coupled, twin, kind, stride, nburn = s.N, s.P, s.coupled, s.twin, s.kind, s.stride, s.nburn
+    third = s.third and coupled
+    cf_f, cf_c, cf_cc, cf_t, pp, pp_t = s.cf_f, s.cf_c, s.cf_cc, s.cf_t, s.pp, s.pp_t
+    sums, counts, counters, mg, esc = out.sums, out.counts, out.counters, out.mart, out.esc_time
     thr = pp[10]
-    f = new_level(N, P, np.zeros((N, P)))
-    c = new_level(N, P, np.zeros((N, P)))
-    cc = new_level(N, P, np.zeros((N, P)))
-    t = new_level(N, P, twin_xi(tag, f.xi))
-    scr = Scratch(np.zeros((N, P)), np.zeros((N, P)), np.zeros((3, N_TAYLOR + 1)), np.zeros((N, P)),
-                  np.zeros((N, P)))
-    nz = tag.normals
+    f, c, cc = _level(N, P, np.zeros((N, P))), _level(N, P, np.zeros((N, P))), _level(N, P, np.zeros((N, P)))
+    t = _level(N, P, twin_xi(tag, f[3]))
+    xf, vf, Vf, xif, Ff, sf, pf = f
+    xc, vc, Vc, xic, Fc, sc, pc = c
+    xcc, vcc, Vcc, xicc, Fcc, scc, pcc = cc
+    xt, vt, Vt, xit, Ft, st, pt = t
+    xm, fext, rbm, rbx = np.zeros((N, P)), np.zeros((N, P)), np.zeros((N, P)), np.zeros((N, P))
+    cs = np.zeros((3, N_TAYLOR + 1))
+    nz = normals(tag)
     z1, z2 = np.zeros((nz, N, P)), np.zeros((nz, N, P))
     e1, e2, et = np.zeros((nz, N, P)), np.zeros((nz, N, P)), np.zeros((nz, N, P))
     ec, ec0, ecc = np.zeros((nz, N, P)), np.zeros((nz, N, P)), np.zeros((nz, N, P))
     w = np.ones(P)
-    out.esc_time[:] = -1.0
+    esc[:] = -1.0
     use_mg = s.n_mart > 0
     phi = np.zeros((n_state(N) if use_mg else 0, N, P))
     n_bd = s.n_mart - n_state(N) - min(N // 2, MG_DIST) - 1 if use_mg else 0
@@ -174,66 +172,72 @@ def _run(tag, gen, s, out) -> None:
     xi0 = np.zeros((N, P))
     mg_started = False
     n_upd = 0  # xi updates of the fine level since the last martingale point
-    h = cf_c[12] if s.coupled else cf_f[12]
-    _start(gen, s.chol, math.sqrt(pp[11]), f.x, f.v, f.V, f.xi)
-    _clamp_start(f.x, kind, pp, h)
+    h = cf_c[12] if coupled else cf_f[12]
+    _start(gen, s.chol, math.sqrt(pp[11]), xf, vf, Vf, xif)
+    _clamp_start(xf, kind, pp, h)
     _init_levels(s, f, c, cc, t)
-    cc_stride = max(1, s.stride // 2)
-    half = s.nburn + s.nrun // 2
-    for it in range(s.nburn + s.nrun):
+    cc_stride = max(1, stride // 2)
+    half = nburn + s.nrun // 2
+    for it in range(nburn + s.nrun):
         live = _live(w)
         if live == 0:
             break
-        meas = it >= s.nburn and (it - s.nburn) % s.stride == 0
+        meas = it >= nburn and (it - nburn) % stride == 0
         first = it < half
         t_end = (it + 1) * h
-        counters[4] += (3 if s.coupled else 1) * live
-        _draw(gen, z1, z2, s.coupled)
+        counters[4] += (3 if coupled else 1) * live
+        for j in range(N):
+            for p in range(P):
+                for r in range(nz):
+                    z1[r, j, p] = gen.standard_normal()
+                if coupled:
+                    for r in range(nz):
+                        z2[r, j, p] = gen.standard_normal()
         ea, eb = e1, e2  # the fine substeps' noise, as the scheme's noise() returns it
-        for sub in range(2 if s.coupled else 1):
-            ee = noise(tag, cf_f, z1 if sub == 0 else z2, e1 if sub == 0 else e2)
+        for sub in range(2 if coupled else 1):
+            zz = z1 if sub == 0 else z2
+            ee = noise(tag, cf_f, zz, e1 if sub == 0 else e2)
             if sub == 0:
                 ea = ee
             else:
                 eb = ee
             n_upd += 1
-            step(tag, f, ee, cf_f, pp, kind, scr, w, counters, gen)
-            if s.twin:
-                step(tag, t, noise(tag, s.cf_t, z1 if sub == 0 else z2, et), s.cf_t, s.pp_t, KIND_LINEAR, scr,
-                     w, counters, gen)
-            if s.coupled and sub == 1:
+            step(tag, xf, vf, Vf, xif, Ff, sf, pf, ee, cf_f, pp, kind, xm, fext, cs, rbm, rbx, w, counters, gen)
+            if twin:
+                step(tag, xt, vt, Vt, xit, Ft, st, pt, noise(tag, cf_t, zz, et), cf_t, pp_t, KIND_LINEAR, xm, fext,
+                     cs, rbm, rbx, w, counters, gen)
+            if coupled and sub == 1:
                 compose(tag, cf_f, cf_c, ea, eb, ec)
-                step(tag, c, ec, cf_c, pp, kind, scr, w, counters, gen)
-                _check_escape(c.x, c.v, c.V, c.xi, c.F, c.stuck, w, thr, t_end, out.esc_time)
-            _check_escape(f.x, f.v, f.V, f.xi, f.F, f.stuck, w, thr,
-                          t_end - (0.5 * h if s.coupled and sub == 0 else 0.0), out.esc_time)
+                step(tag, xc, vc, Vc, xic, Fc, sc, pc, ec, cf_c, pp, kind, xm, fext, cs, rbm, rbx, w, counters, gen)
+                _check_escape(xc, vc, Vc, xic, Fc, sc, w, thr, t_end, esc)
+            _check_escape(xf, vf, Vf, xif, Ff, sf, w, thr, t_end - (0.5 * h if coupled and sub == 0 else 0.0), esc)
             if meas:
-                counts[0] += _measure(f.x, f.v, f.V, f.xi, f.stuck, f.F, w, cf_f, pp, kind, sums[0], f.pvx)
+                counts[0] += _measure(xf, vf, Vf, xif, sf, Ff, w, cf_f, pp, kind, sums[0], pf)
                 if use_mg and sub == 0:
                     dec = cf_f[13] ** n_upd
-                    mg_measure(f.x, f.v, f.V, f.xi, w, pp[7], pp[8], phi, xi0, mg, first, mg_started, dec,
+                    mg_measure(xf, vf, Vf, xif, w, pp[7], pp[8], phi, xi0, mg, first, mg_started, dec,
                                pp[11] * (1.0 - dec * dec), g_bd, gprev_bd)
                     mg_started = True
                     n_upd = 0
-                if s.twin:
-                    measure_twin(t.x, t.v, t.V, t.xi, w, s.cf_t, sums[0], pp[8], t.pvx)
+                if twin:
+                    measure_twin(xt, vt, Vt, xit, w, cf_t, sums[0], pp[8], pt)
                 if first:
-                    counts[2] += _measure(f.x, f.v, f.V, f.xi, f.stuck, f.F, w, cf_f, pp, kind, sums[2], f.pvx)
-                    if s.twin:
-                        measure_twin(t.x, t.v, t.V, t.xi, w, s.cf_t, sums[2], pp[8], t.pvx)
-                if s.coupled and sub == 1:
-                    counts[1] += _measure(c.x, c.v, c.V, c.xi, c.stuck, c.F, w, cf_c, pp, kind, sums[1], c.pvx)
-            advance(tag, f, ee, cf_f)
-        if s.coupled:
-            advance(tag, c, ec, cf_c)
+                    counts[2] += _measure(xf, vf, Vf, xif, sf, Ff, w, cf_f, pp, kind, sums[2], pf)
+                    if twin:
+                        measure_twin(xt, vt, Vt, xit, w, cf_t, sums[2], pp[8], pt)
+                if coupled and sub == 1:
+                    counts[1] += _measure(xc, vc, Vc, xic, sc, Fc, w, cf_c, pp, kind, sums[1], pc)
+            advance(tag, xif, ee, cf_f)
+        if coupled:
+            advance(tag, xic, ec, cf_c)
         if third and it % 2 == 1:
             counters[4] += live
             compose(tag, cf_c, cf_cc, ec0, ec, ecc)
-            step(tag, cc, ecc, cf_cc, pp, kind, scr, w, counters, gen)
-            _check_escape(cc.x, cc.v, cc.V, cc.xi, cc.F, cc.stuck, w, thr, t_end, out.esc_time)
-            if it >= s.nburn and ((it - s.nburn) // 2) % cc_stride == 0:
-                counts[3] += _measure(cc.x, cc.v, cc.V, cc.xi, cc.stuck, cc.F, w, cf_cc, pp, kind, sums[3],
-                                      cc.pvx)
-            advance(tag, cc, ecc, cf_cc)
+            step(tag, xcc, vcc, Vcc, xicc, Fcc, scc, pcc, ecc, cf_cc, pp, kind, xm, fext, cs, rbm, rbx, w, counters,
+                 gen)
+            _check_escape(xcc, vcc, Vcc, xicc, Fcc, scc, w, thr, t_end, esc)
+            if it >= nburn and ((it - nburn) // 2) % cc_stride == 0:
+                counts[3] += _measure(xcc, vcc, Vcc, xicc, scc, Fcc, w, cf_cc, pp, kind, sums[3], pcc)
+            advance(tag, xicc, ecc, cf_cc)
         elif third:
             ec0[:] = ec

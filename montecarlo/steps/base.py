@@ -14,6 +14,7 @@ __all__ = ["StepScheme", "Kernels"]
 class Kernels(NamedTuple):
     """A step scheme's numba kernels (signatures in :class:`StepScheme`)."""
 
+    normals: int
     noise: Callable
     compose: Callable
     step: Callable
@@ -37,25 +38,33 @@ class StepScheme:
         path loop (:func:`montecarlo._loop.run_chunk`) is compiled: one specialised loop per
         scheme, no branch on the scheme at run time.
     kernels : Kernels
-        The scheme's numba kernels, with these signatures (arrays
-        (N, P), noise arrays (normals, N, P), ``lv`` a :class:`montecarlo._kernels.Level`):
+        The scheme's numba kernels (arrays (N, P); noise arrays (normals, N, P)):
 
+        ``normals`` : int
+            Standard normals drawn per unit and step.
         ``noise(cf, z, buf) -> eps``
             The level's noise for one step from the normals ``z`` (may return ``z`` itself or
             fill and return ``buf``).
         ``compose(cf_a, cf_b, e1, e2, out)``
             The noise of one step ``cf_b`` from two steps ``cf_a`` in a row (Richardson's
             coarse levels run on the fine level's noise).
-        ``step(lv, eps, cf, pp, kind, scr, w, counters, gen)``
-            Advance one level over one step (``kind``: the on-site treatment,
-            :data:`montecarlo._kernels.KIND_LINEAR` / ``KIND_KICK`` / ``KIND_KINK``; ``w`` the
-            live paths; ``gen`` for steps that draw extra normals).
-        ``advance(lv, eps, cf)``
-            After the level was measured: whatever of its noise the step left (e.g. the OU
-            update of xi), or nothing.
+        ``step(x, v, V, xi, F, stuck, pvx, eps, cf, pp, kind, xm, fext, cs, rbm, rbx, w, counters, gen)``
+            Advance one level (x, v, V, xi; ``F`` the kicked on-site force at x, ``stuck`` the
+            kink's held units, ``pvx`` the joint step's estimate of v xi) over one step with
+            noise ``eps``. ``kind`` is the on-site treatment
+            (:data:`montecarlo._kernels.KIND_LINEAR`, ``KIND_KICK``, ``KIND_KINK``), ``xm``,
+            ``fext``, ``cs``, ``rbm``, ``rbx`` shared scratch, ``w`` the live paths,
+            ``counters`` the kink statistics, ``gen`` for steps that draw extra normals.
+        ``advance(xi, eps, cf)``
+            After the level was measured: whatever of its noise the step left (the OU update of
+            xi), or nothing.
         ``twin_xi(xi) -> xi_t``
             The harmonic twin's xi array given the fine level's: the same array when the step
-            leaves xi to :func:`advance` (the twin is then never advanced), its own otherwise.
+            leaves xi to ``advance`` (the twin is then never advanced), its own otherwise.
+
+    A scheme's kernels are compiled into the loop (``inline="always"``): arrays are passed
+    one by one, not in tuples, because reading arrays out of tuples in the loop cost up to
+    20 % in reference counting at small chunks.
     """
 
     name: str = ""

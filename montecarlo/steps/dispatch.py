@@ -12,13 +12,18 @@ from numba.extending import overload
 
 from . import STEPS
 
-__all__ = ["noise", "compose", "step", "advance", "twin_xi"]
+__all__ = ["normals", "noise", "compose", "step", "advance", "twin_xi"]
 
 _KERNELS = {type(s.tag): s.kernels for s in STEPS.values()}
 
 
 def _kernels(tag):
     return _KERNELS[tag.instance_class]
+
+
+def normals(tag):
+    """Standard normals per unit and step of the scheme ``tag``, a compile-time constant."""
+    raise NotImplementedError("numba only")
 
 
 def noise(tag, cf, z, buf):
@@ -31,12 +36,12 @@ def compose(tag, cf_a, cf_b, e1, e2, out):
     raise NotImplementedError("numba only")
 
 
-def step(tag, lv, eps, cf, pp, kind, scr, w, counters, gen):
+def step(tag, x, v, V, xi, F, stuck, pvx, eps, cf, pp, kind, xm, fext, cs, rbm, rbx, w, counters, gen):
     """Advance one level over one step (``kernels.step``)."""
     raise NotImplementedError("numba only")
 
 
-def advance(tag, lv, eps, cf):
+def advance(tag, xi, eps, cf):
     """The noise the step left, after the measurement (``kernels.advance``)."""
     raise NotImplementedError("numba only")
 
@@ -46,32 +51,40 @@ def twin_xi(tag, xi):
     raise NotImplementedError("numba only")
 
 
-@overload(noise, jit_options={"cache": True, "nogil": True})
+@overload(normals, jit_options={"cache": True, "nogil": True}, inline="always")
+def _normals(tag):
+    n = _kernels(tag).normals
+    return lambda tag: n
+
+
+@overload(noise, jit_options={"cache": True, "nogil": True}, inline="always")
 def _noise(tag, cf, z, buf):
     f = _kernels(tag).noise
     return lambda tag, cf, z, buf: f(cf, z, buf)
 
 
-@overload(compose, jit_options={"cache": True, "nogil": True})
+@overload(compose, jit_options={"cache": True, "nogil": True}, inline="always")
 def _compose(tag, cf_a, cf_b, e1, e2, out):
     f = _kernels(tag).compose
     return lambda tag, cf_a, cf_b, e1, e2, out: f(cf_a, cf_b, e1, e2, out)
 
 
-@overload(step, jit_options={"cache": True, "nogil": True})
-def _step(tag, lv, eps, cf, pp, kind, scr, w, counters, gen):
+@overload(step, jit_options={"cache": True, "nogil": True}, inline="always")
+def _step(tag, x, v, V, xi, F, stuck, pvx, eps, cf, pp, kind, xm, fext, cs, rbm, rbx, w, counters, gen):
     f = _kernels(tag).step
-    return lambda tag, lv, eps, cf, pp, kind, scr, w, counters, gen: f(lv, eps, cf, pp, kind, scr, w,
-                                                                       counters, gen)
+
+    def impl(tag, x, v, V, xi, F, stuck, pvx, eps, cf, pp, kind, xm, fext, cs, rbm, rbx, w, counters, gen):
+        f(x, v, V, xi, F, stuck, pvx, eps, cf, pp, kind, xm, fext, cs, rbm, rbx, w, counters, gen)
+    return impl
 
 
-@overload(advance, jit_options={"cache": True, "nogil": True})
-def _advance(tag, lv, eps, cf):
+@overload(advance, jit_options={"cache": True, "nogil": True}, inline="always")
+def _advance(tag, xi, eps, cf):
     f = _kernels(tag).advance
-    return lambda tag, lv, eps, cf: f(lv, eps, cf)
+    return lambda tag, xi, eps, cf: f(xi, eps, cf)
 
 
-@overload(twin_xi, jit_options={"cache": True, "nogil": True})
+@overload(twin_xi, jit_options={"cache": True, "nogil": True}, inline="always")
 def _twin_xi(tag, xi):
     f = _kernels(tag).twin_xi
     return lambda tag, xi: f(xi)

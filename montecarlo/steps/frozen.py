@@ -25,7 +25,7 @@ from numba import njit
 
 from fpe_harvester.model import Harvester
 
-from .._kernels import (KIND_KICK, KIND_KINK, MAX_SUBSTEPS, Level, Scratch, _coupling_force, _kick,
+from .._kernels import (KIND_KICK, KIND_KINK, MAX_SUBSTEPS, _coupling_force, _kick,
                         _kick_force, _stiff_amplitude, _substeps)
 from .._kink import _kink_flow
 from ..scheme import step_coefficients
@@ -159,13 +159,13 @@ def _d_step(x, v, V, xi, F, stuck, xm, fext, w, cf, pp, kind, counters, cs) -> N
 
 
 
-@njit(cache=True, nogil=True)
+@njit(cache=True, nogil=True, inline="always")
 def noise(cf: np.ndarray, z: np.ndarray, buf: np.ndarray) -> np.ndarray:
     """The level's noise for one step: the OU update's own normals ``z`` (1, N, P)."""
     return z
 
 
-@njit(cache=True, nogil=True)
+@njit(cache=True, nogil=True, inline="always")
 def compose(cf_a: np.ndarray, cf_b: np.ndarray, e1: np.ndarray, e2: np.ndarray, out: np.ndarray) -> None:
     """Normal of one step ``cf_b`` (= 2 h) from those of two steps ``cf_a`` (h) in a row, exact:
     out = w1 e1 + w2 e2 with the OU update's weights."""
@@ -177,24 +177,22 @@ def compose(cf_a: np.ndarray, cf_b: np.ndarray, e1: np.ndarray, e2: np.ndarray, 
             out[0, j, p] = w1 * e1[0, j, p] + w2 * e2[0, j, p]
 
 
-@njit(cache=True, nogil=True)
-def step(lv: Level, eps: np.ndarray, cf: np.ndarray, pp: np.ndarray, kind: int, scr: Scratch,
-         w: np.ndarray, counters: np.ndarray, gen) -> None:
+@njit(cache=True, nogil=True, inline="always")
+def step(x, v, V, xi, F, stuck, pvx, eps, cf, pp, kind, xm, fext, cs, rbm, rbx, w, counters, gen) -> None:
     """D(h) of one level at frozen xi (``eps`` is applied later, by :func:`advance`)."""
-    _d_step(lv.x, lv.v, lv.V, lv.xi, lv.F, lv.stuck, scr.xm, scr.fext, w, cf, pp, kind, counters, scr.cs)
+    _d_step(x, v, V, xi, F, stuck, xm, fext, w, cf, pp, kind, counters, cs)
 
 
-@njit(cache=True, nogil=True)
-def advance(lv: Level, eps: np.ndarray, cf: np.ndarray) -> None:
+@njit(cache=True, nogil=True, inline="always")
+def advance(xi: np.ndarray, eps: np.ndarray, cf: np.ndarray) -> None:
     """O(h) after the measurement: the exact OU update of the level's xi with normals ``eps``."""
-    xi = lv.xi
     N, P = xi.shape
     for j in range(N):
         for p in range(P):
             xi[j, p] = cf[13] * xi[j, p] + cf[14] * eps[0, j, p]
 
 
-@njit(cache=True, nogil=True)
+@njit(cache=True, nogil=True, inline="always")
 def twin_xi(xi: np.ndarray) -> np.ndarray:
     """The twin runs at the fine level's xi itself (D does not change xi)."""
     return xi
@@ -205,7 +203,7 @@ class FrozenStep(StepScheme):
 
     name = "frozen"
     tag = FrozenTag(1)
-    kernels = Kernels(noise, compose, step, advance, twin_xi)
+    kernels = Kernels(1, noise, compose, step, advance, twin_xi)
 
     def coefficients(self, h: Harvester, dt: float) -> np.ndarray:
         return step_coefficients(h, dt, joint=False)

@@ -22,7 +22,7 @@ from numba import njit
 
 from fpe_harvester.model import Harvester
 
-from .._kernels import (CF_JOINT, JOINT_BLOCK, KIND_KICK, Level, Scratch, _coupling_force, _kick,
+from .._kernels import (CF_JOINT, JOINT_BLOCK, KIND_KICK, _coupling_force, _kick,
                         _kick_force, _stiff_amplitude, _substeps)
 from ..scheme import joint_step_refusal, step_coefficients
 from .base import Kernels, StepScheme
@@ -197,33 +197,31 @@ def _d_step_joint(x, v, V, xi, F, xm, fext, eps, cf, pp, kind, rbm, rbx, pvx, w,
 
 
 
-@njit(cache=True, nogil=True)
+@njit(cache=True, nogil=True, inline="always")
 def noise(cf: np.ndarray, z: np.ndarray, buf: np.ndarray) -> np.ndarray:
     """The level's increment for one step, L z (z four normals per unit), written to ``buf``."""
     _noise(cf, z, buf)
     return buf
 
 
-@njit(cache=True, nogil=True)
+@njit(cache=True, nogil=True, inline="always")
 def compose(cf_a: np.ndarray, cf_b: np.ndarray, e1: np.ndarray, e2: np.ndarray, out: np.ndarray) -> None:
     """Increment of one step ``cf_b`` from two steps ``cf_a`` in a row (:func:`_compose`)."""
     _compose(cf_a, e1, e2, out)
 
 
-@njit(cache=True, nogil=True)
-def step(lv: Level, eps: np.ndarray, cf: np.ndarray, pp: np.ndarray, kind: int, scr: Scratch,
-         w: np.ndarray, counters: np.ndarray, gen) -> None:
+@njit(cache=True, nogil=True, inline="always")
+def step(x, v, V, xi, F, stuck, pvx, eps, cf, pp, kind, xm, fext, cs, rbm, rbx, w, counters, gen) -> None:
     """One joint step of a level with increment ``eps`` (xi included)."""
-    _d_step_joint(lv.x, lv.v, lv.V, lv.xi, lv.F, scr.xm, scr.fext, eps, cf, pp, kind, scr.rbm, scr.rbx,
-                  lv.pvx, w, gen)
+    _d_step_joint(x, v, V, xi, F, xm, fext, eps, cf, pp, kind, rbm, rbx, pvx, w, gen)
 
 
-@njit(cache=True, nogil=True)
-def advance(lv: Level, eps: np.ndarray, cf: np.ndarray) -> None:
+@njit(cache=True, nogil=True, inline="always")
+def advance(xi: np.ndarray, eps: np.ndarray, cf: np.ndarray) -> None:
     """Nothing: the step already moved xi."""
 
 
-@njit(cache=True, nogil=True)
+@njit(cache=True, nogil=True, inline="always")
 def twin_xi(xi: np.ndarray) -> np.ndarray:
     """The twin has its own xi (its transition moves xi with its own factor)."""
     return np.zeros_like(xi)
@@ -234,7 +232,7 @@ class JointStep(StepScheme):
 
     name = "joint"
     tag = JointTag(4)
-    kernels = Kernels(noise, compose, step, advance, twin_xi)
+    kernels = Kernels(4, noise, compose, step, advance, twin_xi)
 
     def coefficients(self, h: Harvester, dt: float) -> np.ndarray:
         return step_coefficients(h, dt, joint=True)
