@@ -22,13 +22,12 @@ with the twin's (:func:`estimate` picks the set).
 
 from __future__ import annotations
 
-from .controls.regression import Regression, regression_estimate
+from .controls import Regression, linearized_stiffness, regression_estimate, twin_expectations
 from .escape import EscapeCurve, escape_study
 from .estimate import Estimate, estimate
 from .naive import simulate_naive
 from .simulate import Ensemble, simulate
 from .solver import MonteCarlo, Plan
-from .controls.twin import linearized_stiffness, twin_expectations
 
 __all__ = [
     "MonteCarlo",

@@ -47,7 +47,7 @@ products :math:`a_j b_{j+d} + b_j a_{j+d}` of (x, v, V, xi), d = 0 .. D, and the
 measured points). They are the Poisson solution's boundary term, which the martingale sums
 leave; their mean is 0 only for a stationary window (exactly so for a harmonic ring started
 from its own law, up to the burn-in's remaining transient otherwise), so the estimator uses them
-only as a separate candidate set (:data:`montecarlo.estimate.CONTROL_SETS`).
+only as a separate candidate set (:data:`montecarlo.controls.CONTROL_SETS`).
 """
 
 from __future__ import annotations
