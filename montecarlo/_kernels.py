@@ -10,42 +10,23 @@ coefficient arrays:
     constant force; ``cf[12] = h``; ``cf[13] = e^{-h/\\tau}``;
     ``cf[14] = \\sqrt{(D/\\tau)(1 - e^{-2h/\\tau})}``; ``cf[15] = e^{-h/2\\tau}``;
     ``cf[16:25]``, ``cf[25:28]``: E and g of the substep ``h /`` :data:`MAX_SUBSTEPS` (the
-    stiff-wall substeps build ``h/K`` from it by squaring, :func:`_substep_path`).
+    stiff-wall substeps build ``h/K`` from it by squaring,
+    :func:`montecarlo.steps.frozen._substep_path`).
 ``pp`` (physical)
     ``m, gamma, Kv, Kc, tau_p, sigma, k, a, n, c, threshold, D/tau, rule, a_kink`` where
     ``c`` is the stiffness kept inside the linear flow (``2k``, plus ``2a`` for the harmonic
     potential), ``threshold`` the escape amplitude, ``rule`` the kink's rule for swings
-    shorter than the step (:data:`AVERAGE` or :data:`HOLD`) and ``a_kink`` the strength
+    shorter than the step (:data:`montecarlo._kink.AVERAGE` or ``HOLD``) and ``a_kink`` the strength
     :math:`an` of the kink part :math:`-an\\,\\mathrm{sign}(x)` integrated exactly by the kink
     scheme (0 for the others).
 ``cf_t`` (harmonic twin, optional)
     ``cf`` of the harmonic ring with on-site stiffness ``kappa_t`` and the same ``k``, run on
     the fine level's noise; its moments are control variates (:mod:`montecarlo.controls.twin`).
 
-Two steps exist. The joint step (``cf[CF_JOINT] = 1``, the harmonic and smooth kick schemes
-when tau < 10 dt, :func:`montecarlo.scheme.uses_joint_step`) is ``K(h/2) L(h) K(h/2)``: L the
-exact Gaussian transition of the linear part of (x, v, V, xi) including the Ornstein--Uhlenbeck
-noise (mean map and noise factor from :func:`montecarlo.scheme.joint_chain`, four normals per
-unit), K the kicks of -U'(x); the neighbours' force is a constant at their predicted midpoints,
-stiff walls split a path's step into joint substeps with fresh normals
-(:func:`_d_step_joint`), and v xi is measured by its conditional expectation. The coarse level
-of a Richardson pair gets the exact composition of the fine level's two noise increments, and
-the twin its own factor applied to the same normals (its xi increment is the system's).
-
-The frozen-xi step is the Strang splitting ``O(h/2) D(h) O(h/2)`` of the generator into the exact
-Ornstein--Uhlenbeck flow ``O`` of xi and the deterministic flow ``D`` of (x, v, V) with xi
-frozen; consecutive half steps of ``O`` merge, so the loop runs ``D(h) O(h)`` and measures
-after ``D`` (xi-dependent observables get the exact half-step factor ``e^{-h/2tau}``).
-Inside ``D`` the neighbours' positions enter as a constant force evaluated at the
-predicted midpoint; the on-site force is either part of the exact linear flow (n = 2),
-a Strang kick around it (smooth n; where a steep wall makes :math:`h^2U''/m` large the
-step of that path is split into substeps, :data:`STIFF_LIMIT`), or, for the kink
-(1 <= n <= 1 + KINK_WIDTH of
-:mod:`montecarlo.scheme`), its part :math:`-an\\,\\mathrm{sign}(x)` is handled by an exact
-piecewise-linear flow with located zero crossings and the remainder by Strang kicks. Toward
-rest the kink's swings shrink exponentially in time and never stop (docs/model.md §3); once
-they are much shorter than the step the scheme advances them by the averaged map of their
-amplitude (:data:`AVERAGE`).
+The steps themselves are :mod:`montecarlo.steps.frozen` (frozen-xi Strang splitting) and
+:mod:`montecarlo.steps.joint` (the joint Gaussian step of (x, v, V, xi), ``cf[CF_JOINT] = 1``),
+the kink's exact piecewise flow :mod:`montecarlo._kink`. The ring's coupling force is computed in
+one place, :func:`_coupling_force`.
 """
 
 from __future__ import annotations

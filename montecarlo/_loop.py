@@ -108,6 +108,7 @@ class Sums(NamedTuple):
 
     @staticmethod
     def zeros(P: int, n_mart: int) -> Sums:
+        """Empty accumulators for a chunk of P paths with ``n_mart`` martingale columns."""
         return Sums(np.zeros((ROWS, N_MOM)), np.zeros(ROWS), np.empty(P), np.zeros(5, dtype=np.int64),
                     np.zeros((2, n_mart)))
 
@@ -144,6 +145,7 @@ def _level(N: int, P: int, xi: np.ndarray) -> tuple:
 
 @njit(cache=True, nogil=True)
 def _run(tag, gen, s, out) -> None:
+    """The loop of :func:`run_chunk`, compiled once per scheme ``tag``."""
     # every array is a local of its own: reading them out of tuples inside the loop cost 5-20 %
     # in reference counting at the solver's small chunks
     N, P, coupled, twin, kind, stride, nburn = s.N, s.P, s.coupled, s.twin, s.kind, s.stride, s.nburn

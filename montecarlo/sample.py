@@ -24,8 +24,8 @@ from fpe_harvester.model import Harvester
 
 from ._kernels import KIND_LINEAR, _kick_force
 from ._kink import N_TAYLOR
-from .steps.frozen import _d_step
 from .scheme import physical_vector, scheme_kind, step_coefficients
+from .steps.frozen import _d_step
 
 __all__ = ["sample_states"]
 

@@ -11,8 +11,8 @@ import pytest
 from fpe_harvester import Harvester, solve
 from fpe_harvester.errors import ParameterError
 from montecarlo import MonteCarlo, estimate, simulate
-from montecarlo.estimate import RESIDUAL_RULE
 from montecarlo.controls.twin import twin_expectations
+from montecarlo.estimate import RESIDUAL_RULE
 
 
 def _discrete_eta(h: Harvester, dt: float, joint: bool) -> float:

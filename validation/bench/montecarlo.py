@@ -67,8 +67,8 @@ from numba import njit, prange
 
 from fpe_harvester import Harvester, solve
 from fpe_harvester.errors import ParameterError
-from montecarlo import MonteCarlo, estimate, simulate, simulate_naive
 from fpe_harvester.parallel import default_threads
+from montecarlo import MonteCarlo, estimate, simulate, simulate_naive
 from validation.bench.cli import bench_main, save_benchmark
 
 __all__ = ["STEM", "run", "martingale_rows", "martingale_coverage", "run_martingale", "policy_rows",
