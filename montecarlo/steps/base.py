@@ -62,9 +62,8 @@ class StepScheme:
             The harmonic twin's xi array given the fine level's: the same array when the step
             leaves xi to ``advance`` (the twin is then never advanced), its own otherwise.
 
-    A scheme's kernels are compiled into the loop (``inline="always"``): arrays are passed
-    one by one, not in tuples, because reading arrays out of tuples in the loop cost up to
-    20 % in reference counting at small chunks.
+    Arrays are passed one by one, not in tuples: reading arrays out of tuples in the loop cost
+    up to 20 % in reference counting at small chunks.
     """
 
     name: str = ""

@@ -57,19 +57,19 @@ def _normals(tag):
     return lambda tag: n
 
 
-@overload(noise, jit_options={"cache": True, "nogil": True}, inline="always")
+@overload(noise, jit_options={"cache": True, "nogil": True})
 def _noise(tag, cf, z, buf):
     f = _kernels(tag).noise
     return lambda tag, cf, z, buf: f(cf, z, buf)
 
 
-@overload(compose, jit_options={"cache": True, "nogil": True}, inline="always")
+@overload(compose, jit_options={"cache": True, "nogil": True})
 def _compose(tag, cf_a, cf_b, e1, e2, out):
     f = _kernels(tag).compose
     return lambda tag, cf_a, cf_b, e1, e2, out: f(cf_a, cf_b, e1, e2, out)
 
 
-@overload(step, jit_options={"cache": True, "nogil": True}, inline="always")
+@overload(step, jit_options={"cache": True, "nogil": True})
 def _step(tag, x, v, V, xi, F, stuck, pvx, eps, cf, pp, kind, xm, fext, cs, rbm, rbx, w, counters, gen):
     f = _kernels(tag).step
 
@@ -78,13 +78,13 @@ def _step(tag, x, v, V, xi, F, stuck, pvx, eps, cf, pp, kind, xm, fext, cs, rbm,
     return impl
 
 
-@overload(advance, jit_options={"cache": True, "nogil": True}, inline="always")
+@overload(advance, jit_options={"cache": True, "nogil": True})
 def _advance(tag, xi, eps, cf):
     f = _kernels(tag).advance
     return lambda tag, xi, eps, cf: f(xi, eps, cf)
 
 
-@overload(twin_xi, jit_options={"cache": True, "nogil": True}, inline="always")
+@overload(twin_xi, jit_options={"cache": True, "nogil": True})
 def _twin_xi(tag, xi):
     f = _kernels(tag).twin_xi
     return lambda tag, xi: f(xi)

@@ -159,13 +159,13 @@ def _d_step(x, v, V, xi, F, stuck, xm, fext, w, cf, pp, kind, counters, cs) -> N
 
 
 
-@njit(cache=True, nogil=True, inline="always")
+@njit(cache=True, nogil=True)
 def noise(cf: np.ndarray, z: np.ndarray, buf: np.ndarray) -> np.ndarray:
     """The level's noise for one step: the OU update's own normals ``z`` (1, N, P)."""
     return z
 
 
-@njit(cache=True, nogil=True, inline="always")
+@njit(cache=True, nogil=True)
 def compose(cf_a: np.ndarray, cf_b: np.ndarray, e1: np.ndarray, e2: np.ndarray, out: np.ndarray) -> None:
     """Normal of one step ``cf_b`` (= 2 h) from those of two steps ``cf_a`` (h) in a row, exact:
     out = w1 e1 + w2 e2 with the OU update's weights."""
@@ -177,13 +177,13 @@ def compose(cf_a: np.ndarray, cf_b: np.ndarray, e1: np.ndarray, e2: np.ndarray, 
             out[0, j, p] = w1 * e1[0, j, p] + w2 * e2[0, j, p]
 
 
-@njit(cache=True, nogil=True, inline="always")
+@njit(cache=True, nogil=True)
 def step(x, v, V, xi, F, stuck, pvx, eps, cf, pp, kind, xm, fext, cs, rbm, rbx, w, counters, gen) -> None:
     """D(h) of one level at frozen xi (``eps`` is applied later, by :func:`advance`)."""
     _d_step(x, v, V, xi, F, stuck, xm, fext, w, cf, pp, kind, counters, cs)
 
 
-@njit(cache=True, nogil=True, inline="always")
+@njit(cache=True, nogil=True)
 def advance(xi: np.ndarray, eps: np.ndarray, cf: np.ndarray) -> None:
     """O(h) after the measurement: the exact OU update of the level's xi with normals ``eps``."""
     N, P = xi.shape
@@ -192,7 +192,7 @@ def advance(xi: np.ndarray, eps: np.ndarray, cf: np.ndarray) -> None:
             xi[j, p] = cf[13] * xi[j, p] + cf[14] * eps[0, j, p]
 
 
-@njit(cache=True, nogil=True, inline="always")
+@njit(cache=True, nogil=True)
 def twin_xi(xi: np.ndarray) -> np.ndarray:
     """The twin runs at the fine level's xi itself (D does not change xi)."""
     return xi

@@ -197,31 +197,31 @@ def _d_step_joint(x, v, V, xi, F, xm, fext, eps, cf, pp, kind, rbm, rbx, pvx, w,
 
 
 
-@njit(cache=True, nogil=True, inline="always")
+@njit(cache=True, nogil=True)
 def noise(cf: np.ndarray, z: np.ndarray, buf: np.ndarray) -> np.ndarray:
     """The level's increment for one step, L z (z four normals per unit), written to ``buf``."""
     _noise(cf, z, buf)
     return buf
 
 
-@njit(cache=True, nogil=True, inline="always")
+@njit(cache=True, nogil=True)
 def compose(cf_a: np.ndarray, cf_b: np.ndarray, e1: np.ndarray, e2: np.ndarray, out: np.ndarray) -> None:
     """Increment of one step ``cf_b`` from two steps ``cf_a`` in a row (:func:`_compose`)."""
     _compose(cf_a, e1, e2, out)
 
 
-@njit(cache=True, nogil=True, inline="always")
+@njit(cache=True, nogil=True)
 def step(x, v, V, xi, F, stuck, pvx, eps, cf, pp, kind, xm, fext, cs, rbm, rbx, w, counters, gen) -> None:
     """One joint step of a level with increment ``eps`` (xi included)."""
     _d_step_joint(x, v, V, xi, F, xm, fext, eps, cf, pp, kind, rbm, rbx, pvx, w, gen)
 
 
-@njit(cache=True, nogil=True, inline="always")
+@njit(cache=True, nogil=True)
 def advance(xi: np.ndarray, eps: np.ndarray, cf: np.ndarray) -> None:
     """Nothing: the step already moved xi."""
 
 
-@njit(cache=True, nogil=True, inline="always")
+@njit(cache=True, nogil=True)
 def twin_xi(xi: np.ndarray) -> np.ndarray:
     """The twin has its own xi (its transition moves xi with its own factor)."""
     return np.zeros_like(xi)
