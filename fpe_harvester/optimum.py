@@ -454,7 +454,7 @@ def optimize(
     replicas : int
         Monte Carlo replicas per point and batch, >= 2 (default 48). The paths per replica are
         the plan's times 16/replicas (at least 2), so the cost per point does not depend on it;
-        with enough replicas (:func:`montecarlo.control.enough_dof`) every point uses the
+        with enough replicas (:func:`montecarlo.controls.regression.enough_dof`) every point uses the
         martingale control variates (:func:`montecarlo.estimate`; no harmonic twin).
     points : int
         Bracketing grid size, >= 3 (default 9).

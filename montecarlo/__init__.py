@@ -7,8 +7,8 @@ Public API:
 * :func:`estimate` and :class:`Estimate` -- means, standard errors, Richardson bias;
 * :func:`escape_study` and :class:`EscapeCurve` -- escape fraction and times vs time;
 * :func:`simulate_naive` -- the plain vectorized numpy Euler--Maruyama reference;
-* :func:`regression_estimate` -- control variates over replicas (:mod:`.control`);
-* :func:`twin_expectations` and :func:`linearized_stiffness` -- the harmonic twin (:mod:`.twin`).
+* :func:`regression_estimate` -- control variates over replicas (:mod:`.controls.regression`);
+* :func:`twin_expectations` and :func:`linearized_stiffness` -- the harmonic twin (:mod:`.controls.twin`).
 
 Scheme: Strang splitting of the exact Ornstein--Uhlenbeck flow of xi with the flow of
 (x, v, V) at frozen xi (exact linear part; Strang kick for smooth nonlinear forces;
@@ -16,19 +16,18 @@ located zero crossings for the kink force of 1 <= n <= 1.05), numba-compiled,
 one :class:`numpy.random.Generator` per (replica, chunk) from a ``SeedSequence``. A harmonic
 twin ring on the same noise, whose moments are known exactly at the step used, gives
 control variates; the paths start from its stationary law. Martingale sums (functions of the
-state times the noise drawn after it, :mod:`._martingale`; mean exactly 0) give more, alone or
+state times the noise drawn after it, :mod:`.controls.martingale`; mean exactly 0) give more, alone or
 with the twin's (:func:`estimate` picks the set).
 """
 
 from __future__ import annotations
 
-from .control import Regression, regression_estimate
+from .controls import Regression, linearized_stiffness, regression_estimate, twin_expectations
 from .escape import EscapeCurve, escape_study
 from .estimate import Estimate, estimate
 from .naive import simulate_naive
 from .simulate import Ensemble, simulate
 from .solver import MonteCarlo, Plan
-from .twin import linearized_stiffness, twin_expectations
 
 __all__ = [
     "MonteCarlo",

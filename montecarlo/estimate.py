@@ -6,12 +6,12 @@ samples inside a path. Standard errors are Student-t scaled: the sample standard
 of freedom :math:`\\nu` at the one-sigma level (0.8413), so that the reported one-sigma interval
 covers 68 % also for few replicas (the factor is 1.84 for 2 replicas, 1.08 for 8, 1.02 for 32).
 With control variates in the ensemble, the means are the regression (control-variate)
-estimates of :mod:`.control`; without, plain means. Two kinds exist, both with an exactly known
-mean: the harmonic twin's moments (:mod:`.twin`; the paths must start from its stationary law)
-and the martingale sums of :mod:`montecarlo._martingale` (mean 0 for any start). The set used
-is the richest candidate (:data:`CONTROL_SETS`, most controls) among those whose residual degrees
-of freedom meet :func:`montecarlo.control.enough_dof`: a rule that does not look at the estimated
-variances (see :func:`choose_controls`).
+estimates of :mod:`.controls.regression`; without, plain means. Two kinds exist, both with an exactly known
+mean: the harmonic twin's moments (:mod:`.controls.twin`; the paths must start from its stationary law)
+and the martingale sums of :mod:`montecarlo.controls.martingale` (mean 0 for any start). The set used
+is the richest candidate (:data:`montecarlo.controls.sets.CONTROL_SETS`, most controls) among those whose residual degrees
+of freedom meet :func:`montecarlo.controls.regression.enough_dof`: a rule that does not look at the estimated
+variances (see :func:`montecarlo.controls.sets.choose_controls`).
 
 Time-step error, two policies. Without extrapolation the reported numbers are the fine level's
 (``dt/2``) and the Richardson estimate of its bias is added to the error in quadrature. With
@@ -37,31 +37,25 @@ import numpy as np
 from fpe_harvester.errors import ParameterError
 from fpe_harvester.model import Harvester
 
-from .control import enough_dof, regression_estimate
+from .controls.regression import regression_estimate
+from .controls.sets import CONTROL_SETS, choose_controls, control_columns
 from .scheme import KIND_KINK, scheme_kind
 from .simulate import Ensemble
-from .twin import TWIN_MOMENTS
 
-__all__ = ["Estimate", "estimate", "BIAS_ORDER", "bias_order", "student_factor", "CONTROL_SETS", "choose_controls",
-           "RESIDUAL_RULE"]
-
-#: Candidate sets of control variates, by name: the twin's moments, the martingale sums, both;
-#: and the martingale sums with the end-of-window terms (``bd_*`` of
-#: :func:`montecarlo._martingale.basis_names`), with and without the twin.
-CONTROL_SETS = ("twin", "martingale", "martingale+twin", "martingale+boundary", "martingale+boundary+twin")
+__all__ = ["Estimate", "estimate", "BIAS_ORDER", "bias_order", "student_factor", "RESIDUAL_RULE"]
 
 #: Weak order assumed when the coarse/fine difference is turned into a bias estimate of the
 #: fine level, bias = (coarse - fine) / (2^p - 1) (so fine - bias is the extrapolation), i.e.
-#: the time-step law eta(dt) = eta0 + c dt^p. p = 2 is measured (validation/bench/montecarlo.py)
+#: the time-step law eta(dt) = eta0 + c dt^p. p = 2 is measured (validation/studies/montecarlo.py)
 #: for the harmonic scheme (2.03), the steep n = 1.1 potential (1.94) and rings (n = 4, N = 3
-#: test), and for the kink scheme (n = 1, validation/kinkstudy.py, data in
+#: test), and for the kink scheme (n = 1, validation/studies/kinkstudy.py, data in
 #: validation/data/kink_dt_new.json): fitted to coupled differences eta(dt) - eta(dt/2) for
 #: dt = 0.08 ... 0.005, p = 1.99 [1.97, 2.02] at a = 0.5, 2.05 [2.00, 2.10] at a = 1, 2.19
 #: [1.99, 2.42] at a = 2 (chi^2 + 1 intervals); independent runs per dt resolve only the coarsest
 #: differences (p = 1.3 [0.6, 2.5], 2.4 [1.5, >4], 0.3 [<0.2, 1.7]). The extrapolation from the
 #: pair (0.02, 0.01) agrees with independent runs at dt = 0.0025 (differences 0.7, 0.1 and 1.1
 #: combined standard errors), and the scheme at dt = 0.04 ... 0.01 agrees with the independent
-#: reference of validation/kinkref.py on common noise.
+#: reference of validation/studies/kinkref.py on common noise.
 BIAS_ORDER = {"smooth": 2.0, "nonsmooth": 2.0}
 
 #: Systematic error of the extrapolated value, from the difference D = R(2 dt) - R(dt) of the
@@ -74,12 +68,8 @@ BIAS_ORDER = {"smooth": 2.0, "nonsmooth": 2.0}
 #: error is 0.29-0.47 of |D|/7 for the frozen-xi step (whose next term is dt^4: 7/15 = 0.47) and
 #: 0.87-0.99 for the joint step on a ring (dt^3), never above it; with q = 4 (|D|/15) the joint
 #: ring's bound would fail by 2x. For nonlinear units at coarse dt 0.04 the D are ~1e-5 and
-#: unresolved (validation.bench.montecarlo.policy_coverage checks the error bars' coverage).
+#: unresolved (validation.studies.mc_policy.policy_coverage checks the error bars' coverage).
 RESIDUAL_RULE = (3.0, 1.0)
-
-#: Tail probability of the test (Hotelling's T^2 against chi^2) that the end-of-window terms
-#: have mean 0; where it fails the candidate sets with them are left out.
-BOUNDARY_TAIL = 1e-3
 
 #: Observables estimated from the replica moments (``eta`` is derived from V2 and Pin).
 _NAMES = ("V2", "Pin", "v2", "vV", "x2", "stuck")
@@ -191,60 +181,6 @@ def _linear_eta(delta: np.ndarray, cov: np.ndarray, mean: np.ndarray, R: float) 
     return float(grad @ delta[:2]), math.sqrt(max(float(grad @ cov[:2, :2] @ grad), 0.0))
 
 
-def _control_columns(e: Ensemble, valid: np.ndarray, which: str, n: int) -> tuple | None:
-    """Controls of one candidate set: (C, C over the first half, mu), or None where the set is not
-    available (no twin started from its law or no martingale sums, an escaped path, too few
-    replicas for :func:`montecarlo.control.enough_dof`)."""
-    if e.escaped_fraction() > 0.0:
-        return None
-    cols, first, mu = [], [], []
-    if "twin" in which:
-        if e.twin_kappa is None or e.start != "twin":
-            return None
-        mom, mom_first = e.moments(0), e.moments(-1)
-        cols += [mom["t_" + name][valid] for name in TWIN_MOMENTS]
-        first += [mom_first["t_" + name][valid] for name in TWIN_MOMENTS]
-        mu += [e.twin_mean[name] for name in TWIN_MOMENTS]
-    if "martingale" in which:
-        if not e.mart_names:
-            return None
-        mg, mg_first = e.martingale(), e.martingale(first_half=True)
-        names = [name for name in e.mart_names if "boundary" in which or not name.startswith("bd_")]
-        if "boundary" in which and not _stationary_window(mg, valid, e.mart_names):
-            return None
-        cols += [mg[name][valid] for name in names]
-        first += [mg_first[name][valid] for name in names]
-        mu += [0.0] * len(names)
-    if not enough_dof(n, len(cols)):
-        return None
-    return np.column_stack(cols), np.column_stack(first), np.array(mu)
-
-
-def _stationary_window(mg: dict[str, np.ndarray], valid: np.ndarray, names: tuple[str, ...]) -> bool:
-    """Whether the end-of-window terms are usable: present, and their means consistent with 0
-    (Hotelling's T^2 below the chi^2 quantile at :data:`BOUNDARY_TAIL`). They have mean 0 only
-    for a stationary window; a transient left by the burn-in shows here first (ring n = 3, N = 3,
-    k = -0.5 from rest, dt = 0.1, 200 replicas of 4 paths, t_run = 40: refused at t_burn = 5,
-    accepted at t_burn = 50)."""
-    from scipy.stats import chi2
-
-    cols = [mg[name][valid] for name in names if name.startswith("bd_")]
-    n = int(valid.sum())
-    if not cols or n < 3:
-        return False
-    C = np.column_stack(cols)
-    sd = C.std(axis=0, ddof=1)
-    C = C[:, sd > 0] / sd[sd > 0]
-    # Hotelling's T^2 of the means (the terms are strongly correlated), on the resolved rank
-    m = C.mean(axis=0)
-    Cc = C - m
-    _, sv, vt = np.linalg.svd(Cc / math.sqrt(n - 1), full_matrices=False)
-    keep = sv > 1e-8 * sv[0] if sv.size else sv > 0
-    proj = vt[keep] @ m / sv[keep]
-    t2 = n * float(proj @ proj)
-    return bool(t2 < chi2.ppf(1.0 - BOUNDARY_TAIL, max(int(keep.sum()), 1)))
-
-
 def estimate(e: Ensemble, h: Harvester, order: float | None = None, control: bool | None = None,
              controls: str | None = None, extrapolate: bool | None = None) -> Estimate:
     """Statistics of an ensemble of ``h`` (see :class:`Estimate`).
@@ -258,10 +194,10 @@ def estimate(e: Ensemble, h: Harvester, order: float | None = None, control: boo
     order : float, optional
         Weak order for the Richardson bias; default :func:`bias_order`.
     control : bool, optional
-        Use control variates (:mod:`.control`). None: whenever some set of
+        Use control variates (:mod:`.controls.regression`). None: whenever some set of
         :data:`CONTROL_SETS` is available (the twin's needs the paths started from its stationary
         law; either needs no escaped path and the degrees of freedom of
-        :func:`montecarlo.control.enough_dof`). True raises if none is.
+        :func:`montecarlo.controls.regression.enough_dof`). True raises if none is.
     controls : str, optional
         Use this set of :data:`CONTROL_SETS` only (raises if it is not available). None: the
         richest available set (:func:`choose_controls`).
@@ -270,7 +206,7 @@ def estimate(e: Ensemble, h: Harvester, order: float | None = None, control: boo
         :func:`montecarlo.simulate` ``third_level``). None: whenever the ensemble has three.
     """
     if controls is not None and controls not in CONTROL_SETS:
-        raise ParameterError(f"controls must be None or one of {CONTROL_SETS}, got {controls!r} "
+        raise ParameterError(f"controls must be None or one of {tuple(CONTROL_SETS)}, got {controls!r} "
                              f"(type {type(controls).__name__})")
     if order is None:
         order = bias_order(h, e.notes.get("scheme_kind"))
@@ -290,7 +226,7 @@ def estimate(e: Ensemble, h: Harvester, order: float | None = None, control: boo
     n = int(valid.sum())
     wanted = (controls,) if controls is not None else CONTROL_SETS
     sets = {} if control is False else {
-        name: cols for name in wanted if (cols := _control_columns(e, valid, name, n)) is not None}
+        name: cols for name in wanted if (cols := control_columns(e, valid, name, n)) is not None}
     if (control or controls is not None) and not sets:
         raise ParameterError(
             f"control=True needs an ensemble with control variates ({controls or 'any set'}): a twin "
@@ -351,31 +287,6 @@ def estimate(e: Ensemble, h: Harvester, order: float | None = None, control: boo
         identity_V2=_mean_se(r1), identity_power=_mean_se(r2), drift=drift, drift_se=drift_se,
         reduction=reduction, control=use, controls=chosen, extrapolated=bool(extrapolate),
         residual=residual, residual_se=residual_se)
-
-
-def choose_controls(sizes: dict[str, int]) -> str:
-    """The control set to use among the available ones (name -> number of controls): the one with
-    the most controls, ties to the earlier in :data:`CONTROL_SETS`.
-
-    The rule does not look at the data. Choosing the set whose *estimated* variance of eta is
-    least picks, among sets of similar merit, the one whose variance happens to be
-    underestimated, and its error bar is then too small. Measured (tol 1e-2, 32 replicas,
-    400 seeds each, z against Fokker--Planck at 1e-4): n = 3, a = 0.5, rms z of eta 1.137 with
-    the least-variance choice (twin 361 times, martingale 39), 1.083 with the twin always, 0.986
-    with the martingale set always (its error 1.4x the chosen one's); n = 8, a = 0.5: 1.009, 1.024
-    and 0.948. Each set is contained in the richer ones that add to it (martingale within
-    martingale+twin and martingale+boundary, all within martingale+boundary+twin; twin within
-    martingale+twin), and a set that contains another never has a larger residual variance in the
-    population: the extra controls cost degrees of freedom only, which
-    :func:`montecarlo.control.enough_dof` keeps within a factor 2 of variance. The two sets that
-    do not contain each other (martingale+twin, martingale+boundary) are ordered by size.
-
-    >>> choose_controls({"twin": 11, "martingale": 15})
-    'martingale'
-    """
-    if not sizes:
-        raise ParameterError("choose_controls needs at least one available set")
-    return max(sizes, key=lambda name: (sizes[name], -CONTROL_SETS.index(name)))
 
 
 @functools.cache

@@ -3,7 +3,7 @@
 The estimators of :mod:`montecarlo.simulate` keep only time averages of moments; densities
 (histograms of the state, its law near the kink's trap at (x, v) = (0, 0)) need the states
 themselves. :func:`sample_states` runs the same splitting step as the solver (the same
-kernel, :func:`montecarlo._kernels._d_step`, and the exact Ornstein--Uhlenbeck update of xi)
+kernel, :func:`montecarlo.steps.frozen._d_step`, and the exact Ornstein--Uhlenbeck update of xi)
 and records every unit's state at a fixed interval after a burn-in.
 
 Samples along one path are correlated (correlation time ~ max(1/gamma, tau, tau_p)); use
@@ -22,8 +22,10 @@ from numba import njit
 from fpe_harvester.errors import ParameterError, check_int, check_real
 from fpe_harvester.model import Harvester
 
-from ._kernels import KIND_LINEAR, N_TAYLOR, _d_step, _kick_force
+from ._kernels import KIND_LINEAR, _kick_force
+from ._kink import N_TAYLOR
 from .scheme import physical_vector, scheme_kind, step_coefficients
+from .steps.frozen import _d_step
 
 __all__ = ["sample_states"]
 

@@ -31,8 +31,9 @@ import scipy.linalg
 
 from fpe_harvester.model import Harvester
 
-from ._kernels import (AVERAGE, CF_JOINT, CF_SIZE, HOLD, JOINT_BLOCK, KIND_KICK, KIND_KINK, KIND_LINEAR,
+from ._kernels import (CF_JOINT, CF_SIZE, JOINT_BLOCK, KIND_KICK, KIND_KINK, KIND_LINEAR,
                        MAX_SUBSTEPS)
+from ._kink import AVERAGE, HOLD
 
 __all__ = ["scheme_kind", "linear_stiffness", "step_coefficients", "physical_vector", "SCHEME_NAMES",
            "KINK_WIDTH", "KINK_RULES", "JOINT_STEPS", "uses_joint_step", "joint_step_refusal",
@@ -56,7 +57,7 @@ SCHEME_NAMES = {
 #: one, so the slow-noise case keeps the cheaper step.
 JOINT_STEPS = 10.0
 
-#: The kink scheme's rules for swings shorter than the step (:data:`montecarlo._kernels.AVERAGE`):
+#: The kink scheme's rules for swings shorter than the step (:data:`montecarlo._kink.AVERAGE`):
 #: ``"average"`` (default) advances them by the averaged map of their amplitude; ``"hold"``
 #: follows them until 64 crossings in one step and then holds the unit at rest (a time-step
 #: artifact, kept to compare with).

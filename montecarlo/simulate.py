@@ -7,37 +7,31 @@ so their spread gives honest standard errors (the samples inside one path are co
 
 Random numbers: every chunk of paths owns a :class:`numpy.random.Generator` (PCG64) seeded by
 ``SeedSequence(seed, spawn_key=(replica, chunk))`` and drawn from inside the numba kernel
-(measured fastest, see ``validation/bench/montecarlo.py``). Chunks run on a thread pool with
+(measured fastest, see ``validation/studies/montecarlo.py``). Chunks run on a thread pool with
 the GIL released, so results depend on the seed only, not on the number of threads.
 """
 
 from __future__ import annotations
 
-import os
 import time
 from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass, field
+from typing import NamedTuple
 
 import numpy as np
 
 from fpe_harvester.errors import ParameterError, check_int, check_real
 from fpe_harvester.model import Harvester
+from fpe_harvester.parallel import default_threads
 
-from ._kernels import KIND_KICK, KIND_KINK, MOMENTS, N_MOM, ROWS, run_chunk
-from ._martingale import basis_names
-from .scheme import (KINK_RULES, joint_step_refusal, physical_vector, scheme_kind, step_coefficients,
-                     uses_joint_step)
-from .twin import initial_cholesky, twin_expectations, twin_harvester, twin_is_stable
+from ._kernels import KIND_KICK, KIND_KINK, MOMENTS, N_MOM
+from ._loop import Setup, Sums, run_chunk
+from .controls.martingale import basis_names
+from .controls.twin import initial_cholesky, twin_expectations, twin_harvester, twin_is_stable
+from .scheme import KINK_RULES, physical_vector, scheme_kind, uses_joint_step
+from .steps import STEPS, StepScheme
 
-__all__ = ["Ensemble", "simulate", "default_threads"]
-
-
-def default_threads() -> int:
-    """Number of worker threads: the CPUs this process may use."""
-    try:
-        return max(1, len(os.sched_getaffinity(0)))
-    except AttributeError:  # pragma: no cover - non-Linux
-        return max(1, os.cpu_count() or 1)
+__all__ = ["Ensemble", "simulate"]
 
 
 @dataclass(frozen=True)
@@ -63,17 +57,17 @@ class Ensemble:
         On-site stiffness of the harmonic twin run on level 0's noise (None: no twin).
     twin_mean : dict of float
         Exact expectations of the twin's moments at level 0's step
-        (:func:`montecarlo.twin.twin_expectations`); empty without a twin.
+        (:func:`montecarlo.controls.twin.twin_expectations`); empty without a twin.
     start : str
         ``"rest"`` or ``"twin"`` (the paths start from the twin's stationary law).
     kink_counters : tuple of int
         Kink scheme: unit-steps on the slow path (near x = 0), located zero crossings, entries
         into the averaged swing map, steps that exhausted the event budget (all levels).
     mart : ndarray, shape (replicas, 2, len(mart_names))
-        Martingale control sums of level 0 (:mod:`montecarlo._martingale`) over the measured
+        Martingale control sums of level 0 (:mod:`montecarlo.controls.martingale`) over the measured
         window and over its first half; no columns without ``martingale``.
     mart_names : tuple of str
-        Their names (:func:`montecarlo._martingale.basis_names`).
+        Their names (:func:`montecarlo.controls.martingale.basis_names`).
     """
 
     sums: np.ndarray
@@ -157,11 +151,6 @@ class Ensemble:
         )
 
 
-def _chunks(paths: int, chunk: int) -> list[int]:
-    full, rest = divmod(paths, chunk)
-    return [chunk] * full + ([rest] if rest else [])
-
-
 def simulate(
     h: Harvester,
     *,
@@ -219,7 +208,7 @@ def simulate(
         error is unchanged while the accumulation cost drops.
     twin : float or None
         On-site stiffness :math:`\\kappa > 0` of a harmonic twin ring (same k) advanced on the
-        fine level's noise and measured with it (:mod:`montecarlo.twin`); its modes
+        fine level's noise and measured with it (:mod:`montecarlo.controls.twin`); its modes
         :math:`\\kappa + 4k\\sin^2(\\pi q/N)` must all be positive. None: no twin.
     start : {"rest", "twin"}
         Initial state of every path: rest (x = v = V = 0, xi stationary), or a draw from the
@@ -242,7 +231,7 @@ def simulate(
         (:func:`montecarlo.scheme.uses_joint_step`). True raises where the scheme has no joint
         step (:func:`montecarlo.scheme.joint_step_refusal`).
     martingale : bool
-        Also accumulate level 0's martingale control sums (:mod:`montecarlo._martingale`,
+        Also accumulate level 0's martingale control sums (:mod:`montecarlo.controls.martingale`,
         :attr:`Ensemble.mart`): sums of basis functions of the state times the noise drawn
         after it, with mean exactly 0. The simulated paths are the same with or without them.
     third_level : bool
@@ -264,6 +253,74 @@ def simulate(
     >>> e.sums.shape, float(e.counts[0, 0])
     ((2, 2, 18), 160.0)
     """
+    c = _check(h, dt=dt, paths=paths, replicas=replicas, t_burn=t_burn, t_run=t_run, seed=seed,
+               richardson=richardson, threshold=threshold, chunk=chunk, threads=threads,
+               first_replica=first_replica, sample_every=sample_every, twin=twin, start=start,
+               kink_rule=kink_rule, kind=kind, joint=joint, martingale=martingale, third_level=third_level)
+    scheme, setup, twin_mean = _coefficients(h, c)
+    ss = np.random.SeedSequence(c.seed)
+    sizes = _chunks(c.paths, c.chunk)
+    tasks = [(r, k) for r in range(c.replicas) for k in range(len(sizes))]
+    t0 = time.perf_counter()
+    results = _run_tasks(scheme, setup, ss, c.first_replica, sizes, tasks, c.threads)
+    wall = time.perf_counter() - t0
+    sums, counts, esc_times, counters, mart = _merge(results, tasks, sizes, c)
+    levels = 3 if c.third_level else 2 if c.richardson else 1
+    dt = c.dt
+    return Ensemble(
+        sums=sums,
+        counts=counts,
+        escape_times=esc_times,
+        dts=(0.5 * dt, dt, 2.0 * dt)[:levels] if c.richardson else (dt,),
+        paths=c.paths,
+        t_burn=setup.nburn * dt,
+        t_run=setup.nrun * dt,
+        threshold=c.threshold,
+        path_steps=int(counters[4]),
+        wall_time=wall,
+        kink_counters=tuple(int(v) for v in counters[:4]),
+        seed_entropy=int(ss.entropy) if c.seed is None else c.seed,
+        first_replica=c.first_replica,
+        notes={"threads": c.threads, "chunk": c.chunk, "scheme_kind": setup.kind, "sample_stride": setup.stride,
+               "kink_rule": c.kink_rule, "joint_step": scheme.name == "joint"},
+        twin_kappa=c.twin,
+        twin_mean=twin_mean,
+        start=c.start,
+        mart=mart if c.martingale else None,
+        mart_names=basis_names(h.N) if c.martingale else (),
+    )
+
+
+class _Checked(NamedTuple):
+    """The arguments of :func:`simulate`, checked (``third_level`` only with ``richardson``,
+    ``kind`` and ``joint`` resolved)."""
+
+    dt: float
+    paths: int
+    replicas: int
+    t_burn: float
+    t_run: float
+    seed: int | None
+    richardson: bool
+    threshold: float
+    chunk: int
+    threads: int
+    first_replica: int
+    sample_every: float
+    twin: float | None
+    start: str
+    kink_rule: str
+    kind: int
+    joint: bool
+    martingale: bool
+    third_level: bool
+
+
+def _check(h: Harvester, *, dt: float, paths: int, replicas: int, t_burn: float, t_run: float,
+           seed: int | None, richardson: bool, threshold: float, chunk: int, threads: int | None,
+           first_replica: int, sample_every: float, twin: float | None, start: str, kink_rule: str,
+           kind: int | None, joint: bool | None, martingale: bool, third_level: bool) -> _Checked:
+    """Validate :func:`simulate`'s arguments (raises :class:`ParameterError`)."""
     if not isinstance(h, Harvester):
         raise ParameterError(f"h must be a Harvester, got {h!r} (type {type(h).__name__})")
     dt = check_real("dt", dt, low=0.0, low_open=True)
@@ -296,94 +353,85 @@ def simulate(
     if start == "twin" and twin is None:
         if not h.is_linear:
             raise ParameterError("start='twin' needs a twin stiffness for a nonlinear potential")
-    stride = max(1, int(round(sample_every / dt)))
-    nrun = max(1, int(round(t_run / dt)))
-    nburn = int(round(t_burn / dt))
-    ss = np.random.SeedSequence(seed)
-    third_level = third_level and richardson
-    levels = 3 if third_level else 2 if richardson else 1
-    dt_f = 0.5 * dt if richardson else dt
     if kind is not None and (h.is_linear or kind not in (KIND_KICK, KIND_KINK)):
         raise ParameterError(f"kind must be None, or {KIND_KICK} (kick) or {KIND_KINK} (kink) for a "
                              f"nonlinear potential, got {kind!r} with n = {h.n:g}")
     kind = scheme_kind(h) if kind is None else kind
-    pp = physical_vector(h, threshold, kink_rule, kind)
     # both levels take the same step, chosen at the coarse one
     if joint is None:
         joint = uses_joint_step(h, dt, kind)
     elif joint:
-        why = joint_step_refusal(h, kind)
+        why = STEPS["joint"].refusal(h, kind)
         if why is not None:
             raise ParameterError(f"joint=True is not available here: {why}")
-    joint = bool(joint)
-    cf_f = step_coefficients(h, dt_f, joint)
-    cf_c = step_coefficients(h, dt, joint)
-    cf_cc = step_coefficients(h, 2.0 * dt, joint) if third_level else cf_c
-    lin = twin_harvester(h, twin) if twin is not None else (h if h.is_linear else None)
-    if twin is not None:
-        cf_t, pp_t = step_coefficients(lin, dt_f, joint), physical_vector(lin, threshold)
-        twin_mean = twin_expectations(lin, dt_f, h.n, joint)
+    return _Checked(dt, paths, replicas, t_burn, t_run, seed, bool(richardson), threshold, chunk, threads,
+                    first_replica, sample_every, twin, start, kink_rule, kind, bool(joint), martingale,
+                    third_level and bool(richardson))
+
+
+def _coefficients(h: Harvester, c: _Checked) -> tuple[StepScheme, Setup, dict[str, float]]:
+    """The step scheme, the kernels' setup (all but the chunk's path count) and the twin's
+    exact expectations (empty without a twin)."""
+    scheme = STEPS["joint" if c.joint else "frozen"]
+    dt_f = 0.5 * c.dt if c.richardson else c.dt
+    pp = physical_vector(h, c.threshold, c.kink_rule, c.kind)
+    cf_f = scheme.coefficients(h, dt_f)
+    cf_c = scheme.coefficients(h, c.dt)
+    cf_cc = scheme.coefficients(h, 2.0 * c.dt) if c.third_level else cf_c
+    lin = twin_harvester(h, c.twin) if c.twin is not None else (h if h.is_linear else None)
+    if c.twin is not None:
+        cf_t, pp_t = scheme.coefficients(lin, dt_f), physical_vector(lin, c.threshold)
+        twin_mean = twin_expectations(lin, dt_f, h.n, c.joint)
     else:
         cf_t, pp_t, twin_mean = cf_f, pp, {}
-    chol = initial_cholesky(lin, dt_f, joint) if start == "twin" else np.zeros((0, 0))
-    sizes = _chunks(paths, chunk)
-    tasks = [(r, c) for r in range(replicas) for c in range(len(sizes))]
+    chol = initial_cholesky(lin, dt_f, c.joint) if c.start == "twin" else np.zeros((0, 0))
+    setup = Setup(P=0, N=h.N, nburn=int(round(c.t_burn / c.dt)), nrun=max(1, int(round(c.t_run / c.dt))),
+                  stride=max(1, int(round(c.sample_every / c.dt))), coupled=c.richardson,
+                  third=c.third_level, twin=c.twin is not None, kind=c.kind, cf_f=cf_f, cf_c=cf_c, cf_cc=cf_cc,
+                  cf_t=cf_t, pp=pp, pp_t=pp_t, chol=chol, n_mart=len(basis_names(h.N)) if c.martingale else 0)
+    return scheme, setup, twin_mean
 
-    names = basis_names(h.N) if martingale else ()
 
-    def work(task: tuple[int, int]) -> tuple[np.ndarray, ...]:
-        r, c = task
-        child = np.random.SeedSequence(ss.entropy, spawn_key=(first_replica + r, c))
+def _chunks(paths: int, chunk: int) -> list[int]:
+    full, rest = divmod(paths, chunk)
+    return [chunk] * full + ([rest] if rest else [])
+
+
+def _run_tasks(scheme: StepScheme, setup: Setup, ss: np.random.SeedSequence, first_replica: int,
+               sizes: list[int], tasks: list[tuple[int, int]], threads: int) -> list[Sums]:
+    """Run every (replica, chunk) task on a thread pool, each on its own random stream
+    ``SeedSequence(seed, spawn_key=(replica, chunk))``."""
+
+    def work(task: tuple[int, int]) -> Sums:
+        r, k = task
+        child = np.random.SeedSequence(ss.entropy, spawn_key=(first_replica + r, k))
         gen = np.random.Generator(np.random.PCG64(child))
-        sums = np.zeros((ROWS, N_MOM))
-        counts = np.zeros(ROWS)
-        esc = np.empty(sizes[c])
-        counters = np.zeros(5, dtype=np.int64)
-        mg = np.zeros((2, len(names)))
-        run_chunk(gen, sizes[c], h.N, nburn, nrun, stride, cf_f, cf_c, pp, kind, richardson, cf_t,
-                  pp_t, twin is not None, chol, sums, counts, esc, counters, mg, cf_cc, third_level)
-        return sums, counts, esc, counters, mg
+        out = Sums.zeros(sizes[k], setup.n_mart)
+        run_chunk(gen, scheme, setup._replace(P=sizes[k]), out)
+        return out
 
-    t0 = time.perf_counter()
     if threads == 1 or len(tasks) == 1:
-        results = [work(t) for t in tasks]
-    else:
-        with ThreadPoolExecutor(max_workers=threads) as pool:
-            results = list(pool.map(work, tasks))
-    wall = time.perf_counter() - t0
-    rows = [0, 1, 3][:levels] + [2]
-    sums = np.zeros((replicas, levels + 1, N_MOM))
-    counts = np.zeros((replicas, levels + 1))
-    esc_times = np.full((replicas, paths), np.inf)
-    counters = np.zeros(5, dtype=np.int64)
-    mart = np.zeros((replicas, 2, len(names)))
-    offsets = np.concatenate([[0], np.cumsum(sizes)])
-    for (r, c), (s, n, e, k, mg) in zip(tasks, results):
-        mart[r] += mg
-        sums[r] += s[rows]
-        counts[r] += n[rows]
-        esc_times[r, offsets[c]:offsets[c + 1]] = np.where(e >= 0.0, e, np.inf)
-        counters += k
-    return Ensemble(
-        sums=sums,
-        counts=counts,
-        escape_times=esc_times,
-        dts=(0.5 * dt, dt, 2.0 * dt)[:levels] if richardson else (dt,),
-        paths=paths,
-        t_burn=nburn * dt,
-        t_run=nrun * dt,
-        threshold=threshold,
-        path_steps=int(counters[4]),
-        wall_time=wall,
-        kink_counters=tuple(int(v) for v in counters[:4]),
-        seed_entropy=int(ss.entropy) if seed is None else seed,
-        first_replica=first_replica,
-        notes={"threads": threads, "chunk": chunk, "scheme_kind": kind, "sample_stride": stride,
-               "kink_rule": kink_rule, "joint_step": joint},
-        twin_kappa=twin,
-        twin_mean=twin_mean,
-        start=start,
-        mart=mart if martingale else None,
-        mart_names=names,
-    )
+        return [work(t) for t in tasks]
+    with ThreadPoolExecutor(max_workers=threads) as pool:
+        return list(pool.map(work, tasks))
 
+
+def _merge(results: list[Sums], tasks: list[tuple[int, int]], sizes: list[int],
+           c: _Checked) -> tuple[np.ndarray, ...]:
+    """Per-replica sums, counts, escape times (inf: none), summed counters and martingale sums
+    from the chunks' outputs (rows of the levels in :attr:`Ensemble.sums`'s order)."""
+    levels = 3 if c.third_level else 2 if c.richardson else 1
+    rows = [0, 1, 3][:levels] + [2]
+    sums = np.zeros((c.replicas, levels + 1, N_MOM))
+    counts = np.zeros((c.replicas, levels + 1))
+    esc_times = np.full((c.replicas, c.paths), np.inf)
+    counters = np.zeros(5, dtype=np.int64)
+    mart = np.zeros((c.replicas, 2, results[0].mart.shape[1]))
+    offsets = np.concatenate([[0], np.cumsum(sizes)])
+    for (r, k), out in zip(tasks, results):
+        mart[r] += out.mart
+        sums[r] += out.sums[rows]
+        counts[r] += out.counts[rows]
+        esc_times[r, offsets[k]:offsets[k + 1]] = np.where(out.esc_time >= 0.0, out.esc_time, np.inf)
+        counters += out.counters
+    return sums, counts, esc_times, counters, mart

@@ -33,20 +33,20 @@ from typing import Any, ClassVar
 import numpy as np
 
 from fpe_harvester.errors import ParameterError, check_int, check_real
-from fpe_harvester.exact import classify, growth_rate, k_di, max_sin2
+from fpe_harvester.exact import classify, max_sin2
 from fpe_harvester.model import Harvester
-from fpe_harvester.result import Stats, Status
+from fpe_harvester.parallel import default_threads
+from fpe_harvester.result import Stats
 
-from .estimate import Estimate, bias_order, estimate
+from .controls.twin import linearized_stiffness, natural_amplitude
+from .estimate import Estimate, estimate
 from .plan import FALLBACK_NOTE, burn_in, relaxation_time
-from .scheme import (JOINT_STEPS, KIND_KINK, KINK_WIDTH, SCHEME_NAMES, joint_step_refusal, scheme_kind,
-                     uses_joint_step)
-from .simulate import Ensemble, default_threads, simulate
-from .twin import linearized_stiffness, natural_amplitude
+from .report import DRIFT_SHARE, DRIFT_SIGMAS, result
+from .scheme import JOINT_STEPS, KIND_KINK, KINK_WIDTH, joint_step_refusal, scheme_kind, uses_joint_step
+from .simulate import Ensemble, simulate
 
 __all__ = ["MonteCarlo", "Plan"]
 
-_RNG = "numpy Generator(PCG64) drawn inside numba, one SeedSequence child per (replica, chunk)"
 
 
 #: Replica index where the pilot run's streams start (far from the measured replicas').
@@ -67,9 +67,8 @@ _DT_START_JOINT = 0.04
 #: n = 3, N = 3, k = -0.5), 0.4e-5 +- 0.7e-5 (n = 3), 1.1e-5 +- 0.8e-5 (n = 1.5), against Richardson
 #: biases of the fine level 1.9e-4, 1.5e-4, 1.5e-4.
 _EXTRAPOLATE_COARSER = 2.0
-#: Restarts allowed for a longer burn-in, and the drift that triggers one (in standard
-#: errors, and relative to tol).
-_BURN_RESTARTS, _DRIFT_SIGMAS, _DRIFT_SHARE = 3, 3.0, 1.0 / 3.0
+#: Restarts allowed for a longer burn-in (the drift that triggers one: :data:`montecarlo.report.DRIFT_SIGMAS`).
+_BURN_RESTARTS = 3
 #: Tolerance from which the automatic paths per replica drop from 64 to 16.
 _LOOSE_TOL = 5e-3
 #: Automatic measured time per path, in burn-ins (when longer than the default below).
@@ -89,7 +88,7 @@ _T_RUN_MART_TOL = 1e-3
 
 
 #: A confined system's escape threshold is at least this many natural amplitudes
-#: (:func:`~montecarlo.twin.natural_amplitude`), and at least 100.
+#: (:func:`~montecarlo.controls.twin.natural_amplitude`), and at least 100.
 ESCAPE_AMPLITUDES = 30.0
 
 @dataclass(frozen=True)
@@ -168,7 +167,7 @@ class MonteCarlo:
         anti-phase coupling force :math:`4|k| s x` (:math:`s = \\max_q \\sin^2(\\pi q/N)`)
         overtakes the on-site force, if that is larger; for a confined system
         ``ESCAPE_AMPLITUDES`` (30) times the root-mean-square x of the equivalent harmonic
-        unit (:func:`~montecarlo.twin.natural_amplitude`), if that is larger (strong noise on
+        unit (:func:`~montecarlo.controls.twin.natural_amplitude`), if that is larger (strong noise on
         a weak wall: n = 1, D = 100 has sd(x) ~ 94, threshold ~2500).
     progress : bool or None
         tqdm bar on stderr; None shows it only for runs longer than 2 s.
@@ -185,7 +184,7 @@ class MonteCarlo:
     control : bool
         For a nonlinear potential, run the harmonic twin (stiffness from a pilot run's
         :math:`\\langle xU'\\rangle/\\langle x^2\\rangle`) on the same noise and use its
-        exactly known moments as control variates (:mod:`montecarlo.control`); the paths then
+        exactly known moments as control variates (:mod:`montecarlo.controls.regression`); the paths then
         start from the twin's stationary law. Used whenever a stable twin exists and no path
         escaped; ``info["variance_reduction"]`` gives the factor. Default True.
     joint : bool or None
@@ -194,10 +193,10 @@ class MonteCarlo:
         (default): joint when tau < 10 dt, where freezing xi is wrong
         (:data:`montecarlo.scheme.JOINT_STEPS`). The kink scheme (n near 1) has no joint step.
     martingale : bool
-        Accumulate the martingale control sums (:mod:`montecarlo._martingale`: basis functions
+        Accumulate the martingale control sums (:mod:`montecarlo.controls.martingale`: basis functions
         of the state times the noise drawn after it, mean 0 exactly, for any potential and
         ring) and use them as control variates, alone or with the twin's: the richest set the
-        replicas allow (:func:`montecarlo.estimate.choose_controls`). The default ``t_run`` is then 400
+        replicas allow (:func:`montecarlo.controls.choose_controls`). The default ``t_run`` is then 400
         instead of 100 when ``tol <= 1e-3``. Default True.
     extrapolate : bool
         With ``richardson``: run a third level at ``2 dt`` and report the Richardson extrapolation
@@ -313,7 +312,7 @@ class MonteCarlo:
 
         A nonlinear ring gets a short pilot run from rest (no twin) that measures
         :math:`\\kappa = \\langle xU'(x)\\rangle/\\langle x^2\\rangle`
-        (:func:`montecarlo.twin.linearized_stiffness`); failing a stable twin there, the
+        (:func:`montecarlo.controls.twin.linearized_stiffness`); failing a stable twin there, the
         Gaussian closure; failing that, no twin and a rest start.
         """
         if not math.isfinite(2.0 * h.a):
@@ -407,11 +406,11 @@ class MonteCarlo:
         else:
             bias, bias_se = abs(est.bias["eta"]), est.bias_se["eta"]
         if (self.dt is None and self.richardson and bias > _BIAS_SHARE * self.tol * eta
-                and bias > _DRIFT_SIGMAS * bias_se and plan.dt / 2 >= _DT_MIN):
+                and bias > DRIFT_SIGMAS * bias_se and plan.dt / 2 >= _DT_MIN):
             return "dt", dataclasses.replace(plan, dt=plan.dt / 2)
         drift, drift_se = abs(est.drift["eta"]), est.drift_se["eta"]
-        if (self.t_burn is None and drift > _DRIFT_SIGMAS * drift_se
-                and drift > _DRIFT_SHARE * self.tol * eta):
+        if (self.t_burn is None and drift > DRIFT_SIGMAS * drift_se
+                and drift > DRIFT_SHARE * self.tol * eta):
             t_burn = 2.0 * plan.t_burn
             t_run = plan.t_run if self.t_run is not None else max(plan.t_run, _RUN_PER_BURN * t_burn)
             paths = self.paths or self._auto_paths(t_burn, t_run)
@@ -490,149 +489,8 @@ class MonteCarlo:
         if harmonic_status == "unstable":
             # short run from rest: only to show the escape, statistics do not exist
             short = dataclasses.replace(self, max_replicas=self.min_replicas, tol=0.999)
-            ens, est, _, plan = short.run(h)
+            ens, est, met, plan = short.run(h)
         else:
             ens, est, met, plan = self.run(h)
-        info = self._info(h, ens, est, plan, time.perf_counter() - start)
-        esc = ens.escaped_fraction()
-        kd = k_di(h.N, h.a) if h.N > 1 else None
-        if harmonic_status == "unstable":
-            rate = growth_rate(h)
-            return Stats(status=Status.UNSTABLE, method=self.name, growth_rate=rate, info=info, message=(
-                f"unstable: harmonic ring with k = {h.k:g} beyond k_di = {kd:.10g}; the critical "
-                f"mode grows like exp({rate:.4g} t). {esc:.1%} of the simulated paths passed "
-                f"|x| = {self.threshold(h):g} (times in info); no stationary statistics exist."))
-        if est.replicas < 2:
-            where = (f"(|x| > {self.threshold(h):g}) during burn-in (median escape time "
-                     f"{info['escape_time_median']})")
-            if h.confinement == "metastable":
-                return Stats(status=Status.METASTABLE, method=self.name, info=info, message=(
-                    f"metastable: {est.replicas} replica(s) measured anything, too few for an error "
-                    f"bar: the paths escaped {where}. No statistics."))
-            return Stats(status=Status.NOT_CONVERGED, method=self.name, info=info, message=(
-                f"not converged: this system is {h.confinement} (it has a stationary state), but "
-                f"the simulated paths blew up {where}: a numerical instability of the scheme at "
-                f"dt = {plan.dt:g}. Lower dt. No statistics."))
-        stats = self._stats(h, est, info)
-        return self._label(h, stats, est, esc, met, kd, harmonic_status)
-
-    def _stats(self, h: Harvester, est: Estimate, info: dict[str, Any]) -> Stats:
-        mean, se = est.mean, est.se
-        tot = est.total_error
-        info["eta_standard_error"] = se["eta"]
-        return Stats.from_moments(
-            V2=mean["V2"], Pin=mean["Pin"], R=h.params.R, V2_err=tot("V2"), Pin_err=tot("Pin"),
-            cov_V2_Pin=est.cov_V2_Pin, eta_err=tot("eta"), v2=mean["v2"],
-            v2_err=tot("v2"), vV=mean["vV"], vV_err=tot("vV"), x2=mean["x2"], x2_err=tot("x2"),
-            method=self.name, info=info)
-
-    def _label(self, h: Harvester, s: Stats, est: Estimate, esc: float, met: bool,
-               kd: float | None, harmonic_status: str | None) -> Stats:
-        """Status and message. The order matters: a problem with the numbers (escapes of a
-        system that should not escape, a transient, an unmet tolerance) is reported as
-        ``not_converged`` whatever the system's class, which the message then also gives."""
-        rel = s.eta_err / abs(s.eta) if s.eta else math.inf
-        fields = {f: getattr(s, f) for f in s.__dataclass_fields__}
-        bias_rel = est.systematic("eta") / abs(s.eta) if s.eta else 0.0
-        why = ("the time-step bias estimate dominates: lower dt" if bias_rel > self.tol
-               else "the time budget max_time or max_replicas ran out: raise them")
-        problems = []
-        if not met:
-            problems.append(f"NOT CONVERGED: relative error on eta {rel:.2e} > tol {self.tol:g} after "
-                            f"{est.replicas} replicas; {why}.")
-        drift, drift_se = est.drift["eta"], est.drift_se["eta"]
-        if abs(drift) > _DRIFT_SIGMAS * drift_se and abs(drift) > _DRIFT_SHARE * self.tol * abs(s.eta):
-            problems.append(f"TRANSIENT: eta over the first half of the measured window differs from "
-                            f"the whole by {drift:.3g} +- {drift_se:.2g} (burn-in "
-                            f"{s.info['t_burn']:g} too short): raise t_burn.")
-        metastable = h.confinement == "metastable"
-        if esc > 0.0 and not metastable:
-            problems.append(f"{esc:.2%} of paths escaped (|x| > {self.threshold(h):g}) although the "
-                            "system should not: numerical instability, a too-low escape threshold "
-                            "or a diffusing marginal mode; numbers are averages before escape. "
-                            "Lower dt or raise escape.")
-        note = " ".join(problems)
-        if harmonic_status == "marginal":
-            fields.update(x2=None, x2_err=None)
-            head = (f"marginal: k = k_di = {kd:.10g}; x of the critical mode diffuses (x2 not "
-                    "reported); V2, Pin, eta are finite.")
-            status = Status.MARGINAL
-        elif metastable:
-            head = (f"metastable: n = {h.n:g} < 2 with k = {h.k:g} < 0 is unbounded below at large "
-                    f"amplitude. {esc:.2%} of paths escaped (|x| > {self.threshold(h):g}) within "
-                    f"t_burn + t_run = {s.info['t_burn'] + s.info['t_run']:g}; the numbers are "
-                    "quasi-stationary averages over the time before escape.")
-            status = Status.METASTABLE
-        elif problems:
-            head = f"{h.confinement} system;"
-            status = Status.STABLE
-        else:
-            head = (f"stable; relative error on eta {rel:.2e} (standard error over {est.replicas} "
-                    "replicas and time-step bias estimate in quadrature)")
-            status = Status.STABLE
-        # a metastable ring whose paths escape has no stationary state to converge to: it stays
-        # metastable (more replicas would not help); one that no path left is quasi-stationary
-        # and reports an unmet tolerance as not_converged
-        if problems and status is not Status.METASTABLE or (metastable and not met and esc == 0.0):
-            status = Status.NOT_CONVERGED
-        fields.update(status=status, message=(head + " " + note).strip())
-        return Stats(**fields)
-
-    def _info(self, h: Harvester, ens: Ensemble, est: Estimate, plan: Plan, wall: float) -> dict[str, Any]:
-        esc = ens.escape_times[np.isfinite(ens.escape_times)]
-        info: dict[str, Any] = {
-            "dt": ens.dts[0],
-            "dt_coarse": ens.dts[1] if len(ens.dts) > 1 else None,
-            "richardson": len(ens.dts) > 1,
-            "bias_order": bias_order(h),
-            "paths": ens.paths,
-            "replicas": ens.replicas,
-            "replicas_valid": est.replicas,
-            "t_burn": ens.t_burn,
-            "t_run": ens.t_run,
-            "relaxation_time": plan.relaxation_time,
-            "t_burn_rule": burn_in(plan.relaxation_time, self.tol, ens.t_run),
-            "start": ens.start,
-            "plan_notes": dict(plan.notes),
-            "control_variates": est.control,
-            "control_set": est.controls,
-            "twin_kappa": ens.twin_kappa,
-            "variance_reduction": est.reduction.get("eta"),
-            "variance_reduction_V2": est.reduction.get("V2"),
-            "variance_reduction_Pin": est.reduction.get("Pin"),
-            "burn_in_drift_eta": [est.drift["eta"], est.drift_se["eta"]],
-            "path_steps": ens.path_steps,
-            "path_steps_per_s": ens.path_steps / ens.wall_time if ens.wall_time > 0 else None,
-            "wall_time": wall,
-            "seed": ens.seed_entropy,
-            "threads": ens.notes.get("threads"),
-            "batch": self._batch(),
-            "scheme": SCHEME_NAMES[scheme_kind(h)] + (
-                "; joint step: (x, v, V, xi) by the exact Gaussian transition of the linear drift, "
-                "kicks around it" if ens.notes.get("joint_step") else ""),
-            "joint_step": bool(ens.notes.get("joint_step")),
-            "rng": _RNG,
-            "bias_eta": est.bias["eta"],
-            "bias_eta_se": est.bias_se["eta"],
-            "extrapolated": est.extrapolated,
-            "eta_systematic": est.systematic("eta"),
-            "dt_coarsest": ens.dts[2] if len(ens.dts) > 2 else None,
-            "residual_eta": est.residual.get("eta"),
-            "residual_eta_se": est.residual_se.get("eta"),
-            "bias_V2": est.bias["V2"],
-            "bias_Pin": est.bias["Pin"],
-            "escape_threshold": ens.threshold,
-            "escape_fraction": ens.escaped_fraction(),
-            "escaped_paths": int(esc.size),
-            "escape_time_mean": float(esc.mean()) if esc.size else None,
-            "escape_time_median": float(np.median(esc)) if esc.size else None,
-            "escape_times": np.sort(esc)[:200].tolist(),
-            "identity_V2_minus_KcTaup_vV": list(est.identity_V2),
-            "identity_Pin_minus_mgamma_v2_minus_Kv_vV": list(est.identity_power),
-            "confinement": h.confinement,
-        }
-        if scheme_kind(h) == KIND_KINK:
-            slow, crossings, averaged, exhausted = ens.kink_counters
-            info.update(stuck_fraction=est.mean["stuck"], kink_slow_steps=slow, kink_crossings=crossings,
-                        kink_averaged=averaged, kink_event_budget_exhausted=exhausted)
-        return {k: (None if isinstance(v, float) and not math.isfinite(v) else v) for k, v in info.items()}
+        return result(h, ens, est, met, plan, time.perf_counter() - start, harmonic_status,
+                      name=self.name, tol=self.tol, threshold=self.threshold(h), batch=self._batch())

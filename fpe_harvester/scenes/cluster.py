@@ -80,7 +80,7 @@ class Connection:
             return self._client
         dd = self._dd
         if self.scheduler == LOCAL:
-            from montecarlo.simulate import default_threads
+            from fpe_harvester.parallel import default_threads
 
             cluster = dd.LocalCluster(n_workers=self.workers or default_threads(), threads_per_worker=1,
                                       processes=True)

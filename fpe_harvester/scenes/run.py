@@ -72,7 +72,7 @@ class _Runner:
             # the scene draws its own progress bar over points
             opts.update(tol=self.scene.rtol, progress=False)
         if method == "mc":
-            from montecarlo.simulate import default_threads
+            from fpe_harvester.parallel import default_threads
 
             # the replica batch (by default the thread count) shapes the numbers: fixed here,
             # as in a run in this process, a point gives the same numbers on any Dask worker

@@ -11,8 +11,8 @@ from fpe_harvester import Harvester, Status, solve
 from fpe_harvester.errors import ParameterError
 from fpe_harvester.exact import dense_covariance, mode_moments
 from montecarlo import estimate, simulate
-from montecarlo.control import regression_estimate
-from montecarlo.twin import (
+from montecarlo.controls.regression import regression_estimate
+from montecarlo.controls.twin import (
     TWIN_MOMENTS,
     initial_cholesky,
     linearized_stiffness,

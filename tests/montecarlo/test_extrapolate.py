@@ -11,8 +11,8 @@ import pytest
 from fpe_harvester import Harvester, solve
 from fpe_harvester.errors import ParameterError
 from montecarlo import MonteCarlo, estimate, simulate
+from montecarlo.controls.twin import twin_expectations
 from montecarlo.estimate import RESIDUAL_RULE
-from montecarlo.twin import twin_expectations
 
 
 def _discrete_eta(h: Harvester, dt: float, joint: bool) -> float:
@@ -116,14 +116,14 @@ def test_end_of_window_terms_make_a_harmonic_ring_nearly_exact() -> None:
 def test_end_of_window_terms_are_refused_for_a_window_with_a_transient() -> None:
     # they have mean 0 only for a stationary window: a ring started at rest with a short burn-in
     # must not get them, the same ring with a long one must
-    from montecarlo.estimate import _stationary_window
+    from montecarlo.controls.sets import stationary_window
 
     h = Harvester.build(a=0.5, n=3, N=3, k=-0.5)
     ok = []
     for t_burn in (5.0, 50.0):
         e = simulate(h, dt=0.1, paths=4, replicas=200, t_burn=t_burn, t_run=40.0, seed=8, richardson=True,
                      martingale=True)
-        ok.append(_stationary_window(e.martingale(), np.ones(e.replicas, dtype=bool), e.mart_names))
+        ok.append(stationary_window(e.martingale(), np.ones(e.replicas, dtype=bool), e.mart_names))
     assert ok == [False, True]
 
 

@@ -12,8 +12,8 @@ from fpe_harvester import Harvester, Status, solve
 from fpe_harvester.errors import MethodNotAvailableError, ParameterError
 from fpe_harvester.exact import mode_moments
 from montecarlo import simulate
+from montecarlo.controls.twin import TWIN_MOMENTS, twin_expectations
 from montecarlo.scheme import joint_matrices, noise_factor, uses_joint_step
-from montecarlo.twin import TWIN_MOMENTS, twin_expectations
 
 FAST = dict(tol=0.01, paths=64, t_run=50.0, min_replicas=8, progress=False)
 

@@ -10,7 +10,7 @@ import pytest
 from fpe_harvester import Harvester
 from fpe_harvester.errors import ParameterError
 from montecarlo import estimate, simulate
-from montecarlo._kernels import N_TAYLOR, _average_swing, _kink_unit
+from montecarlo._kink import N_TAYLOR, _average_swing, _kink_unit
 from montecarlo.scheme import physical_vector, step_coefficients
 
 

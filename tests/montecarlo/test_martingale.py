@@ -11,8 +11,8 @@ from scipy.stats import chi2
 from fpe_harvester import Harvester, solve
 from fpe_harvester.errors import ParameterError
 from montecarlo import estimate, simulate
-from montecarlo.control import enough_dof, regression_estimate
-from montecarlo.twin import poisson_controls, twin_expectations
+from montecarlo.controls.regression import enough_dof, regression_estimate
+from montecarlo.controls.twin import poisson_controls, twin_expectations
 
 
 @pytest.mark.parametrize("joint", [False, True])

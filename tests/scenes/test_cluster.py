@@ -13,10 +13,10 @@ import pytest
 from fpe_harvester.cli import main
 from fpe_harvester.errors import ParameterError
 from fpe_harvester.model import Harvester
+from fpe_harvester.parallel import default_threads
 from fpe_harvester.scenes import Axis, Scene, run_scene
 from fpe_harvester.scenes import run as scene_run
 from fpe_harvester.scenes.cache import CACHE_NAME
-from montecarlo.simulate import default_threads
 
 distributed = pytest.importorskip("distributed")
 

@@ -14,7 +14,7 @@ The reference shares none of the kink scheme's approximations (:mod:`montecarlo.
   the net force reaches the kink's strength a (the effect of ``w_min`` is checked by
   lowering it on the same noise).
 
-On the same noise path, the production scheme (:func:`montecarlo._kernels._d_step`) runs at
+On the same noise path, the production scheme (:func:`montecarlo.steps.frozen._d_step`) runs at
 steps ``K * delta`` for each ``(K, rule)`` asked for, with the noise frozen at the centre of
 each of its steps as in :func:`montecarlo.simulate`. The scheme's and the reference's time
 averages are then strongly correlated, and their difference measures the scheme's time-step
@@ -35,10 +35,12 @@ from numba import njit
 
 from fpe_harvester import Harvester
 from fpe_harvester.errors import ParameterError, check_real
-from montecarlo._kernels import KIND_KINK, N_TAYLOR, _d_step
+from fpe_harvester.parallel import default_threads
+from montecarlo._kernels import KIND_KINK
+from montecarlo._kink import N_TAYLOR
 from montecarlo.estimate import student_factor
 from montecarlo.scheme import physical_vector, step_coefficients
-from montecarlo.simulate import default_threads
+from montecarlo.steps.frozen import _d_step
 
 __all__ = ["reference_run", "summarize", "draw", "main", "MOMENTS"]
 

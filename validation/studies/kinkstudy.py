@@ -27,7 +27,7 @@ import numpy as np
 
 from fpe_harvester import Harvester
 from montecarlo import estimate, simulate
-from montecarlo.twin import linearized_stiffness
+from montecarlo.controls.twin import linearized_stiffness
 
 __all__ = ["fit_weak_order", "fit_difference_order", "pilot_kappa", "sweep_point", "sweep", "fits",
            "rule_comparison"]

@@ -1,6 +1,6 @@
 """Monte Carlo design study: the end-of-window terms of the martingale controls.
 
-Variance reduction of eta with each control set of :data:`montecarlo.estimate.CONTROL_SETS`
+Variance reduction of eta with each control set of :data:`montecarlo.controls.CONTROL_SETS`
 (the end-of-window terms with and without the twin among them) on one ensemble per case and
 t_run (:func:`boundary_rows`).
 
@@ -27,12 +27,12 @@ STEM = "bench_montecarlo_boundary"
 
 
 def boundary_rows(quick: bool) -> dict[str, Any]:
-    """Variance reduction of eta with each control set of :data:`montecarlo.estimate.CONTROL_SETS`
+    """Variance reduction of eta with each control set of :data:`montecarlo.controls.CONTROL_SETS`
     (the end-of-window terms with and without the twin among them) on one ensemble per case and
     t_run: ring n = 3, N = 3, k = -0.5, harmonic ring N = 3, k = -0.2, single n = 3 (a = 0.5); 300
     replicas of 2 paths (quick: 120), the solver's plan for tol = 1e-4 otherwise, t_run = 100 and
     400; with each set's eta and standard error, and the CPU seconds of the ensemble."""
-    from montecarlo.estimate import CONTROL_SETS
+    from montecarlo.controls import CONTROL_SETS
 
     reps = 120 if quick else 300
     out: dict[str, Any] = {"replicas": reps, "paths": 2}

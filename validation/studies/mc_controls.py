@@ -19,7 +19,7 @@ import numpy as np
 
 from fpe_harvester import Harvester, solve
 from montecarlo import MonteCarlo, estimate, simulate
-from montecarlo.simulate import default_threads
+from fpe_harvester.parallel import default_threads
 from validation.studies.cli import bench_main, study_runner
 
 __all__ = ["STEM", "CV_CASES", "QUICK_CV_CASES", "CV_TARGET", "control_variates", "draw", "run"]

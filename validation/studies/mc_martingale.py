@@ -23,7 +23,7 @@ import numpy as np
 from fpe_harvester import Harvester, solve
 from fpe_harvester.errors import ParameterError
 from montecarlo import MonteCarlo, estimate, simulate
-from montecarlo.simulate import default_threads
+from fpe_harvester.parallel import default_threads
 from validation.studies.cli import axes_plot, bench_main, save_benchmark
 from validation.studies.mc_controls import CV_TARGET
 
@@ -106,7 +106,7 @@ def martingale_coverage(quick: bool) -> dict[str, Any]:
     frozen step dt = 0.1), and the single n = 3 unit (a = 0.5) against the Fokker--Planck solver
     (extrapolated value mean - bias against hypot(se, bias_se), and the solver's own error
     hypot(se, bias) around the fine level)."""
-    from montecarlo.twin import twin_expectations
+    from montecarlo.controls.twin import twin_expectations
 
     seeds = 24 if quick else 100
     h2 = Harvester.build(a=0.5, N=2, k=-0.2)

@@ -23,7 +23,7 @@ import numpy as np
 
 from fpe_harvester import Harvester, solve
 from montecarlo import MonteCarlo
-from montecarlo.simulate import default_threads
+from fpe_harvester.parallel import default_threads
 from validation.studies.cli import axes_plot, bench_main, save_benchmark
 from validation.studies.mc_boundary import boundary_rows
 

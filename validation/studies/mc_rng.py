@@ -16,7 +16,7 @@ from typing import Any
 import numpy as np
 from numba import njit, prange
 
-from montecarlo.simulate import default_threads
+from fpe_harvester.parallel import default_threads
 from validation.studies.cli import bench_main, study_runner
 
 __all__ = ["STEM", "rng_costs", "run"]

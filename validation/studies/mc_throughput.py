@@ -14,7 +14,7 @@ from typing import Any
 
 from fpe_harvester import Harvester
 from montecarlo import simulate
-from montecarlo.simulate import default_threads
+from fpe_harvester.parallel import default_threads
 from validation.studies.cli import bench_main, study_runner
 
 __all__ = ["STEM", "rate", "throughput", "run"]

@@ -22,7 +22,7 @@ from pathlib import Path
 from typing import Any
 
 from fpe_harvester import Harvester, solve
-from montecarlo.simulate import default_threads
+from fpe_harvester.parallel import default_threads
 from validation.studies import (mc_bias, mc_boundary, mc_controls, mc_equal_error, mc_kink_dt, mc_martingale,
                                 mc_policy, mc_rng, mc_steep, mc_tau, mc_throughput)
 from validation.studies.cli import bench_main, save_benchmark

@@ -14,7 +14,7 @@ Ornstein--Uhlenbeck normal :math:`Z_j` of each unit (frozen-xi step, xi incremen
 
 exactly, for any dt, scheme, start and coefficient (each normal is independent of everything
 before it), so these sums are control variates with known mean 0 whose regression
-(:mod:`montecarlo.control`) adds no bias and leaves the Richardson pair untouched. The
+(:mod:`montecarlo.controls.regression`) adds no bias and leaves the Richardson pair untouched. The
 :math:`t_m` are the measured steps (the fine level's first substep with Richardson); the
 innovation needs no work per step, and the noise after the last point is left out, so that the
 sums telescope with the measured window. The ideal :math:`\\phi` is the gradient in xi of
@@ -24,7 +24,7 @@ the solution g of the Poisson equation of the measured observable,
 boundary term :math:`g(Y_{t_0}) - g(Y_{t_1})`; for a harmonic ring g is quadratic, so its
 first-order part is linear in the state (the ``lin`` basis) and its second-order part is
 :math:`\\sum_d G_d \\sum_j (\\eta_j\\eta_{j+d} - \\delta_{d0}\\,\\mathrm{var})` (the ``he`` sums;
-exact with a martingale point at every step, :func:`montecarlo.twin.poisson_controls`).
+exact with a martingale point at every step, :func:`montecarlo.controls.twin.poisson_controls`).
 
 Basis, per unit j (sums over units; the ring's symmetry makes one coefficient per lag d):
 
@@ -47,7 +47,7 @@ products :math:`a_j b_{j+d} + b_j a_{j+d}` of (x, v, V, xi), d = 0 .. D, and the
 measured points). They are the Poisson solution's boundary term, which the martingale sums
 leave; their mean is 0 only for a stationary window (exactly so for a harmonic ring started
 from its own law, up to the burn-in's remaining transient otherwise), so the estimator uses them
-only as a separate candidate set (:data:`montecarlo.estimate.CONTROL_SETS`).
+only as a separate candidate set (:data:`montecarlo.controls.CONTROL_SETS`).
 """
 
 from __future__ import annotations
@@ -55,7 +55,7 @@ from __future__ import annotations
 import numpy as np
 from numba import njit
 
-from ._force import _onsite_force
+from .._force import _onsite_force
 
 #: Largest neighbour lag of the linear basis (the Poisson solution's weight on farther units is
 #: small; the count of controls grows with it).

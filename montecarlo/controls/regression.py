@@ -1,7 +1,7 @@
 """Control variates over replicas: the regression estimator and its standard error.
 
 Replica ``i`` gives responses :math:`Y_i \\in \\mathbb R^q` (the system's time averages) and
-controls :math:`C_i \\in \\mathbb R^p` (the harmonic twin's time averages, :mod:`.twin`) whose
+controls :math:`C_i \\in \\mathbb R^p` (the harmonic twin's time averages, :mod:`.controls.twin`) whose
 expectation :math:`\\mu` is known exactly. The regression estimator of :math:`E[Y]` is the
 intercept of the least-squares fit :math:`Y_i = \\alpha + B (C_i - \\mu) + e_i`:
 

@@ -4,7 +4,7 @@ The twin of a harvester ring is the harmonic ring with the same parameters and c
 ``k`` and an on-site stiffness :math:`\\kappa` (potential :math:`\\kappa x^2/2`), driven by the
 same noise paths :math:`\\xi_j(t)`. Its moments fluctuate with the system's, and their
 expectations are known exactly, so they serve as control variates
-(:mod:`montecarlo.control`). Exact here means: for the integrator itself at the step ``h``,
+(:mod:`montecarlo.controls.regression`). Exact here means: for the integrator itself at the step ``h``,
 not only in the limit h -> 0, so that subtracting the twin's fluctuation adds no time-step
 bias. Mode ``q`` of the twin (:math:`s_q = \\sin^2(\\pi q/N)`) advances, one step of the
 kernel's splitting, as
@@ -34,12 +34,14 @@ import functools
 import math
 
 import numpy as np
+from numba import njit
 
 from fpe_harvester.errors import ParameterError, check_real
 from fpe_harvester.exact.moments import closure_mismatch, mode_moments
 from fpe_harvester.model import Harvester, mode_sin2
 
-from .scheme import joint_matrices, step_coefficients
+from .._kernels import CF_JOINT
+from ..scheme import joint_matrices, step_coefficients
 
 __all__ = [
     "TWIN_MOMENTS",
@@ -293,8 +295,8 @@ def poisson_controls(lin: Harvester, dt: float, names: tuple[str, ...]) -> dict[
         + s^2 \\sum_{j,l} (T^TGT)_{\\xi_j\\xi_l}(Z_jZ_l - \\delta_{jl}),
 
     linear in the state times the noise plus Hermite terms: a fixed combination of the ``lin`` and
-    ``he`` sums of :mod:`montecarlo._martingale` (the ring's symmetry makes the weights depend on
-    the lag only; lags beyond :data:`montecarlo._martingale.MG_DIST` are not in the basis, so the
+    ``he`` sums of :mod:`montecarlo.controls.martingale` (the ring's symmetry makes the weights depend on
+    the lag only; lags beyond :data:`montecarlo.controls.martingale.MG_DIST` are not in the basis, so the
     weights are exact for N <= 9). With a sample at every step the time average's fluctuation is
     this martingale up to the boundary term :math:`g(Y_{t_0}) - g(Y_{t_1})`.
 
@@ -373,3 +375,42 @@ def natural_amplitude(h: Harvester) -> float | None:
     kap = kappa + 4.0 * h.k * mode_sin2(h.N) if h.N > 1 else np.array([kappa])
     x2 = float(np.mean(mode_moments(kap, h.params)["x2"]))
     return math.sqrt(x2) if math.isfinite(x2) and x2 > 0 else None
+
+
+@njit(cache=True, nogil=True)
+def measure_twin(x, v, V, xi, w, cf, acc, nn, pvx) -> None:
+    """Add the twin's moments (``t_*`` of :data:`MOMENTS`, ``nn`` the system's n) to acc[7:18].
+
+    Second moments and a few fourth moments and :math:`|x|^n`: the twin is Gaussian, so
+    each has an exactly known mean (:func:`montecarlo.controls.twin.twin_expectations`), and the
+    higher ones follow the nonlinear system's amplitude-dependent response better.
+    """
+    N, P = x.shape
+    half = cf[15]
+    s = np.zeros(11)
+    for j in range(N):
+        for p in range(P):
+            wp = w[p]
+            xx, vv, VV = x[j, p] * x[j, p], v[j, p] * v[j, p], V[j, p] * V[j, p]
+            vxi = v[j, p] * xi[j, p]
+            ax = abs(x[j, p])
+            s[0] += wp * VV
+            s[1] += wp * v[j, p] * V[j, p]
+            s[2] += wp * vv
+            s[3] += wp * xx
+            s[4] += wp * vxi
+            s[5] += wp * xx * xx
+            s[6] += wp * xx * VV
+            s[7] += wp * xx * vv
+            s[8] += wp * (ax if nn == 1.0 else ax**nn)
+            s[9] += wp * VV * vv
+            s[10] += wp * VV * vxi
+    if cf[CF_JOINT] == 1.0:
+        s[4] = 0.0
+        for j in range(N):
+            for p in range(P):
+                s[4] += w[p] * pvx[j, p]
+    s[4] *= half
+    s[10] *= half
+    for i in range(11):
+        acc[7 + i] += s[i]

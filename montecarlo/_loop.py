@@ -1,0 +1,245 @@
+"""The path loop of one chunk: every level of P rings through burn-in and measured window.
+
+Private module. One loop serves every step scheme (:mod:`montecarlo.steps`): the scheme's tag
+selects its kernels at compile time (:mod:`montecarlo.steps.dispatch`), so numba compiles one
+specialised loop per scheme. The levels: fine (``dt/2`` with Richardson coupling, else ``dt``),
+coarse (``dt``, on the fine level's noise), coarsest (``2 dt``, optional) and the harmonic twin
+(on the fine level's noise, measured with it, :mod:`montecarlo.controls.twin`); the martingale
+sums ride on the fine level (:mod:`montecarlo.controls.martingale`).
+"""
+
+from __future__ import annotations
+
+import math
+from typing import NamedTuple
+
+import numpy as np
+from numba import njit
+
+from ._kernels import KIND_LINEAR, N_MOM, ROWS, _check_escape, _clamp_start, _kick_force, _live, _measure, _start
+from ._kink import N_TAYLOR
+from .controls.martingale import MG_DIST, mg_measure, n_state
+from .controls.twin import measure_twin
+from .steps import StepScheme
+from .steps.dispatch import advance, compose, noise, normals, step, twin_xi
+
+
+class Setup(NamedTuple):
+    """Everything a chunk's loop reads.
+
+    Attributes
+    ----------
+    P, N : int
+        Paths (rings) of this chunk and units per ring.
+    nburn, nrun : int
+        Burn-in and measured steps of size ``cf_c[12]`` if ``coupled`` else ``cf_f[12]``.
+    stride : int
+        Moments are accumulated every ``stride``-th step of the measured part (samples far
+        closer than the correlation time add cost, not information).
+    coupled : bool
+        If True, each coarse step ``cf_c`` is also done as two fine steps ``cf_f`` (h/2) on the
+        same noise (exact composition): level 0 = fine, 1 = coarse. If False, only level 0 runs,
+        with step ``cf_f``.
+    third : bool
+        With ``coupled``, every two coarse steps are also done as one step ``cf_cc`` (2h) on
+        their combined noise: the coarsest level, row 3 of ``sums`` (measured at its own steps
+        in the measured window).
+    twin : bool
+        A harmonic ring (coefficients ``cf_t`` at the fine step, physical vector ``pp_t``) is
+        advanced on the fine level's noise and measured with it.
+    kind : int
+        On-site treatment (:data:`montecarlo._kernels.KIND_LINEAR`, ``KIND_KICK``, ``KIND_KINK``).
+    cf_f, cf_c, cf_cc, cf_t : ndarray
+        Step coefficients (:mod:`montecarlo._kernels`) of the fine, coarse, coarsest and twin
+        levels.
+    pp, pp_t : ndarray
+        Physical vectors of the system and of the twin.
+    chol : (4N, 4N) or (0, 0) ndarray
+        Initial law: every level (and the twin) starts from one draw of ``chol @ z`` per path,
+        or from rest with stationary xi when empty.
+    n_mart : int
+        Martingale control columns (:func:`montecarlo.controls.martingale.basis_names`), 0 for
+        none.
+    """
+
+    P: int
+    N: int
+    nburn: int
+    nrun: int
+    stride: int
+    coupled: bool
+    third: bool
+    twin: bool
+    kind: int
+    cf_f: np.ndarray
+    cf_c: np.ndarray
+    cf_cc: np.ndarray
+    cf_t: np.ndarray
+    pp: np.ndarray
+    pp_t: np.ndarray
+    chol: np.ndarray
+    n_mart: int
+
+
+class Sums(NamedTuple):
+    """What a chunk's loop accumulates.
+
+    Attributes
+    ----------
+    sums : (ROWS, N_MOM) ndarray
+        Sums over measured unit-steps of the moments :data:`montecarlo._kernels.MOMENTS`: fine
+        level, coarse level, fine level over the first half of the measured steps, coarsest.
+    counts : (ROWS,) ndarray
+        Number of unit-steps summed per row.
+    esc_time : (P,) ndarray
+        Time at which path p first had some |x_j| > threshold, or -1.
+    counters : (5,) int64 ndarray
+        Kink statistics (slow-path unit steps, crossings, averaged-map entries, exhausted event
+        budgets) and, in slot 4, the number of ring steps taken (all levels).
+    mart : (2, n_mart) ndarray
+        Martingale control sums of the fine level over the measured window and its first half.
+    """
+
+    sums: np.ndarray
+    counts: np.ndarray
+    esc_time: np.ndarray
+    counters: np.ndarray
+    mart: np.ndarray
+
+    @staticmethod
+    def zeros(P: int, n_mart: int) -> Sums:
+        """Empty accumulators for a chunk of P paths with ``n_mart`` martingale columns."""
+        return Sums(np.zeros((ROWS, N_MOM)), np.zeros(ROWS), np.empty(P), np.zeros(5, dtype=np.int64),
+                    np.zeros((2, n_mart)))
+
+
+def run_chunk(gen: np.random.Generator, scheme: StepScheme, s: Setup, out: Sums) -> None:
+    """Simulate one chunk of paths with ``scheme`` and add its time averages to ``out``.
+
+    ``gen`` is this chunk's own stream (deterministic for a given seed, whatever the thread
+    count)."""
+    _run(scheme.tag, gen, s, out)
+
+
+@njit(cache=True, nogil=True)
+def _init_levels(s, f, c, cc, t) -> None:
+    """Every level starts where the fine level's start put it (with the same kicked force);
+    levels are tuples (x, v, V, xi, F, stuck, pvx) of (N, P) arrays."""
+    x, v, V, xi, F = f[0], f[1], f[2], f[3], f[4]
+    for lv in (c, cc, t):
+        lv[0][:], lv[1][:], lv[2][:], lv[3][:] = x, v, V, xi
+    if s.kind != KIND_LINEAR:
+        for j in range(s.N):
+            for p in range(s.P):
+                F[j, p] = _kick_force(x[j, p], s.pp)
+        c[4][:], cc[4][:] = F, F
+
+
+@njit(cache=True, nogil=True)
+def _level(N: int, P: int, xi: np.ndarray) -> tuple:
+    """A level at rest, (x, v, V, xi, F, stuck, pvx): ``F`` the kicked on-site force at the
+    current x, ``stuck`` the kink's held units, ``pvx`` the joint step's estimate of v xi."""
+    return (np.zeros((N, P)), np.zeros((N, P)), np.zeros((N, P)), xi, np.zeros((N, P)),
+            np.zeros((N, P), dtype=np.bool_), np.zeros((N, P)))
+
+
+@njit(cache=True, nogil=True)
+def _run(tag, gen, s, out) -> None:
+    """The loop of :func:`run_chunk`, compiled once per scheme ``tag``."""
+    # every array is a local of its own: reading them out of tuples inside the loop cost 5-20 %
+    # in reference counting at the solver's small chunks
+    N, P, coupled, twin, kind, stride, nburn = s.N, s.P, s.coupled, s.twin, s.kind, s.stride, s.nburn
+    third = s.third and coupled
+    cf_f, cf_c, cf_cc, cf_t, pp, pp_t = s.cf_f, s.cf_c, s.cf_cc, s.cf_t, s.pp, s.pp_t
+    sums, counts, counters, mg, esc = out.sums, out.counts, out.counters, out.mart, out.esc_time
+    thr = pp[10]
+    f, c, cc = _level(N, P, np.zeros((N, P))), _level(N, P, np.zeros((N, P))), _level(N, P, np.zeros((N, P)))
+    t = _level(N, P, twin_xi(tag, f[3]))
+    xf, vf, Vf, xif, Ff, sf, pf = f
+    xc, vc, Vc, xic, Fc, sc, pc = c
+    xcc, vcc, Vcc, xicc, Fcc, scc, pcc = cc
+    xt, vt, Vt, xit, Ft, st, pt = t
+    xm, fext, rbm, rbx = np.zeros((N, P)), np.zeros((N, P)), np.zeros((N, P)), np.zeros((N, P))
+    cs = np.zeros((3, N_TAYLOR + 1))
+    nz = normals(tag)
+    z1, z2 = np.zeros((nz, N, P)), np.zeros((nz, N, P))
+    e1, e2, et = np.zeros((nz, N, P)), np.zeros((nz, N, P)), np.zeros((nz, N, P))
+    ec, ec0, ecc = np.zeros((nz, N, P)), np.zeros((nz, N, P)), np.zeros((nz, N, P))
+    w = np.ones(P)
+    esc[:] = -1.0
+    use_mg = s.n_mart > 0
+    phi = np.zeros((n_state(N) if use_mg else 0, N, P))
+    n_bd = s.n_mart - n_state(N) - min(N // 2, MG_DIST) - 1 if use_mg else 0
+    g_bd, gprev_bd = np.zeros(max(n_bd, 0)), np.zeros(max(n_bd, 0))
+    xi0 = np.zeros((N, P))
+    mg_started = False
+    n_upd = 0  # xi updates of the fine level since the last martingale point
+    h = cf_c[12] if coupled else cf_f[12]
+    _start(gen, s.chol, math.sqrt(pp[11]), xf, vf, Vf, xif)
+    _clamp_start(xf, kind, pp, h)
+    _init_levels(s, f, c, cc, t)
+    cc_stride = max(1, stride // 2)
+    half = nburn + s.nrun // 2
+    for it in range(nburn + s.nrun):
+        live = _live(w)
+        if live == 0:
+            break
+        meas = it >= nburn and (it - nburn) % stride == 0
+        first = it < half
+        t_end = (it + 1) * h
+        counters[4] += (3 if coupled else 1) * live
+        for j in range(N):
+            for p in range(P):
+                for r in range(nz):
+                    z1[r, j, p] = gen.standard_normal()
+                if coupled:
+                    for r in range(nz):
+                        z2[r, j, p] = gen.standard_normal()
+        ea, eb = e1, e2  # the fine substeps' noise, as the scheme's noise() returns it
+        for sub in range(2 if coupled else 1):
+            zz = z1 if sub == 0 else z2
+            ee = noise(tag, cf_f, zz, e1 if sub == 0 else e2)
+            if sub == 0:
+                ea = ee
+            else:
+                eb = ee
+            n_upd += 1
+            step(tag, xf, vf, Vf, xif, Ff, sf, pf, ee, cf_f, pp, kind, xm, fext, cs, rbm, rbx, w, counters, gen)
+            if twin:
+                step(tag, xt, vt, Vt, xit, Ft, st, pt, noise(tag, cf_t, zz, et), cf_t, pp_t, KIND_LINEAR, xm, fext,
+                     cs, rbm, rbx, w, counters, gen)
+            if coupled and sub == 1:
+                compose(tag, cf_f, cf_c, ea, eb, ec)
+                step(tag, xc, vc, Vc, xic, Fc, sc, pc, ec, cf_c, pp, kind, xm, fext, cs, rbm, rbx, w, counters, gen)
+                _check_escape(xc, vc, Vc, xic, Fc, sc, w, thr, t_end, esc)
+            _check_escape(xf, vf, Vf, xif, Ff, sf, w, thr, t_end - (0.5 * h if coupled and sub == 0 else 0.0), esc)
+            if meas:
+                counts[0] += _measure(xf, vf, Vf, xif, sf, Ff, w, cf_f, pp, kind, sums[0], pf)
+                if use_mg and sub == 0:
+                    dec = cf_f[13] ** n_upd
+                    mg_measure(xf, vf, Vf, xif, w, pp[7], pp[8], phi, xi0, mg, first, mg_started, dec,
+                               pp[11] * (1.0 - dec * dec), g_bd, gprev_bd)
+                    mg_started = True
+                    n_upd = 0
+                if twin:
+                    measure_twin(xt, vt, Vt, xit, w, cf_t, sums[0], pp[8], pt)
+                if first:
+                    counts[2] += _measure(xf, vf, Vf, xif, sf, Ff, w, cf_f, pp, kind, sums[2], pf)
+                    if twin:
+                        measure_twin(xt, vt, Vt, xit, w, cf_t, sums[2], pp[8], pt)
+                if coupled and sub == 1:
+                    counts[1] += _measure(xc, vc, Vc, xic, sc, Fc, w, cf_c, pp, kind, sums[1], pc)
+            advance(tag, xif, ee, cf_f)
+        if coupled:
+            advance(tag, xic, ec, cf_c)
+        if third and it % 2 == 1:
+            counters[4] += live
+            compose(tag, cf_c, cf_cc, ec0, ec, ecc)
+            step(tag, xcc, vcc, Vcc, xicc, Fcc, scc, pcc, ecc, cf_cc, pp, kind, xm, fext, cs, rbm, rbx, w, counters,
+                 gen)
+            _check_escape(xcc, vcc, Vcc, xicc, Fcc, scc, w, thr, t_end, esc)
+            if it >= nburn and ((it - nburn) // 2) % cc_stride == 0:
+                counts[3] += _measure(xcc, vcc, Vcc, xicc, scc, Fcc, w, cf_cc, pp, kind, sums[3], pcc)
+            advance(tag, xicc, ecc, cf_cc)
+        elif third:
+            ec0[:] = ec

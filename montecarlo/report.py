@@ -1,0 +1,189 @@
+"""The Monte Carlo solver's result: statistics, status and message, and the run's details.
+
+Private module of :mod:`montecarlo.solver`: everything :meth:`MonteCarlo.solve
+<montecarlo.solver.MonteCarlo.solve>` reports once the replicas have run.
+"""
+
+from __future__ import annotations
+
+import math
+from typing import TYPE_CHECKING, Any
+
+import numpy as np
+
+from fpe_harvester.exact import growth_rate, k_di
+from fpe_harvester.model import Harvester
+from fpe_harvester.result import Stats, Status
+
+from .estimate import Estimate, bias_order
+from .plan import burn_in
+from .scheme import KIND_KINK, SCHEME_NAMES, scheme_kind
+from .simulate import Ensemble
+
+if TYPE_CHECKING:
+    from .solver import Plan
+
+__all__ = ["result", "DRIFT_SIGMAS", "DRIFT_SHARE"]
+
+_RNG = "numpy Generator(PCG64) drawn inside numba, one SeedSequence child per (replica, chunk)"
+#: The burn-in drift (eta over the first half of the measured window minus the whole) that
+#: counts as a transient, in standard errors and relative to tol.
+DRIFT_SIGMAS, DRIFT_SHARE = 3.0, 1.0 / 3.0
+
+
+def result(h: Harvester, ens: Ensemble, est: Estimate, met: bool, plan: Plan, wall: float,
+           harmonic_status: str | None, *, name: str, tol: float, threshold: float, batch: int) -> Stats:
+    """The :class:`~fpe_harvester.Stats` of a finished run of ``h``.
+
+    ``met``: whether the tolerance ``tol`` was met; ``wall``: the solve's wall time in seconds;
+    ``harmonic_status``: the harmonic ring's class (``"unstable"``, ``"marginal"``, ...) or None;
+    ``threshold``: the escape amplitude; ``batch``: replicas per batch.
+    """
+    info = _info(h, ens, est, plan, wall, tol, batch)
+    esc = ens.escaped_fraction()
+    kd = k_di(h.N, h.a) if h.N > 1 else None
+    if harmonic_status == "unstable":
+        rate = growth_rate(h)
+        return Stats(status=Status.UNSTABLE, method=name, growth_rate=rate, info=info, message=(
+            f"unstable: harmonic ring with k = {h.k:g} beyond k_di = {kd:.10g}; the critical "
+            f"mode grows like exp({rate:.4g} t). {esc:.1%} of the simulated paths passed "
+            f"|x| = {threshold:g} (times in info); no stationary statistics exist."))
+    if est.replicas < 2:
+        where = (f"(|x| > {threshold:g}) during burn-in (median escape time "
+                 f"{info['escape_time_median']})")
+        if h.confinement == "metastable":
+            return Stats(status=Status.METASTABLE, method=name, info=info, message=(
+                f"metastable: {est.replicas} replica(s) measured anything, too few for an error "
+                f"bar: the paths escaped {where}. No statistics."))
+        return Stats(status=Status.NOT_CONVERGED, method=name, info=info, message=(
+            f"not converged: this system is {h.confinement} (it has a stationary state), but "
+            f"the simulated paths blew up {where}: a numerical instability of the scheme at "
+            f"dt = {plan.dt:g}. Lower dt. No statistics."))
+    stats = _stats(h, est, info, name)
+    return _label(h, stats, est, esc, met, kd, harmonic_status, tol, threshold)
+
+
+
+def _stats(h: Harvester, est: Estimate, info: dict[str, Any], name: str) -> Stats:
+    """The numbers: each mean with its total error (standard error and systematic term)."""
+    mean, se = est.mean, est.se
+    tot = est.total_error
+    info["eta_standard_error"] = se["eta"]
+    return Stats.from_moments(
+        V2=mean["V2"], Pin=mean["Pin"], R=h.params.R, V2_err=tot("V2"), Pin_err=tot("Pin"),
+        cov_V2_Pin=est.cov_V2_Pin, eta_err=tot("eta"), v2=mean["v2"],
+        v2_err=tot("v2"), vV=mean["vV"], vV_err=tot("vV"), x2=mean["x2"], x2_err=tot("x2"),
+        method=name, info=info)
+
+def _label(h: Harvester, s: Stats, est: Estimate, esc: float, met: bool, kd: float | None,
+           harmonic_status: str | None, tol: float, threshold: float) -> Stats:
+    """Status and message. The order matters: a problem with the numbers (escapes of a
+    system that should not escape, a transient, an unmet tolerance) is reported as
+    ``not_converged`` whatever the system's class, which the message then also gives."""
+    rel = s.eta_err / abs(s.eta) if s.eta else math.inf
+    fields = {f: getattr(s, f) for f in s.__dataclass_fields__}
+    bias_rel = est.systematic("eta") / abs(s.eta) if s.eta else 0.0
+    why = ("the time-step bias estimate dominates: lower dt" if bias_rel > tol
+           else "the time budget max_time or max_replicas ran out: raise them")
+    problems = []
+    if not met:
+        problems.append(f"NOT CONVERGED: relative error on eta {rel:.2e} > tol {tol:g} after "
+                        f"{est.replicas} replicas; {why}.")
+    drift, drift_se = est.drift["eta"], est.drift_se["eta"]
+    if abs(drift) > DRIFT_SIGMAS * drift_se and abs(drift) > DRIFT_SHARE * tol * abs(s.eta):
+        problems.append(f"TRANSIENT: eta over the first half of the measured window differs from "
+                        f"the whole by {drift:.3g} +- {drift_se:.2g} (burn-in "
+                        f"{s.info['t_burn']:g} too short): raise t_burn.")
+    metastable = h.confinement == "metastable"
+    if esc > 0.0 and not metastable:
+        problems.append(f"{esc:.2%} of paths escaped (|x| > {threshold:g}) although the "
+                        "system should not: numerical instability, a too-low escape threshold "
+                        "or a diffusing marginal mode; numbers are averages before escape. "
+                        "Lower dt or raise escape.")
+    note = " ".join(problems)
+    if harmonic_status == "marginal":
+        fields.update(x2=None, x2_err=None)
+        head = (f"marginal: k = k_di = {kd:.10g}; x of the critical mode diffuses (x2 not "
+                "reported); V2, Pin, eta are finite.")
+        status = Status.MARGINAL
+    elif metastable:
+        head = (f"metastable: n = {h.n:g} < 2 with k = {h.k:g} < 0 is unbounded below at large "
+                f"amplitude. {esc:.2%} of paths escaped (|x| > {threshold:g}) within "
+                f"t_burn + t_run = {s.info['t_burn'] + s.info['t_run']:g}; the numbers are "
+                "quasi-stationary averages over the time before escape.")
+        status = Status.METASTABLE
+    elif problems:
+        head = f"{h.confinement} system;"
+        status = Status.STABLE
+    else:
+        head = (f"stable; relative error on eta {rel:.2e} (standard error over {est.replicas} "
+                "replicas and time-step bias estimate in quadrature)")
+        status = Status.STABLE
+    # a metastable ring whose paths escape has no stationary state to converge to: it stays
+    # metastable (more replicas would not help); one that no path left is quasi-stationary
+    # and reports an unmet tolerance as not_converged
+    if problems and status is not Status.METASTABLE or (metastable and not met and esc == 0.0):
+        status = Status.NOT_CONVERGED
+    fields.update(status=status, message=(head + " " + note).strip())
+    return Stats(**fields)
+
+def _info(h: Harvester, ens: Ensemble, est: Estimate, plan: Plan, wall: float, tol: float,
+          batch: int) -> dict[str, Any]:
+    """The run's details for :attr:`fpe_harvester.Stats.info` (non-finite numbers as None)."""
+    esc = ens.escape_times[np.isfinite(ens.escape_times)]
+    info: dict[str, Any] = {
+        "dt": ens.dts[0],
+        "dt_coarse": ens.dts[1] if len(ens.dts) > 1 else None,
+        "richardson": len(ens.dts) > 1,
+        "bias_order": bias_order(h),
+        "paths": ens.paths,
+        "replicas": ens.replicas,
+        "replicas_valid": est.replicas,
+        "t_burn": ens.t_burn,
+        "t_run": ens.t_run,
+        "relaxation_time": plan.relaxation_time,
+        "t_burn_rule": burn_in(plan.relaxation_time, tol, ens.t_run),
+        "start": ens.start,
+        "plan_notes": dict(plan.notes),
+        "control_variates": est.control,
+        "control_set": est.controls,
+        "twin_kappa": ens.twin_kappa,
+        "variance_reduction": est.reduction.get("eta"),
+        "variance_reduction_V2": est.reduction.get("V2"),
+        "variance_reduction_Pin": est.reduction.get("Pin"),
+        "burn_in_drift_eta": [est.drift["eta"], est.drift_se["eta"]],
+        "path_steps": ens.path_steps,
+        "path_steps_per_s": ens.path_steps / ens.wall_time if ens.wall_time > 0 else None,
+        "wall_time": wall,
+        "seed": ens.seed_entropy,
+        "threads": ens.notes.get("threads"),
+        "batch": batch,
+        "scheme": SCHEME_NAMES[scheme_kind(h)] + (
+            "; joint step: (x, v, V, xi) by the exact Gaussian transition of the linear drift, "
+            "kicks around it" if ens.notes.get("joint_step") else ""),
+        "joint_step": bool(ens.notes.get("joint_step")),
+        "rng": _RNG,
+        "bias_eta": est.bias["eta"],
+        "bias_eta_se": est.bias_se["eta"],
+        "extrapolated": est.extrapolated,
+        "eta_systematic": est.systematic("eta"),
+        "dt_coarsest": ens.dts[2] if len(ens.dts) > 2 else None,
+        "residual_eta": est.residual.get("eta"),
+        "residual_eta_se": est.residual_se.get("eta"),
+        "bias_V2": est.bias["V2"],
+        "bias_Pin": est.bias["Pin"],
+        "escape_threshold": ens.threshold,
+        "escape_fraction": ens.escaped_fraction(),
+        "escaped_paths": int(esc.size),
+        "escape_time_mean": float(esc.mean()) if esc.size else None,
+        "escape_time_median": float(np.median(esc)) if esc.size else None,
+        "escape_times": np.sort(esc)[:200].tolist(),
+        "identity_V2_minus_KcTaup_vV": list(est.identity_V2),
+        "identity_Pin_minus_mgamma_v2_minus_Kv_vV": list(est.identity_power),
+        "confinement": h.confinement,
+    }
+    if scheme_kind(h) == KIND_KINK:
+        slow, crossings, averaged, exhausted = ens.kink_counters
+        info.update(stuck_fraction=est.mean["stuck"], kink_slow_steps=slow, kink_crossings=crossings,
+                    kink_averaged=averaged, kink_event_budget_exhausted=exhausted)
+    return {k: (None if isinstance(v, float) and not math.isfinite(v) else v) for k, v in info.items()}

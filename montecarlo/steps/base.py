@@ -1,0 +1,79 @@
+"""The step-scheme protocol: what the path loop and :func:`montecarlo.simulate` use of a step."""
+
+from __future__ import annotations
+
+from typing import Callable, NamedTuple
+
+import numpy as np
+
+from fpe_harvester.model import Harvester
+
+__all__ = ["StepScheme", "Kernels"]
+
+
+class Kernels(NamedTuple):
+    """A step scheme's numba kernels (signatures in :class:`StepScheme`)."""
+
+    normals: int
+    noise: Callable
+    compose: Callable
+    step: Callable
+    advance: Callable
+    twin_xi: Callable
+
+
+class StepScheme:
+    """One way of advancing the ring over a time step, with its noise (Python side).
+
+    A scheme lives in its own module of :mod:`montecarlo.steps` and has one entry in
+    :data:`montecarlo.steps.STEPS`; nothing else names it. Members used by the driver:
+
+    Attributes
+    ----------
+    name : str
+        Its key in :data:`montecarlo.steps.STEPS`.
+    tag : NamedTuple
+        An instance of the scheme's own NamedTuple class with the field ``normals`` (standard
+        normals drawn per unit and step). Its numba type selects the scheme's kernels when the
+        path loop (:func:`montecarlo._loop.run_chunk`) is compiled: one specialised loop per
+        scheme, no branch on the scheme at run time.
+    kernels : Kernels
+        The scheme's numba kernels (arrays (N, P); noise arrays (normals, N, P)):
+
+        ``normals`` : int
+            Standard normals drawn per unit and step.
+        ``noise(cf, z, buf) -> eps``
+            The level's noise for one step from the normals ``z`` (may return ``z`` itself or
+            fill and return ``buf``).
+        ``compose(cf_a, cf_b, e1, e2, out)``
+            The noise of one step ``cf_b`` from two steps ``cf_a`` in a row (Richardson's
+            coarse levels run on the fine level's noise).
+        ``step(x, v, V, xi, F, stuck, pvx, eps, cf, pp, kind, xm, fext, cs, rbm, rbx, w, counters, gen)``
+            Advance one level (x, v, V, xi; ``F`` the kicked on-site force at x, ``stuck`` the
+            kink's held units, ``pvx`` the joint step's estimate of v xi) over one step with
+            noise ``eps``. ``kind`` is the on-site treatment
+            (:data:`montecarlo._kernels.KIND_LINEAR`, ``KIND_KICK``, ``KIND_KINK``), ``xm``,
+            ``fext``, ``cs``, ``rbm``, ``rbx`` shared scratch, ``w`` the live paths,
+            ``counters`` the kink statistics, ``gen`` for steps that draw extra normals.
+        ``advance(xi, eps, cf)``
+            After the level was measured: whatever of its noise the step left (the OU update of
+            xi), or nothing.
+        ``twin_xi(xi) -> xi_t``
+            The harmonic twin's xi array given the fine level's: the same array when the step
+            leaves xi to ``advance`` (the twin is then never advanced), its own otherwise.
+
+    Arrays are passed one by one, not in tuples: reading arrays out of tuples in the loop cost
+    up to 20 % in reference counting at small chunks.
+    """
+
+    name: str = ""
+    tag: NamedTuple
+    kernels: Kernels
+
+    def coefficients(self, h: Harvester, dt: float) -> np.ndarray:
+        """Coefficient array ``cf`` of one step ``dt`` (layout in :mod:`montecarlo._kernels`)."""
+        raise NotImplementedError
+
+    def refusal(self, h: Harvester, kind: int) -> str | None:
+        """Why this scheme cannot serve ``h`` with on-site treatment ``kind``, or None."""
+        return None

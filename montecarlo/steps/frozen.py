@@ -1,0 +1,213 @@
+"""The frozen-xi step: Strang splitting ``O(h/2) D(h) O(h/2)`` (the default when tau >= 10 dt).
+
+The generator splits into the exact Ornstein--Uhlenbeck flow ``O`` of xi and the deterministic
+flow ``D`` of (x, v, V) with xi frozen; consecutive half steps of ``O`` merge, so the loop runs
+``D(h) O(h)`` and measures after ``D`` (xi-dependent observables get the exact half-step factor
+``e^{-h/2tau}``, ``cf[15]``). Inside ``D`` the neighbours' positions enter as a constant force
+evaluated at the predicted midpoint; the on-site force is either part of the exact linear flow
+(n = 2), a Strang kick around it (smooth n; where a steep wall makes :math:`h^2U''/m` large the
+step of that path is split into substeps, :data:`montecarlo._kernels.STIFF_LIMIT`), or, for the
+kink, its part :math:`-an\\,\\mathrm{sign}(x)` is handled by the exact piecewise-linear flow of
+:mod:`montecarlo._kink` and the remainder by Strang kicks. One normal per unit and step; the
+coarse level of a Richardson pair takes the exact composition of the fine level's two.
+
+This module implements the step protocol of :mod:`montecarlo.steps` (``noise``, ``compose``,
+``step``, ``advance``, ``twin_xi`` and the scheme object :data:`FROZEN`).
+"""
+
+from __future__ import annotations
+
+import math
+from typing import NamedTuple
+
+import numpy as np
+from numba import njit
+
+from fpe_harvester.model import Harvester
+
+from .._kernels import (KIND_KICK, KIND_KINK, MAX_SUBSTEPS, _coupling_force, _kick,
+                        _kick_force, _stiff_amplitude, _substeps)
+from .._kink import _kink_flow
+from ..scheme import step_coefficients
+from .base import Kernels, StepScheme
+
+
+class FrozenTag(NamedTuple):
+    """numba tag selecting this module's kernels in the path loop."""
+
+    normals: int
+
+
+@njit(cache=True, nogil=True)
+def _external_force(xi, xm, f, pp) -> None:
+    """f = sigma xi + k (x_{j-1} + x_{j+1}) with neighbours at their predicted midpoints."""
+    N, P = xi.shape
+    sigma, k = pp[5], pp[6]
+    for j in range(N):
+        jm = (j + N - 1) % N
+        jp = (j + 1) % N
+        for p in range(P):
+            f[j, p] = sigma * xi[j, p]
+            if N > 1:
+                f[j, p] += _coupling_force(xm, jm, jp, p, k)
+
+
+@njit(cache=True, nogil=True)
+def _linear_flow(x, v, V, f, cf) -> None:
+    """Exact linear flow of (x, v, V) over the step with constant force f; arrays (N, P)."""
+    N, P = x.shape
+    for j in range(N):
+        for p in range(P):
+            x0, v0, V0, fp = x[j, p], v[j, p], V[j, p], f[j, p]
+            x[j, p] = cf[0] * x0 + cf[1] * v0 + cf[2] * V0 + cf[9] * fp
+            v[j, p] = cf[3] * x0 + cf[4] * v0 + cf[5] * V0 + cf[10] * fp
+            V[j, p] = cf[6] * x0 + cf[7] * v0 + cf[8] * V0 + cf[11] * fp
+
+
+
+@njit(cache=True, nogil=True)
+def _substep_path(x, v, V, F, fext, p: int, K: int, cf: np.ndarray, pp: np.ndarray) -> None:
+    """Kick-drift-kick of path p as K substeps h/K (neighbours' force fext held)."""
+    N = x.shape[0]
+    E = cf[16:25].copy()
+    g = cf[25:28].copy()
+    s = MAX_SUBSTEPS // K
+    while s > 1:                      # e^{A 2t} = (e^{At})^2, g_2t = e^{At} g_t + g_t
+        E2 = np.empty(9)
+        g2 = np.empty(3)
+        for r in range(3):
+            g2[r] = E[3 * r] * g[0] + E[3 * r + 1] * g[1] + E[3 * r + 2] * g[2] + g[r]
+            for c in range(3):
+                E2[3 * r + c] = E[3 * r] * E[c] + E[3 * r + 1] * E[3 + c] + E[3 * r + 2] * E[6 + c]
+        E, g = E2, g2
+        s //= 2
+    hk = 0.5 * cf[12] / K / pp[0]
+    for j in range(N):
+        xx, vv, VV, FF, fp = x[j, p], v[j, p], V[j, p], F[j, p], fext[j, p]
+        for _ in range(K):
+            vv += hk * FF
+            x0, v0, V0 = xx, vv, VV
+            xx = E[0] * x0 + E[1] * v0 + E[2] * V0 + g[0] * fp
+            vv = E[3] * x0 + E[4] * v0 + E[5] * V0 + g[1] * fp
+            VV = E[6] * x0 + E[7] * v0 + E[8] * V0 + g[2] * fp
+            FF = _kick_force(xx, pp)
+            vv += hk * FF
+        x[j, p], v[j, p], V[j, p], F[j, p] = xx, vv, VV, FF
+
+
+@njit(cache=True, nogil=True)
+def _d_step(x, v, V, xi, F, stuck, xm, fext, w, cf, pp, kind, counters, cs) -> None:
+    """Deterministic flow D(h) of P rings of N units with xi frozen; arrays (N, P), in place.
+
+    Paths are the inner loops: one path's steps form a serial dependency chain, so only
+    independent paths side by side keep the floating-point pipelines busy. ``kind`` is
+    tested once per call, outside the loops (inside them it cost a factor ten).
+    """
+    N, P = x.shape
+    h = cf[12]
+    # the kink scheme kicks only the smooth remainder of a near-kink potential (n > 1)
+    kicks = kind == KIND_KICK or (kind == KIND_KINK and pp[8] != 1.0)
+    # stiff walls: paths to redo as substeps, with their state at the start of the step
+    n_stiff = 0
+    xstar = math.inf
+    if kind == KIND_KICK and pp[8] > 2.0:
+        xstar = _stiff_amplitude(pp, h)
+    if xstar < pp[10]:  # stiffness reachable before the escape amplitude: scan the paths
+        for p in range(P):
+            for j in range(N):
+                if max(abs(x[j, p]), abs(x[j, p] + h * v[j, p])) > xstar:
+                    n_stiff += 1
+                    break
+    if n_stiff > 0:
+        sp = np.empty(n_stiff, dtype=np.int64)
+        sk = np.empty(n_stiff, dtype=np.int64)
+        s0 = np.empty((4, N, n_stiff))
+        i = 0
+        for p in range(P):
+            K = 1
+            for j in range(N):
+                K = max(K, _substeps(x[j, p], v[j, p], h, xstar, pp))
+            if K > 1:
+                sp[i], sk[i] = p, K
+                for j in range(N):
+                    s0[0, j, i], s0[1, j, i], s0[2, j, i], s0[3, j, i] = x[j, p], v[j, p], V[j, p], F[j, p]
+                i += 1
+    if kicks:
+        _kick(x, v, F, h, pp, False)
+    if N > 1:
+        for j in range(N):
+            for p in range(P):
+                xm[j, p] = x[j, p] + 0.5 * h * v[j, p]
+    _external_force(xi, xm, fext, pp)
+    if kind == KIND_KINK:
+        _kink_flow(x, v, V, stuck, fext, w, cf, pp, counters, cs)
+    else:
+        _linear_flow(x, v, V, fext, cf)
+    if kicks:
+        _kick(x, v, F, h, pp, True)
+    for i in range(n_stiff):
+        p = sp[i]
+        for j in range(N):
+            x[j, p], v[j, p], V[j, p], F[j, p] = s0[0, j, i], s0[1, j, i], s0[2, j, i], s0[3, j, i]
+        if N > 1:  # neighbours at their midpoints predicted from the start of the step
+            for j in range(N):
+                xm[j, p] = x[j, p] + 0.5 * h * v[j, p]
+            sigma, k = pp[5], pp[6]
+            for j in range(N):
+                fext[j, p] = sigma * xi[j, p] + _coupling_force(xm, (j + N - 1) % N, (j + 1) % N, p, k)
+        _substep_path(x, v, V, F, fext, p, sk[i], cf, pp)
+
+
+
+@njit(cache=True, nogil=True)
+def noise(cf: np.ndarray, z: np.ndarray, buf: np.ndarray) -> np.ndarray:
+    """The level's noise for one step: the OU update's own normals ``z`` (1, N, P)."""
+    return z
+
+
+@njit(cache=True, nogil=True)
+def compose(cf_a: np.ndarray, cf_b: np.ndarray, e1: np.ndarray, e2: np.ndarray, out: np.ndarray) -> None:
+    """Normal of one step ``cf_b`` (= 2 h) from those of two steps ``cf_a`` (h) in a row, exact:
+    out = w1 e1 + w2 e2 with the OU update's weights."""
+    w1 = cf_a[13] * cf_a[14] / cf_b[14]
+    w2 = cf_a[14] / cf_b[14]
+    _, N, P = e1.shape
+    for j in range(N):
+        for p in range(P):
+            out[0, j, p] = w1 * e1[0, j, p] + w2 * e2[0, j, p]
+
+
+@njit(cache=True, nogil=True)
+def step(x, v, V, xi, F, stuck, pvx, eps, cf, pp, kind, xm, fext, cs, rbm, rbx, w, counters, gen) -> None:
+    """D(h) of one level at frozen xi (``eps`` is applied later, by :func:`advance`)."""
+    _d_step(x, v, V, xi, F, stuck, xm, fext, w, cf, pp, kind, counters, cs)
+
+
+@njit(cache=True, nogil=True)
+def advance(xi: np.ndarray, eps: np.ndarray, cf: np.ndarray) -> None:
+    """O(h) after the measurement: the exact OU update of the level's xi with normals ``eps``."""
+    N, P = xi.shape
+    for j in range(N):
+        for p in range(P):
+            xi[j, p] = cf[13] * xi[j, p] + cf[14] * eps[0, j, p]
+
+
+@njit(cache=True, nogil=True)
+def twin_xi(xi: np.ndarray) -> np.ndarray:
+    """The twin runs at the fine level's xi itself (D does not change xi)."""
+    return xi
+
+
+class FrozenStep(StepScheme):
+    """The frozen-xi step (Python side)."""
+
+    name = "frozen"
+    tag = FrozenTag(1)
+    kernels = Kernels(1, noise, compose, step, advance, twin_xi)
+
+    def coefficients(self, h: Harvester, dt: float) -> np.ndarray:
+        return step_coefficients(h, dt, joint=False)
+
+
+#: The frozen-xi step scheme.
+FROZEN = FrozenStep()
