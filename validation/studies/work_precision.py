@@ -285,8 +285,12 @@ def plot(res: dict[str, Any], path: Path) -> None:
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    fig, axes = plt.subplots(1, 1 + len(res["cases"]), figsize=(4.0 * (1 + len(res["cases"])), 3.8))
-    draw(res, list(np.ravel(axes)))
+    panels = 1 + len(res["cases"])
+    fig, axes = plt.subplots(2, (panels + 1) // 2, figsize=(4.2 * ((panels + 1) // 2), 7.6))
+    flat = list(np.ravel(axes))
+    draw(res, flat)
+    for ax in flat[panels:]:
+        ax.set_visible(False)
     fig.suptitle("work-precision: solid/dashed lines rms actual error over seeds, dots the reported error, "
                  "dotted grey the reference's own error", fontsize=9)
     fig.tight_layout()

@@ -71,3 +71,38 @@ def test_summary_rows_and_figure(tmp_path):
     assert math.isinf(float(rows[0][5]))  # an exact hit: the reported error is infinitely larger
     wp.plot(res, tmp_path / "wp.png")
     assert (tmp_path / "wp.png").stat().st_size > 10_000
+
+
+def test_the_report_draws_the_recorded_diagrams_and_fails_thin_or_quick_data(tmp_path, monkeypatch):
+    import json
+
+    from validation.harness.checks import Context, SolveCache
+    from validation.harness.report import Section
+    from validation.sections import benchmarks
+
+    res = _synthetic()
+    recorded = tmp_path / "work_precision.json"
+    recorded.write_text(json.dumps(res))
+    monkeypatch.setattr(wp, "RECORDED", recorded)
+    ctx = Context(quick=True, out=tmp_path, cache=SolveCache())
+    sec = Section("b", "B")
+    (check,) = benchmarks._work_precision(ctx, sec)
+    assert check.passed and sec.figures[0].path.exists() and sec.tables[0].title.startswith("Work-precision")
+    res["cases"]["ring_n3"]["curves"][0]["points"] = res["cases"]["ring_n3"]["curves"][0]["points"][:1]
+    recorded.write_text(json.dumps(res))
+    (check,) = benchmarks._work_precision(ctx, Section("b", "B"))
+    assert not check.passed and "(1 points)" in check.detail
+    recorded.unlink()
+    assert not benchmarks._work_precision(ctx, Section("b", "B"))[0].passed
+
+
+def test_the_recorded_full_run_has_every_solver_as_a_curve():
+    """The committed data (validation/data/work_precision.json) is a full run in which every
+    solver of every case reached at least two tolerances."""
+    import json
+
+    res = json.loads(wp.RECORDED.read_text())
+    assert not res["quick"] and set(res["cases"]) == set(wp.CASES)
+    for case in res["cases"].values():
+        assert {c["method"] for c in case["curves"]} >= set(wp.METHODS) - {"fpe"}
+        assert all(len(c["points"]) >= 2 for c in case["curves"]), case["title"]
