@@ -120,6 +120,7 @@ def test_cli_exit_code(monkeypatch, tmp_path, capsys, steps, quick, code):
         assert "SKIP     never ran" in out and "check(s) SKIPPED" in out
     if any(title == "Finding step" for _, title in steps):
         assert "FINDING  paper off" in out and "40 passed, 1 finding, 0 failed, 3 skipped" in out
+        assert "Finding step: " in captured.err and "1 checks, 1 finding" in captured.err
         assert ("a quick run fails below 90%" in out) == quick
 
 
