@@ -43,8 +43,8 @@ def _pct(x: float | None) -> str:
 def _references(d: dict[str, Any]) -> Table:
     rows = [[f"``{name}``", _pm(e["eta"], e["eta_err"]), e["status"], _num(e["seconds"]), f"``{e['commit']}``",
              f"``{e['command']}``"] for name, e in d.items()]
-    return (["entry", "eta ± error", "status", "s", "commit", "command"], rows, "reference_values.json",
-            "python -m validation.references.reftable")
+    return (["entry", "eta ± error", "status", "s", "commit", "command"], rows,
+            "validation/references/data/reference_values.json", "python -m validation.references.reftable")
 
 
 def _fpe_time(d: dict[str, Any]) -> Table:
@@ -143,9 +143,17 @@ def _mc_boundary(d: dict[str, Any]) -> Table:
             "bench_montecarlo_boundary_rows.json", "python -m validation.studies.mc_boundary (boundary_rows)")
 
 
-#: Table name -> (JSON file in the data folder, builder).
+def _work_precision(d: dict[str, Any]) -> Table:
+    from validation.studies import work_precision as wp
+
+    head, rows = wp.summary_rows(d)
+    return head, rows, f"{wp.STEM}.json", wp.COMMAND
+
+
+#: Table name -> (JSON file, relative to the data folder, builder).
 TABLES: dict[str, tuple[str, Callable[[dict[str, Any]], Table]]] = {
-    "references": ("reference_values.json", _references),
+    "references": ("../references/data/reference_values.json", _references),
+    "work-precision": ("work_precision.json", _work_precision),
     "fpe-time": ("bench_fpe_meshes.json", _fpe_time),
     "fpe-schemes": ("bench_fpe_schemes.json", _fpe_schemes),
     "mc-policy": ("bench_montecarlo_policy.json", _mc_policy),
@@ -199,7 +207,25 @@ class BenchTable(SphinxDirective):
         return [nodes.container("", table_node(head, rows), note, classes=["bench-table"])]
 
 
+class WorkPrecisionFigure(SphinxDirective):
+    """``.. work-precision-figure::``: the work-precision diagrams drawn from the recorded data
+    (:func:`validation.studies.work_precision.plot`) into ``_generated/`` at build time."""
+
+    def run(self) -> list[nodes.Node]:
+        from validation.studies import work_precision as wp
+
+        data = Path(self.config.bench_data_dir) / f"{wp.STEM}.json"
+        self.env.note_dependency(str(data))
+        png = Path(self.env.srcdir) / "_generated" / f"{wp.STEM}.png"
+        png.parent.mkdir(exist_ok=True)
+        wp.plot(json.loads(data.read_text()), png)
+        figure = nodes.figure("", nodes.image(uri=f"/_generated/{png.name}", alt="work-precision diagrams"),
+                              nodes.caption(text=wp.CAPTION))
+        return [figure]
+
+
 def setup(app: Sphinx) -> dict[str, Any]:
     app.add_config_value("bench_data_dir", "", "env")
     app.add_directive("bench-table", BenchTable)
+    app.add_directive("work-precision-figure", WorkPrecisionFigure)
     return {"parallel_read_safe": True, "parallel_write_safe": True}

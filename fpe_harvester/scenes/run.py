@@ -44,8 +44,9 @@ __all__ = ["run_scene"]
 #: Methods worth a process pool: single-threaded and slow (Monte Carlo runs its own threads,
 #: exact points cost microseconds).
 _POOLED: tuple[str, ...] = ("fpe",)
-#: Solver details copied onto rows (escapes decide how a metastable point is drawn).
-_CARRIED_INFO = ("seed", "escape_fraction", "escape_time_median")
+#: Solver details copied onto rows (escapes decide how a metastable point is drawn; ``fallback``
+#: keeps the other solver's numbers where Monte Carlo was tried after Fokker--Planck).
+_CARRIED_INFO = ("seed", "escape_fraction", "escape_time_median", "fallback")
 
 
 @dataclass(frozen=True)
@@ -212,7 +213,8 @@ def _solve_point(h: Harvester, method: str, opts: dict[str, Any],
     marginal), or when the first has no numbers; otherwise the one with the smaller relative
     error on eta is kept. Measured on the paper's Fig. 1 grid at rtol 5e-3: n = 1.25, a = 2
     stops at 8.9e-3 with Fokker--Planck (17 s; its Hermite levels stop converging) and
-    Monte Carlo then reaches 4.6e-3 in 2.4 s.
+    Monte Carlo then reaches 4.6e-3 in 2.4 s. The kept result's ``info["fallback"]`` holds the
+    other one's numbers (:func:`_fallback_info`), so that the two can be compared.
     """
     res = _attempt(h, method, opts)
     if not (fallback is not None and isinstance(res, Stats) and res.status is Status.NOT_CONVERGED):
@@ -227,8 +229,17 @@ def _solve_point(h: Harvester, method: str, opts: dict[str, Any],
         note = (f"Fokker-Planck did not reach the tolerance (eta = {res.eta:.6g} {err}: "
                 f"{res.message}); Monte Carlo used instead")
     else:
-        return replace(res, message=f"{res.message}; Monte Carlo did no better ({second.message})")
-    return replace(second, message=f"{second.message}; {note}")
+        return replace(res, message=f"{res.message}; Monte Carlo did no better ({second.message})",
+                       info={**res.info, "fallback": _fallback_info(res, second)})
+    return replace(second, message=f"{second.message}; {note}",
+                   info={**second.info, "fallback": _fallback_info(second, res)})
+
+
+def _fallback_info(kept: Stats, other: Stats) -> dict[str, Any]:
+    """What a point tried twice records: the solver kept, and the other one's status and numbers
+    (each quantity and its error, None where it gave none)."""
+    numbers = {f"{q}{suffix}": v for q in QUANTITIES for suffix, v in zip(("", "_err"), other.value(q))}
+    return {"kept": kept.method, "other": {"method": other.method, "status": other.status.value, **numbers}}
 
 
 def _relative_eta_error(res: Stats) -> float:

@@ -277,11 +277,16 @@ def test_auto_falls_back_to_monte_carlo_when_fokker_planck_misses_the_tolerance(
     row = scene_run.run_scene(scene, tmp_path / "ok", progress=False, workers=1).rows[0]
     assert row.method == "mc" and row.status == "stable"
     assert "Fokker-Planck did not reach the tolerance" in row.message and "fpe stopped" in row.message
+    # the replaced Fokker-Planck numbers stay on the row, for the validation's cross-check
+    assert row.info["fallback"]["kept"] == "mc"
+    assert row.info["fallback"]["other"]["method"] == "fpe"
+    assert row.info["fallback"]["other"]["eta"] == fpe.eta and row.info["fallback"]["other"]["eta_err"] == fpe.eta_err
     # Monte Carlo not converged either: the smaller relative error wins, the message says why
     outcomes["mc"] = replace(fpe, method="mc", eta_err=0.02 * exact.eta, message="mc stopped")
     row = scene_run.run_scene(scene, tmp_path / "worse", progress=False, workers=1).rows[0]
     assert row.method == "fpe" and row.status == "not_converged"
     assert "Monte Carlo did no better (mc stopped)" in row.message
+    assert row.info["fallback"]["kept"] == "fpe" and row.info["fallback"]["other"]["method"] == "mc"
     outcomes["mc"] = replace(fpe, method="mc", eta_err=0.007 * exact.eta, message="mc stopped")
     row = scene_run.run_scene(scene, tmp_path / "better", progress=False, workers=1).rows[0]
     assert row.method == "mc" and row.status == "not_converged"

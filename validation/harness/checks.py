@@ -11,7 +11,9 @@ Monte Carlo, truncation/mesh error for Fokker--Planck, 0 for exact), :math:`n_\\
 number of error bars allowed (4 by default) and the floors cover what the errors do not
 (round-off for exact numbers). The tolerance is stated in every result, so a reader can
 see what was promised and what was delivered. A check whose solver is not installed is
-*skipped*, never passed.
+*skipped*, never passed. A *finding* is a disagreement with a published value that a second,
+independent solver confirms: not a failure of ours, and not a pass either, so it is counted
+apart from both.
 """
 
 from __future__ import annotations
@@ -40,6 +42,7 @@ __all__ = [
     "expect",
     "skipped",
     "failed",
+    "finding",
     "guarded",
     "SolveCache",
     "solver_available",
@@ -49,16 +52,22 @@ __all__ = [
 
 
 class Outcome(str, enum.Enum):
-    """Result of one check."""
+    """Result of one check.
+
+    PASS: ours agrees with what it was held to. FINDING: a published value disagrees with ours
+    and a second, independent solver confirms ours (the run still succeeds). FAIL: ours is
+    wrong or could not be checked. SKIP: the check did not run.
+    """
 
     PASS = "PASS"
+    FINDING = "FINDING"
     FAIL = "FAIL"
     SKIP = "SKIP"
 
 
 @dataclass(frozen=True)
 class CheckResult:
-    """One pass/fail/skip verdict with the numbers behind it.
+    """One pass/finding/fail/skip verdict with the numbers behind it.
 
     Attributes
     ----------
@@ -67,7 +76,7 @@ class CheckResult:
     section : str
         Report section the check belongs to.
     outcome : Outcome
-        PASS, FAIL or SKIP.
+        PASS, FINDING, FAIL or SKIP.
     detail : str
         The comparison in words: values, errors, tolerance, or why it was skipped.
     value, reference : float or None
@@ -201,6 +210,17 @@ def skipped(name: str, section: str, why: str) -> CheckResult:
 def failed(name: str, section: str, why: str) -> CheckResult:
     """A check that could not produce a verdict because something broke."""
     return CheckResult(name, section, Outcome.FAIL, why)
+
+
+def finding(name: str, section: str, detail: str, value: float | None = None,
+            reference: float | None = None) -> CheckResult:
+    """A published ``reference`` that disagrees with our ``value``, confirmed by a second solver.
+
+    Only the caller can know that the second solver is independent and agrees with the first;
+    the detail must say so with the numbers.
+    """
+    diff = None if value is None or reference is None else abs(float(value) - float(reference))
+    return CheckResult(name, section, Outcome.FINDING, detail, value=value, reference=reference, diff=diff)
 
 
 class CheckTimeout(BaseException):

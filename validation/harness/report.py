@@ -15,7 +15,11 @@ from pathlib import Path
 
 from .checks import CheckResult, Outcome
 
-__all__ = ["Table", "Figure", "Section", "Report", "write_markdown", "write_html", "summary_text", "slowest_checks"]
+__all__ = ["Table", "Figure", "Section", "Report", "write_markdown", "write_html", "summary_text", "slowest_checks",
+           "count_line"]
+
+#: Outcomes in the order the summaries count them.
+_ORDER = (Outcome.PASS, Outcome.FINDING, Outcome.FAIL, Outcome.SKIP)
 
 
 @dataclass
@@ -87,6 +91,39 @@ class Report:
         """The checks that did not run (a full validation run fails on any)."""
         return [c for c in self.checks if c.outcome is Outcome.SKIP]
 
+    @property
+    def findings(self) -> list[CheckResult]:
+        """Published values that a second solver shows to be off (not failures of ours)."""
+        return [c for c in self.checks if c.outcome is Outcome.FINDING]
+
+
+def count_line(checks: Sequence[CheckResult]) -> str:
+    """``"N passed, F findings, M failed, S skipped"`` over ``checks``.
+
+    Findings are named apart from passes and failures, in words a test-log reader that looks
+    for ``"N failed"`` does not mistake for failures.
+
+    Examples
+    --------
+    >>> from validation.harness.checks import CheckResult
+    >>> count_line([CheckResult("a", "s", "PASS"), CheckResult("b", "s", "FINDING")])
+    '1 passed, 1 finding, 0 failed, 0 skipped'
+    """
+    n = Counter(c.outcome for c in checks)
+    f = n[Outcome.FINDING]
+    return (f"{n[Outcome.PASS]} passed, {f} finding{'' if f == 1 else 's'}, {n[Outcome.FAIL]} failed, "
+            f"{n[Outcome.SKIP]} skipped")
+
+
+def _section_rows(report: Report) -> list[tuple[str, ...]]:
+    return [(s.title, *(str(sum(c.outcome is o for c in s.checks)) for o in _ORDER), f"{s.seconds:.1f}",
+             f"{s.cpu_seconds:.1f}") for s in report.sections]
+
+
+_SECTION_HEADER = ("section", "pass", "finding", "fail", "skip", "time [s]", "CPU [s]")
+_NOTE = ("findings are published values that a second, independent solver shows to be off: not failures; "
+         "skipped checks did not run: see the reason; they are not passes")
+
 
 def new_figure(figsize: tuple[float, float] = (6, 4), ncols: int = 1, nrows: int = 1):
     """A matplotlib figure and its axes (``nrows`` x ``ncols``) drawn off-screen (Agg backend)."""
@@ -131,20 +168,13 @@ def _rel(path: Path, base: Path) -> str:
 def write_markdown(report: Report, path: Path) -> Path:
     """Write ``report`` as Markdown to ``path``; figures are linked relative to its folder."""
     base = path.parent
-    counts = report.counts()
     lines = [f"# {report.title}", ""]
     lines += [f"- {k}: {v}" for k, v in report.meta.items()]
-    lines += ["", "## Summary", "",
-              f"**{counts.get('PASS', 0)} passed, {counts.get('FAIL', 0)} failed, "
-              f"{counts.get('SKIP', 0)} skipped** (skipped checks did not run: see the reason; "
-              "they are not passes).", ""]
-    lines += _md_table(("section", "pass", "fail", "skip", "time [s]", "CPU [s]"), [
-        (s.title, *(str(sum(c.outcome.value == o for c in s.checks)) for o in ("PASS", "FAIL", "SKIP")),
-         f"{s.seconds:.1f}", f"{s.cpu_seconds:.1f}") for s in report.sections])
-    bad = [c for c in report.checks if c.outcome is not Outcome.PASS]
-    if bad:
-        lines += ["", "### Failed and skipped checks", ""]
-        lines += _md_table(("outcome", "check", "detail", "time [s]"), _check_rows(bad))
+    lines += ["", "## Summary", "", f"**{count_line(report.checks)}** ({_NOTE}).", ""]
+    lines += _md_table(_SECTION_HEADER, _section_rows(report))
+    for title, picked in _listed(report):
+        lines += ["", f"### {title}", ""]
+        lines += _md_table(("outcome", "check", "detail", "time [s]"), _check_rows(picked))
     for s in report.sections:
         lines += ["", f"## {s.title}", ""]
         for para in s.text:
@@ -160,6 +190,13 @@ def write_markdown(report: Report, path: Path) -> Path:
                                                      _check_rows(s.checks)) + [""]
     path.write_text("\n".join(lines) + "\n", encoding="utf-8")
     return path
+
+
+def _listed(report: Report) -> list[tuple[str, list[CheckResult]]]:
+    """The summary's lists: findings, then failed and skipped checks (each only when not empty)."""
+    bad = [c for c in report.checks if c.outcome in (Outcome.FAIL, Outcome.SKIP)]
+    return [(title, picked) for title, picked in (("Findings", report.findings), ("Failed and skipped checks", bad))
+            if picked]
 
 
 def _inline(text: str) -> str:
@@ -180,27 +217,22 @@ def _html_table(header: Sequence[str], rows: Sequence[Sequence[str]], outcome_co
 _CSS = """body{font-family:sans-serif;max-width:1100px;margin:2em auto;line-height:1.4}
 table{border-collapse:collapse;margin:.5em 0 1em;font-size:.9em}td,th{border:1px solid #bbb;padding:3px 6px;
 vertical-align:top}th{background:#eee}tr.pass td:first-child{background:#c8f0c8}
-tr.fail td:first-child{background:#f5b5b5;font-weight:bold}tr.skip td:first-child{background:#f7e3a1}
+tr.fail td:first-child{background:#f5b5b5;font-weight:bold}tr.finding td:first-child{background:#b9d7f5}tr.skip td:first-child{background:#f7e3a1}
 img{max-width:100%;border:1px solid #ddd}figure{margin:1em 0}.summary{font-size:1.2em}
 code{background:#f4f4f4;padding:0 2px}"""
 
 
 def write_html(report: Report, path: Path) -> Path:
     """Write ``report`` as one self-contained HTML page (figures embedded as base64 PNG)."""
-    counts = report.counts()
     parts = [f"<!DOCTYPE html><html><head><meta charset='utf-8'><title>{html.escape(report.title)}"
              f"</title><style>{_CSS}</style></head><body><h1>{html.escape(report.title)}</h1><ul>"]
     parts += [f"<li>{html.escape(k)}: {html.escape(v)}</li>" for k, v in report.meta.items()]
     parts.append("</ul><h2>Summary</h2>")
-    parts.append(f"<p class='summary'><b>{counts.get('PASS', 0)} passed, {counts.get('FAIL', 0)} failed, "
-                 f"{counts.get('SKIP', 0)} skipped</b> (skipped checks did not run; they are not passes)</p>")
-    parts.append(_html_table(("section", "pass", "fail", "skip", "time [s]", "CPU [s]"), [
-        (s.title, *(str(sum(c.outcome.value == o for c in s.checks)) for o in ("PASS", "FAIL", "SKIP")),
-         f"{s.seconds:.1f}", f"{s.cpu_seconds:.1f}") for s in report.sections]))
-    bad = [c for c in report.checks if c.outcome is not Outcome.PASS]
-    if bad:
-        parts.append("<h3>Failed and skipped checks</h3>")
-        parts.append(_html_table(("outcome", "check", "detail", "time [s]"), _check_rows(bad), 0))
+    parts.append(f"<p class='summary'><b>{html.escape(count_line(report.checks))}</b> ({html.escape(_NOTE)})</p>")
+    parts.append(_html_table(_SECTION_HEADER, _section_rows(report)))
+    for title, picked in _listed(report):
+        parts.append(f"<h3>{title}</h3>")
+        parts.append(_html_table(("outcome", "check", "detail", "time [s]"), _check_rows(picked), 0))
     for s in report.sections:
         parts.append(f"<h2>{html.escape(s.title)}</h2>")
         parts += [f"<p>{_inline(p)}</p>" for p in s.text]
@@ -245,33 +277,36 @@ def slowest_checks(report: Report, k: int = SLOWEST) -> list[str]:
 
 
 def summary_text(report: Report, width: int = 110, show_passed: bool = False) -> str:
-    """Plain-text pass/fail summary for the terminal.
+    """Plain-text summary for the terminal.
 
-    A table of pass/fail/skip counts per section, then every failed and skipped check (and,
-    with ``show_passed``, every passed one), failures first, then the slowest computations
-    (:func:`slowest_checks`).
+    A table of pass/finding/fail/skip counts per section, then every failed, skipped and finding
+    check (and, with ``show_passed``, every passed one), failures first, then the slowest
+    computations (:func:`slowest_checks`), and last the counts (:func:`count_line`).
     """
-    order = {Outcome.FAIL: 0, Outcome.SKIP: 1, Outcome.PASS: 2}
+    order = {Outcome.FAIL: 0, Outcome.SKIP: 1, Outcome.FINDING: 2, Outcome.PASS: 3}
     title_w = min(max([7, *(len(s.title) for s in report.sections)]), 50)
-    lines = [f"{'section':{title_w}}  {'pass':>5} {'fail':>5} {'skip':>5}  {'time [s]':>8}  {'CPU [s]':>8}",
-             f"{'-' * title_w}  {'-' * 5} {'-' * 5} {'-' * 5}  {'-' * 8}  {'-' * 8}"]
+    lines = [f"{'section':{title_w}}  {'pass':>5} {'find':>5} {'fail':>5} {'skip':>5}  {'time [s]':>8}  {'CPU [s]':>8}",
+             f"{'-' * title_w}  {'-' * 5} {'-' * 5} {'-' * 5} {'-' * 5}  {'-' * 8}  {'-' * 8}"]
     for sec in report.sections:
         n = Counter(c.outcome for c in sec.checks)
-        lines.append(f"{sec.title[:title_w]:{title_w}}  {n[Outcome.PASS]:5d} {n[Outcome.FAIL]:5d} "
-                     f"{n[Outcome.SKIP]:5d}  {sec.seconds:8.1f}  {sec.cpu_seconds:8.1f}")
+        lines.append(f"{sec.title[:title_w]:{title_w}}  " + " ".join(f"{n[o]:5d}" for o in _ORDER)
+                     + f"  {sec.seconds:8.1f}  {sec.cpu_seconds:8.1f}")
     checks = sorted((c for c in report.checks if show_passed or c.outcome is not Outcome.PASS),
                     key=lambda c: order[c.outcome])
     if checks:
         name_w = min(max([5, *(len(c.name) for c in checks)]), 60)
         room = max(width - name_w - 10, 20)
-        lines += ["", f"{'result':6}  {'check':{name_w}}  detail", f"{'-' * 6}  {'-' * name_w}  {'-' * 20}"]
+        lines += ["", f"{'result':7}  {'check':{name_w}}  detail", f"{'-' * 7}  {'-' * name_w}  {'-' * 20}"]
         for c in checks:
             detail = c.detail if len(c.detail) <= room else c.detail[: room - 3] + "..."
-            lines.append(f"{c.outcome.value:6}  {c.name[:name_w]:{name_w}}  {detail}")
+            lines.append(f"{c.outcome.value:7}  {c.name[:name_w]:{name_w}}  {detail}")
     lines += slowest_checks(report)
     counts = report.counts()
     lines.append("")
-    lines.append(f"{counts.get('PASS', 0)} passed, {counts.get('FAIL', 0)} failed, {counts.get('SKIP', 0)} skipped")
+    lines.append(count_line(report.checks))
+    if counts.get("FINDING", 0):
+        lines.append("FINDINGS are published values that a second, independent solver shows to be off: listed "
+                     "above, they are not failures.")
     if counts.get("SKIP", 0):
         lines.append("SKIPPED checks did not run (time budget, solver or module not available, or no number to "
                      "check): they are NOT passes.")

@@ -282,8 +282,10 @@ def run_cli(quick: bool = False, out: Path | str = "validation_report", seed: in
 
     def step_done(sec: Section) -> None:
         failed = sum(c.outcome.value == "FAIL" for c in sec.checks)
+        found = sum(c.outcome.value == "FINDING" for c in sec.checks)
         line = (f"{time.perf_counter() - t0:7.1f} s  {sec.title}: {sec.seconds:.1f} s ({sec.cpu_seconds:.0f} CPU-s), "
                 f"{len(sec.checks)} checks"
+                + (f", {found} finding{'' if found == 1 else 's'}" if found else "")
                 + (f", {failed} FAILED" if failed else ""))
         if bar is not None:
             bar.write(line, file=sys.stderr)

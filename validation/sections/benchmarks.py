@@ -1,19 +1,12 @@
-"""Benchmarks: run each solver's benchmark module and combine their error-versus-wall-time curves.
+"""Benchmarks: the work-precision diagrams, and each solver's benchmark module in its short version.
 
-The study modules :mod:`validation.studies.exact`, :mod:`validation.studies.fpe` and
-:mod:`validation.studies.montecarlo` (:func:`bench_modules`) each provide ``run(quick, out) -> dict`` and write their own
-JSON and PNG (named by their ``STEM``). Each may also return ``"series"``: a list of curves
-
-``{"problem": key of PROBLEMS, "method": str, "points": [{"seconds": float, "error": float}
-or {"seconds": float, "eta": float}, ...], "reference": str, "reference_eta": float (optional),
-"reference_err": float (optional, relative)}``,
-
-where ``error`` is the *actual* relative error of eta against the best reference (not a
-reported one). Points given as ``eta`` get their error against the problem's reference: the
-``reference_eta`` with the smallest ``reference_err`` among the series of that problem. The
-combined figure has one panel per problem of :data:`PROBLEMS`, wall time on x, actual error on
-y, one line per method; a problem whose reference has an uncertainty shows it as a dotted line
-(errors below it are not resolved).
+The work-precision diagrams (:mod:`validation.studies.work_precision`: every solver's actual
+error of eta against its wall time over a range of tolerances, beside the baselines, against
+references that do not share its errors) are read from the study's recorded full run in
+``validation/data`` and drawn here. The study modules :mod:`validation.studies.exact`,
+:mod:`validation.studies.fpe` and :mod:`validation.studies.montecarlo` (:func:`bench_modules`)
+each provide ``run(quick, out) -> dict`` and write their own JSON and PNG (named by their
+``STEM``); every error/time pair they report is tabulated (:func:`error_time_pairs`).
 
 Speed targets (``X_target_s`` next to ``X_s``) are tabulated, not failed: timings belong to
 the machine, correctness to the checks.
@@ -28,9 +21,9 @@ from types import ModuleType
 from typing import Any
 
 from ..harness.checks import CheckResult, Context, expect
-from ..harness.report import Figure, Section, Table, new_figure, save_figure
+from ..harness.report import Figure, Section, Table
 
-__all__ = ["bench_modules", "PROBLEMS", "error_time_pairs", "resolve_series", "run"]
+__all__ = ["bench_modules", "error_time_pairs", "run"]
 
 _SECTION = "Benchmarks: error versus wall time"
 def bench_modules() -> tuple[ModuleType, ...]:
@@ -106,89 +99,29 @@ def _targets(data: Any, prefix: str = "") -> Iterator[tuple[str, float, float]]:
                 yield from _targets(val, f"{prefix}{k}.")
 
 
-#: The problems of the combined figure, one panel each: key -> title.
-PROBLEMS = {
-    "harmonic_ring": "harmonic ring: N = 3, a = 0.5, k = -0.33",
-    "n3_single": "single unit: n = 3, a = 0.5",
-    "n1_single": "single unit: n = 1 (kink), a = 0.5",
-    "n3_ring": "ring: n = 3, N = 3, a = 0.5, k = -0.5",
-}
+def _work_precision(ctx: Context, sec: Section) -> list[CheckResult]:
+    """The work-precision diagrams recorded by :mod:`validation.studies.work_precision` (its full
+    run, committed in ``validation/data``): the figure drawn from the JSON and the table of
+    each solver's range; checked to hold every solver of every case over at least two points."""
+    from ..studies import work_precision as wp
 
-#: Line style per method (anything else: grey).
-METHOD_STYLE = {
-    "exact": ("tab:blue", "o", "-"),
-    "Fokker-Planck": ("tab:green", "s", "-"),
-    "Fokker-Planck (previous design)": ("tab:olive", "D", ":"),
-    "Monte Carlo": ("tab:red", "^", "-"),
-    "Monte Carlo + control variates": ("tab:purple", "v", "-"),
-    "numpy Euler-Maruyama": ("black", "x", "--"),
-}
-
-
-def resolve_series(series: list[dict[str, Any]]) -> dict[str, list[dict[str, Any]]]:
-    """Group curves by problem and give every point its actual error.
-
-    Returns ``{problem: [curve, ...]}`` with each point carrying ``error``; the curves of a
-    problem get ``reference_used`` (eta, relative uncertainty, source). Points given as eta
-    on a problem without a reference are dropped.
-
-    Examples
-    --------
-    >>> out = resolve_series([
-    ...     {"problem": "p", "method": "exact", "points": [{"seconds": 1e-4, "error": 0.0}],
-    ...      "reference": "closed form", "reference_eta": 0.5, "reference_err": 0.0},
-    ...     {"problem": "p", "method": "Monte Carlo", "points": [{"seconds": 2.0, "eta": 0.501}]}])
-    >>> round(out["p"][1]["points"][0]["error"], 6)
-    0.002
-    """
-    by: dict[str, list[dict[str, Any]]] = {}
-    for cur in series:
-        by.setdefault(cur["problem"], []).append(dict(cur, points=[dict(p) for p in cur["points"]]))
-    for curves in by.values():
-        refs = [c for c in curves if _number(c.get("reference_eta")) is not None]
-        ref = min(refs, key=lambda c: _number(c.get("reference_err")) or 0.0) if refs else None
-        for c in curves:
-            if ref is not None:
-                c["reference_used"] = (ref["reference_eta"], _number(ref.get("reference_err")) or 0.0,
-                                       ref.get("reference", ref["method"]))
-            kept = []
-            for p in c["points"]:
-                if _number(p.get("error")) is None and ref is not None and _number(p.get("eta")) is not None:
-                    p["error"] = abs(p["eta"] - ref["reference_eta"]) / abs(ref["reference_eta"])
-                if _number(p.get("error")) is not None and _number(p.get("seconds")):
-                    kept.append(p)
-            c["points"] = kept
-    return by
-
-
-def _plot(ctx: Context, series: list[dict[str, Any]]) -> Figure:
-    by = resolve_series(series)
-    fig, axes = new_figure((10, 7.5), ncols=2, nrows=2)
-    for ax, (key, title) in zip(axes.ravel(), PROBLEMS.items()):
-        curves = by.get(key, [])
-        for c in curves:
-            pts = sorted((p["seconds"], p["error"]) for p in c["points"])
-            if not pts:
-                continue
-            color, marker, ls = METHOD_STYLE.get(c["method"], ("0.5", ".", "-"))
-            # an error of exactly 0 (agreement to the last bit) is drawn at 1e-17
-            ax.loglog([t for t, _ in pts], [max(e, 1e-17) for _, e in pts], color=color, marker=marker,
-                      ls=ls if len(pts) > 1 else "none", lw=1, ms=5, label=c["method"])
-        ref = next((c["reference_used"] for c in curves if "reference_used" in c), None)
-        if ref is not None and ref[1] > 0:
-            ax.axhline(ref[1], color="0.5", ls=":", lw=0.8)
-        ax.set_title(title + ("" if curves else " (no data in this run)"), fontsize=9)
-        ax.set_xlabel("wall time [s]")
-        ax.set_ylabel("actual relative error of eta")
-        ax.grid(True, which="both", alpha=0.3)
-        if curves:
-            ax.legend(fontsize=7, loc="best")
-    refs = "; ".join(f"{PROBLEMS[k]}: {next((c['reference_used'][2] for c in v if 'reference_used' in c), 'none')}"
-                     for k, v in by.items() if k in PROBLEMS)
-    return save_figure(fig, ctx.out / "bench_error_vs_time.png",
-                       "Actual relative error of eta versus wall time, measured in this run, one panel per "
-                       "problem and one line per method (dotted: the uncertainty of the reference; an error of "
-                       f"exactly 0 is drawn at 1e-17). References: {refs}.")
+    if not wp.RECORDED.exists():
+        return [expect("work-precision data", _SECTION, False,
+                       f"{wp.RECORDED} missing: python -m validation.studies.work_precision --out validation/data")]
+    res = json.loads(wp.RECORDED.read_text())
+    path = ctx.out / "work_precision.png"
+    wp.plot(res, path)
+    sec.figures.insert(0, Figure(path, wp.CAPTION + f" Recorded by {wp.COMMAND} ({'quick' if res['quick'] else 'full'} "
+                                                     f"run, {res['wall_s']:.0f} s; not this run)."))
+    head, rows = wp.summary_rows(res)
+    sec.tables.insert(0, Table("Work-precision: each solver's range (recorded)", head, rows,
+                               note=f"Data: validation/data/{wp.STEM}.json; regenerate: {wp.COMMAND}."))
+    thin = [f"{case['title']}: {c['method']} ({len(c['points'])} points)" for case in res["cases"].values()
+            for c in case["curves"] if len(c["points"]) < 2]
+    return [expect("work-precision data: every solver of every case is a curve", _SECTION,
+                   not thin and not res["quick"],
+                   f"{len(res['cases'])} cases from a {'quick' if res['quick'] else 'full'} run; curves with fewer "
+                   f"than two points: {'; '.join(thin) or 'none'}")]
 
 
 def _include(ctx: Context, mod: Any, sec: Section, targets: Table) -> None:
@@ -216,8 +149,7 @@ def _include(ctx: Context, mod: Any, sec: Section, targets: Table) -> None:
                             note=f"All measurements: {path}."))
 
 
-def _run_one(ctx: Context, mod: ModuleType, sec: Section, curves: list[dict[str, Any]],
-             targets: Table) -> list[CheckResult]:
+def _run_one(ctx: Context, mod: ModuleType, sec: Section, targets: Table) -> list[CheckResult]:
     out = ctx.out / "bench"
     out.mkdir(parents=True, exist_ok=True)
     # a module's REPORT_KW narrows its short run to what this section needs (its own CLI runs all)
@@ -225,7 +157,6 @@ def _run_one(ctx: Context, mod: ModuleType, sec: Section, curves: list[dict[str,
     name = mod.STEM
     _include(ctx, mod, sec, targets)
     pairs = list(error_time_pairs(data))
-    curves.extend(data.get("series", []))
     for label, t, target in _targets(data):
         targets.rows.append((name, label, f"{t:.4g}", f"{target:.4g}", "yes" if t <= target else "NO"))
     for png in sorted(out.glob(f"{name}*.png")):
@@ -240,28 +171,28 @@ def _run_one(ctx: Context, mod: ModuleType, sec: Section, curves: list[dict[str,
 
 
 def run(ctx: Context) -> Section:
-    """Run every benchmark module's short version and draw the combined plot; include the
-    exhaustive runs written by ``python -m validation.studies.* --out DIR`` when the run was given
-    ``DIR`` (``harvester validate --bench DIR``)."""
+    """The recorded work-precision diagrams, then every benchmark module's short version; include
+    the exhaustive runs written by ``python -m validation.studies.* --out DIR`` when the run was
+    given ``DIR`` (``harvester validate --bench DIR``)."""
     sec = Section("benchmarks", _SECTION)
-    curves: list[dict[str, Any]] = []
     targets = Table("Speed targets (reported, not failed)", ("benchmark", "measurement", "time [s]", "target [s]",
                                                              "met"))
     for mod in bench_modules():
         sec.checks += ctx.check(f"benchmark {mod.__name__}", _SECTION,
-                                lambda mod=mod: _run_one(ctx, mod, sec, curves, targets))
-    if curves:
-        sec.figures.insert(0, _plot(ctx, curves))
+                                lambda mod=mod: _run_one(ctx, mod, sec, targets))
     if targets.rows:
         sec.tables.insert(0, targets)
+    sec.checks += ctx.check("work-precision diagrams", _SECTION, lambda: _work_precision(ctx, sec))
     sec.text.append(
-        "Each benchmark module measures its own solver and baselines (numpy Euler-Maruyama loop, scipy dense "
-        "Lyapunov) in this run, in its short version (the exhaustive sweeps, 1e-6 for every case and long Monte "
-        "Carlo extrapolations, are python -m validation.studies.fpe, .montecarlo, .exact; harvester validate "
+        "The work-precision figure (first) shows, for the harmonic ring, the exact solver's time against the "
+        "ring size beside scipy's dense Lyapunov solve, and for a smooth unit, the kink and a ring, each "
+        "solver's actual error of eta against its wall time over a range of tolerances, beside the baselines a "
+        "user would otherwise write (plain Monte Carlo, a numpy Euler-Maruyama script), every error measured "
+        "against a reference that does not share it; it is recorded by a full run of the study, not this run. "
+        "Each benchmark module then measures its own solver and baselines in this run, in its short version "
+        "(the exhaustive sweeps are python -m validation.studies.fpe, .montecarlo, .exact; harvester validate "
         "--bench DIR includes their latest output, labelled with its date)."
         + (f" Included: {ctx.bench}." if ctx.bench else " None included in this run.")
-        + " The combined figure shows, for four problems, the actual error of eta (against "
-        "the best reference of that problem) versus wall time, one line per method; each module's own table "
-        "lists every error/time pair it reports (reported errors included)."
+        + " Each module's table lists every error/time pair it reports (reported errors included)."
     )
     return sec

@@ -14,8 +14,10 @@ Monte Carlo run (another seed) ``REF_FACTOR`` times tighter. For each result and
 and the fractions of :math:`|z| < 1, 2, 3` are the coverage; for honest one-standard-error
 bars they are close to 68.3 / 95.4 / 99.7 %. The errors fold in the time-step bias estimate
 (:class:`montecarlo.MonteCarlo`), so coverage above these fractions means conservative
-bars, below means optimistic ones. The fractions are checked per quantity against limits from
-the binomial distribution of the number of results (:func:`binomial_limits`).
+bars, below means optimistic ones. The fractions are checked per quantity against two-sided
+limits from the binomial distribution of the number of results (:func:`binomial_limits`), so
+that bars too wide fail as well as bars too narrow; a run must count enough results for that
+(:func:`min_results`).
 :func:`mc_coverage` runs the quick subset (seconds, for CI) or the full grid (minutes, the
 report's).
 """
@@ -32,7 +34,8 @@ import numpy as np
 from fpe_harvester import Harvester, Stats, Status, solve
 
 __all__ = ["CoverageCase", "QUICK_CASES", "FULL_CASES", "NORMAL_COVERAGE", "mc_coverage",
-           "binomial_limits", "coverage_checks", "usable_reference", "ALPHA", "REF_MAX_SHARE"]
+           "binomial_limits", "coverage_checks", "usable_reference", "ALPHA", "REF_MAX_SHARE", "MISSCALED",
+           "min_results", "detection"]
 
 #: Seeds per case: the results of different cases use different seeds. With the same seeds in
 #: every case, the cases' results were driven by the same noise and correlated, while the
@@ -180,9 +183,10 @@ def binomial_limits(count: int, p: float, alpha: float = ALPHA) -> tuple[float, 
 
 
 def coverage_checks(z: dict[str, list[float]], alpha: float = ALPHA) -> list[tuple[str, bool, str]]:
-    """Per quantity and k = 1, 2, 3: is the fraction of |z| < k inside the binomial limits of
-    the normal coverage? (At k = 1 both limits: bars too wide fail as well as too narrow; at
-    k = 2, 3 the lower one.) Returns (label, passed, detail) triples."""
+    """Per quantity and k = 1, 2, 3: is the fraction of |z| < k inside the two-sided binomial
+    limits of the normal coverage? Bars too wide fail (a fraction above the upper limit) as well
+    as bars too narrow (below the lower one); at k = 3 the upper limit is 1 for any count below
+    several thousand. Returns (label, passed, detail) triples."""
     out = []
     for q, values in z.items():
         a = np.abs(np.asarray(values))
@@ -192,11 +196,44 @@ def coverage_checks(z: dict[str, list[float]], alpha: float = ALPHA) -> list[tup
         for k, p in zip((1, 2, 3), NORMAL_COVERAGE):
             f = float((a < k).mean())
             lo, hi = binomial_limits(a.size, p, alpha)
-            ok = lo <= f <= hi if k == 1 else f >= lo
-            lim = f"[{lo:.3f}, {hi:.3f}]" if k == 1 else f">= {lo:.3f}"
+            ok = lo <= f <= hi
+            verdict = "" if ok else (" (bars too narrow)" if f < lo else " (bars too wide)")
             out.append((f"mc coverage of {q} within {k} standard error{'s' if k > 1 else ''}", ok,
-                        f"{f:.3f} of {a.size} results (normal {p:.3f}; binomial limits {lim} at alpha {alpha:g})"))
+                        f"{f:.3f} of {a.size} results (normal {p:.3f}; binomial limits [{lo:.3f}, {hi:.3f}] at "
+                        f"alpha {alpha:g}){verdict}"))
     return out
+
+
+#: Mis-scaled error bars the coverage checks must catch: reported errors 1.5x too small (z 1.5x
+#: too large) and 2x too large (z halved).
+MISSCALED = (1.5, 0.5)
+
+
+def detection(count: int, scale: float, alpha: float = ALPHA) -> float:
+    """Probability that :func:`coverage_checks` fails a quantity of ``count`` results whose z
+    are ``scale`` times a standard normal's (reported errors off by 1/scale), at least: the
+    larger of the probabilities that its fraction within 1 error, or within 2, leaves its limits."""
+    import scipy.stats
+
+    best = 0.0
+    for k, p in zip((1, 2), NORMAL_COVERAGE):
+        lo, hi = binomial_limits(count, p, alpha)
+        q = 2.0 * float(scipy.stats.norm.cdf(k / scale)) - 1.0  # P(|z| < k) for the mis-scaled bars
+        inside = scipy.stats.binom.cdf(round(hi * count), count, q) - scipy.stats.binom.cdf(round(lo * count) - 1,
+                                                                                             count, q)
+        best = max(best, 1.0 - float(inside))
+    return best
+
+
+def min_results(power: float = 0.5, alpha: float = ALPHA, upto: int = 1000) -> int:
+    """The fewest results per quantity at which each of :data:`MISSCALED` fails the coverage
+    checks with probability at least ``power`` (:func:`detection`): 48 for 0.5 and 95 for 0.9 at
+    alpha 1e-3 (bars 1.5x too small are the harder to tell; 2x too wide fail with probability
+    0.994 at 60 results)."""
+    for count in range(10, upto + 1):
+        if all(detection(count, s, alpha) >= power for s in MISSCALED):
+            return count
+    raise ValueError(f"no count up to {upto} detects mis-scaled bars with probability {power:g}")
 
 
 def mc_coverage(quick: bool = True, runs: int | None = None, seed: int = 0,

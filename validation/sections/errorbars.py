@@ -36,8 +36,14 @@ from ..harness.report import Figure, Section, Table, new_figure, save_figure
 __all__ = ["run", "FpeCase", "QUICK_FPE", "FULL_FPE", "fpe_bounds"]
 
 _SECTION = "Error bars"
-#: Monte Carlo results per coverage case in quick mode (the full run: the coverage default).
-_QUICK_MC_RUNS = 8
+#: Monte Carlo results per coverage case in quick mode (the full run: the coverage default): 3 x 20
+#: = 60 per quantity. Bars 1.5x too small then fail with probability 0.68, 2x too wide 0.994
+#: (:func:`validation.sections.coverage.detection`; the full run's 104: 0.92 and 1), and the typical
+#: sample of either fails (at 48, the fewest with probability 0.5, that of bars 1.5x too small
+#: still passes: the binomial limits move in steps of 1/count).
+_QUICK_MC_RUNS = 20
+#: Least probability that the run's coverage checks fail mis-scaled bars (quick, full).
+_POWER = {True: 0.5, False: 0.9}
 
 
 
@@ -273,7 +279,7 @@ def _fpe_checks(ctx: Context, sec: Section) -> list[CheckResult]:
 
 
 def _mc_checks(ctx: Context, sec: Section) -> list[CheckResult]:
-    from .coverage import ALPHA, NORMAL_COVERAGE, coverage_checks, mc_coverage
+    from .coverage import ALPHA, MISSCALED, NORMAL_COVERAGE, coverage_checks, detection, mc_coverage, min_results
 
     ctx.require("mc")
     res = mc_coverage(quick=ctx.quick, runs=_QUICK_MC_RUNS if ctx.quick else None, seed=ctx.seed)
@@ -293,7 +299,13 @@ def _mc_checks(ctx: Context, sec: Section) -> list[CheckResult]:
     missing = [expect(f"mc coverage: reference for {c['label']}", _SECTION, False,
                       f"no usable reference, the case was not counted: {c['unusable_reference']}")
                for c in res["cases"] if "unusable_reference" in c]
-    return missing + [expect(label, _SECTION, ok, detail) for label, ok, detail in coverage_checks(z)]
+    need, power = min_results(_POWER[ctx.quick]), _POWER[ctx.quick]
+    enough = expect("mc coverage: enough results to fail bars too narrow or too wide", _SECTION,
+                    res["count"] >= need,
+                    f"{res['count']} results per quantity (at least {need} for probability {power:g}); bars 1.5x too "
+                    f"small fail with probability {detection(res['count'], MISSCALED[0]):.2f}, 2x too wide "
+                    f"{detection(res['count'], MISSCALED[1]):.4f}")
+    return missing + [enough] + [expect(label, _SECTION, ok, detail) for label, ok, detail in coverage_checks(z)]
 
 
 def _plot_coverage(ctx: Context, res: dict) -> Figure:

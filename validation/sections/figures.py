@@ -19,14 +19,17 @@ from typing import Any
 
 from fpe_harvester import Params, solve
 
-from ..harness.checks import CheckResult, Context, expect, skipped
+from ..harness.checks import CheckResult, Context, agree, expect, skipped
 from ..harness.report import Figure, Section, Table
 
-__all__ = ["MAX_ROWS", "row_checks", "run_exact", "run_solvers"]
+__all__ = ["FALLBACK_SIGMAS", "MAX_ROWS", "fallback_check", "row_checks", "run_exact", "run_solvers"]
 
 _SECTION = "The paper's figures (scenes)"
 #: Rows of each scene's data shown in the report (the CSV has them all).
 MAX_ROWS = 40
+#: Combined error bars within which Fokker--Planck and Monte Carlo must agree at a point that was
+#: solved by both (three: about one point in 370 outside by chance if both bars are honest).
+FALLBACK_SIGMAS = 3.0
 
 
 def _fmt(v: object) -> str:
@@ -74,7 +77,7 @@ def _run_one(ctx: Context, name: str, sec: Section) -> list[CheckResult]:
     return [expect(f"{label}: figures", _SECTION, len(res.figures) == len(res.scene.figures),
                    f"{len(res.rows)} points ({res.computed} computed, {res.reused} reused), statuses {statuses}, "
                    f"figures drawn {sorted(res.figures)} of {[f.name for f in res.scene.figures]}"),
-            *row_checks(label, res.scene, res.rows)]
+            *row_checks(label, res.scene, res.rows), *fallback_check(label, res.scene, res.rows)]
 
 
 def row_checks(label: str, scene: Any, rows: list[Any]) -> list[CheckResult]:
@@ -130,6 +133,37 @@ def row_checks(label: str, scene: Any, rows: list[Any]) -> list[CheckResult]:
                   f"{n_exact} exact rows; off by more than their errors: {'; '.join(wrong[:3]) or 'none'}")]
           if n_exact else []),
     ]
+
+
+def fallback_check(label: str, scene: Any, rows: list[Any]) -> list[CheckResult]:
+    """The points solved twice (Fokker--Planck missed its tolerance, Monte Carlo was tried):
+    counted, and where both solvers gave numbers, held to agree on every observable of the
+    scene within :data:`FALLBACK_SIGMAS` combined error bars (a missing error bar counts as 0,
+    so it can only make the check stricter). No check when no point was solved twice.
+
+    The other solver's numbers come from the row's ``info["fallback"]``
+    (:func:`fpe_harvester.scenes.run_scene` records them).
+    """
+    twice = [r for r in rows if r.info.get("fallback")]
+    if not twice:
+        return []
+    kept_mc = sum(r.info["fallback"]["kept"] == "mc" for r in twice)
+    compared, off = 0, []
+    for row in twice:
+        other = row.info["fallback"]["other"]
+        where = ", ".join(f"{key} = {v:g}" for key, v in row.point.items())
+        for q in scene.observables:
+            if row.values.get(q) is None or other.get(q) is None:
+                continue
+            compared += 1
+            c = agree(q, _SECTION, row.values[q], row.values.get(q + "_err"), other[q], other.get(q + "_err"),
+                      n_sigma=FALLBACK_SIGMAS)
+            if not c.passed:
+                off.append(f"({where}) {q}: {row.method} vs {other['method']} {c.detail}")
+    return [expect(f"{label}: points solved by both Fokker-Planck and Monte Carlo agree", _SECTION, not off,
+                   f"{len(twice)} of {len(rows)} points missed the Fokker-Planck tolerance and were tried with "
+                   f"Monte Carlo ({kept_mc} kept Monte Carlo's numbers); {compared} values given by both solvers "
+                   f"compared within {FALLBACK_SIGMAS:g} combined error bars; outside: {'; '.join(off[:3]) or 'none'}")]
 
 
 def _is_exact(name: str) -> bool:

@@ -27,7 +27,7 @@ from fpe_harvester.model import Harvester
 from fpe_harvester.optimum import Optimum, optimize
 from fpe_harvester.result import Stats, Status
 
-from ..harness.checks import CheckResult, Context, agree, expect
+from ..harness.checks import CheckResult, Context, Outcome, agree, expect, finding
 from ..harness.report import Section, Table
 
 __all__ = ["PaperRow", "PAPER_ROWS", "RING_N", "MAX_REL_TOL", "solve_first", "run", "vrms_text", "second_solver",
@@ -171,7 +171,7 @@ def _row_check(row: PaperRow, k: float, r: Stats, rounding: float, opt: Optimum 
     if second is None:
         return check
     ok, detail = paper_disagreement(row, r, second, rounding)
-    return expect(name, _SECTION, ok, detail)
+    return finding(name, _SECTION, detail, r.eta, row.eta) if ok else expect(name, _SECTION, False, detail)
 
 
 _DISAGREES = "THE PAPER'S PRINTED VALUE DISAGREES: "
@@ -190,11 +190,11 @@ def second_solver(row: PaperRow, r: Stats) -> Stats | None:
 def paper_disagreement(row: PaperRow, r: Stats, second: Stats, rounding: float) -> tuple[bool, str]:
     """Our eta differs from the paper's printed one by more than 4 of our error bars plus the
     paper's rounding. Decide between "our solver is wrong" and "the paper's printed number is off"
-    with a second, independent solver: the check passes (and says that the paper disagrees)
-    only when the two solvers agree with each other within 4 combined errors and *both* lie
-    outside the paper's digits; otherwise it fails.
+    with a second, independent solver: the row is a finding about the paper only when the two
+    solvers agree with each other within 4 combined errors and *both* lie outside the paper's
+    digits; otherwise it fails.
 
-    Returns (passed, detail).
+    Returns (is_finding, detail).
     """
     assert r.eta is not None and second.eta is not None
     e1, e2 = r.eta_err or 0.0, second.eta_err or 0.0
@@ -207,7 +207,7 @@ def paper_disagreement(row: PaperRow, r: Stats, second: Stats, rounding: float) 
         return True, (f"{_DISAGREES}{text}. The two solvers agree with each other "
                       f"(|diff| {abs(r.eta - second.eta):.2g} <= 4 x {math.hypot(e1, e2):.2g}) and both differ "
                       f"from the paper by {r.eta - row.eta:+.4f} ({(r.eta - row.eta) / rounding:+.1f} rounding "
-                      "units): a finding about the paper, listed in this section's text")
+                      "units): a finding about the paper, not a pass, listed in this section's text")
     why = "the two solvers disagree with each other" if not mutual else "the second solver agrees with the paper"
     return False, f"{text}: {why}, so our {r.method} result is in question"
 
@@ -271,16 +271,17 @@ def run(ctx: Context) -> Section:
                        "no such limit: k_di = -2a/3 < 0 for every a > 0", "-", "-", "-", "-", "-", "-", "-", "-"))
     sec.tables.append(table)
     rows = [c for c in sec.checks if c.name.startswith("paper: ")]
-    findings = [c for c in rows if c.passed and c.detail.startswith(_DISAGREES)]
-    sec.text.append(vrms_text(ratios, {c.name.removeprefix("paper: ").removesuffix(": eta"):
-                                       c.passed and c not in findings for c in rows}))
+    findings = [c for c in rows if c.outcome is Outcome.FINDING]
+    sec.text.append(vrms_text(ratios, {c.name.removeprefix("paper: ").removesuffix(": eta"): c.passed
+                                       for c in rows}))
     if findings:
         sec.text.append(
             "**Where the paper's printed eta is off.** "
             + " ".join(f"{c.name.removeprefix('paper: ').removesuffix(': eta')}: {c.detail.removeprefix(_DISAGREES)}."
                        for c in findings)
-            + " Such a row passes its check only because a second, independent solver confirms our value; had "
-              "the second solver sided with the paper, or disagreed with the first, it would fail.")
+            + " Such a row is a FINDING (counted apart from the passes) because a second, independent solver "
+              "confirms our value; had the second solver sided with the paper, or disagreed with the first, it "
+              "would fail.")
     sec.text.append(
         f"**Thresholds.** The exact harmonic threshold for N = 3, a = 0.5 is k_di = {kd3:.10f} (= -1/3): the "
         "paper's k = -0.33 sits 1% inside it, where the critical mode stiffness is only 0.01, hence its high eta. "

@@ -2,9 +2,8 @@
 
 Measured in one run:
 
-* a single call of :func:`fpe_harvester.solve` (N = 3, a = 0.5, k = -0.33) and scipy's dense
-  Lyapunov solve of the same ring, their errors against a 40-digit Lyapunov solve (``series``:
-  the harmonic-ring panel of the combined plot);
+* a single call of :func:`fpe_harvester.solve` (N = 3, a = 0.5, k = -0.33), its error against a
+  40-digit Lyapunov solve;
 * a ring of N = 1,000,000 units (target: under 1 s);
 * a vectorized sweep of 10,000 (k, a) points for N = 3 (target: under 1 s);
 * scipy's dense 4N x 4N Lyapunov solve (``solve_continuous_lyapunov``) for N = 2..128 and the
@@ -59,15 +58,6 @@ def run(quick: bool = False, out: Path | None = None) -> dict[str, Any]:
     res["single_call_s"] = t
     res["single_call_eta_rel_error"] = abs(r.eta / ref_eta - 1)
     res["single_call_reference"] = "40-digit Lyapunov solve (validation.references.mp_ring_moments)"
-    t_dense, C = _best_time(lambda: dense_covariance(paper), repeat)
-    dense_eta = float(np.diag(C)[2::4].mean()) / (float(np.diag(C, 2)[1::4].mean()) * paper.params.sigma)
-    reference = {"reference": res["single_call_reference"], "reference_eta": ref_eta, "reference_err": 0.0}
-    res["series"] = [
-        {"problem": "harmonic_ring", "method": "exact", "points": [{"seconds": t, "error": res["single_call_eta_rel_error"]}],
-         **reference},
-        {"problem": "harmonic_ring", "method": "scipy dense Lyapunov",
-         "points": [{"seconds": t_dense, "error": abs(dense_eta / ref_eta - 1)}], **reference},
-    ]
 
     h = Harvester.build(a=0.5, N=1_000_000, k=-0.2)
     t, r = _best_time(lambda: solve(h), repeat)
@@ -138,4 +128,4 @@ def _plot(res: dict[str, Any], path: Path) -> None:
 
 
 if __name__ == "__main__":  # pragma: no cover
-    bench_main(run, __doc__, drop=("fourier_vs_dense", "series"))
+    bench_main(run, __doc__, drop=("fourier_vs_dense",))

@@ -94,7 +94,7 @@ from fpe_harvester.fpe import stationary
 from fpe_harvester.fpe.schemes.x import discretize
 from validation.studies.cli import bench_main, save_benchmark
 
-__all__ = ["STEM", "PREVIOUS", "PREVIOUS_SERIES_N3", "run", "run_meshes", "meshes", "run_schemes", "schemes", "run_convergence", "convergence", "work", "table", "series"]
+__all__ = ["STEM", "PREVIOUS", "run", "run_meshes", "meshes", "run_schemes", "schemes", "run_convergence", "convergence", "work", "table"]
 
 #: Name of the written ``.json`` and ``.png``.
 STEM = "bench_fpe"
@@ -352,8 +352,7 @@ def run(quick: bool = False, out: pathlib.Path | None = None) -> dict:
     Returns
     -------
     dict
-        ``cases`` (per case: runs, reference, Monte Carlo), ``targets``, ``series`` (the
-        error-versus-time curves for the combined plot) and ``summary``.
+        ``cases`` (per case: runs, reference, Monte Carlo), ``targets`` and ``summary``.
     """
     cases: dict[str, Any] = {}
     if quick:
@@ -364,7 +363,7 @@ def run(quick: bool = False, out: pathlib.Path | None = None) -> dict:
         budget, mc_rel = 120.0, 3e-3
     for n, a, tols in plan:
         cases[f"n={n:g}, a={a:g}"] = _case(n, a, tols, budget, mc_rel, 60.0)
-    result = {"quick": quick, "cases": cases, "targets": TARGETS, "series": series(quick),
+    result = {"quick": quick, "cases": cases, "targets": TARGETS,
               "summary": _summary(cases), "meshes": meshes(quick), "schemes": schemes(quick)}
     if not quick:
         result["convergence"] = convergence()
@@ -374,47 +373,6 @@ def run(quick: bool = False, out: pathlib.Path | None = None) -> dict:
         result["kink"] = kink.run(quick=False, out=out)
     save_benchmark(result, out, STEM, _plot)
     return result
-
-
-#: The previous design (commit e011c60) on n = 3, a = 0.5 for the combined plot: (tol, seconds,
-#: eta), each a fresh process, the minimum of two runs interleaved with the current design's on
-#: a loaded 2-core machine (the current design in the same runs: 0.76, 0.28, 0.49, 4.3, 4.3 s).
-PREVIOUS_SERIES_N3 = ((1e-2, 0.86, 0.48400807801970425), (1e-3, 0.59, 0.4840021617609992),
-                      (1e-4, 0.29, 0.4840021617609992), (1e-5, 2.91, 0.48400192360302235),
-                      (1e-6, 12.32, 0.48400192360302235))
-
-
-def series(quick: bool) -> list[dict[str, Any]]:
-    """Error-versus-time curves of the Fokker--Planck solver for the combined plot: n = 3
-    (a = 0.5) at tol 1e-2 ... 1e-6 (1e-2 ... 1e-4 quick) against a run at 1e-7 (1e-5),
-    and n = 1 (a = 0.5) at tol 1e-2, 1e-3 against the Monte Carlo value of the combined
-    benchmark (see :mod:`validation.sections.benchmarks`; here against the 1e-4 run with its error)."""
-    out = []
-    h = Harvester.build(a=0.5, n=3.0)
-    tols = [1e-2, 1e-3, 1e-4] if quick else [1e-2, 1e-3, 1e-4, 1e-5, 1e-6]
-    ref = stationary(h, tol=1e-5 if quick else 1e-7, max_seconds=120.0, grid=3).stats
-    pts = []
-    for tol in tols:
-        r = _tol_run(h, tol, 60.0)
-        pts.append({"seconds": r["seconds"], "error": abs(r["eta"] - ref.eta) / abs(ref.eta),
-                    "reported": r["eta_err"] / abs(r["eta"]), "tol": tol})
-    out.append({"problem": "n3_single", "method": "Fokker-Planck", "points": pts,
-                "reference": f"Fokker-Planck at tol = {1e-5 if quick else 1e-7:g} "
-                             f"(reported relative error {ref.eta_err / ref.eta:.1g})",
-                "reference_eta": ref.eta, "reference_err": ref.eta_err / abs(ref.eta)})
-    out.append({"problem": "n3_single", "method": "Fokker-Planck (previous design)",
-                "points": [{"seconds": sec, "eta": eta, "tol": tol} for tol, sec, eta in PREVIOUS_SERIES_N3],
-                "reference": "recorded numbers of the previous design, commit e011c60, loaded machine (PREVIOUS_SERIES_N3)"})
-    h1 = Harvester.build(a=0.5, n=1.0)
-    pts = []
-    for tol in ([1e-2] if quick else [1e-2, 3e-3, 1e-3]):
-        r = _tol_run(h1, tol, 120.0)
-        if r["eta"] is not None:
-            pts.append({"seconds": r["seconds"], "eta": r["eta"], "reported": r["eta_err"] / abs(r["eta"]),
-                        "tol": tol})
-    out.append({"problem": "n1_single", "method": "Fokker-Planck", "points": pts,
-                "reference": "set by the combined benchmark (Monte Carlo)"})
-    return out
 
 
 def _summary(cases: dict[str, Any]) -> dict[str, Any]:
@@ -701,5 +659,5 @@ if __name__ == "__main__":
         res = bench_main(run_meshes, __doc__, drop=("cases",))
         print(_mesh_lines(res["cases"]))
     else:
-        res = bench_main(run, __doc__, drop=("cases", "series", "meshes", "schemes", "convergence"))
+        res = bench_main(run, __doc__, drop=("cases", "meshes", "schemes", "convergence"))
         print(table(res))

@@ -7,8 +7,8 @@ error), :mod:`.mc_bias` (time-step bias), :mod:`.mc_tau` (noise correlation time
 :mod:`.mc_steep` (steep walls), :mod:`.mc_controls` (harmonic twin), :mod:`.mc_martingale`
 (martingale controls and their coverage), :mod:`.mc_policy` (time-step policy and its
 coverage), :mod:`.mc_boundary` (end-of-window terms), :mod:`.mc_kink_dt` (the kink's time-step
-law); plus the error-versus-time curves (``series``) of the combined benchmark
-(:mod:`validation.sections.benchmarks`).
+law). The solver's error against wall time beside the baselines is the work-precision study
+(:mod:`.work_precision`).
 
 ``python -m validation.studies.montecarlo [--quick] [--out DIR]`` writes ``bench_montecarlo.json``
 and ``bench_montecarlo.png``.
@@ -16,26 +16,23 @@ and ``bench_montecarlo.png``.
 
 from __future__ import annotations
 
-import math
 from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
-from fpe_harvester import Harvester, solve
 from fpe_harvester.parallel import default_threads
 from validation.studies import (mc_bias, mc_boundary, mc_controls, mc_equal_error, mc_kink_dt, mc_martingale,
                                 mc_policy, mc_rng, mc_steep, mc_tau, mc_throughput)
 from validation.studies.cli import bench_main, save_benchmark
 
-__all__ = ["STEM", "STUDIES", "REPORT_STUDIES", "REPORT_KW", "run", "series"]
+__all__ = ["STEM", "STUDIES", "REPORT_STUDIES", "REPORT_KW", "run"]
 
 #: Name of the written ``.json`` and ``.png``.
 STEM = "bench_montecarlo"
 
 _FULL_ONLY = "full mode only; CI smoke test: tests/montecarlo/test_martingale.py"
 
-#: The studies of :func:`run`, in order: name -> function of ``quick`` giving its result
-#: (``series``, which reads the others' results, is run last by :func:`run`).
+#: The studies of :func:`run`, in order: name -> function of ``quick`` giving its result.
 STUDIES: dict[str, Callable[[bool], Any]] = {
     "rng": mc_rng.study,
     "throughput": mc_throughput.throughput,
@@ -59,7 +56,7 @@ STUDIES: dict[str, Callable[[bool], Any]] = {
 #: ring's run at 1e-4 give the references of the Monte Carlo curves). The design studies (bias
 #: against dt, noise correlation time, steep walls, the martingale terms, the time-step policy,
 #: 35 s of the quick run's 66 s) run with ``python -m validation.studies.montecarlo [--quick]``.
-REPORT_STUDIES = ("rng", "throughput", "equal_error", "control_variates", "kink_dt", "series")
+REPORT_STUDIES = ("rng", "throughput", "equal_error", "control_variates", "kink_dt")
 #: Keyword arguments the report's benchmark section passes to :func:`run`.
 REPORT_KW = {"studies": REPORT_STUDIES}
 
@@ -67,10 +64,10 @@ REPORT_KW = {"studies": REPORT_STUDIES}
 def run(quick: bool = False, out: Path | None = None, studies: tuple[str, ...] | None = None) -> dict[str, Any]:
     """Run the benchmark; returns (and writes, when ``out`` is given) the measurements.
 
-    ``studies``: the subset of :data:`STUDIES` (and ``"series"``) to run (default all); the
-    others are listed as not run.
+    ``studies``: the subset of :data:`STUDIES` to run (default all); the others are listed as
+    not run.
     """
-    names = (*STUDIES, "series")
+    names = tuple(STUDIES)
     chosen = names if studies is None else tuple(studies)
     unknown = set(chosen) - set(names)
     if unknown:
@@ -82,47 +79,9 @@ def run(quick: bool = False, out: Path | None = None, studies: tuple[str, ...] |
         if name not in chosen:
             res[key] = {"note": "not run here: python -m validation.studies.montecarlo [--quick] runs every study"}
         else:
-            res[key] = series(quick, res) if name == "series" else STUDIES[name](quick)
+            res[key] = STUDIES[name](quick)
     save_benchmark(res, out, STEM, _plot)
     return res
-
-
-def series(quick: bool, res: dict[str, Any]) -> list[dict[str, Any]]:
-    """Error-versus-time curves for the combined figure (:mod:`validation.sections.benchmarks`): the solver at a
-    few tolerances with and without control variates, for the kink (n = 1, a = 0.5) and the
-    n = 3 ring; references from this run's most precise values (the kink's time-step study at
-    dt = 0.02/0.01 with its bias estimate, the ring's run at 1e-4)."""
-    cases = {"n1_single": (dict(a=0.5, n=1.0), None), "n3_ring": (dict(a=0.5, n=3.0, N=3, k=-0.5), None)}
-    kink = res.get("kink_dt", {})
-    rows = kink.get("a0.5", {}).get("rows", [])
-    if rows:
-        best = min(rows, key=lambda r: r["eta_se"])
-        bias = best["diff"] / (2.0 ** kink["bias_order_used"] - 1.0)
-        rel = math.hypot(best["eta_se"], bias) / best["eta"]
-        cases["n1_single"] = (cases["n1_single"][0], (
-            best["eta"], rel, f"Monte Carlo, dt = {best['dt']:g}, {best['replicas']} x 64 paths, "
-            "bias estimate folded in"))
-    ring = res.get("control_variates", {}).get("N3_n3_a0.5_k-0.5", {}).get("to_1e-4_control")
-    if ring and ring.get("eta"):
-        cases["n3_ring"] = (cases["n3_ring"][0], (
-            ring["eta"], ring["rel_err"],
-            f"Monte Carlo + control variates, run at tol 1e-4 ({ring['status']})"))
-    out = []
-    for problem, (kw, ref) in cases.items():
-        h = Harvester.build(**kw)
-        for control in (False, True):
-            pts = []
-            for j, tol in enumerate((3e-2, 1e-2) if quick else (1e-2, 3e-3, 1e-3)):
-                r = solve(h, "mc", seed=1000 + j, tol=tol, control=control, max_time=60.0, progress=False)
-                if r.eta is not None:
-                    pts.append({"seconds": r.info["wall_time"], "eta": r.eta,
-                                "reported": r.eta_err / abs(r.eta), "tol": tol})
-            cur: dict[str, Any] = {"problem": problem, "points": pts,
-                                   "method": "Monte Carlo + control variates" if control else "Monte Carlo"}
-            if control and ref is not None:
-                cur.update(reference_eta=ref[0], reference_err=ref[1], reference=ref[2])
-            out.append(cur)
-    return out
 
 
 def _plot(res: dict[str, Any], path: Path) -> None:

@@ -6,7 +6,7 @@ import base64
 
 import pytest
 
-from validation.harness.checks import Outcome, agree, expect, skipped
+from validation.harness.checks import Outcome, agree, expect, finding, skipped
 from validation.harness.report import Figure, Report, Section, Table, slowest_checks, summary_text, write_html, write_markdown
 
 
@@ -24,19 +24,23 @@ def report(tmp_path):
     sec.figures.append(Figure(png, "a line"))
     sec.checks += [agree("close", "First section", 1.0, 0.1, 1.1, 0.0),
                    expect("wrong", "First section", False, "must fail"),
-                   skipped("later", "First section", "solver not available")]
+                   skipped("later", "First section", "solver not available"),
+                   finding("paper off", "First section", "a second solver confirms ours", 0.61, 0.609)]
     return Report("Tiny report", [sec], {"mode": "test"})
 
 
 def test_counts_and_failure(report):
-    assert report.counts() == {"PASS": 1, "FAIL": 1, "SKIP": 1}
+    assert report.counts() == {"PASS": 1, "FAIL": 1, "SKIP": 1, "FINDING": 1}
+    assert [c.name for c in report.findings] == ["paper off"]
     assert report.failed
 
 
 def test_markdown(report, tmp_path):
     text = write_markdown(report, tmp_path / "report.md").read_text()
     assert "# Tiny report" in text
-    assert "**1 passed, 1 failed, 1 skipped**" in text
+    assert "**1 passed, 1 finding, 1 failed, 1 skipped**" in text
+    assert "### Findings" in text and "| FINDING | paper off |" in text
+    assert "| First section | 1 | 1 | 1 | 1 |" in text
     assert "![a line](fig.png)" in text
     assert "| a | b\\|c |" in text
     assert "| FAIL | wrong | must fail |" in text
@@ -48,18 +52,20 @@ def test_html_is_self_contained(report, tmp_path):
     assert "data:image/png;base64," + base64.b64encode(png).decode() in page
     assert "src='fig.png'" not in page and 'src="fig.png"' not in page
     assert "<code>code</code>" in page and "<b>bold</b>" in page
-    assert "class=\"fail\"" in page and "class=\"skip\"" in page
+    assert "class=\"fail\"" in page and "class=\"skip\"" in page and "class=\"finding\"" in page
+    assert "1 passed, 1 finding, 1 failed, 1 skipped" in page
 
 
 def test_summary_lists_failures_first_and_flags_skips(report):
     text = summary_text(report)
     assert text.splitlines()[2].startswith("First section")
-    results = [ln.split()[0] for ln in text.splitlines() if ln[:6].strip() in ("PASS", "FAIL", "SKIP")]
-    assert results == ["FAIL", "SKIP"]
-    full = [ln.split()[0] for ln in summary_text(report, show_passed=True).splitlines() if ln[:6].strip() in
-            ("PASS", "FAIL", "SKIP")]
-    assert full == ["FAIL", "SKIP", "PASS"]
-    assert "1 passed, 1 failed, 1 skipped" in text
+    kinds = ("PASS", "FAIL", "SKIP", "FINDING")
+    results = [ln.split()[0] for ln in text.splitlines() if ln.split()[:1] and ln.split()[0] in kinds]
+    assert results == ["FAIL", "SKIP", "FINDING"]
+    full = [ln.split()[0] for ln in summary_text(report, show_passed=True).splitlines()
+            if ln.split()[:1] and ln.split()[0] in kinds]
+    assert full == ["FAIL", "SKIP", "FINDING", "PASS"]
+    assert "1 passed, 1 finding, 1 failed, 1 skipped" in text
     assert "NOT passes" in text
 
 
@@ -69,7 +75,22 @@ def test_table_rejects_ragged_rows():
 
 
 def test_outcome_values():
-    assert [o.value for o in Outcome] == ["PASS", "FAIL", "SKIP"]
+    assert [o.value for o in Outcome] == ["PASS", "FINDING", "FAIL", "SKIP"]
+
+
+def test_findings_alone_do_not_fail_the_run_and_are_not_read_as_failures():
+    """A run with a finding exits 0; its last count line names no failure a test-log reader
+    looking for "N failed" could pick up."""
+    import re
+
+    from validation.harness.runner import exit_code
+
+    sec = Section("s", "S", checks=[agree("ok", "S", 1.0, 0.1, 1.0, 0.0), finding("off", "S", "confirmed")])
+    rep = Report("r", [sec])
+    assert exit_code(rep, quick=True) == 0 and exit_code(rep, quick=False) == 0
+    line = next(ln for ln in reversed(summary_text(rep).splitlines()) if "passed" in ln)
+    assert line == "1 passed, 1 finding, 0 failed, 0 skipped"
+    assert [int(m) for m in re.findall(r"(\d+) failed", line)] == [0]
 
 
 def test_summary_names_the_slowest_computations_once_each():

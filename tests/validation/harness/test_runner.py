@@ -33,6 +33,14 @@ def _crashing(ctx):
     raise RuntimeError("step exploded")
 
 
+def _finding(ctx):
+    from validation.harness.checks import finding
+
+    sec = Section("paper", "Finding step")
+    sec.checks.append(finding("paper off", "Finding step", "a second solver confirms ours", 0.6103, 0.609))
+    return sec
+
+
 def _skipping(ctx):
     from validation.harness.checks import skipped
 
@@ -95,6 +103,7 @@ def test_cli_arguments():
     (((_passing, "Passing step"), (_failing, "Failing step")), True, 1),
     (((_passing, "Passing step"), (_skipping, "Skipping step")), True, 0),
     (((_passing, "Passing step"), (_skipping, "Skipping step")), False, 1),
+    (((_passing, "Passing step"), (_finding, "Finding step")), True, 0),
 ])
 def test_cli_exit_code(monkeypatch, tmp_path, capsys, steps, quick, code):
     """A failure fails any run; a skip fails the full run, and a quick run names every skip."""
@@ -108,7 +117,10 @@ def test_cli_exit_code(monkeypatch, tmp_path, capsys, steps, quick, code):
     assert ("1 FAILED" in captured.err) == any(title == "Failing step" for _, title in steps)
     assert (tmp_path / "report.html").is_file()
     if any(title == "Skipping step" for _, title in steps):
-        assert "SKIP    never ran" in out and "check(s) SKIPPED" in out
+        assert "SKIP     never ran" in out and "check(s) SKIPPED" in out
+    if any(title == "Finding step" for _, title in steps):
+        assert "FINDING  paper off" in out and "40 passed, 1 finding, 0 failed, 3 skipped" in out
+        assert "Finding step: " in captured.err and "1 checks, 1 finding" in captured.err
         assert ("a quick run fails below 90%" in out) == quick
 
 

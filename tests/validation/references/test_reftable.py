@@ -4,7 +4,10 @@ from __future__ import annotations
 
 import dataclasses
 
-from fpe_harvester import Harvester, solve
+import pytest
+
+from fpe_harvester import Harvester, Stats, Status, solve
+from validation.references import reftable
 from validation.references.reftable import CASES, compare, load
 
 
@@ -25,3 +28,63 @@ def test_a_fresh_solve_agrees_with_the_table_and_a_wrong_one_does_not() -> None:
     off = dataclasses.replace(r, eta=r.eta * (1 + 1e-4))
     assert not compare("fpe n = 4, a = 0.5", off)[0][1]
     assert not compare("no such case", r)[0][1]
+
+
+#: Fokker--Planck entries cheap enough (recorded wall time [s]) for the normal suite; the others
+#: are marked slow.
+CHEAP_S = 20.0
+
+
+def _fpe_params() -> list:
+    table = load()
+    return [pytest.param(c, id=c.label, marks=() if table[c.label]["seconds"] <= CHEAP_S else pytest.mark.slow)
+            for c in CASES if c.method == "fpe"]
+
+
+@pytest.mark.parametrize("case", _fpe_params())
+def test_a_fokker_planck_entry_matches_a_fresh_solve_at_its_tolerance(case) -> None:
+    """A change to the solver that moves a result by more than 4 combined errors (the entry's
+    and the fresh one's) shows here: regenerate the entry (python -m validation.references.reftable
+    --only LABEL) or fix the solver."""
+    r = solve(case.h, case.method, **case.options)
+    checks = compare(case.label, r)
+    assert all(ok for _, ok, _ in checks), checks
+
+
+def test_no_entry_is_stamped_with_an_uncommitted_tree() -> None:
+    for label, entry in load().items():
+        assert "+" not in entry["commit"] and entry["commit"] != "unknown", (label, entry["commit"])
+
+
+def test_staleness_names_what_is_wrong() -> None:
+    head = reftable._git("rev-parse", "--short", "HEAD")
+    assert reftable.staleness(None, "fpe") == "missing"
+    assert "not a commit" in reftable.staleness({"commit": "96b6666+changes"}, "mc")
+    assert reftable.staleness({"commit": head}, "fpe") is None
+    first = reftable._git("rev-list", "--max-parents=0", "HEAD").split()[0]
+    assert "later commit(s) changed its code" in reftable.staleness({"commit": first}, "mc")
+
+
+def test_the_command_refuses_an_uncommitted_tree(monkeypatch, capsys, tmp_path) -> None:
+    real = reftable._git
+    monkeypatch.setattr(reftable, "_git", lambda *a: " M montecarlo/solver.py" if a[0] == "status" else real(*a))
+    monkeypatch.setattr(reftable, "solve", lambda *a, **k: pytest.fail("must not solve"))
+    out = tmp_path / "table.json"
+    assert reftable.main(["--only", "mc n = 3, a = 0.5", "--out", str(out)]) == 1
+    assert "uncommitted changes" in capsys.readouterr().err and not out.exists()
+
+
+def test_crosscheck_compares_a_system_with_every_entry_it_has() -> None:
+    """n = 3, a = 0.5 has a Fokker-Planck and a Monte Carlo entry: a result is held to both."""
+    from types import SimpleNamespace
+
+    from validation.sections.crosscheck import table_checks
+
+    h = Harvester.build(a=0.5, n=3.0)
+    entry = load()["fpe n = 3, a = 0.5"]
+    r = Stats(status=Status.STABLE, method="fpe", **{q: entry[q] for q in ("eta", "V2", "Pin")},
+              **{q + "_err": entry[q + "_err"] for q in ("eta", "V2", "Pin")})
+    ctx = SimpleNamespace(cache=SimpleNamespace(results=lambda: [(h, "fpe", r)]))
+    names = [c.name for c in table_checks(ctx)]
+    assert any("fpe n = 3, a = 0.5" in n for n in names) and any("mc n = 3, a = 0.5" in n for n in names)
+    assert len(names) == 6

@@ -56,22 +56,26 @@ def test_paper_row_check_fails_on_a_wrong_number_and_on_a_missing_one():
     assert not _row_check(row, -0.33, replace(r, status=Status.UNSTABLE), 0.0005).passed
 
 
-def test_a_paper_disagreement_passes_only_when_a_second_solver_confirms_ours(monkeypatch):
+def test_a_paper_disagreement_is_a_finding_only_when_a_second_solver_confirms_ours(monkeypatch):
     """The best single unit (n = 1, a = 0.5): the paper prints 0.609, both our solvers give 0.6103.
-    The row passes as a documented disagreement only while the independent second solver agrees
-    with the first and not with the paper."""
+    The row is a FINDING (not a pass) only while the independent second solver agrees with the
+    first and not with the paper; otherwise it fails."""
+    from validation.harness.checks import Outcome
+
     row = PAPER_ROWS[0]
     fpe = Stats(status=Status.STABLE, method="fpe", eta=0.6103035, eta_err=4.3e-5)
     mc = Stats(status=Status.STABLE, method="mc", eta=0.610596, eta_err=1.6e-4, message="long run")
     monkeypatch.setattr(paper, "second_solver", lambda row, r: mc)
     confirmed = _row_check(row, 0.0, fpe, 0.0005)
-    assert confirmed.passed and confirmed.detail.startswith("THE PAPER'S PRINTED VALUE DISAGREES")
+    assert confirmed.outcome is Outcome.FINDING and not confirmed.passed
+    assert confirmed.detail.startswith("THE PAPER'S PRINTED VALUE DISAGREES")
+    assert (confirmed.value, confirmed.reference) == (fpe.eta, 0.609)
     monkeypatch.setattr(paper, "second_solver", lambda row, r: replace(mc, eta=0.6092))  # sides with the paper
-    assert not _row_check(row, 0.0, fpe, 0.0005).passed
+    assert _row_check(row, 0.0, fpe, 0.0005).outcome is Outcome.FAIL
     monkeypatch.setattr(paper, "second_solver", lambda row, r: replace(mc, eta=0.6130))  # disagrees with fpe
-    assert not _row_check(row, 0.0, fpe, 0.0005).passed
+    assert _row_check(row, 0.0, fpe, 0.0005).outcome is Outcome.FAIL
     monkeypatch.setattr(paper, "second_solver", lambda row, r: None)  # no second solver: a plain failure
-    assert not _row_check(row, 0.0, fpe, 0.0005).passed
+    assert _row_check(row, 0.0, fpe, 0.0005).outcome is Outcome.FAIL
     # the recorded second solver exists for this row and is the long Monte Carlo run
     monkeypatch.undo()
     second = paper.second_solver(row, fpe)

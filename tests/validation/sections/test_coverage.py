@@ -7,7 +7,7 @@ import pytest
 
 from fpe_harvester import Harvester, solve
 from validation.sections.coverage import (NORMAL_COVERAGE, QUICK_CASES, CoverageCase, binomial_limits, coverage_checks,
-                                 mc_coverage)
+                                          detection, mc_coverage, min_results)
 
 
 def test_quick_cases_use_other_solvers_and_the_kink() -> None:
@@ -30,23 +30,46 @@ def test_binomial_limits() -> None:
     assert binomial_limits(100, 0.9973)[0] > 0.96
 
 
-def test_checks_fail_when_the_bars_are_too_small_or_too_large() -> None:
-    """Honest bars pass; the same z with bars 1.5x too small, or 2x too large, fail, at the full
-    grid's number of results per quantity (104: over 200 seeds honest bars passed 99 %, and a
-    quantity's 1.5x too small bars failed one of its checks 97 % of the time)."""
-    from validation.sections.coverage import FULL_CASES, FULL_RUNS
+def _typical(count: int, scale: float) -> list[float]:
+    """``count`` z at the normal quantiles (i + 1/2)/count, times ``scale``: the typical sample
+    of results whose reported errors are off by 1/scale."""
+    import scipy.stats
 
-    count = sum(c.runs or FULL_RUNS for c in FULL_CASES)
-    assert count >= 100
+    return list(scale * scipy.stats.norm.ppf((np.arange(count) + 0.5) / count))
+
+
+@pytest.mark.parametrize("run", ["quick", "full"])
+def test_checks_fail_when_the_bars_are_too_small_or_too_large(run) -> None:
+    """Honest bars pass; the typical results of bars 1.5x too small, or 2x too large, fail, at
+    the number of results per quantity of the quick run (60) and of the full grid (104)."""
+    from validation.sections.coverage import FULL_CASES, FULL_RUNS
+    from validation.sections.errorbars import _QUICK_MC_RUNS
+
+    count = len(QUICK_CASES) * _QUICK_MC_RUNS if run == "quick" else sum(c.runs or FULL_RUNS for c in FULL_CASES)
+    assert count >= min_results(0.5 if run == "quick" else 0.9)
     rng = np.random.default_rng(5)
-    z = {q: list(rng.standard_normal(count)) for q in ("eta", "V2", "Pin")}
-    assert all(ok for _, ok, _ in coverage_checks(z))
-    shrunk = {q: [1.5 * v for v in zq] for q, zq in z.items()}        # reported errors / 1.5
-    for q in shrunk:
-        assert not all(ok for _, ok, _ in coverage_checks({q: shrunk[q]})), q
-    widened = {q: [0.5 * v for v in zq] for q, zq in z.items()}
-    assert not any(ok for label, ok, _ in coverage_checks(widened) if "within 1 " in label)
+    assert all(ok for _, ok, _ in coverage_checks({q: list(rng.standard_normal(count)) for q in ("eta", "V2")}))
+    assert all(ok for _, ok, _ in coverage_checks({"eta": _typical(count, 1.0)}))
+    shrunk = [detail for _, ok, detail in coverage_checks({"eta": _typical(count, 1.5)}) if not ok]
+    assert shrunk and all("too narrow" in d for d in shrunk)                 # reported errors / 1.5
+    wide = [(label, d) for label, ok, d in coverage_checks({"eta": _typical(count, 0.5)}) if not ok]
+    assert any("within 1 " in label and "too wide" in d for label, d in wide)  # reported errors x 2
     assert NORMAL_COVERAGE[0] == pytest.approx(0.6827, abs=1e-4)
+
+
+def test_detection_probability_of_misscaled_bars() -> None:
+    """The power the runs are sized by, checked by simulation: 300 synthetic quantities of 48
+    results with bars 1.5x too small fail at the predicted rate (a lower bound) or more."""
+    rng = np.random.default_rng(7)
+    predicted = detection(48, 1.5)
+    failed = np.mean([not all(ok for _, ok, _ in coverage_checks({"q": list(1.5 * rng.standard_normal(48))}))
+                      for _ in range(300)])
+    assert 0.5 <= predicted <= failed + 0.1
+    assert detection(60, 0.5) > 0.99 and detection(104, 1.5) > 0.9
+    assert min_results(0.5) == 48 and min_results(0.9) == 95
+    honest = np.mean([all(ok for _, ok, _ in coverage_checks({"q": list(rng.standard_normal(48))}))
+                      for _ in range(300)])
+    assert honest > 0.98
 
 
 def test_coverage_fails_for_a_wrong_reference() -> None:

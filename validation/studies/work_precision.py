@@ -1,0 +1,302 @@
+"""Work-precision diagrams: each solver's actual error on eta against its wall time.
+
+The field's convention (SciMLBenchmarks, DifferentialEquations.jl): every method on the same
+axes, over a range of tolerances from 1e-2 down to the smallest each reaches within a budget,
+the error measured against a reference that does not share its errors.
+
+* **harmonic ring** (a = 0.5, k = -0.2): the exact solver's wall time against the ring size N
+  up to 1e6, beside scipy's dense 4N x 4N Lyapunov solve (what a user would otherwise call) for
+  small N, each with its error against the closed form in 60-digit arithmetic;
+* **smooth unit** (n = 3, a = 0.5), **the kink** (n = 1, a = 0.5 and a = 1) and **the n = 3
+  ring** (N = 3, a = 0.5, k = -0.5): Fokker--Planck (single units), Monte Carlo, and the two
+  baselines a user would otherwise write: plain Monte Carlo (``control=False,
+  martingale=False``: no control variates) and a numpy Euler--Maruyama script vectorised over
+  paths (:func:`montecarlo.simulate_naive` at the usual dt = 0.01, its run length chosen from
+  a pilot run to meet each tolerance). A Monte Carlo point is the rms actual error over
+  several seeds at one tolerance, beside the mean error the runs reported.
+
+References (:func:`reference`): for Monte Carlo, the reference table's Fokker--Planck entry
+(units) or its independent long Monte Carlo run (the ring); for Fokker--Planck, its entry at a
+tighter tolerance (n = 3) or the kink's independent long Monte Carlo run. An error below the
+reference's own is not resolved: the figure shows that floor.
+
+``python -m validation.studies.work_precision [--quick] [--out DIR]`` writes
+``work_precision.json`` and ``work_precision.png`` (full: about 25 min; quick: < 2 min).
+"""
+
+from __future__ import annotations
+
+import math
+import time
+from collections.abc import Callable
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from fpe_harvester import Harvester, solve
+from validation.studies.cli import bench_main, save_benchmark
+
+__all__ = ["STEM", "RECORDED", "COMMAND", "CAPTION", "CASES", "METHODS", "reference", "harmonic", "ladder", "run",
+           "draw", "plot", "summary_rows"]
+
+#: Name of the written ``.json`` and ``.png``.
+STEM = "work_precision"
+#: The recorded full run that the report and the docs site draw.
+RECORDED = Path(__file__).resolve().parents[1] / "data" / f"{STEM}.json"
+#: The command that writes :data:`RECORDED` again.
+COMMAND = "python -m validation.studies.work_precision --out validation/data"
+#: What the figure shows.
+CAPTION = ("Work-precision diagrams. Left: the harmonic ring's exact solver against scipy's dense Lyapunov solve, "
+           "wall time against ring size. Other panels: actual relative error of eta against wall time, one curve "
+           "per solver over tolerances from 1e-2 down (Monte Carlo: rms over seeds; small dots: the mean error the "
+           "runs reported), plain Monte Carlo and a numpy Euler-Maruyama script as the baselines; dotted grey: the "
+           "reference's own error, below which an error is not resolved.")
+
+#: The nonlinear cases: key -> (title, Harvester.build arguments).
+CASES: dict[str, tuple[str, dict[str, Any]]] = {
+    "unit_n3": ("smooth unit n = 3, a = 0.5", {"n": 3.0, "a": 0.5}),
+    "kink_a0.5": ("kink n = 1, a = 0.5", {"n": 1.0, "a": 0.5}),
+    "kink_a1": ("kink n = 1, a = 1", {"n": 1.0, "a": 1.0}),
+    "ring_n3": ("ring N = 3, n = 3, a = 0.5, k = -0.5", {"n": 3.0, "a": 0.5, "N": 3, "k": -0.5}),
+}
+#: Solvers and baselines, in drawing order.
+METHODS = ("fpe", "mc", "mc plain", "euler-maruyama")
+#: Euler--Maruyama baseline: time step [s], paths per replica, burn-in and pilot window [s].
+EM_DT, EM_PATHS, EM_BURN, EM_PILOT = 0.01, 256, 20.0, 50.0
+
+
+def _settings(quick: bool) -> dict[str, Any]:
+    """Tolerances, seeds and budgets [s] (per run, and per solver and case in total)."""
+    if quick:
+        return {"tols": (1e-2, 3e-3), "fpe_tols": (1e-2, 1e-3), "seeds": 2, "run_s": 8.0, "budget_s": 5.0,
+                "ring_N": (3, 100, 10_000, 1_000_000), "dense_N": (3, 10, 30), "mp_N_max": 100}
+    return {"tols": (1e-2, 5e-3, 2e-3, 1e-3, 5e-4, 2e-4, 1e-4), "fpe_tols": (1e-2, 1e-3, 1e-4, 1e-5, 1e-6),
+            "seeds": 4, "run_s": 60.0, "budget_s": 120.0,
+            "ring_N": (3, 10, 100, 1000, 10_000, 100_000, 1_000_000), "dense_N": (3, 10, 30, 100, 200),
+            "mp_N_max": 1000}
+
+
+def reference(key: str, method: str) -> dict[str, Any]:
+    """The reference of case ``key`` for ``method``'s errors: ``{"eta", "rel_err", "source"}``.
+
+    Never the method's own result at a similar setting: Monte Carlo is measured against
+    Fokker--Planck (units) or an independent long run (the ring); Fokker--Planck against its
+    table entry at 1e-7 (n = 3: ten times tighter than the tightest point) or, at the kink,
+    where its table entry is only 1e-4, against the independent long Monte Carlo run.
+    """
+    from validation.references.reftable import load, recorded_kink
+
+    _, system = CASES[key]
+    h = Harvester.build(**system)
+    if method == "fpe" and h.n == 1.0:
+        d = recorded_kink(h.a)
+        return {"eta": d["eta"], "rel_err": d["eta_err"] / d["eta"],
+                "source": f"long Monte Carlo run (kink_mc_reference_values.json a{h.a:g}, seed {d['seed']})"}
+    label = (f"mc n = {h.n:g}, N = {h.N}, a = {h.a:g}, k = {h.k:g}" if h.N > 1
+             else f"fpe n = {h.n:g}, a = {h.a:g}")
+    e = load()[label]
+    return {"eta": e["eta"], "rel_err": e["eta_err"] / e["eta"],
+            "source": f"reference table '{label}' ({e['method']}, commit {e['commit']})"}
+
+
+def _timed(fn: Callable[[], Any]) -> tuple[float, Any]:
+    t0 = time.perf_counter()
+    out = fn()
+    return time.perf_counter() - t0, out
+
+
+def harmonic(quick: bool) -> dict[str, Any]:
+    """The harmonic ring: exact and dense-Lyapunov wall times against N, errors vs 60 digits."""
+    from fpe_harvester.exact import dense_covariance
+    from validation.references.analytic import mp_closed_form
+
+    cfg = _settings(quick)
+    rows = []
+    for method, sizes in (("exact", cfg["ring_N"]), ("scipy dense Lyapunov", cfg["dense_N"])):
+        for N in sizes:
+            h = Harvester.build(a=0.5, N=N, k=-0.2)
+            if method == "exact":
+                wall = min(_timed(lambda: solve(h))[0] for _ in range(3))
+                eta = solve(h).eta
+            else:
+                wall, C = min((_timed(lambda: dense_covariance(h)) for _ in range(2)), key=lambda tc: tc[0])
+                eta = float(np.diag(C)[2::4].mean()) / (float(np.diag(C, 2)[1::4].mean()) * h.params.sigma)
+            ref = float(mp_closed_form(h)["eta"]) if N <= cfg["mp_N_max"] else None
+            rows.append({"method": method, "N": N, "seconds": wall, "eta": eta,
+                         "error": None if ref is None else abs(eta / ref - 1)})
+    return {"title": "harmonic ring a = 0.5, k = -0.2", "reference": "closed form in 60-digit arithmetic",
+            "rows": rows}
+
+
+def _em_run(h: Harvester, tol: float, seed: int, pilot: dict[str, float],
+            run_s: float) -> tuple[float, float | None, float | None, str]:
+    """The Euler--Maruyama baseline at ``tol``: replicas so that the standard error meets it,
+    scaled from the pilot (standard error ~ 1/sqrt(replicas)). Returns (wall, eta, err, status);
+    a run predicted to take longer than ``run_s`` [s] is not started (no numbers)."""
+    from montecarlo import estimate, simulate_naive
+
+    replicas = max(2, math.ceil(pilot["replicas"] * (pilot["rel_se"] / tol) ** 2))
+    if pilot["seconds"] * replicas / pilot["replicas"] > run_s:
+        return 0.0, None, None, "over budget"
+    wall, ens = _timed(lambda: simulate_naive(h, dt=EM_DT, paths=EM_PATHS, replicas=replicas, t_burn=EM_BURN,
+                                              t_run=EM_PILOT, seed=seed))
+    est = estimate(ens, h, control=False)
+    return wall, est.mean["eta"], est.se["eta"], "stable"
+
+
+def _em_pilot(h: Harvester, seed: int) -> dict[str, float]:
+    from montecarlo import estimate, simulate_naive
+
+    wall, ens = _timed(lambda: simulate_naive(h, dt=EM_DT, paths=EM_PATHS, replicas=4, t_burn=EM_BURN,
+                                              t_run=EM_PILOT, seed=seed))
+    est = estimate(ens, h, control=False)
+    return {"replicas": 4, "rel_se": est.se["eta"] / abs(est.mean["eta"]), "seconds": wall}
+
+
+def _runner(method: str, h: Harvester, cfg: dict[str, Any]) -> Callable[[float, int], tuple[float, Any, Any, str]]:
+    """``run(tol, seed) -> (wall [s], eta, reported error, status)`` of one solver."""
+    if method == "euler-maruyama":
+        pilot = _em_pilot(h, seed=99)
+        return lambda tol, seed: _em_run(h, tol, seed, pilot, cfg["run_s"])
+    options: dict[str, Any] = {"max_seconds": cfg["run_s"]} if method == "fpe" else {
+        "max_time": cfg["run_s"], "progress": False, **({"control": False, "martingale": False}
+                                                        if method == "mc plain" else {})}
+
+    def one(tol: float, seed: int) -> tuple[float, float, float, str]:
+        wall, r = _timed(lambda: solve(h, method.split()[0], tol=tol, **options,
+                                       **({} if method == "fpe" else {"seed": seed})))
+        return wall, r.eta, r.eta_err, r.status.value
+
+    return one
+
+
+def ladder(run_one: Callable[[float, int], tuple[float, Any, Any, str]], tols: tuple[float, ...],
+           seeds: int, ref_eta: float, budget_s: float) -> list[dict[str, Any]]:
+    """One point per tolerance, tightest last: the rms actual relative error over ``seeds``
+    runs and the mean reported relative error, and the mean wall time [s]. Stops after a
+    tolerance at which a run did not converge or the total time passed ``budget_s``."""
+    points, spent = [], 0.0
+    for tol in tols:
+        runs = [run_one(tol, 1000 + s) for s in range(seeds)]
+        spent += sum(r[0] for r in runs)
+        done = [r for r in runs if r[1] is not None]
+        if not done:
+            break
+        actual = [(r[1] / ref_eta - 1.0) ** 2 for r in done]
+        points.append({"tol": tol, "seconds": float(np.mean([r[0] for r in runs])),
+                       "error": math.sqrt(float(np.mean(actual))),
+                       "reported": float(np.mean([(r[2] or math.nan) / abs(r[1]) for r in done])),
+                       "runs": len(done), "statuses": sorted({r[3] for r in runs})})
+        if spent > budget_s or any(r[3] != "stable" for r in runs):
+            break
+    return points
+
+
+def _case(key: str, quick: bool) -> dict[str, Any]:
+    cfg = _settings(quick)
+    title, system = CASES[key]
+    h = Harvester.build(**system)
+    curves = []
+    for method in METHODS:
+        if method == "fpe" and h.N > 1:
+            continue
+        ref = reference(key, "fpe" if method == "fpe" else "mc")
+        fpe = method == "fpe"
+        points = ladder(_runner(method, h, cfg), cfg["fpe_tols"] if fpe else cfg["tols"], 1 if fpe else cfg["seeds"],
+                        ref["eta"], cfg["budget_s"])
+        curves.append({"method": method, "reference": ref, "points": points})
+    return {"title": title, "system": system, "curves": curves}
+
+
+def run(quick: bool = False, out: Path | str | None = None) -> dict[str, Any]:
+    """Run the study; returns (and writes into ``out``, when given) the measurements."""
+    t0 = time.perf_counter()
+    res: dict[str, Any] = {"quick": quick, "settings": {k: list(v) if isinstance(v, tuple) else v
+                                                        for k, v in _settings(quick).items()},
+                           "harmonic": harmonic(quick), "cases": {key: _case(key, quick) for key in CASES}}
+    res["wall_s"] = time.perf_counter() - t0
+    save_benchmark(res, out, STEM, plot)
+    return res
+
+
+_STYLE = {"fpe": ("o-", "C0"), "mc": ("s-", "C1"), "mc plain": ("^--", "C2"), "euler-maruyama": ("v:", "C3"),
+          "exact": ("o-", "C0"), "scipy dense Lyapunov": ("s--", "C3")}
+
+
+def draw(res: dict[str, Any], axes: Any) -> None:
+    """Draw the diagrams on ``axes`` (at least 1 + len(CASES) matplotlib axes, flat)."""
+    ax = axes[0]
+    rows = res["harmonic"]["rows"]
+    for method in ("exact", "scipy dense Lyapunov"):
+        mine = [r for r in rows if r["method"] == method]
+        style, color = _STYLE[method]
+        ax.loglog([r["N"] for r in mine], [r["seconds"] for r in mine], style, color=color, label=method)
+    ax.set(xlabel="ring size N", ylabel="wall time [s]", title=res["harmonic"]["title"])
+    ax.legend(fontsize=7)
+    for ax, case in zip(axes[1:], res["cases"].values()):
+        floors = {}
+        for curve in case["curves"]:
+            pts = curve["points"]
+            style, color = _STYLE[curve["method"]]
+            ax.loglog([p["seconds"] for p in pts], [max(p["error"], 1e-12) for p in pts], style, color=color,
+                      label=curve["method"])
+            if curve["method"] in ("mc", "mc plain"):
+                ax.loglog([p["seconds"] for p in pts], [p["reported"] for p in pts], ".", color=color, alpha=0.5)
+            floors[curve["reference"]["source"]] = curve["reference"]["rel_err"]
+        for rel in set(floors.values()):
+            ax.axhline(rel, color="grey", lw=0.8, ls=":")
+        ax.set(xlabel="wall time [s]", ylabel="actual relative error of eta", title=case["title"])
+        ax.title.set_fontsize(9)
+        ax.legend(fontsize=7)
+
+
+def summary_rows(res: dict[str, Any]) -> tuple[list[str], list[list[str]]]:
+    """Header and rows of the table beside the figure: per case and solver, the tolerances
+    run, the smallest actual error reached and its wall time, the reported over the actual
+    error at that point, and the reference."""
+    head = ["case", "solver", "tolerances", "smallest actual error", "wall time there [s]",
+            "reported / actual there", "reference"]
+    rows = []
+    for case in res["cases"].values():
+        for c in case["curves"]:
+            pts = c["points"]
+            if not pts:
+                rows.append([case["title"], c["method"], "-", "no result within the budget", "-", "-",
+                             c["reference"]["source"]])
+                continue
+            best = min(pts, key=lambda p: p["error"])
+            ratio = best["reported"] / best["error"] if best["error"] > 0 else math.inf
+            rows.append([case["title"], c["method"], f"{pts[0]['tol']:g} ... {pts[-1]['tol']:g}",
+                         f"{best['error']:.2g}", f"{best['seconds']:.3g}", f"{ratio:.2g}", c["reference"]["source"]])
+    for method in ("exact", "scipy dense Lyapunov"):
+        mine = [r for r in res["harmonic"]["rows"] if r["method"] == method]
+        errs = [r["error"] for r in mine if r["error"] is not None]
+        rows.append([res["harmonic"]["title"], method, f"N = {mine[0]['N']} ... {mine[-1]['N']}",
+                     f"{max(errs):.2g} (largest)" if errs else "-",
+                     f"{mine[-1]['seconds']:.3g} (N = {mine[-1]['N']})", "-", res["harmonic"]["reference"]])
+    return head, rows
+
+
+def plot(res: dict[str, Any], path: Path) -> None:
+    """Write the figure: one panel per case (harmonic first), log-log."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    panels = 1 + len(res["cases"])
+    fig, axes = plt.subplots(2, (panels + 1) // 2, figsize=(4.2 * ((panels + 1) // 2), 7.6))
+    flat = list(np.ravel(axes))
+    draw(res, flat)
+    for ax in flat[panels:]:
+        ax.set_visible(False)
+    fig.suptitle("work-precision: solid/dashed lines rms actual error over seeds, dots the reported error, "
+                 "dotted grey the reference's own error", fontsize=9)
+    fig.tight_layout()
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
+
+
+if __name__ == "__main__":  # pragma: no cover
+    bench_main(run, __doc__, drop=("harmonic", "cases"))
