@@ -27,7 +27,9 @@ Discretization of the half space x >= 0 (the density is symmetric under
 
 from __future__ import annotations
 
+import json
 import math
+import resource
 import time
 import tracemalloc
 from dataclasses import dataclass
@@ -43,7 +45,9 @@ from fpe_harvester.fpe.plane import DGLine, PlaneMesh
 from fpe_harvester.fpe.schemes.xv.kinkdisc import kink_domain
 from fpe_harvester.model import Harvester
 
-__all__ = ["XVWMesh", "XVWResult", "solve_xvw"]
+from .cli import bench_main, study_runner
+
+__all__ = ["XVWMesh", "XVWResult", "solve_xvw", "CASES", "QUICK_CASES", "study", "run"]
 
 
 @dataclass(frozen=True)
@@ -81,7 +85,7 @@ class XVWMesh:
 
 @dataclass(frozen=True)
 class XVWResult:
-    """One level: eta, V2, Pin (half-space integrals doubled), unknowns, GMRES iterations,
+    r"""One level: eta, V2, Pin (half-space integrals doubled), unknowns, GMRES iterations,
     relative residuals of the exact identities :math:`V^2 = K_c\tau_p\langle vV\rangle` and
     :math:`P_{in} = m\gamma\langle v^2\rangle + K_v\langle vV\rangle`, seconds (assembly, preconditioner factorization, GMRES) and peak traced memory [GB]."""
 
@@ -94,10 +98,11 @@ class XVWResult:
     seconds: dict[str, float]
     peak_gb: float
     mesh: XVWMesh
+    maxrss_gb: float = 0.0
 
     def to_dict(self) -> dict[str, Any]:
         return {"eta": self.eta, "V2": self.V2, "Pin": self.Pin, "unknowns": self.unknowns,
-                "iterations": self.iterations, "residuals": self.residuals, "seconds": self.seconds, "peak_gb": self.peak_gb,
+                "iterations": self.iterations, "residuals": self.residuals, "seconds": self.seconds, "peak_gb": self.peak_gb, "maxrss_gb": self.maxrss_gb,
                 "mesh": self.mesh.__dict__}
 
 
@@ -256,5 +261,52 @@ def solve_xvw(h: Harvester, ms: XVWMesh, rtol: float = 1e-9, maxiter: int = 600,
     vV, v2 = (2.0 * float(asm[k] @ c0) / mass for k in ("vV", "v2"))
     q = h.params
     residuals = {"V2": (V2 - q.Kc * q.tau_p * vV) / V2, "power": (Pin - q.m * q.gamma * v2 - q.Kv * vV) / Pin}
+    rss = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1e6  # kB on Linux
     return XVWResult(V2 / (q.R * Pin), V2, Pin, N, its[0], residuals,
-                     {"assembly": t1 - t0, "factorization": t2 - t1, "gmres": t3 - t2}, peak, ms)
+                     {"assembly": t1 - t0, "factorization": t2 - t1, "gmres": t3 - t2}, peak, ms, rss)
+
+
+#: (a, mesh changes) of the study: refinement in degree, xi-modes and V layers at a = 0.5
+#: (reference: scheme xv, eta = 0.6103035 +- 4e-5), then a = 1 (0.4075292 +- 2.4e-5) and a = 2
+#: (Monte Carlo 0.12288 +- 0.00020).
+CASES: tuple[tuple[float, dict[str, Any]], ...] = (
+    (0.5, {"p": 1, "K": 3}), (0.5, {"p": 2, "K": 3}), (0.5, {"p": 2, "K": 5}), (0.5, {"p": 2, "K": 7}),
+    (0.5, {"p": 2, "K": 5, "v_layers": 5}), (0.5, {"p": 2, "K": 5, "bulk_x": 5, "bulk_v": 3}),
+    (1.0, {"p": 2, "K": 5}), (2.0, {"p": 2, "K": 5}), (2.0, {"p": 2, "K": 5, "v_layers": 5}),
+    (2.0, {"p": 2, "K": 5, "layers": 4}),
+)
+QUICK_CASES = CASES[:2]
+#: The smallest (x, v) mesh of the study: 2 layers toward the trap, 3 + 2 bulk elements.
+BASE = {"layers": 2, "bulk_x": 3, "bulk_v": 2, "v_layers": 2, "v_bulk": 2}
+
+
+def study(quick: bool) -> dict[str, Any]:
+    """Solve every case (each on :data:`BASE` with its changes); a case whose GMRES stalls is
+    recorded with its message."""
+    rows = []
+    for a, changes in QUICK_CASES if quick else CASES:
+        ms = XVWMesh(**{**BASE, **changes})
+        try:
+            res = solve_xvw(Harvester.build(n=1, a=a), ms)
+            rows.append({"a": a, **res.to_dict()})
+        except NotConvergedError as exc:
+            rows.append({"a": a, "mesh": ms.__dict__, "failed": str(exc)})
+        print(json.dumps(rows[-1]), flush=True)
+    return {"rows": rows}
+
+
+def _draw(res: dict[str, Any], ax: Any) -> None:
+    for a in sorted({r["a"] for r in res["rows"]}):
+        pts = [(r["unknowns"], r["eta"]) for r in res["rows"] if r["a"] == a and "eta" in r]
+        if pts:
+            ax.plot(*zip(*pts), "o", label=f"a = {a:g}")
+    ax.set_xscale("log")
+    ax.set_xlabel("unknowns")
+    ax.set_ylabel("eta")
+    ax.legend()
+
+
+run = study_runner(study, "xvw", _draw)
+
+if __name__ == "__main__":  # pragma: no cover
+    bench_main(run, __doc__)
