@@ -108,7 +108,7 @@ class XVWResult:
 
 @functools.cache
 def _scales(h: Harvester) -> tuple[float, float]:
-    """:math:`\langle v^2\rangle` and :math:`\langle V^2\rangle` that set the mesh: from a short
+    r""":math:`\langle v^2\rangle` and :math:`\langle V^2\rangle` that set the mesh: from a short
     Monte Carlo run (2 % on eta, seed 1). The equivalent harmonic unit's are far off at the
     strong kink (a = 2: V2 50 times too small, the V domain then cuts the density off); scheme
     ``"xv"`` takes them from a pilot level instead."""
@@ -118,10 +118,12 @@ def _scales(h: Harvester) -> tuple[float, float]:
     return float(res.v2), float(res.V2)
 
 
-def _axes(h: Harvester, ms: XVWMesh) -> tuple[DGLine, DGLine, DGLine]:
-    """The three 1-D DG spaces: x in [0, Lx], v in [-Lv, Lv], V in [-LV, LV]."""
+def _axes(h: Harvester, ms: XVWMesh, scales: tuple[float, float] | None = None
+          ) -> tuple[DGLine, DGLine, DGLine]:
+    """The three 1-D DG spaces: x in [0, Lx], v in [-Lv, Lv], V in [-LV, LV], for the moments
+    ``scales`` = (v2, V2) (default :func:`_scales`)."""
     p = h.params
-    v2, V2 = _scales(h)
+    v2, V2 = _scales(h) if scales is None else scales
     sF = math.sqrt(p.sigma**2 * p.D / p.tau + p.Kv**2 * V2)
     Lx, Lv = kink_domain(h, v2, sF)
     plane = PlaneMesh(Lx=Lx, Lv=Lv, Ec=p.m * v2, a=h.a, layers=ms.layers, ratio=ms.ratio,
@@ -171,10 +173,11 @@ def _face_sum(line: DGLine, pos: list[sp.spmatrix], neg: list[sp.spmatrix], oute
     return out.tocsr()
 
 
-def assemble(h: Harvester, ms: XVWMesh) -> dict[str, Any]:
-    """Transport matrices per xi-mode, the 3-D mass, mirror and moment vectors."""
+def assemble(h: Harvester, ms: XVWMesh, scales: tuple[float, float] | None = None) -> dict[str, Any]:
+    """Transport matrices per xi-mode, the 3-D mass, mirror and moment vectors (mesh scales
+    ``scales`` = (v2, V2), default :func:`_scales`)."""
     p = h.params
-    X, Vv, W = _axes(h, ms)
+    X, Vv, W = _axes(h, ms, scales)
     lam, R, gen, parity = _xi_modes(h, ms.K)
     Mx, Mv, MW = X.mass(), Vv.mass(), W.mass()
     Mv1, MW1 = Vv.mass(power=1), W.mass(power=1)

@@ -28,7 +28,7 @@ def test_the_transport_of_a_constant_is_its_outflow():
     # through the outer boundary and x = 0 (here without the mirror's inflow)
     h = Harvester.build(n=1, a=1)
     ms = XVWMesh(**{**BASE, "p": 1, "K": 3})
-    asm = assemble(h, ms)
+    asm = assemble(h, ms, scales=(0.15, 0.078))
     X, Vv, W = asm["lines"]
     ones = np.ones(asm["mass"].shape[0])
     flux = ones @ (asm["T"][1] @ ones)
