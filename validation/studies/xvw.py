@@ -87,7 +87,9 @@ class XVWMesh:
 class XVWResult:
     r"""One level: eta, V2, Pin (half-space integrals doubled), unknowns, GMRES iterations,
     relative residuals of the exact identities :math:`V^2 = K_c\tau_p\langle vV\rangle` and
-    :math:`P_{in} = m\gamma\langle v^2\rangle + K_v\langle vV\rangle`, seconds (assembly, preconditioner factorization, GMRES) and peak traced memory [GB]."""
+    :math:`P_{in} = m\gamma\langle v^2\rangle + K_v\langle vV\rangle` and the outflow rate
+    through the domain's edges (``leak``, per unit time and mass), seconds (assembly,
+    preconditioner factorization, GMRES) and peak traced memory [GB]."""
 
     eta: float
     V2: float
@@ -280,7 +282,11 @@ def solve_xvw(h: Harvester, ms: XVWMesh, rtol: float = 1e-9, maxiter: int = 600,
     Pin = h.params.sigma * 2.0 * float(asm["vxi"] @ c1) / mass
     vV, v2 = (2.0 * float(asm[k] @ c0) / mass for k in ("vV", "v2"))
     q = h.params
-    residuals = {"V2": (V2 - q.Kc * q.tau_p * vV) / V2, "power": (Pin - q.m * q.gamma * v2 - q.Kv * vV) / Pin}
+    # outflow through the edges of the domain per unit time and mass: test function 1 in
+    # (x, v, V) and h_0 in xi (the noise and the interior faces conserve mass)
+    leak = float(np.kron(asm["R"][0], np.ones(n3)) @ (A @ d)) / (0.5 * mass)
+    residuals = {"V2": (V2 - q.Kc * q.tau_p * vV) / V2, "power": (Pin - q.m * q.gamma * v2 - q.Kv * vV) / Pin,
+                 "leak": leak}
     rss = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1e6  # kB on Linux
     return XVWResult(V2 / (q.R * Pin), V2, Pin, N, its[0], residuals,
                      {"assembly": t1 - t0, "factorization": t2 - t1, "gmres": t3 - t2}, peak, ms, rss)
