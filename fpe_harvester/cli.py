@@ -27,7 +27,7 @@ from .errors import HarvesterError, ParameterError
 from .exact import threshold
 from .model import MAX_EXPONENT, Harvester, Params
 from .result import QUANTITIES
-from .solve import METHODS, choose_method, solve
+from .solve import FALLBACK_SECONDS, METHODS, choose_method, solve
 
 __all__ = ["COMMAND_GROUP", "main", "build_parser", "writable_folder"]
 
@@ -145,7 +145,9 @@ def cmd_stats(args: argparse.Namespace) -> int:
     if method == "fpe" and "progress" not in options:
         bar, options["progress"] = _fpe_bar(h)
     try:
-        result = solve(h, method, **options)
+        # "auto" itself (not the method it picks), so that Monte Carlo steps in where
+        # Fokker-Planck stops short of the tolerance
+        result = solve(h, args.method, fallback_time=args.fallback_time, **options)
     finally:
         if bar is not None:
             bar.close()
@@ -373,6 +375,10 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--seed", type=int, default=None, help="random seed, >= 0 (Monte Carlo only)")
     p.add_argument("--opt", type=_key_value, action="append", default=[], metavar="NAME=VALUE",
                    help="solver setting passed to the solver; repeatable")
+    p.add_argument("--fallback-time", type=_number, default=FALLBACK_SECONDS, metavar="SECONDS",
+                   help="method auto: where Fokker-Planck stops short of the tolerance, Monte Carlo runs for at "
+                        f"most this many seconds and gives the numbers if better (default {FALLBACK_SECONDS:g}; "
+                        "0: no fallback)")
     p.add_argument("--json", action="store_true", help="print one JSON object")
     p.add_argument("--no-progress", action="store_true", help="no progress bar (fpe, mc)")
 

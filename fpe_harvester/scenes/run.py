@@ -31,7 +31,7 @@ from ..exact import Exact, exact_stats, k_di
 from ..model import Harvester
 from ..optimum import optimize, refine_grid_maximum
 from ..result import QUANTITIES, Stats, Status
-from ..solve import choose_method, solve
+from ..solve import choose_method, fallback_result, relative_eta_error, solve
 from .cache import PointCache, atomic_path, point_key, point_seed, stats_from_dict, write_text_atomic
 from .result import ERROR, NOT_AVAILABLE, SceneResult, SceneRow, write_csv
 from .spec import Scene, load_scene
@@ -207,46 +207,13 @@ def _solve_point(h: Harvester, method: str, opts: dict[str, Any],
                  fallback: tuple[str, dict[str, Any]] | None) -> Stats | _Failure:
     """Solve one point; a point that did not reach its tolerance (Fokker--Planck density not
     resolved: no numbers, or numbers whose error exceeds the tolerance) is tried again with
-    ``fallback`` (method, settings) if given, and the message says so.
-
-    The second result replaces the first when it describes a stationary state (stable or
-    marginal), or when the first has no numbers; otherwise the one with the smaller relative
-    error on eta is kept. Measured on the paper's Fig. 1 grid at rtol 5e-3: n = 1.25, a = 2
-    stops at 8.9e-3 with Fokker--Planck (17 s; its Hermite levels stop converging) and
-    Monte Carlo then reaches 4.6e-3 in 2.4 s. The kept result's ``info["fallback"]`` holds the
-    other one's numbers (:func:`_fallback_info`), so that the two can be compared.
-    """
+    ``fallback`` (method, settings) if given, and :func:`~fpe_harvester.solve.fallback_result`
+    decides which numbers to keep and says so in the message."""
     res = _attempt(h, method, opts)
     if not (fallback is not None and isinstance(res, Stats) and res.status is Status.NOT_CONVERGED):
         return res
     second = _attempt(h, *fallback)
-    if not isinstance(second, Stats):
-        return res
-    if res.eta is None:
-        note = f"Fokker-Planck gave no result ({res.message}); Monte Carlo used instead"
-    elif second.ok or _relative_eta_error(second) < _relative_eta_error(res):
-        err = "no error estimate" if res.eta_err is None else f"+- {res.eta_err:.2g}"
-        note = (f"Fokker-Planck did not reach the tolerance (eta = {res.eta:.6g} {err}: "
-                f"{res.message}); Monte Carlo used instead")
-    else:
-        return replace(res, message=f"{res.message}; Monte Carlo did no better ({second.message})",
-                       info={**res.info, "fallback": _fallback_info(res, second)})
-    return replace(second, message=f"{second.message}; {note}",
-                   info={**second.info, "fallback": _fallback_info(second, res)})
-
-
-def _fallback_info(kept: Stats, other: Stats) -> dict[str, Any]:
-    """What a point tried twice records: the solver kept, and the other one's status and numbers
-    (each quantity and its error, None where it gave none)."""
-    numbers = {f"{q}{suffix}": v for q in QUANTITIES for suffix, v in zip(("", "_err"), other.value(q))}
-    return {"kept": kept.method, "other": {"method": other.method, "status": other.status.value, **numbers}}
-
-
-def _relative_eta_error(res: Stats) -> float:
-    """eta_err / |eta|; inf when either is missing or eta is 0."""
-    if res.eta is None or res.eta_err is None or res.eta == 0:
-        return math.inf
-    return res.eta_err / abs(res.eta)
+    return fallback_result(res, second) if isinstance(second, Stats) else res
 
 
 def _solve_portable(h: Harvester, method: str, opts: dict[str, Any],
@@ -276,7 +243,7 @@ def _row(scene: Scene, index: int, point: Mapping[str, float], h: Harvester,
     # that misses the scene's accuracy on eta is not converged; the message keeps the solver's
     if res.ok and res.eta is not None and not (res.eta_err is not None
                                                and res.eta_err <= scene.rtol * abs(res.eta)):
-        rel_err = _relative_eta_error(res)
+        rel_err = relative_eta_error(res)
         rel = "unknown" if math.isinf(rel_err) else f"{rel_err:.2g}"
         status = Status.NOT_CONVERGED.value
         message += (f"; accuracy not met: eta_err/eta = {rel} > rtol = {scene.rtol:g} "

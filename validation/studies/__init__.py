@@ -10,7 +10,9 @@
   :mod:`.mc_bias`, :mod:`.mc_tau`, :mod:`.mc_steep`, :mod:`.mc_controls`, :mod:`.mc_martingale`,
   :mod:`.mc_policy`, :mod:`.mc_boundary`, :mod:`.mc_kink_dt`;
 * the kink (n = 1): :mod:`.kinkstudy` (its time-step law) and :mod:`.kinkref` (an independent
-  reference scheme with exact crossings).
+  reference scheme with exact crossings);
+* the strong kink's candidate discretization: :mod:`.xvw` (DG in (x, v, V) with V graded toward
+  0, discrete ordinates in xi; measured, not a product scheme).
 
 The modules are imported when run, not here.
 """

@@ -1,0 +1,344 @@
+"""Candidate kink scheme: DG in (x, v, V) with V graded toward 0, discrete ordinates in xi.
+
+A study, not a product scheme (it is not registered in :data:`fpe_harvester.fpe.schemes.SCHEMES`):
+it measures whether a V mesh graded geometrically toward 0 resolves the spike of the law of V
+at the strong kink (n = 1, a = 2), where the Hermite expansion in V of scheme ``"xv"`` stalls.
+
+Discretization of the half space x >= 0 (the density is symmetric under
+:math:`(x, v, V, \\xi) \\to -(x, v, V, \\xi)`), for :math:`U = a|x|`:
+
+* x and v: the nodes of scheme ``"xv"`` (:class:`~fpe_harvester.fpe.plane.PlaneMesh`, graded
+  toward the trap), V: nodes symmetric about 0, ``v_layers`` geometric layers of ratio
+  ``v_ratio`` toward 0 inside :math:`|V| < V_c` and ``v_bulk`` elements per sign out to
+  :math:`L_V`; nodal DG of degree p on each axis (:class:`~fpe_harvester.fpe.plane.DGLine`),
+  every 3-D matrix a Kronecker product (x outer, V inner).
+* xi: K Hermite functions of the stationary Ornstein--Uhlenbeck law, diagonalized (the
+  multiplication by xi becomes the Gauss--Hermite nodes :math:`\\lambda_i`), so that mode i
+  is transported with the velocity
+  :math:`(v,\\ (-a - m\\gamma v - K_v V + \\sigma\\lambda_i)/m,\\ K_c v - V/\\tau_p)`; the noise
+  couples the modes through :math:`R^T \\mathrm{diag}(-k/\\tau) R`.
+* Upwind fluxes, exact: on every face the normal speed is linear in one other coordinate,
+  and each element is split at its root (:meth:`DGLine.signed_parts`). On x = 0 the inflow
+  (v > 0) is the mirror image of the outflow.
+* Solve: GMRES on the system bordered by the normalization, preconditioned by the exact
+  (sparse LU) solve of each pair of mirror-coupled modes' 3-D transport (block Jacobi across
+  xi-modes; the (x, v) rotation's cycles are inside each block).
+"""
+
+from __future__ import annotations
+
+import functools
+import json
+import math
+import resource
+import time
+import tracemalloc
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+import scipy.sparse as sp
+import scipy.sparse.linalg as spla
+
+from fpe_harvester.errors import NotConvergedError
+from fpe_harvester.fpe.plane import DGLine, PlaneMesh
+from fpe_harvester.fpe.schemes.xv.kinkdisc import kink_domain
+from fpe_harvester.model import Harvester
+
+from .cli import bench_main, study_runner
+
+__all__ = ["XVWMesh", "XVWResult", "solve_xvw", "CASES", "QUICK_CASES", "study", "run"]
+
+
+@dataclass(frozen=True)
+class XVWMesh:
+    """Mesh settings of the candidate scheme (x and v as :class:`PlaneMesh`, V graded toward 0).
+
+    Attributes
+    ----------
+    p : int
+        DG degree on every axis.
+    K : int
+        Hermite functions (discrete ordinates) in xi.
+    layers, ratio, bulk_x, bulk_v : int, float, int, int
+        The (x, v) mesh (see :class:`PlaneMesh`; core box at the energy :math:`m\\langle v^2\\rangle`).
+    v_layers, v_ratio, v_bulk : int, float, int
+        V mesh: geometric layers toward 0 (ratio), elements per sign outside them.
+    v_core : float
+        :math:`V_c` in units of the standard deviation of V (equivalent harmonic unit).
+    v_width : float
+        :math:`L_V` in the same units.
+    """
+
+    p: int = 2
+    K: int = 4
+    layers: int = 3
+    ratio: float = 0.3
+    bulk_x: int = 4
+    bulk_v: int = 3
+    v_layers: int = 3
+    v_ratio: float = 0.1
+    v_bulk: int = 3
+    v_core: float = 0.5
+    v_width: float = 6.0
+
+
+@dataclass(frozen=True)
+class XVWResult:
+    r"""One level: eta, V2, Pin (half-space integrals doubled), unknowns, GMRES iterations,
+    relative residuals of the exact identities :math:`V^2 = K_c\tau_p\langle vV\rangle` and
+    :math:`P_{in} = m\gamma\langle v^2\rangle + K_v\langle vV\rangle` and the outflow rate
+    through the domain's edges (``leak``, per unit time and mass), seconds (assembly,
+    preconditioner factorization, GMRES) and peak traced memory [GB]."""
+
+    eta: float
+    V2: float
+    Pin: float
+    unknowns: int
+    iterations: int
+    residuals: dict[str, float]
+    seconds: dict[str, float]
+    peak_gb: float
+    mesh: XVWMesh
+    maxrss_gb: float = 0.0
+
+    def to_dict(self) -> dict[str, Any]:
+        """JSON-ready dict of the level (the mesh settings as a dict)."""
+        return {"eta": self.eta, "V2": self.V2, "Pin": self.Pin, "unknowns": self.unknowns,
+                "iterations": self.iterations, "residuals": self.residuals, "seconds": self.seconds,
+                "peak_gb": self.peak_gb, "maxrss_gb": self.maxrss_gb, "mesh": self.mesh.__dict__}
+
+
+@functools.cache
+def _scales(h: Harvester) -> tuple[float, float]:
+    r""":math:`\langle v^2\rangle` and :math:`\langle V^2\rangle` that set the mesh: from a short
+    Monte Carlo run (2 % on eta, seed 1). The equivalent harmonic unit's are far off at the
+    strong kink (a = 2: V2 50 times too small, the V domain then cuts the density off); scheme
+    ``"xv"`` takes them from a pilot level instead."""
+    from fpe_harvester import solve
+
+    res = solve(h, "mc", tol=2e-2, seed=1, max_time=60.0, progress=False)
+    return float(res.v2), float(res.V2)
+
+
+def _axes(h: Harvester, ms: XVWMesh, scales: tuple[float, float] | None = None
+          ) -> tuple[DGLine, DGLine, DGLine]:
+    """The three 1-D DG spaces: x in [0, Lx], v in [-Lv, Lv], V in [-LV, LV], for the moments
+    ``scales`` = (v2, V2) (default :func:`_scales`)."""
+    p = h.params
+    v2, V2 = _scales(h) if scales is None else scales
+    sF = math.sqrt(p.sigma**2 * p.D / p.tau + p.Kv**2 * V2)
+    Lx, Lv = kink_domain(h, v2, sF)
+    plane = PlaneMesh(Lx=Lx, Lv=Lv, Ec=p.m * v2, a=h.a, layers=ms.layers, ratio=ms.ratio,
+                      bulk_x=ms.bulk_x, bulk_v=ms.bulk_v, grading=2.5)
+    sV = math.sqrt(V2)
+    core, edge = ms.v_core * sV, ms.v_width * sV
+    inner = core * ms.v_ratio ** np.arange(ms.v_layers - 1, -1, -1)
+    outer = core + (edge - core) * np.linspace(0.0, 1.0, ms.v_bulk + 1)[1:] ** 1.5
+    half = np.concatenate([[0.0], inner, outer])
+    V_nodes = np.concatenate([-half[:0:-1], half])
+    return DGLine(plane.x_nodes(), ms.p), DGLine(plane.v_nodes(), ms.p), DGLine(V_nodes, ms.p)
+
+
+def _xi_modes(h: Harvester, K: int) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """Nodes lambda (xi values), R (columns: eigenvectors of the xi multiplication in the
+    normalized Hermite basis), the noise generator and the parity in the mode basis."""
+    p = h.params
+    s = math.sqrt(p.D / p.tau)
+    J = np.diag(s * np.sqrt(np.arange(1.0, K)), 1)
+    lam, R = np.linalg.eigh(J + J.T)
+    gen = R.T @ np.diag(-np.arange(K) / p.tau) @ R
+    parity = R.T @ np.diag((-1.0) ** np.arange(K)) @ R
+    return lam, R, gen, parity
+
+
+def _block(arrays: np.ndarray) -> sp.csr_matrix:
+    """Block-diagonal matrix of per-element arrays (E, p+1, p+1)."""
+    return sp.block_diag(list(arrays), format="csr")
+
+
+def _face_sum(line: DGLine, pos: list[sp.spmatrix], neg: list[sp.spmatrix], outer_first: bool
+              ) -> sp.csr_matrix:
+    """Upwind face terms along ``line``: sum over its nodes f of
+    :math:`(l_f - r_f)(l_f^T \\otimes W^+_f + r_f^T \\otimes W^-_f)`, with ``pos[f]``, ``neg[f]``
+    the positive/negative-part weighted masses over the other axes (``outer_first``: the
+    line's own factor is the outer one of the Kronecker product, else the inner one)."""
+    out = None
+    for f in range(line.elements + 1):
+        lf, rf = line.left_of(f), line.right_of(f)
+        jump = sp.csr_matrix(lf - rf).T
+        for vec, W in ((lf, pos[f]), (rf, neg[f])):
+            if not vec.any():
+                continue
+            F = jump @ sp.csr_matrix(vec)
+            term = sp.kron(F, W) if outer_first else sp.kron(W, F)
+            out = term if out is None else out + term
+    return out.tocsr()
+
+
+def assemble(h: Harvester, ms: XVWMesh, scales: tuple[float, float] | None = None) -> dict[str, Any]:
+    """Transport matrices per xi-mode, the 3-D mass, mirror and moment vectors (mesh scales
+    ``scales`` = (v2, V2), default :func:`_scales`)."""
+    p = h.params
+    X, Vv, W = _axes(h, ms, scales)
+    lam, R, gen, parity = _xi_modes(h, ms.K)
+    Mx, Mv, MW = X.mass(), Vv.mass(), W.mass()
+    Mv1, MW1 = Vv.mass(power=1), W.mass(power=1)
+    Dx, Dv, Dv1, DW, DW1 = X.derivative(), Vv.derivative(), Vv.derivative(1), W.derivative(), W.derivative(1)
+    kron3 = lambda a, b, c: sp.kron(a, sp.kron(b, c, format="csr"), format="csr")  # noqa: E731
+    common = (-kron3(Dx, Mv1, MW) + p.gamma * kron3(Mx, Dv1, MW) + (p.Kv / p.m) * kron3(Mx, Dv, MW1)
+              - p.Kc * kron3(Mx, Mv1, DW) + (1.0 / p.tau_p) * kron3(Mx, Mv, DW1))
+    vol_f = -kron3(Mx, Dv, MW)                   # times f_i = (-a + sigma lambda_i) / m
+    vpos, vneg = Vv.signed_parts(np.array([0.0]), 1.0)
+    Vp, Vn = _block(vpos[0]), _block(vneg[0])
+    nf = X.elements + 1
+    xface = _face_sum(X, [sp.kron(Vp, MW)] * nf, [sp.kron(Vn, MW)] * nf, True)
+    # V faces: speed Kc v - V_f / tau_p, linear in v
+    sp_pos, sp_neg = Vv.signed_parts(-W.nodes / p.tau_p, p.Kc)
+    wface = sp.kron(Mx, _face_sum(W, [_block(a) for a in sp_pos], [_block(a) for a in sp_neg], False))
+    T = []
+    for li in lam:
+        f = (-h.a + p.sigma * li) / p.m
+        # v faces: speed f - gamma v_f - (Kv / m) V, linear in V
+        pos, neg = W.signed_parts(f - p.gamma * Vv.nodes, -p.Kv / p.m)
+        vface = _face_sum(Vv, [_block(a) for a in pos], [_block(a) for a in neg], True)
+        T.append((common + f * vol_f + xface + wface + sp.kron(Mx, vface)).tocsr())
+    e0 = np.zeros(X.size)
+    e0[0] = 1.0
+    flip_v = sp.csr_matrix(np.fliplr(np.eye(Vv.size)))
+    flip_W = sp.csr_matrix(np.fliplr(np.eye(W.size)))
+    mirror = kron3(sp.csr_matrix(np.outer(e0, e0)), Vp @ flip_v, MW @ flip_W)
+    mass = kron3(Mx, Mv, MW)
+    ix, iv, iW = X.integral(), Vv.integral(), W.integral()
+    return {"T": T, "mass": mass, "mirror": mirror, "gen": gen, "parity": parity, "R": R,
+            "one": np.kron(ix, np.kron(iv, iW)), "V2": np.kron(ix, np.kron(iv, W.integral(2))),
+            "vxi": np.kron(ix, np.kron(Vv.integral(1), iW)) * math.sqrt(p.D / p.tau),
+            "vV": np.kron(ix, np.kron(Vv.integral(1), W.integral(1))),
+            "v2": np.kron(ix, np.kron(Vv.integral(2), iW)),
+            "lines": (X, Vv, W)}
+
+
+def _operator_blocks(asm: dict[str, Any], i: int, j: int) -> sp.csr_matrix:
+    """Block (i, j) of the full operator: transport on the diagonal, noise and mirror couplings."""
+    blk = -asm["gen"][i, j] * asm["mass"] - asm["parity"][i, j] * asm["mirror"]
+    return (blk + asm["T"][i]).tocsr() if i == j else blk.tocsr()
+
+
+def solve_xvw(h: Harvester, ms: XVWMesh, rtol: float = 1e-9, maxiter: int = 600,
+              blocks: str = "lu") -> XVWResult:
+    """Assemble and solve one level; raise :class:`NotConvergedError` if GMRES stalls.
+
+    ``blocks``: the preconditioner's solve of each mirror-coupled pair of xi-modes, ``"lu"``
+    (exact, SuperLU) or ``"ilu"`` (SuperLU's incomplete LU, drop tolerance 1e-4, fill 10).
+    """
+    tracemalloc.start()
+    t0 = time.perf_counter()
+    asm = assemble(h, ms)
+    K = ms.K
+    A = sp.bmat([[_operator_blocks(asm, i, j) for j in range(K)] for i in range(K)], format="csr")
+    n3 = asm["mass"].shape[0]
+    t1 = time.perf_counter()
+    groups, seen = [], set()
+    for i in range(K):
+        if i in seen:
+            continue
+        grp = sorted({i, K - 1 - i})
+        seen.update(grp)
+        blk = sp.bmat([[_operator_blocks(asm, r, c) for c in grp] for r in grp], format="csc")
+        lu = spla.splu(blk, permc_spec="COLAMD") if blocks == "lu" else \
+            spla.spilu(blk, drop_tol=1e-4, fill_factor=10.0)
+        groups.append((grp, lu))
+    t2 = time.perf_counter()
+    u = np.kron(asm["R"][0], asm["one"])
+    u /= np.linalg.norm(u)
+
+    def matvec(d: np.ndarray) -> np.ndarray:
+        return A @ d + u * float(u @ d)
+
+    def prec(r: np.ndarray) -> np.ndarray:
+        out = np.empty_like(r)
+        Rm = r.reshape(K, n3)
+        for grp, lu in groups:
+            out.reshape(K, n3)[grp] = lu.solve(Rm[grp].ravel()).reshape(len(grp), n3)
+        return out
+
+    its = [0]
+
+    def count(_: Any) -> None:
+        its[0] += 1
+
+    N = K * n3
+    d, info = spla.gmres(spla.LinearOperator((N, N), matvec=matvec), u, M=spla.LinearOperator((N, N), matvec=prec),
+                         rtol=rtol, restart=min(200, maxiter), maxiter=-(-maxiter // 200), callback=count,
+                         callback_type="pr_norm")
+    t3 = time.perf_counter()
+    peak = tracemalloc.get_traced_memory()[1] / 1e9
+    tracemalloc.stop()
+    if info != 0:
+        raise NotConvergedError(f"GMRES did not converge in {its[0]} iterations ({N} unknowns)")
+    C = d.reshape(K, n3)
+    c0, c1 = asm["R"][0] @ C, asm["R"][1] @ C
+    mass = 2.0 * float(asm["one"] @ c0)
+    V2 = 2.0 * float(asm["V2"] @ c0) / mass
+    Pin = h.params.sigma * 2.0 * float(asm["vxi"] @ c1) / mass
+    vV, v2 = (2.0 * float(asm[k] @ c0) / mass for k in ("vV", "v2"))
+    q = h.params
+    # outflow through the edges of the domain per unit time and mass: test function 1 in
+    # (x, v, V) and h_0 in xi (the noise and the interior faces conserve mass)
+    leak = float(np.kron(asm["R"][0], np.ones(n3)) @ (A @ d)) / (0.5 * mass)
+    residuals = {"V2": (V2 - q.Kc * q.tau_p * vV) / V2, "power": (Pin - q.m * q.gamma * v2 - q.Kv * vV) / Pin,
+                 "leak": leak}
+    rss = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1e6  # kB on Linux
+    return XVWResult(V2 / (q.R * Pin), V2, Pin, N, its[0], residuals,
+                     {"assembly": t1 - t0, "factorization": t2 - t1, "gmres": t3 - t2}, peak, ms, rss)
+
+
+#: (a, mesh changes) of the study (about 30 min on 2 loaded cores, at most 2.4 GB): refinement in
+#: degree, xi-modes and V layers at a = 0.5
+#: (reference: scheme xv, eta = 0.6103035 +- 4e-5), then a = 1 (0.4075292 +- 2.4e-5) and a = 2
+#: (Monte Carlo 0.12288 +- 0.00020).
+CASES: tuple[tuple[float, dict[str, Any]], ...] = (
+    (0.5, {"p": 1, "K": 3}), (0.5, {"p": 2, "K": 3}), (0.5, {"p": 2, "K": 5}), (0.5, {"p": 2, "K": 7}),
+    (0.5, {"p": 2, "K": 5, "v_layers": 5}), (0.5, {"p": 2, "K": 5, "bulk_x": 5, "bulk_v": 3}),
+    (1.0, {"p": 2, "K": 5}), (2.0, {"p": 2, "K": 5}), (2.0, {"p": 2, "K": 5, "v_layers": 5}),
+    (2.0, {"p": 2, "K": 5, "layers": 4}), (0.5, {"p": 2, "K": 5, "blocks": "ilu"}),
+    (1.0, {"p": 2, "K": 5, "bulk_x": 5, "bulk_v": 3}), (2.0, {"p": 2, "K": 5, "v_width": 15.0, "v_bulk": 4}),
+    (2.0, {"p": 2, "K": 5, "bulk_x": 5, "bulk_v": 3, "v_width": 10.0, "v_bulk": 4, "blocks": "ilu"}),
+)
+QUICK_CASES = CASES[:2]
+#: The smallest (x, v) mesh of the study: 2 layers toward the trap, 3 + 2 bulk elements.
+BASE = {"layers": 2, "bulk_x": 3, "bulk_v": 2, "v_layers": 2, "v_bulk": 2}
+
+
+def study(quick: bool) -> dict[str, Any]:
+    """Solve every case (each on :data:`BASE` with its changes); a case whose GMRES stalls is
+    recorded with its message."""
+    rows = []
+    for a, case in QUICK_CASES if quick else CASES:
+        changes = dict(case)
+        options = {"blocks": changes.pop("blocks")} if "blocks" in changes else {}
+        ms = XVWMesh(**{**BASE, **changes})
+        try:
+            res = solve_xvw(Harvester.build(n=1, a=a), ms, **options)
+            rows.append({"a": a, **options, **res.to_dict()})
+        except NotConvergedError as exc:
+            rows.append({"a": a, **options, "mesh": ms.__dict__, "failed": str(exc)})
+        print(json.dumps(rows[-1]), flush=True)
+    return {"rows": rows}
+
+
+def _draw(res: dict[str, Any], ax: Any) -> None:
+    for a in sorted({r["a"] for r in res["rows"]}):
+        pts = [(r["unknowns"], r["eta"]) for r in res["rows"] if r["a"] == a and "eta" in r]
+        if pts:
+            ax.plot(*zip(*pts), "o", label=f"a = {a:g}")
+    ax.set_xscale("log")
+    ax.set_xlabel("unknowns")
+    ax.set_ylabel("eta")
+    ax.legend()
+
+
+run = study_runner(study, "xvw", _draw)
+
+if __name__ == "__main__":  # pragma: no cover
+    bench_main(run, __doc__)
