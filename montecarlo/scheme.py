@@ -92,8 +92,9 @@ def scheme_kind(h: Harvester) -> int:
 
 
 def linear_stiffness(h: Harvester) -> float:
-    """Stiffness :math:`c` kept in the exactly integrated linear part."""
-    c = 2.0 * h.k if h.N > 1 else 0.0
+    """Stiffness :math:`c` kept in the exactly integrated linear part: the coupling's own-unit
+    part :math:`2k + 6k_4` (of :math:`k(Lx)_j - k_4(L^2x)_j`) and, for the harmonic potential, 2a."""
+    c = (2.0 * h.k + 6.0 * h.k4 if h.k4 != 0.0 else 2.0 * h.k) if h.N > 1 else 0.0
     if h.is_linear:
         c += 2.0 * h.a
     return c
@@ -298,6 +299,6 @@ def physical_vector(h: Harvester, threshold: float, rule: str = "average",
     return np.array(
         [p.m, p.gamma, p.Kv, p.Kc, p.tau_p, p.sigma, h.k if h.N > 1 else 0.0, h.a, h.n,
          linear_stiffness(h), threshold, p.noise_variance, KINK_RULES[rule],
-         h.a * h.n if kind == KIND_KINK else 0.0],
+         h.a * h.n if kind == KIND_KINK else 0.0, h.k4 if h.N > 1 else 0.0, h.k3 if h.N > 1 else 0.0],
         dtype=float,
     )

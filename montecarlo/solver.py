@@ -273,12 +273,7 @@ class MonteCarlo:
     def unsupported_reason(self, h: Harvester) -> str | None:
         """None, or why this solver refuses ``h``: ``joint=True`` where there is no joint step,
         and the kink scheme (xi held over a step) where tau is shorter than the step can be made:
-        below ``JOINT_STEPS`` times the finest automatic step, or below an explicit ``dt``; and,
-        until the kernels have their forces, the couplings ``k4`` and ``k3``."""
-        for name, value in (("k4", h.k4), ("k3", h.k3)):
-            if value != 0.0:
-                return (f"{name} = {value:g}: Monte Carlo does not simulate the {name} coupling yet; "
-                        f"set {name} = 0" + (" (or use method='exact', which handles k4)" if name == "k4" else ""))
+        below ``JOINT_STEPS`` times the finest automatic step, or below an explicit ``dt``."""
         if self.joint:
             return joint_step_refusal(h)
         if scheme_kind(h) != KIND_KINK:
