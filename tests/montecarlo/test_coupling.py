@@ -12,7 +12,9 @@ from scipy.integrate import quad
 from fpe_harvester import Harvester, solve
 from fpe_harvester.landscape.energy import RingEnergy
 from montecarlo._kernels import _coupling_force
+from montecarlo.escape import escape_study
 from montecarlo.scheme import linear_stiffness
+from montecarlo.switching import _count_switches, buckled_labels, switching_times
 
 
 def _bond_d2(a: float, k: float, k3: float, k4: float = 0.0) -> float:
@@ -115,3 +117,44 @@ def test_boltzmann_k4() -> None:
 def test_boltzmann_n15(a: float, k: float, expect: float) -> None:
     """n = 1.5, k3 = 0.1 (values by integrating out the centre of mass)."""
     _check_boltzmann(Harvester.build(a=a, n=1.5, k=k, k3=0.1, **_WHITE), expect)
+
+
+def _escaped(k3: float, t_max: float) -> int:
+    h = Harvester.build(a=0.5, n=1, N=3, k=-0.05, k3=k3)
+    return int(escape_study(h, t_max, paths=64, seed=1).escape_times.size)
+
+
+def test_cubic_bonds_confine_short() -> None:
+    """n = 1, N = 3, k = -0.05 over t = 1e3 on 64 rings: 63 escape without k3 (measured), none
+    with k3 = 0.1 (the ring is confined; escapes are still detected)."""
+    assert _escaped(0.0, 1e3) > 32
+    assert _escaped(0.1, 1e3) == 0
+    assert Harvester.build(a=0.5, n=1, N=3, k=-0.05, k3=0.1).confinement == "confined"
+
+
+@pytest.mark.slow
+def test_cubic_bonds_confine() -> None:
+    """The same over t = 1e4: every ring escapes without k3, none with it."""
+    assert _escaped(0.0, 1e4) == 64
+    assert _escaped(0.1, 1e4) == 0
+
+
+def test_switch_counting() -> None:
+    """Labels and switches on a made-up path: excursions back to the same state do not count."""
+    x = np.array([[0.0, 0.1, 0.0], [2.0, 0.0, 0.1], [0.2, 0.0, 0.0], [1.9, 0.1, 0.0],
+                  [0.0, -2.1, 0.0], [0.0, 0.0, 0.0], [0.0, 0.0, 2.2], [-2.0, 0.0, 0.0]])
+    labels = buckled_labels(x, 1.0)
+    assert labels.tolist() == [0, 1, 0, 1, -2, 0, 3, -1]
+    assert _count_switches(labels[:, None]).tolist() == [3]
+
+
+def test_switching_slower_in_deeper_wells() -> None:
+    """n = 1, a = 0.5, k3 = 0.1, N = 3: beyond the fold (k_sn = -0.348) the buckled states
+    deepen with -k, and the mean residence time grows (measured 7.0 +- 0.2 at k = -0.45,
+    11.0 +- 0.8 at k = -1)."""
+    shallow = switching_times(Harvester.build(a=0.5, n=1, N=3, k=-0.45, k3=0.1), 1.1, t_run=1000.0,
+                              paths=8, seed=1)
+    deep = switching_times(Harvester.build(a=0.5, n=1, N=3, k=-1.0, k3=0.1), 1.5, t_run=1000.0,
+                           paths=8, seed=1)
+    assert deep.residence - shallow.residence > 3.0 * math.hypot(deep.residence_err, shallow.residence_err)
+    assert deep.buckled_share > 0.95
