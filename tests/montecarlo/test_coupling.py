@@ -77,8 +77,9 @@ def test_exact_d2_from_modes() -> None:
     assert solve(Harvester.build(a=0.5), "exact").d2 is None
 
 
-def _check_boltzmann(h: Harvester, expect: float, seed: int = 1) -> None:
-    s = solve(h, "mc", seed=seed, tol=1e-2)
+def _check_boltzmann(h: Harvester, expect: float, seed: int = 1, tol: float = 1e-2) -> None:
+    """<d^2> and Pin of ``h`` by Monte Carlo (``tol`` on eta) against their Boltzmann values."""
+    s = solve(h, "mc", seed=seed, tol=tol)
     p = h.params
     # Pin = sigma^2 D/(m (1 + gamma tau)) for K_v = 0, up to O(tau^2) (1e-8 here)
     pin = p.sigma**2 * p.D / (p.m * (1.0 + p.gamma * p.tau))
@@ -96,12 +97,12 @@ def test_boltzmann_harmonic_cubic_bonds() -> None:
     _check_boltzmann(Harvester.build(a=0.5, n=2, k=-0.2, k3=0.1, **_WHITE), 1.384024)
 
 
-@pytest.mark.slow
-@pytest.mark.parametrize("k, k3, expect", [(-0.4, 0.1, 2.007773), (0.0, 0.0, 2.0)])
-def test_boltzmann_harmonic_slow(k: float, k3: float, expect: float) -> None:
-    """n = 2, a = 0.5: the double well in d held by k3 beyond -a/2, and the uncoupled pair."""
+@pytest.mark.parametrize("k, k3, expect, tol", [(-0.4, 0.1, 2.007773, 1e-2), (0.0, 0.0, 2.0, 5e-3)])
+def test_boltzmann_harmonic_more(k: float, k3: float, expect: float, tol: float) -> None:
+    """n = 2, a = 0.5: the double well in d held by k3 beyond -a/2, and the uncoupled pair
+    (exact solver's route; its eta converges before d2 does, hence the tighter tol)."""
     assert _bond_d2(0.5, k, k3) == pytest.approx(expect, abs=1e-6)
-    _check_boltzmann(Harvester.build(a=0.5, n=2, k=k, k3=k3, **_WHITE), expect)
+    _check_boltzmann(Harvester.build(a=0.5, n=2, k=k, k3=k3, **_WHITE), expect, tol=tol)
 
 
 def test_boltzmann_k4() -> None:
@@ -112,7 +113,6 @@ def test_boltzmann_k4() -> None:
     _check_boltzmann(Harvester.build(a=0.5, n=2, k=-0.45, k4=0.05, k3=0.1, **_WHITE), expect)
 
 
-@pytest.mark.slow
 @pytest.mark.parametrize("a, k, expect", [(0.5, -0.1, 1.362075), (1.0, -0.5, 1.999117)])
 def test_boltzmann_n15(a: float, k: float, expect: float) -> None:
     """n = 1.5, k3 = 0.1 (values by integrating out the centre of mass)."""
