@@ -132,7 +132,8 @@ def _measure(x, v, V, xi, stuck, F, w, cf, pp, kind, acc, pvx) -> float:
     acc[18] (N bonds per ring of N >= 2); return unit-steps counted.
 
     ``F`` holds -U'(x) at the current x for the smooth kind (the last kick computed it).
-    After a joint step, v xi is replaced by the estimate ``pvx`` of :func:`_d_step_joint`.
+    After a joint step, v xi is replaced by the estimate ``pvx`` of :func:`_d_step_joint` (and
+    after the kink's averaged-noise step by its own, :mod:`montecarlo.steps.averaged`).
     """
     N, P = x.shape
     half = cf[15]

@@ -103,8 +103,9 @@ def linear_stiffness(h: Harvester) -> float:
 def joint_step_refusal(h: Harvester, kind: int | None = None) -> str | None:
     """Why the joint step cannot serve ``h``, or None if it can.
 
-    Only the harmonic and the smooth kick schemes have it: the kink scheme (n near 1) keeps xi
-    frozen over its piecewise flow with located zero crossings.
+    Only the harmonic and the smooth kick schemes have it: the kink scheme (n near 1) integrates
+    its piecewise flow at a constant force (with xi frozen, or at short tau its step mean,
+    :mod:`montecarlo.steps.averaged`).
     """
     kind = scheme_kind(h) if kind is None else kind
     if kind == KIND_KINK:
@@ -114,7 +115,12 @@ def joint_step_refusal(h: Harvester, kind: int | None = None) -> str | None:
 
 def uses_joint_step(h: Harvester, dt: float, kind: int | None = None) -> bool:
     """Whether a run of ``h`` with coarse step ``dt`` takes the joint step by default:
-    tau < :data:`JOINT_STEPS` dt, and :func:`joint_step_refusal` has no objection."""
+    tau < :data:`JOINT_STEPS` dt, and :func:`joint_step_refusal` has no objection; for the kink
+    scheme, whose frozen-xi flow needs dt <= tau, the short-tau step is the averaged-noise step
+    (:mod:`montecarlo.steps.averaged`), taken when tau < dt."""
+    kind = scheme_kind(h) if kind is None else kind
+    if kind == KIND_KINK:
+        return bool(h.params.tau < dt)
     return bool(h.params.tau < JOINT_STEPS * dt and joint_step_refusal(h, kind) is None)
 
 
