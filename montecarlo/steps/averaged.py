@@ -50,6 +50,9 @@ from .._kernels import CF_JOINT, KIND_KINK
 from ..scheme import step_coefficients
 from .base import Kernels, StepScheme
 from .frozen import _d_step
+# like the joint step, this one moves xi itself: nothing to advance after the measurement, and
+# a twin (never run with this step) would need its own xi
+from .joint import advance, twin_xi
 
 _O = CF_JOINT + 1
 
@@ -109,17 +112,6 @@ def step(x, v, V, xi, F, stuck, pvx, eps, cf, pp, kind, xm, fext, cs, rbm, rbx, 
         for p in range(P):
             xi[j, p] = e * xi[j, p] + eps[0, j, p]
             pvx[j, p] = v[j, p] * rbx[j, p] + cf[_O + 6]
-
-
-@njit(cache=True, nogil=True)
-def advance(xi: np.ndarray, eps: np.ndarray, cf: np.ndarray) -> None:
-    """Nothing: the step already moved xi."""
-
-
-@njit(cache=True, nogil=True)
-def twin_xi(xi: np.ndarray) -> np.ndarray:
-    """Its own xi (never used: this step runs without a twin)."""
-    return np.zeros_like(xi)
 
 
 class AveragedStep(StepScheme):
