@@ -77,11 +77,12 @@ def draw(res: dict[str, Any], ax: Any) -> None:
     ax.semilogy(lines["fold"], lines["k3"], label="fold k_sn (buckled states appear)")
     ax.semilogy(lines["coexistence"], lines["k3"], "--", label="coexistence k_co (buckled = origin)")
     for o in res["optima"]:
-        if o["k_opt"] is not None:
-            ax.errorbar(o["k_opt"], o["k3"], xerr=o["k_opt_err"] or 0.0, fmt="o", color="k")
+        if o["k_opt"] is not None:  # open: not converged (e.g. at the search interval's edge)
+            ax.errorbar(o["k_opt"], o["k3"], xerr=o["k_opt_err"] or 0.0, fmt="o", color="k",
+                        mfc="k" if o["status"] == "stable" else "none")
     ax.set_xlabel("coupling k")
     ax.set_ylabel("cubic coupling k3")
-    ax.set_title(f"n = 1, a = {res['a']:g}, N = {res['N']}: optimum k (dots)", fontsize=8)
+    ax.set_title(f"n = 1, a = {res['a']:g}, N = {res['N']}: optimum k (dots; open: not converged)", fontsize=8)
     ax.legend(fontsize=7)
 
 
