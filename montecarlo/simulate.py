@@ -253,7 +253,7 @@ def simulate(
     >>> e = simulate(Harvester.build(a=0.5), dt=0.05, paths=4, replicas=2, t_burn=1.0,
     ...              t_run=2.0, seed=3)
     >>> e.sums.shape, float(e.counts[0, 0])
-    ((2, 2, 18), 160.0)
+    ((2, 2, 19), 160.0)
     """
     c = _check(h, dt=dt, paths=paths, replicas=replicas, t_burn=t_burn, t_run=t_run, seed=seed,
                richardson=richardson, threshold=threshold, chunk=chunk, threads=threads,
