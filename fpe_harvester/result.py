@@ -16,7 +16,7 @@ __all__ = ["QUANTITIES", "Stats", "Status", "propagated_eta_error"]
 
 #: Names of the stationary observables every solver reports, each with its error ``<name>_err``
 #: (the one list of them: scenes, the point cache and the command line use it too).
-QUANTITIES = ("eta", "V2", "Vrms", "Pin", "v2", "vV", "x2")
+QUANTITIES = ("eta", "V2", "Vrms", "Pin", "v2", "vV", "x2", "d2")
 
 
 class Status(str, enum.Enum):
@@ -52,6 +52,10 @@ class Stats:
     v2, vV, x2 : float or None
         :math:`\\langle v^2\\rangle`, :math:`\\langle vV\\rangle`, :math:`\\langle x^2\\rangle`
         where the method provides them (``x2`` is ``None`` at a marginal point, where it diverges).
+    d2 : float or None
+        Mean squared bond of a ring, :math:`\\langle (x_{j+1} - x_j)^2\\rangle` (averaged over
+        bonds); ``None`` for a single unit, at a marginal point, or where the method does not
+        provide it.
     *_err : float or None
         Error estimate of each quantity (one standard error for Monte Carlo, truncation and
         mesh error for Fokker--Planck, 0 for exact). ``None`` when the value is ``None``.
@@ -76,6 +80,7 @@ class Stats:
     v2: float | None = None
     vV: float | None = None
     x2: float | None = None
+    d2: float | None = None
     V2_err: float | None = None
     Pin_err: float | None = None
     eta_err: float | None = None
@@ -83,6 +88,7 @@ class Stats:
     v2_err: float | None = None
     vV_err: float | None = None
     x2_err: float | None = None
+    d2_err: float | None = None
     status: Status = Status.STABLE
     message: str = ""
     method: str = ""

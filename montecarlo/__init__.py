@@ -6,6 +6,7 @@ Public API:
 * :func:`simulate` and :class:`Ensemble` -- raw per-replica moments for validation studies;
 * :func:`estimate` and :class:`Estimate` -- means, standard errors, Richardson bias;
 * :func:`escape_study` and :class:`EscapeCurve` -- escape fraction and times vs time;
+* :func:`switching_times` and :class:`Switching` -- residence times between buckled states;
 * :func:`simulate_naive` -- the plain vectorized numpy Euler--Maruyama reference;
 * :func:`regression_estimate` -- control variates over replicas (:mod:`.controls.regression`);
 * :func:`twin_expectations` and :func:`linearized_stiffness` -- the harmonic twin (:mod:`.controls.twin`).
@@ -28,6 +29,7 @@ from .estimate import Estimate, estimate
 from .naive import simulate_naive
 from .simulate import Ensemble, simulate
 from .solver import MonteCarlo, Plan
+from .switching import Switching, switching_times
 
 __all__ = [
     "MonteCarlo",
@@ -42,5 +44,7 @@ __all__ = [
     "Estimate",
     "escape_study",
     "EscapeCurve",
+    "switching_times",
+    "Switching",
     "simulate_naive",
 ]

@@ -13,9 +13,9 @@ coefficient arrays:
     stiff-wall substeps build ``h/K`` from it by squaring,
     :func:`montecarlo.steps.frozen._substep_path`).
 ``pp`` (physical)
-    ``m, gamma, Kv, Kc, tau_p, sigma, k, a, n, c, threshold, D/tau, rule, a_kink`` where
-    ``c`` is the stiffness kept inside the linear flow (``2k``, plus ``2a`` for the harmonic
-    potential), ``threshold`` the escape amplitude, ``rule`` the kink's rule for swings
+    ``m, gamma, Kv, Kc, tau_p, sigma, k, a, n, c, threshold, D/tau, rule, a_kink, k4, k3``
+    where ``c`` is the stiffness kept inside the linear flow (``2k + 6k4``, plus ``2a`` for the
+    harmonic potential), ``threshold`` the escape amplitude, ``rule`` the kink's rule for swings
     shorter than the step (:data:`montecarlo._kink.AVERAGE` or ``HOLD``) and ``a_kink`` the strength
     :math:`an` of the kink part :math:`-an\\,\\mathrm{sign}(x)` integrated exactly by the kink
     scheme (0 for the others).
@@ -64,11 +64,12 @@ JOINT_BLOCK = 38
 CF_SIZE = CF_JOINT + 1 + JOINT_BLOCK * (1 + 10)
 
 #: Moments accumulated per level, in this order: the system's (``xdU`` is
-#: :math:`x\\,U'(x)`, for the statistical linearization) and, prefixed ``t_``, the harmonic
-#: twin's (fine level only; zero without a twin).
+#: :math:`x\\,U'(x)`, for the statistical linearization), prefixed ``t_`` the harmonic
+#: twin's (fine level only; zero without a twin), and the bond's :math:`(x_{j+1} - x_j)^2`
+#: (``d2``, 0 for a single unit; last so that the twin's slots keep their place).
 MOMENTS = ("V2", "vV", "v2", "x2", "vxi", "stuck", "xdU",
            "t_V2", "t_vV", "t_v2", "t_x2", "t_vxi",
-           "t_x4", "t_x2V2", "t_x2v2", "t_absxn", "t_V2v2", "t_vxiV2")
+           "t_x4", "t_x2V2", "t_x2v2", "t_absxn", "t_V2v2", "t_vxiV2", "d2")
 N_MOM = len(MOMENTS)
 #: Rows of the ``sums`` accumulator: fine level, coarse level, fine level over the first half
 #: of the measured window (the burn-in drift check compares it with the whole), and the
@@ -127,10 +128,12 @@ def _substeps(x: float, v: float, h: float, xstar: float, pp: np.ndarray) -> int
 
 @njit(cache=True, nogil=True)
 def _measure(x, v, V, xi, stuck, F, w, cf, pp, kind, acc, pvx) -> float:
-    """Add the moments of the live paths (weight w = 1) to acc[0:7]; return unit-steps counted.
+    """Add the moments of the live paths (weight w = 1) to acc[0:7] and the bonds' d^2 to
+    acc[18] (N bonds per ring of N >= 2); return unit-steps counted.
 
     ``F`` holds -U'(x) at the current x for the smooth kind (the last kick computed it).
-    After a joint step, v xi is replaced by the estimate ``pvx`` of :func:`_d_step_joint`.
+    After a joint step, v xi is replaced by the estimate ``pvx`` of :func:`_d_step_joint` (and
+    after the kink's averaged-noise step by its own, :mod:`montecarlo.steps.averaged`).
     """
     N, P = x.shape
     half = cf[15]
@@ -168,6 +171,14 @@ def _measure(x, v, V, xi, stuck, F, w, cf, pp, kind, acc, pvx) -> float:
     acc[4] += s4 * half
     acc[5] += s5
     acc[6] += s6
+    if N > 1:
+        s7 = 0.0
+        for j in range(N):
+            jp = (j + 1) % N
+            for p in range(P):
+                d = x[jp, p] - x[j, p]
+                s7 += w[p] * d * d
+        acc[18] += s7
     live = 0.0
     for p in range(P):
         live += w[p]
@@ -259,7 +270,24 @@ def _live(w: np.ndarray) -> int:
 
 
 @njit(cache=True, nogil=True, inline="always")
-def _coupling_force(xm: np.ndarray, jm: int, jp: int, p: int, k: float) -> float:
-    """Force on a unit from its ring neighbours ``jm``, ``jp`` at their predicted midpoints
-    ``xm``: the one place the step kernels compute the coupling."""
-    return k * (xm[jm, p] + xm[jp, p])
+def _coupling_force(xm: np.ndarray, j: int, jm: int, jp: int, p: int, k: float, k4: float, k3: float) -> float:
+    """Force on unit ``j`` from its ring neighbours ``jm``, ``jp`` (and theirs, for ``k4``) at
+    the predicted midpoints ``xm``: the one place the step kernels compute the coupling.
+
+    The force is :math:`-\\partial E/\\partial x_j` of :math:`E = (k/2)\\sum d^2 +
+    (k_4/2)\\sum (Lx)^2 + (k_3/4)\\sum d^4` (bonds :math:`d = x_{j+1} - x_j`) minus the part
+    :math:`-(2k + 6k_4)x_j` kept in the exact linear flow (:func:`montecarlo.scheme.linear_stiffness`):
+    :math:`k(x_{j-1} + x_{j+1}) + k_4[4(x_{j-1} + x_{j+1}) - x_{j-2} - x_{j+2}]
+    + k_3[(x_{j+1} - x_j)^3 - (x_j - x_{j-1})^3]`, indices modulo N (so that N = 2 is a ring
+    of two bonds). ``k4`` and ``k3`` are tested for 0 so that a ring without them computes
+    exactly the diffusive force, bit for bit.
+    """
+    F = k * (xm[jm, p] + xm[jp, p])
+    if k4 != 0.0:
+        N = xm.shape[0]
+        F += k4 * (4.0 * (xm[jm, p] + xm[jp, p]) - xm[(jm + N - 1) % N, p] - xm[(jp + 1) % N, p])
+    if k3 != 0.0:
+        dp = xm[jp, p] - xm[j, p]
+        dm = xm[j, p] - xm[jm, p]
+        F += k3 * (dp * dp * dp - dm * dm * dm)
+    return F

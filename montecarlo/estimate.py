@@ -73,6 +73,10 @@ RESIDUAL_RULE = (3.0, 1.0)
 
 #: Observables estimated from the replica moments (``eta`` is derived from V2 and Pin).
 _NAMES = ("V2", "Pin", "v2", "vV", "x2", "stuck")
+#: Observables estimated in a second pass (:func:`_second_pass`), so that adding them leaves the
+#: bits of the first pass's numbers unchanged (a least-squares fit of more columns rounds
+#: differently).
+_SECOND = ("V2", "Pin", "d2")
 
 
 def bias_order(h: Harvester, kind: int | None = None) -> float:
@@ -88,7 +92,7 @@ class Estimate:
     Attributes
     ----------
     mean, se : dict of float
-        Per observable (``V2, Pin, eta, v2, vV, x2, stuck``): estimate and standard error
+        Per observable (``V2, Pin, eta, v2, vV, x2, stuck, d2``): estimate and standard error
         (level 0, the finest step).
     bias : dict of float
         Richardson estimate of the time-step bias of level 0, value(dt/2) - value(0)
@@ -156,11 +160,11 @@ class Estimate:
         return self.total_error(name) / value if value > 0 else math.inf
 
 
-def _per_replica(e: Ensemble, h: Harvester, level: int) -> np.ndarray:
+def _per_replica(e: Ensemble, h: Harvester, level: int, names: tuple[str, ...] = _NAMES) -> np.ndarray:
     m = e.moments(level)
     cols = {"V2": m["V2"], "Pin": h.params.sigma * m["vxi"], "v2": m["v2"], "vV": m["vV"],
-            "x2": m["x2"], "stuck": m["stuck"]}
-    return np.column_stack([cols[name] for name in _NAMES])
+            "x2": m["x2"], "stuck": m["stuck"], "d2": m["d2"]}
+    return np.column_stack([cols[name] for name in names])
 
 
 def _ratio(mean: np.ndarray, cov: np.ndarray, R: float) -> tuple[float, float]:
@@ -235,8 +239,8 @@ def estimate(e: Ensemble, h: Harvester, order: float | None = None, control: boo
             f"{bool(e.mart_names)}, escaped fraction {e.escaped_fraction():g}, {n} replicas")
     use = bool(sets)
     if n < 2:
-        nan = dict.fromkeys(_NAMES + ("eta",), math.nan)
-        zero = dict.fromkeys(_NAMES + ("eta",), 0.0)
+        nan = dict.fromkeys(_NAMES + ("eta", "d2"), math.nan)
+        zero = dict.fromkeys(_NAMES + ("eta", "d2"), 0.0)
         return Estimate(dict(nan), dict(nan), dict(zero), dict(zero), math.nan, n, (math.nan, math.nan),
                         (math.nan, math.nan), dict(zero), dict(zero))
     R = h.params.R
@@ -279,6 +283,9 @@ def estimate(e: Ensemble, h: Harvester, order: float | None = None, control: boo
     # control for the system's, which a transient would shift
     drift, drift_se = _scaled_difference(first[valid] - Ff, (C_first - C) if use else None,
                                          np.zeros(C.shape[1]) if use else None, mean, R, 1.0)
+    second = _second_pass(e, h, valid, extrapolate, scale, controls_used, (C_first - C) if use else None)
+    for out, part in zip((est_mean, est_se, bias, bias_se, residual, residual_se, drift, drift_se), second):
+        out["d2"] = part
     p = h.params
     r1 = Ff[:, 0] - p.Kc * p.tau_p * Ff[:, 3]
     r2 = Ff[:, 1] - p.m * p.gamma * Ff[:, 2] - p.Kv * Ff[:, 3]
@@ -304,6 +311,32 @@ def student_factor(dof: int) -> float:
     return float(t.ppf(norm.cdf(1.0), dof)) if dof >= 1 else math.inf
 
 
+def _second_pass(e: Ensemble, h: Harvester, valid: np.ndarray, extrapolate: bool, scale: float,
+                 controls: tuple[np.ndarray | None, np.ndarray | None],
+                 drift_controls: np.ndarray | None) -> tuple[float, ...]:
+    """The :data:`_SECOND` observables' last entry (``d2``) as :func:`estimate` treats the first
+    pass's: mean, standard error, bias and its error, residual and its error, drift and its
+    error (0 where a level is missing)."""
+    levels = [_per_replica(e, h, i, _SECOND)[valid] if i < e.levels else None for i in range(3)]
+    Ff, coarse, coarsest = levels
+    Y = Ff + scale * (Ff - coarse) if extrapolate else Ff
+    C, mu = controls
+    mean, cov = _plain(Y) if C is None else _regression(Y, C, mu)[:2]
+    name, R = _SECOND[-1], h.params.R
+    out = [float(mean[-1]), math.sqrt(max(float(cov[-1, -1]), 0.0)), 0.0, 0.0, 0.0, 0.0]
+    if coarse is not None:
+        b, b_se = _scaled_difference(coarse - Ff, C, mu, mean, R, scale, _SECOND)
+        out[2:4] = b[name], b_se[name]
+    if coarsest is not None:
+        D = (1.0 + 2.0 * scale) * coarse - scale * coarsest - (1.0 + scale) * Ff
+        r, r_se = _scaled_difference(D, C, mu, mean, R, 1.0 / (2.0 ** RESIDUAL_RULE[0] - 1.0), _SECOND)
+        out[4:6] = r[name], r_se[name]
+    first = _per_replica(e, h, -1, _SECOND)[valid]
+    d, d_se = _scaled_difference(first - Ff, drift_controls, None if C is None else np.zeros(C.shape[1]),
+                                 mean, R, 1.0, _SECOND)
+    return (*out, d[name], d_se[name])
+
+
 def _plain(Y: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """Sample mean of the rows of Y and the Student-scaled covariance of that mean."""
     n = Y.shape[0]
@@ -321,7 +354,7 @@ def _regression(Y: np.ndarray, C: np.ndarray, mu: np.ndarray) -> tuple[np.ndarra
 
 
 def _scaled_difference(D: np.ndarray, C: np.ndarray | None, mu: np.ndarray | None, mean: np.ndarray, R: float,
-                       factor: float) -> tuple[dict[str, float], dict[str, float]]:
+                       factor: float, names: tuple[str, ...] = _NAMES) -> tuple[dict[str, float], dict[str, float]]:
     """Mean and standard error of a per-replica difference between levels or windows, times
     ``factor``, per observable and for eta (to first order): the regression on the controls
     ``C`` (expectation ``mu``) when given, the plain mean otherwise.
@@ -337,8 +370,8 @@ def _scaled_difference(D: np.ndarray, C: np.ndarray | None, mu: np.ndarray | Non
         d_mean, d_cov = _plain(D)
     else:
         d_mean, d_cov, _ = _regression(D, C, mu)
-    value = {name: float(d_mean[i]) * factor for i, name in enumerate(_NAMES)}
-    se = {name: math.sqrt(max(float(d_cov[i, i]), 0.0)) * factor for i, name in enumerate(_NAMES)}
+    value = {name: float(d_mean[i]) * factor for i, name in enumerate(names)}
+    se = {name: math.sqrt(max(float(d_cov[i, i]), 0.0)) * factor for i, name in enumerate(names)}
     b, b_se = _linear_eta(d_mean, d_cov, mean, R)
     value["eta"], se["eta"] = b * factor, b_se * factor
     return value, se

@@ -73,7 +73,7 @@ def _stats(h: Harvester, est: Estimate, info: dict[str, Any], name: str) -> Stat
         V2=mean["V2"], Pin=mean["Pin"], R=h.params.R, V2_err=tot("V2"), Pin_err=tot("Pin"),
         cov_V2_Pin=est.cov_V2_Pin, eta_err=tot("eta"), v2=mean["v2"],
         v2_err=tot("v2"), vV=mean["vV"], vV_err=tot("vV"), x2=mean["x2"], x2_err=tot("x2"),
-        method=name, info=info)
+        d2=mean["d2"] if h.N > 1 else None, d2_err=tot("d2") if h.N > 1 else None, method=name, info=info)
 
 def _label(h: Harvester, s: Stats, est: Estimate, esc: float, met: bool, kd: float | None,
            harmonic_status: str | None, tol: float, threshold: float) -> Stats:
@@ -102,8 +102,8 @@ def _label(h: Harvester, s: Stats, est: Estimate, esc: float, met: bool, kd: flo
                         "Lower dt or raise escape.")
     note = " ".join(problems)
     if harmonic_status == "marginal":
-        fields.update(x2=None, x2_err=None)
-        head = (f"marginal: k = k_di = {kd:.10g}; x of the critical mode diffuses (x2 not "
+        fields.update(x2=None, x2_err=None, d2=None, d2_err=None)
+        head = (f"marginal: k = k_di = {kd:.10g}; x of the critical mode diffuses (x2, d2 not "
                 "reported); V2, Pin, eta are finite.")
         status = Status.MARGINAL
     elif metastable:

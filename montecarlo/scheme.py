@@ -92,8 +92,9 @@ def scheme_kind(h: Harvester) -> int:
 
 
 def linear_stiffness(h: Harvester) -> float:
-    """Stiffness :math:`c` kept in the exactly integrated linear part."""
-    c = 2.0 * h.k if h.N > 1 else 0.0
+    """Stiffness :math:`c` kept in the exactly integrated linear part: the coupling's own-unit
+    part :math:`2k + 6k_4` (of :math:`k(Lx)_j - k_4(L^2x)_j`) and, for the harmonic potential, 2a."""
+    c = (2.0 * h.k + 6.0 * h.k4 if h.k4 != 0.0 else 2.0 * h.k) if h.N > 1 else 0.0
     if h.is_linear:
         c += 2.0 * h.a
     return c
@@ -102,8 +103,9 @@ def linear_stiffness(h: Harvester) -> float:
 def joint_step_refusal(h: Harvester, kind: int | None = None) -> str | None:
     """Why the joint step cannot serve ``h``, or None if it can.
 
-    Only the harmonic and the smooth kick schemes have it: the kink scheme (n near 1) keeps xi
-    frozen over its piecewise flow with located zero crossings.
+    Only the harmonic and the smooth kick schemes have it: the kink scheme (n near 1) integrates
+    its piecewise flow at a constant force (with xi frozen, or at short tau its step mean,
+    :mod:`montecarlo.steps.averaged`).
     """
     kind = scheme_kind(h) if kind is None else kind
     if kind == KIND_KINK:
@@ -113,7 +115,12 @@ def joint_step_refusal(h: Harvester, kind: int | None = None) -> str | None:
 
 def uses_joint_step(h: Harvester, dt: float, kind: int | None = None) -> bool:
     """Whether a run of ``h`` with coarse step ``dt`` takes the joint step by default:
-    tau < :data:`JOINT_STEPS` dt, and :func:`joint_step_refusal` has no objection."""
+    tau < :data:`JOINT_STEPS` dt, and :func:`joint_step_refusal` has no objection; for the kink
+    scheme, whose frozen-xi flow needs dt <= tau, the short-tau step is the averaged-noise step
+    (:mod:`montecarlo.steps.averaged`), taken when tau < dt."""
+    kind = scheme_kind(h) if kind is None else kind
+    if kind == KIND_KINK:
+        return bool(h.params.tau < dt)
     return bool(h.params.tau < JOINT_STEPS * dt and joint_step_refusal(h, kind) is None)
 
 
@@ -298,6 +305,6 @@ def physical_vector(h: Harvester, threshold: float, rule: str = "average",
     return np.array(
         [p.m, p.gamma, p.Kv, p.Kc, p.tau_p, p.sigma, h.k if h.N > 1 else 0.0, h.a, h.n,
          linear_stiffness(h), threshold, p.noise_variance, KINK_RULES[rule],
-         h.a * h.n if kind == KIND_KINK else 0.0],
+         h.a * h.n if kind == KIND_KINK else 0.0, h.k4 if h.N > 1 else 0.0, h.k3 if h.N > 1 else 0.0],
         dtype=float,
     )

@@ -228,8 +228,10 @@ def simulate(
         Advance (x, v, V, xi) together by the exact Gaussian transition of the linear drift
         (True) or with xi frozen over each step (False). None (default): joint when
         tau < :data:`montecarlo.scheme.JOINT_STEPS` dt, where freezing xi is wrong
-        (:func:`montecarlo.scheme.uses_joint_step`). True raises where the scheme has no joint
-        step (:func:`montecarlo.scheme.joint_step_refusal`).
+        (:func:`montecarlo.scheme.uses_joint_step`). The kink scheme's short-tau step is the
+        averaged-noise step instead (:mod:`montecarlo.steps.averaged`; default when tau < dt),
+        which runs without a twin. True raises where the scheme has no such step
+        (:func:`montecarlo.scheme.joint_step_refusal`).
     martingale : bool
         Also accumulate level 0's martingale control sums (:mod:`montecarlo.controls.martingale`,
         :attr:`Ensemble.mart`): sums of basis functions of the state times the noise drawn
@@ -251,7 +253,7 @@ def simulate(
     >>> e = simulate(Harvester.build(a=0.5), dt=0.05, paths=4, replicas=2, t_burn=1.0,
     ...              t_run=2.0, seed=3)
     >>> e.sums.shape, float(e.counts[0, 0])
-    ((2, 2, 18), 160.0)
+    ((2, 2, 19), 160.0)
     """
     c = _check(h, dt=dt, paths=paths, replicas=replicas, t_burn=t_burn, t_run=t_run, seed=seed,
                richardson=richardson, threshold=threshold, chunk=chunk, threads=threads,
@@ -282,7 +284,7 @@ def simulate(
         seed_entropy=int(ss.entropy) if c.seed is None else c.seed,
         first_replica=c.first_replica,
         notes={"threads": c.threads, "chunk": c.chunk, "scheme_kind": setup.kind, "sample_stride": setup.stride,
-               "kink_rule": c.kink_rule, "joint_step": scheme.name == "joint"},
+               "kink_rule": c.kink_rule, "joint_step": scheme.name == "joint", "step": scheme.name},
         twin_kappa=c.twin,
         twin_mean=twin_mean,
         start=c.start,
@@ -361,18 +363,25 @@ def _check(h: Harvester, *, dt: float, paths: int, replicas: int, t_burn: float,
     if joint is None:
         joint = uses_joint_step(h, dt, kind)
     elif joint:
-        why = STEPS["joint"].refusal(h, kind)
+        why = STEPS[_short_tau_step(kind)].refusal(h, kind)
         if why is not None:
             raise ParameterError(f"joint=True is not available here: {why}")
+    if joint and kind == KIND_KINK and twin is not None:
+        raise ParameterError("twin: the kink's averaged-noise step (tau < dt) has no harmonic twin; use twin=None")
     return _Checked(dt, paths, replicas, t_burn, t_run, seed, bool(richardson), threshold, chunk, threads,
                     first_replica, sample_every, twin, start, kink_rule, kind, bool(joint), martingale,
                     third_level and bool(richardson))
 
 
+def _short_tau_step(kind: int) -> str:
+    """The step taken at short tau (``joint``): the averaged-noise step for the kink, else the joint step."""
+    return "averaged" if kind == KIND_KINK else "joint"
+
+
 def _coefficients(h: Harvester, c: _Checked) -> tuple[StepScheme, Setup, dict[str, float]]:
     """The step scheme, the kernels' setup (all but the chunk's path count) and the twin's
     exact expectations (empty without a twin)."""
-    scheme = STEPS["joint" if c.joint else "frozen"]
+    scheme = STEPS[_short_tau_step(c.kind) if c.joint else "frozen"]
     dt_f = 0.5 * c.dt if c.richardson else c.dt
     pp = physical_vector(h, c.threshold, c.kink_rule, c.kind)
     cf_f = scheme.coefficients(h, dt_f)

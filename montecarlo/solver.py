@@ -56,6 +56,10 @@ _PILOT_FIRST = 2**40
 _PATH_TIME = 140.0
 #: Coarsest and finest automatic time step, and the share of tol the bias may take.
 _DT_START, _DT_MIN, _BIAS_SHARE = 0.02, 0.02 / 32, 1.0 / 3.0
+#: Largest tau at which the kink scheme's averaged-noise step (:mod:`montecarlo.steps.averaged`)
+#: is measured correct: the Boltzmann bond law of n = 1 rings of two at K_v = 0, tau = 1e-4
+#: (tests/montecarlo/test_coupling.py); between it and JOINT_STEPS x _DT_MIN the kink refuses.
+KINK_AVERAGED_TAU = 1e-4
 #: Coarsest automatic time step where the joint step runs: its linear part is exact, so only
 #: the kicks of -U'(x) leave a bias. Measured for n = 3, a = 0.5 (coupled Richardson estimate
 #: at dt/2): 1.7e-5, 6.7e-5, 2.7e-4 relative at dt = 0.02, 0.04, 0.08 and tau = 1e-4, against
@@ -272,22 +276,19 @@ class MonteCarlo:
 
     def unsupported_reason(self, h: Harvester) -> str | None:
         """None, or why this solver refuses ``h``: ``joint=True`` where there is no joint step,
-        and the kink scheme (xi held over a step) where tau is shorter than the step can be made:
-        below ``JOINT_STEPS`` times the finest automatic step, or below an explicit ``dt``; and,
-        until the kernels have their forces, the couplings ``k4`` and ``k3``."""
-        for name, value in (("k4", h.k4), ("k3", h.k3)):
-            if value != 0.0:
-                return (f"{name} = {value:g}: Monte Carlo does not simulate the {name} coupling yet; "
-                        f"set {name} = 0" + (" (or use method='exact', which handles k4)" if name == "k4" else ""))
-        if self.joint:
-            return joint_step_refusal(h)
+        and the kink scheme (xi held over a step) where tau is shorter than the step can be made
+        (below ``JOINT_STEPS`` times the finest automatic step, or below an explicit ``dt``),
+        unless tau <= :data:`KINK_AVERAGED_TAU`, where its averaged-noise step serves it."""
         if scheme_kind(h) != KIND_KINK:
-            return None
+            return joint_step_refusal(h) if self.joint else None
         tau = h.params.tau
+        if tau <= KINK_AVERAGED_TAU and (self.dt is None or tau < self.dt):
+            return None
         if self.dt is None and tau < JOINT_STEPS * _DT_MIN:
             return (f"tau = {tau:g} is too short for the kink scheme (n = {h.n:g} <= 1 + {KINK_WIDTH:g}), "
                     f"which holds xi over a step: it needs tau >= {JOINT_STEPS * _DT_MIN:g} "
-                    f"({JOINT_STEPS:g} x the finest automatic step {_DT_MIN:g}), or an explicit dt <= tau")
+                    f"({JOINT_STEPS:g} x the finest automatic step {_DT_MIN:g}), or an explicit dt <= tau; "
+                    f"its averaged-noise step serves tau <= {KINK_AVERAGED_TAU:g} (measured)")
         if self.dt is not None and tau < self.dt:
             return (f"tau = {tau:g} is shorter than dt = {self.dt:g}: the kink scheme (n = {h.n:g}) holds xi "
                     f"over a step; use dt <= tau")
@@ -349,7 +350,9 @@ class MonteCarlo:
                     if kp is not None:
                         kappa = kp
                         notes["twin"] = "pilot <x U'(x)>/<x^2>"
-            twin = kappa if self.control else None
+            # the kink's averaged-noise step (tau < dt) has no twin
+            averaged = scheme_kind(h) == KIND_KINK and uses_joint_step(h, dt)
+            twin = kappa if self.control and not averaged else None
             start = "twin" if twin is not None else "rest"
         tau_r = relaxation_time(h, kappa)
         if kappa is None and harmonic is None:

@@ -241,9 +241,7 @@ def test_stats_with_k4_and_kv_zero(capsys):
 
 
 @pytest.mark.parametrize(("argv", "match"), [
-    (("stats", "--N", "3", "--k3", "0.1"), "k3 = 0.1: Monte Carlo does not simulate the k3 coupling yet"),
     (("stats", "--N", "3", "--k3", "0.1", "--method", "exact"), r"k3 = 0.1 \(cubic coupling\) is nonlinear"),
-    (("stats", "--n", "3", "--N", "3", "--k4", "0.1"), "k4 = 0.1: Monte Carlo does not simulate the k4 coupling yet"),
     (("stats", "--k4", "0.1"), r"k4 must be 0 for a single unit \(N = 1"),
     (("stats", "--N", "3", "--k3", "-1"), r"k3 must be in \[0, inf\), got -1"),
     (("stats", "--param", "Kv=0", "--param", "gamma=0"), "gamma = 0 and Kv = 0 leave the oscillator undamped"),

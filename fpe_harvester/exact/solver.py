@@ -69,7 +69,7 @@ _REQUIRED = ("V2", "Pin", "eta")
 
 
 def _wide_ring(kappa: Wide | Float, scale: Wide | Float, marginal: np.ndarray,
-               params: Params) -> tuple[dict[str, Wide | Float], dict[str, Wide | Float]]:
+               params: Params, N: int) -> tuple[dict[str, Wide | Float], dict[str, Wide | Float]]:
     """Ring moments (means over the last axis) and their floating-point error, as :class:`Wide`.
 
     The error is the change of each moment when every stiffness moves by its own round-off
@@ -79,10 +79,18 @@ def _wide_ring(kappa: Wide | Float, scale: Wide | Float, marginal: np.ndarray,
     (``marginal``) are not moved: the result there is by definition the limit at zero stiffness.
     """
     num = type(kappa)
-    mom = {key: val.mean() for key, val in wide_mode_moments(kappa, params).items()}
-    moved = wide_mode_moments(kappa + num.where(marginal, 0.0, _KAPPA_ROUNDOFF * scale), params)
+    mom = {key: val.mean() for key, val in _with_bonds(wide_mode_moments(kappa, params), N).items()}
+    moved = _with_bonds(wide_mode_moments(kappa + num.where(marginal, 0.0, _KAPPA_ROUNDOFF * scale), params), N)
     err = {key: abs(moved[key].mean() - mom[key]) + _KAPPA_ROUNDOFF * abs(mom[key]) for key in mom}
     return mom, err
+
+
+def _with_bonds(modes: dict[str, Wide | Float], N: int) -> dict[str, Wide | Float]:
+    """Add the per-mode bond moment ``d2``: mode q of a ring of N (last axis) contributes
+    :math:`\\mu_q\\langle|x_q|^2\\rangle`, :math:`\\mu_q = 4\\sin^2(\\pi q/N)`, to
+    :math:`\\langle(x_{j+1} - x_j)^2\\rangle` (0 for a single unit)."""
+    mu = 4.0 * np.sin(np.pi * np.arange(N) / N) ** 2
+    return {**modes, "d2": modes["x2"] * mu}
 
 
 def _sweep_block(a: np.ndarray, k: np.ndarray, N: int, params: Params, k4: float) -> dict[str, np.ndarray]:
@@ -109,7 +117,7 @@ def _sweep_block_in(num: type, a: np.ndarray, k: np.ndarray, N: int, params: Par
     stable = ~unstable_q.any(axis=-1)
     marginal = stable & marginal_q.any(axis=-1)
     kappa = num.where(marginal_q, 0.0, num.where(stable[:, None], kappa, 1.0))
-    mom, err = _wide_ring(kappa, scale, marginal_q & stable[:, None], params)
+    mom, err = _wide_ring(kappa, scale, marginal_q & stable[:, None], params, N)
     mom["eta"] = mom["V2"] / (params.R * mom["Pin"])
     rel = [(err[q] / mom[q]).to_float() for q in ("V2", "Pin")]
     err["eta"] = mom["eta"] * np.hypot(*rel)
@@ -118,12 +126,12 @@ def _sweep_block_in(num: type, a: np.ndarray, k: np.ndarray, N: int, params: Par
     err["Vrms"] = 0.5 * err["V2"] / mom["Vrms"] + _KAPPA_ROUNDOFF * mom["Vrms"]
     in_range = stable & np.logical_and.reduce([mom[q].representable() for q in _REQUIRED])
     out: dict[str, np.ndarray] = {}
-    for key in ("V2", "Pin", "eta", "Vrms", "v2", "vV", "x2"):
+    for key in ("V2", "Pin", "eta", "Vrms", "v2", "vV", "x2", "d2"):
         # an error below the normal range is still an honest (if imprecise) bound: only its
         # value decides; an error that overflows (next to the threshold) drops the value too
         value, error = mom[key].to_float(), err[key].to_float()
         ok = stable & mom[key].representable() & np.isfinite(error)
-        if key == "x2":
+        if key in ("x2", "d2"):
             ok &= ~marginal
         out[key] = np.where(ok, value, np.nan)
         out[key + "_err"] = np.where(ok, error, np.nan)
@@ -266,11 +274,11 @@ def _point_stats(h: Harvester, point: dict[str, Any]) -> Stats:
         )
     secondary = {}
     dropped = []
-    for key in ("v2", "vV", "x2"):
+    for key in ("v2", "vV", "x2", "d2"):
         value = point[key]
-        if value is np.ma.masked:
+        if value is np.ma.masked or (key == "d2" and h.N == 1):
             secondary[key] = secondary[key + "_err"] = None
-            if not (key == "x2" and marginal):
+            if not (key in ("x2", "d2") and marginal) and h.N > 1:
                 dropped.append(key)
         else:
             secondary[key], secondary[key + "_err"] = float(value), float(point[key + "_err"])

@@ -40,16 +40,16 @@ class FrozenTag(NamedTuple):
 
 @njit(cache=True, nogil=True)
 def _external_force(xi, xm, f, pp) -> None:
-    """f = sigma xi + k (x_{j-1} + x_{j+1}) with neighbours at their predicted midpoints."""
+    """f = sigma xi + the coupling force (:func:`_coupling_force`) at the predicted midpoints."""
     N, P = xi.shape
-    sigma, k = pp[5], pp[6]
+    sigma, k, k4, k3 = pp[5], pp[6], pp[14], pp[15]
     for j in range(N):
         jm = (j + N - 1) % N
         jp = (j + 1) % N
         for p in range(P):
             f[j, p] = sigma * xi[j, p]
             if N > 1:
-                f[j, p] += _coupling_force(xm, jm, jp, p, k)
+                f[j, p] += _coupling_force(xm, j, jm, jp, p, k, k4, k3)
 
 
 @njit(cache=True, nogil=True)
@@ -152,9 +152,9 @@ def _d_step(x, v, V, xi, F, stuck, xm, fext, w, cf, pp, kind, counters, cs) -> N
         if N > 1:  # neighbours at their midpoints predicted from the start of the step
             for j in range(N):
                 xm[j, p] = x[j, p] + 0.5 * h * v[j, p]
-            sigma, k = pp[5], pp[6]
+            sigma, k, k4, k3 = pp[5], pp[6], pp[14], pp[15]
             for j in range(N):
-                fext[j, p] = sigma * xi[j, p] + _coupling_force(xm, (j + N - 1) % N, (j + 1) % N, p, k)
+                fext[j, p] = sigma * xi[j, p] + _coupling_force(xm, j, (j + N - 1) % N, (j + 1) % N, p, k, k4, k3)
         _substep_path(x, v, V, F, fext, p, sk[i], cf, pp)
 
 

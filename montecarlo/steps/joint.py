@@ -158,7 +158,7 @@ def _d_step_joint(x, v, V, xi, F, xm, fext, eps, cf, pp, kind, rbm, rbx, pvx, w,
         n_stiff = i
     if kicks:
         _kick(x, v, F, h, pp, False)
-    k = pp[6]
+    k, k4, k3 = pp[6], pp[14], pp[15]
     for j in range(N):
         for p in range(P):
             fext[j, p] = 0.0
@@ -170,7 +170,7 @@ def _d_step_joint(x, v, V, xi, F, xm, fext, eps, cf, pp, kind, rbm, rbx, pvx, w,
             jm = (j + N - 1) % N
             jp = (j + 1) % N
             for p in range(P):
-                fext[j, p] = _coupling_force(xm, jm, jp, p, k)
+                fext[j, p] = _coupling_force(xm, j, jm, jp, p, k, k4, k3)
     _joint_flow(x, v, V, xi, fext, eps, cf, rbm, rbx)
     if kicks:
         _kick(x, v, F, h, pp, True)
@@ -192,7 +192,7 @@ def _d_step_joint(x, v, V, xi, F, xm, fext, eps, cf, pp, kind, rbm, rbx, pvx, w,
             for j in range(N):
                 xm[j, p] = x[j, p] + 0.5 * h * v[j, p]
             for j in range(N):
-                fext[j, p] = _coupling_force(xm, (j + N - 1) % N, (j + 1) % N, p, k)
+                fext[j, p] = _coupling_force(xm, j, (j + N - 1) % N, (j + 1) % N, p, k, k4, k3)
         _joint_substeps(x, v, V, xi, F, fext, pvx, p, sk[i], cf, pp, gen)
 
 

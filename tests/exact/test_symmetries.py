@@ -56,7 +56,7 @@ SYMMETRIES = {
     "S1 noise amplitude": ({"sigma": 1, "D": -2}, {}),
     "S2 voltage amplitude": ({"Kc": -1, "Kv": 1}, {"V2": -2, "vV": -1, "eta": -2, "Vrms": -1}),
     "S3 mass": ({"m": 1, "a": 1, "k": 1, "Kv": 1, "sigma": 1}, {"Pin": 1, "eta": -1}),
-    "S4 amplitude": ({"D": 2}, {"V2": 2, "Pin": 2, "v2": 2, "vV": 2, "x2": 2, "Vrms": 1}),
+    "S4 amplitude": ({"D": 2}, {"V2": 2, "Pin": 2, "v2": 2, "vV": 2, "x2": 2, "d2": 2, "Vrms": 1}),
     "S5 time": ({"m": -2, "gamma": 1, "tau_p": -1, "tau": -1, "D": -1},
                 {"Pin": 1, "v2": 2, "vV": 1, "eta": -1, "growth_rate": 1}),
 }
@@ -130,7 +130,7 @@ def check_powers_of_two(h: Harvester, exps: list[int]) -> None:
             v1, v2 = getattr(r1, key), getattr(r2, key)
             if v1 is None or v2 is None:
                 # only a secondary moment that leaves the double range may vanish on one side
-                assert v1 is v2 is None or q in ("v2", "vV", "x2"), key
+                assert v1 is v2 is None or q in ("v2", "vV", "x2", "d2"), key
                 continue
             assert v2 == math.ldexp(v1, shift.get(q, 0)), f"{key}: {v2!r} != {v1!r} * 2^{shift.get(q, 0)}"
     g1, g2 = r1.growth_rate, r2.growth_rate
@@ -170,5 +170,5 @@ def test_each_symmetry_on_the_paper_ring(name: str) -> None:
     h = Harvester.build(a=0.5, N=3, k=-0.33)
     h2, obs = transform(h, {name: 3.0})
     r1, r2 = solve(h), solve(h2)
-    for q in ("eta", "V2", "Pin", "v2", "vV", "x2"):
+    for q in ("eta", "V2", "Pin", "v2", "vV", "x2", "d2"):
         assert getattr(r2, q) == pytest.approx(getattr(r1, q) * obs.get(q, 1.0), rel=1e-13), q

@@ -70,9 +70,13 @@ def test_white_noise_limit_is_continuous() -> None:
 def test_step_choice_and_refusal() -> None:
     assert uses_joint_step(Harvester.build(a=0.5, n=3, tau=1e-4), 0.02)
     assert not uses_joint_step(Harvester.build(a=0.5, n=3, tau=1.0), 0.02)
-    assert not uses_joint_step(Harvester.build(a=0.5, n=1, tau=1e-4), 0.02)
-    with pytest.raises(ParameterError, match="joint=True is not available here: the kink scheme"):
-        simulate(Harvester.build(a=0.5, n=1, tau=1e-4), dt=0.02, paths=2, replicas=1, t_run=1.0, joint=True)
+    # the kink's short-tau step is the averaged-noise step, taken when tau < dt
+    assert uses_joint_step(Harvester.build(a=0.5, n=1, tau=1e-4), 0.02)
+    assert not uses_joint_step(Harvester.build(a=0.5, n=1, tau=0.05), 0.02)
+    e = simulate(Harvester.build(a=0.5, n=1, tau=1e-4), dt=0.02, paths=2, replicas=1, t_run=1.0, seed=1)
+    assert e.notes["step"] == "averaged"
+    with pytest.raises(ParameterError, match="averaged-noise step .* has no harmonic twin"):
+        simulate(Harvester.build(a=0.5, n=1, tau=1e-4), dt=0.02, paths=2, replicas=1, t_run=1.0, twin=1.0)
 
 
 def test_twin_at_fast_noise_matches_its_expectations() -> None:
@@ -111,11 +115,10 @@ def test_fast_noise_cubic_unit_agrees_with_fokker_planck() -> None:
 
 def test_kink_refuses_a_tau_shorter_than_its_step() -> None:
     # the kink scheme keeps xi frozen over a step: at tau = 1e-4 it had returned eta ~ 6e4
-    # (not converged, paths escaping); it now says why it cannot run
-    h = Harvester.build(a=0.5, n=1, tau=1e-4)
-    with pytest.raises(MethodNotAvailableError, match="tau = 0.0001 is too short for the kink scheme"):
+    # (not converged, paths escaping); its averaged-noise step now serves tau <= 1e-4
+    # (tests/montecarlo/test_coupling.py), and between that and the frozen step's range it says why
+    h = Harvester.build(a=0.5, n=1, tau=1e-3)
+    with pytest.raises(MethodNotAvailableError, match="tau = 0.001 is too short for the kink scheme"):
         solve(h, "mc", progress=False)
-    with pytest.raises(MethodNotAvailableError, match="shorter than dt = 0.001"):
-        solve(h, "mc", dt=1e-3, progress=False)
-    with pytest.raises(MethodNotAvailableError, match="integrates its piecewise flow with xi frozen"):
-        solve(h, "mc", joint=True, progress=False)
+    with pytest.raises(MethodNotAvailableError, match="shorter than dt = 0.01"):
+        solve(h, "mc", dt=1e-2, progress=False)

@@ -1,5 +1,6 @@
-"""Beyond the paper: the exact optimum of harmonic rings, its upper bound, k_di maps, and
-the escape (metastability) time of n < 2 rings from Monte Carlo.
+"""Beyond the paper: the exact optimum of harmonic rings, its upper bound, k_di maps, the
+escape (metastability) time of n < 2 rings from Monte Carlo, and rings made stable by cubic
+bonds k3 (the recorded study :mod:`validation.studies.coupling`, with cheap live checks).
 
 **The bound.** From the closed form of :func:`fpe_harvester.exact.mode_moments`,
 :math:`\\eta = V^2/P_{in}` of one mode of stiffness :math:`\\kappa` is
@@ -38,9 +39,14 @@ from ..harness.checks import CheckResult, Context, agree, expect, skipped
 from ..references.analytic import closed_form_mode
 from ..harness.report import Figure, Section, Table, new_figure, save_figure
 
-__all__ = ["eta_mode", "eta_bound", "optimum", "plateau", "escape_time", "run"]
+__all__ = ["eta_mode", "eta_bound", "optimum", "plateau", "escape_time", "COUPLING_DATA", "run"]
 
 _SECTION = "Beyond the paper"
+
+#: The recorded coupling study (``python -m validation.studies.coupling --out validation/data``).
+COUPLING_DATA = Path(__file__).resolve().parents[1] / "data" / "coupling.json"
+#: The paper's best n = 1 ring: metastable, eta ~ 0.62 at k = -0.01 (N = 3, a = 0.5).
+_PAPER_METASTABLE = 0.62
 
 
 def eta_mode(kappa: np.ndarray | float, p: Params) -> np.ndarray:
@@ -277,8 +283,89 @@ def _plot_escape(ctx: Context, found: list[tuple[float, float, float, float]]) -
     return save_figure(fig, ctx.out / "beyond_escape_time.png", "Escape time of n < 2 rings (N = 3, a = 0.5) versus 1/|k|: Kramers predicts a straight line.")
 
 
+def _coupling_study(ctx: Context, sec: Section) -> list[CheckResult]:
+    """The recorded k3 study: table of the best stable n = 1 ring per k3, eta(k) curves, the
+    landscape figure; live, one Monte Carlo point at the best ring and the confinement by k3."""
+    import json
+
+    if not COUPLING_DATA.exists():
+        return [skipped("cubic bonds: recorded study", _SECTION, f"{COUPLING_DATA} missing: run "
+                        "python -m validation.studies.coupling --out validation/data")]
+    res = json.loads(COUPLING_DATA.read_text())
+    unit, unit_err = res["unit_eta"], res["unit_eta_err"]
+    table = Table(f"Best stable n = 1 ring (N = {res['N']}, a = {res['a']:g}) per cubic coupling k3 (Monte Carlo "
+                  f"optimizer over k); single unit eta = {unit:.4f}, paper's metastable ring {_PAPER_METASTABLE} "
+                  "at k = -0.01", ("k3", "k_opt", "eta_max", "fold k_sn", "coexistence k_co", "status"))
+    for o in res["optima"]:
+        k_err = f" +- {o['k_opt_err']:.2g}" if o["k_opt_err"] is not None else " (edge)"
+        table.rows.append((f"{o['k3']:g}", f"{o['k_opt']:.4g}{k_err}", f"{o['eta_max']:.4f} +- {o['eta_max_err']:.2g}",
+                           f"{o['k_fold']:.4g}", f"{o['k_coexistence']:.4g}", o["status"]))
+    sec.tables.append(table)
+    best = max((o for o in res["optima"] if o["status"] == "stable"), key=lambda o: o["eta_max"], default=None)
+    checks: list[CheckResult] = []
+    if best is None:
+        return [expect("cubic bonds: a converged optimum", _SECTION, False, "no optimum converged in the study")]
+    gain = best["eta_max"] - unit
+    checks.append(expect("best stable n = 1 ring (cubic bonds) against the single unit", _SECTION,
+                         gain > 3.0 * math.hypot(best["eta_max_err"], unit_err),
+                         f"eta_max = {best['eta_max']:.4f} +- {best['eta_max_err']:.2g} at k = {best['k_opt']:.4g}, "
+                         f"k3 = {best['k3']:g}; single unit {unit:.4f} +- {unit_err:.1g}: gain {gain:.4f}"))
+    h = Harvester.build(a=res["a"], n=1.0, N=res["N"], k=best["k_opt"], k3=best["k3"])
+    r = ctx.solve(h, "mc")
+    checks.append(agree(f"live: eta of the best ring (k = {best['k_opt']:.4g}, k3 = {best['k3']:g}) against the "
+                        "recorded optimum", _SECTION, r.eta, r.eta_err, best["eta_max"], best["eta_max_err"]))
+    conf = ctx.solve(Harvester.build(a=0.5, n=1.0, N=3, k=-0.05, k3=0.1), "mc")
+    checks.append(expect("live: k3 = 0.1 confines the n = 1 ring at k = -0.05 (N = 3)", _SECTION,
+                         conf.status is Status.STABLE, f"status {conf.status.value}: {conf.message}"))
+    sec.text.append(_coupling_text(res, best, unit))
+    sec.figures.append(_plot_coupling(ctx, res))
+    return checks
+
+
+def _coupling_text(res: Mapping[str, Any], best: Mapping[str, Any], unit: float) -> str:
+    return (
+        "**Rings made stable by cubic bonds (k3 > 0).** With bonds (k/2) d^2 + (k3/4) d^4 every n = 1 ring is "
+        "confined (each bond's energy is at least -k^2/(4 k3)); the origin stays a local minimum and buckled "
+        "states (one unit displaced) appear at the fold k_sn = -(27 a^2 k3/16)^(1/3) and become the global minimum "
+        "at k_co = -(27 a^2 k3/8)^(1/3). The Monte Carlo optimizer over k at fixed k3 (common random numbers, "
+        f"error bars from batches; study validation/studies/coupling.py) finds the best stable ring at k3 = "
+        f"{best['k3']:g}, k = {best['k_opt']:.4g} +- {best['k_opt_err']:.2g}: eta = {best['eta_max']:.4f} +- "
+        f"{best['eta_max_err']:.2g}, against {unit:.4f} for the single unit and the paper's metastable "
+        f"{_PAPER_METASTABLE} at k = -0.01. Optimum k against the coexistence coupling k_co per k3: "
+        + ", ".join(f"{o['k3']:g}: {o['k_opt']:.3g} vs {o['k_coexistence']:.3g}" for o in res["optima"])
+        + f". Larger k3 lowers eta at every k of the n = 1 curves: {'yes' if _falls_with_k3(res, 1) else 'no'}."
+    )
+
+
+def _falls_with_k3(res: Mapping[str, Any], n: int) -> bool:
+    """Whether eta decreases with k3 at every k of the recorded n curves (beyond their errors)."""
+    curves = sorted((float(key.split("_k3_")[1]), rows) for key, rows in res["curves"].items() if key.startswith(f"n{n}_"))
+    return all(hi["eta"] + 2 * hi["eta_err"] < lo["eta"] - 2 * lo["eta_err"]
+               for (_, low_rows), (_, high_rows) in zip(curves, curves[1:]) for lo, hi in zip(low_rows, high_rows))
+
+
+def _plot_coupling(ctx: Context, res: Mapping[str, Any]) -> Figure:
+    from validation.studies.coupling import draw
+
+    fig, (ax1, ax2, ax3) = new_figure((15, 4), ncols=3)
+    for ax, n in ((ax1, 1), (ax2, 2)):
+        for key, rows in res["curves"].items():
+            if key.startswith(f"n{n}_"):
+                pts = [(r["k"], r["eta"], r["eta_err"]) for r in rows if r["eta"] is not None]
+                ax.errorbar(*zip(*pts), fmt="o-", ms=3, label=f"k3 = {key.split('_k3_')[1]}")
+        ax.axhline(res["unit_eta"], color="k", ls=":", lw=1, label="single unit")
+        ax.set_xlabel("k")
+        ax.set_ylabel("eta")
+        ax.set_title(f"n = {n}, N = {res['N']}, a = {res['a']:g} (Monte Carlo)", fontsize=8)
+        ax.legend(fontsize=7)
+    draw(dict(res), ax3)
+    return save_figure(fig, ctx.out / "beyond_cubic_bonds.png", "Cubic bonds k3: eta against k at n = 1 and "
+                       "n = 2 (N = 3), and the landscape's fold and coexistence couplings in the (k, k3) plane "
+                       "with the optimum k per k3 (recorded study).")
+
+
 def run(ctx: Context) -> Section:
-    """Optimum and bound (exact), k_di maps (scene), escape times (Monte Carlo)."""
+    """Optimum and bound (exact), k_di maps (scene), escape times (Monte Carlo), cubic bonds."""
     sec = Section("beyond", _SECTION)
     rng = np.random.default_rng(ctx.seed)
     sec.checks += ctx.check("closed form of eta(kappa)", _SECTION, lambda: _closed_form_checks(rng))
@@ -286,4 +373,5 @@ def run(ctx: Context) -> Section:
     sec.checks += ctx.check("k_di(N, a) map (scene)", _SECTION, lambda: _kdi_map(ctx, sec))
     sec.checks += ctx.check("escape time vs k (Monte Carlo)", _SECTION, lambda: _escape_study(ctx, sec))
     sec.checks += ctx.check("metastable status from the mc solver", _SECTION, lambda: _metastable_status(ctx))
+    sec.checks += ctx.check("cubic bonds k3 (recorded study)", _SECTION, lambda: _coupling_study(ctx, sec))
     return sec
