@@ -146,7 +146,7 @@ def solve(h: Harvester, method: str | Solver = "auto", *, fallback_time: float |
         raise MethodNotAvailableError(reason)
     res = solver.solve(h)
     if method == "auto" and solver.name == "fpe" and fallback_time and res.status is Status.NOT_CONVERGED:
-        return _monte_carlo_fallback(h, res, fallback_time, getattr(solver, "tol"), options.get("progress"))
+        return _monte_carlo_fallback(h, res, fallback_time, solver.tol, options.get("progress"))
     return res
 
 
