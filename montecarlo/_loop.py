@@ -195,21 +195,18 @@ def _run(tag, gen, s, out) -> None:
                 if coupled:
                     for r in range(nz):
                         z2[r, j, p] = gen.standard_normal()
-        ea, eb = e1, e2  # the fine substeps' noise, as the scheme's noise() returns it
         for sub in range(2 if coupled else 1):
             zz = z1 if sub == 0 else z2
-            ee = noise(tag, cf_f, zz, e1 if sub == 0 else e2)
-            if sub == 0:
-                ea = ee
-            else:
-                eb = ee
+            ee = e1 if sub == 0 else e2
+            noise(tag, cf_f, zz, ee)
             n_upd += 1
             step(tag, xf, vf, Vf, xif, Ff, sf, pf, ee, cf_f, pp, kind, xm, fext, cs, rbm, rbx, w, counters, gen)
             if twin:
-                step(tag, xt, vt, Vt, xit, Ft, st, pt, noise(tag, cf_t, zz, et), cf_t, pp_t, KIND_LINEAR, xm, fext,
+                noise(tag, cf_t, zz, et)
+                step(tag, xt, vt, Vt, xit, Ft, st, pt, et, cf_t, pp_t, KIND_LINEAR, xm, fext,
                      cs, rbm, rbx, w, counters, gen)
             if coupled and sub == 1:
-                compose(tag, cf_f, cf_c, ea, eb, ec)
+                compose(tag, cf_f, cf_c, e1, e2, ec)
                 step(tag, xc, vc, Vc, xic, Fc, sc, pc, ec, cf_c, pp, kind, xm, fext, cs, rbm, rbx, w, counters, gen)
                 _check_escape(xc, vc, Vc, xic, Fc, sc, w, thr, t_end, esc)
             _check_escape(xf, vf, Vf, xif, Ff, sf, w, thr, t_end - (0.5 * h if coupled and sub == 0 else 0.0), esc)

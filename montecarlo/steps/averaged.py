@@ -73,18 +73,17 @@ def innovation_covariance(h: float, tau: float, D: float) -> tuple[float, float,
     return -s2 * math.expm1(-2.0 * x), s2 * tau * em1 * em1, s2 * tau * tau * f
 
 
-@njit(cache=True, nogil=True)
-def noise(cf: np.ndarray, z: np.ndarray, buf: np.ndarray) -> np.ndarray:
+@njit(cache=True, nogil=True, inline="always")
+def noise(cf: np.ndarray, z: np.ndarray, buf: np.ndarray) -> None:
     """The innovations (eta_xi, eta_I) of one step from two normals per unit."""
     _, N, P = z.shape
     for j in range(N):
         for p in range(P):
             buf[0, j, p] = cf[_O + 2] * z[0, j, p]
             buf[1, j, p] = cf[_O + 3] * z[0, j, p] + cf[_O + 4] * z[1, j, p]
-    return buf
 
 
-@njit(cache=True, nogil=True)
+@njit(cache=True, nogil=True, inline="always")
 def compose(cf_a: np.ndarray, cf_b: np.ndarray, e1: np.ndarray, e2: np.ndarray, out: np.ndarray) -> None:
     """Innovations of one step 2h from two steps h in a row, exact: the end value's
     :math:`e\\,\\eta_{\\xi,1} + \\eta_{\\xi,2}` and the integral's
@@ -97,7 +96,7 @@ def compose(cf_a: np.ndarray, cf_b: np.ndarray, e1: np.ndarray, e2: np.ndarray, 
             out[1, j, p] = e1[1, j, p] + b * e1[0, j, p] + e2[1, j, p]
 
 
-@njit(cache=True, nogil=True)
+@njit(cache=True, nogil=True, inline="always")
 def step(x, v, V, xi, F, stuck, pvx, eps, cf, pp, kind, xm, fext, cs, rbm, rbx, w, counters, gen) -> None:
     """The frozen step's flow at the step's mean of xi (held in the scratch ``rbm``), then xi
     moved to its end value and ``pvx`` set to v times its conditional mean (module docstring)."""

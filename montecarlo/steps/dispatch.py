@@ -3,7 +3,9 @@ as a generic numba function of the scheme's tag.
 
 The path loop calls ``noise(tag, ...)``, ``step(tag, ...)`` etc.; numba resolves each call from
 the tag's type (its NamedTuple class) to the scheme's own kernel when the loop is compiled, so
-the loop is specialised per scheme and cached like any other kernel.
+the loop is specialised per scheme and cached like any other kernel. Every kernel is inlined
+(numba IR), so that the loop calls the scheme's own step as the two loops before it did
+(:class:`~montecarlo.steps.base.StepScheme` says what the calls cost).
 """
 
 from __future__ import annotations
@@ -57,19 +59,22 @@ def _normals(tag):
     return lambda tag: n
 
 
-@overload(noise, jit_options={"cache": True, "nogil": True})
+@overload(noise, jit_options={"cache": True, "nogil": True}, inline="always")
 def _noise(tag, cf, z, buf):
     f = _kernels(tag).noise
-    return lambda tag, cf, z, buf: f(cf, z, buf)
+
+    def impl(tag, cf, z, buf):
+        f(cf, z, buf)
+    return impl
 
 
-@overload(compose, jit_options={"cache": True, "nogil": True})
+@overload(compose, jit_options={"cache": True, "nogil": True}, inline="always")
 def _compose(tag, cf_a, cf_b, e1, e2, out):
     f = _kernels(tag).compose
     return lambda tag, cf_a, cf_b, e1, e2, out: f(cf_a, cf_b, e1, e2, out)
 
 
-@overload(step, jit_options={"cache": True, "nogil": True})
+@overload(step, jit_options={"cache": True, "nogil": True}, inline="always")
 def _step(tag, x, v, V, xi, F, stuck, pvx, eps, cf, pp, kind, xm, fext, cs, rbm, rbx, w, counters, gen):
     f = _kernels(tag).step
 
@@ -78,13 +83,13 @@ def _step(tag, x, v, V, xi, F, stuck, pvx, eps, cf, pp, kind, xm, fext, cs, rbm,
     return impl
 
 
-@overload(advance, jit_options={"cache": True, "nogil": True})
+@overload(advance, jit_options={"cache": True, "nogil": True}, inline="always")
 def _advance(tag, xi, eps, cf):
     f = _kernels(tag).advance
     return lambda tag, xi, eps, cf: f(xi, eps, cf)
 
 
-@overload(twin_xi, jit_options={"cache": True, "nogil": True})
+@overload(twin_xi, jit_options={"cache": True, "nogil": True}, inline="always")
 def _twin_xi(tag, xi):
     f = _kernels(tag).twin_xi
     return lambda tag, xi: f(xi)

@@ -25,8 +25,8 @@ from numba import njit
 
 from fpe_harvester.model import Harvester
 
-from .._kernels import (KIND_KICK, KIND_KINK, MAX_SUBSTEPS, _coupling_force, _kick,
-                        _kick_force, _stiff_amplitude, _substeps)
+from .._kernels import (KIND_KICK, KIND_KINK, MAX_SUBSTEPS, _coupling_force, _kick, _kick_force,
+                        _ring_neighbours, _stiff_amplitude, _substeps)
 from .._kink import _kink_flow
 from ..scheme import step_coefficients
 from .base import Kernels, StepScheme
@@ -44,12 +44,11 @@ def _external_force(xi, xm, f, pp) -> None:
     N, P = xi.shape
     sigma, k, k4, k3 = pp[5], pp[6], pp[14], pp[15]
     for j in range(N):
-        jm = (j + N - 1) % N
-        jp = (j + 1) % N
+        jmm, jm, jp, jpp = _ring_neighbours(j, N)
         for p in range(P):
             f[j, p] = sigma * xi[j, p]
             if N > 1:
-                f[j, p] += _coupling_force(xm, j, jm, jp, p, k, k4, k3)
+                f[j, p] += _coupling_force(xm[jmm, p], xm[jm, p], xm[j, p], xm[jp, p], xm[jpp, p], k, k4, k3)
 
 
 @njit(cache=True, nogil=True)
@@ -154,18 +153,23 @@ def _d_step(x, v, V, xi, F, stuck, xm, fext, w, cf, pp, kind, counters, cs) -> N
                 xm[j, p] = x[j, p] + 0.5 * h * v[j, p]
             sigma, k, k4, k3 = pp[5], pp[6], pp[14], pp[15]
             for j in range(N):
-                fext[j, p] = sigma * xi[j, p] + _coupling_force(xm, j, (j + N - 1) % N, (j + 1) % N, p, k, k4, k3)
+                jmm, jm, jp, jpp = _ring_neighbours(j, N)
+                fext[j, p] = sigma * xi[j, p] + _coupling_force(xm[jmm, p], xm[jm, p], xm[j, p], xm[jp, p],
+                                                                xm[jpp, p], k, k4, k3)
         _substep_path(x, v, V, F, fext, p, sk[i], cf, pp)
 
 
 
-@njit(cache=True, nogil=True)
-def noise(cf: np.ndarray, z: np.ndarray, buf: np.ndarray) -> np.ndarray:
-    """The level's noise for one step: the OU update's own normals ``z`` (1, N, P)."""
-    return z
+@njit(cache=True, nogil=True, inline="always")
+def noise(cf: np.ndarray, z: np.ndarray, buf: np.ndarray) -> None:
+    """The level's noise for one step: the OU update's own normals ``z`` (1, N, P), copied."""
+    _, N, P = z.shape
+    for j in range(N):
+        for p in range(P):
+            buf[0, j, p] = z[0, j, p]
 
 
-@njit(cache=True, nogil=True)
+@njit(cache=True, nogil=True, inline="always")
 def compose(cf_a: np.ndarray, cf_b: np.ndarray, e1: np.ndarray, e2: np.ndarray, out: np.ndarray) -> None:
     """Normal of one step ``cf_b`` (= 2 h) from those of two steps ``cf_a`` (h) in a row, exact:
     out = w1 e1 + w2 e2 with the OU update's weights."""
@@ -177,13 +181,13 @@ def compose(cf_a: np.ndarray, cf_b: np.ndarray, e1: np.ndarray, e2: np.ndarray, 
             out[0, j, p] = w1 * e1[0, j, p] + w2 * e2[0, j, p]
 
 
-@njit(cache=True, nogil=True)
+@njit(cache=True, nogil=True, inline="always")
 def step(x, v, V, xi, F, stuck, pvx, eps, cf, pp, kind, xm, fext, cs, rbm, rbx, w, counters, gen) -> None:
     """D(h) of one level at frozen xi (``eps`` is applied later, by :func:`advance`)."""
     _d_step(x, v, V, xi, F, stuck, xm, fext, w, cf, pp, kind, counters, cs)
 
 
-@njit(cache=True, nogil=True)
+@njit(cache=True, nogil=True, inline="always")
 def advance(xi: np.ndarray, eps: np.ndarray, cf: np.ndarray) -> None:
     """O(h) after the measurement: the exact OU update of the level's xi with normals ``eps``."""
     N, P = xi.shape
@@ -192,7 +196,7 @@ def advance(xi: np.ndarray, eps: np.ndarray, cf: np.ndarray) -> None:
             xi[j, p] = cf[13] * xi[j, p] + cf[14] * eps[0, j, p]
 
 
-@njit(cache=True, nogil=True)
+@njit(cache=True, nogil=True, inline="always")
 def twin_xi(xi: np.ndarray) -> np.ndarray:
     """The twin runs at the fine level's xi itself (D does not change xi)."""
     return xi

@@ -22,8 +22,8 @@ from numba import njit
 
 from fpe_harvester.model import Harvester
 
-from .._kernels import (CF_JOINT, JOINT_BLOCK, KIND_KICK, _coupling_force, _kick,
-                        _kick_force, _stiff_amplitude, _substeps)
+from .._kernels import (CF_JOINT, JOINT_BLOCK, KIND_KICK, _coupling_force, _kick, _kick_force,
+                        _ring_neighbours, _stiff_amplitude, _substeps)
 from ..scheme import joint_step_refusal, step_coefficients
 from .base import Kernels, StepScheme
 
@@ -167,10 +167,9 @@ def _d_step_joint(x, v, V, xi, F, xm, fext, eps, cf, pp, kind, rbm, rbx, pvx, w,
             for p in range(P):
                 xm[j, p] = x[j, p] + 0.5 * h * v[j, p]
         for j in range(N):
-            jm = (j + N - 1) % N
-            jp = (j + 1) % N
+            jmm, jm, jp, jpp = _ring_neighbours(j, N)
             for p in range(P):
-                fext[j, p] = _coupling_force(xm, j, jm, jp, p, k, k4, k3)
+                fext[j, p] = _coupling_force(xm[jmm, p], xm[jm, p], xm[j, p], xm[jp, p], xm[jpp, p], k, k4, k3)
     _joint_flow(x, v, V, xi, fext, eps, cf, rbm, rbx)
     if kicks:
         _kick(x, v, F, h, pp, True)
@@ -192,36 +191,36 @@ def _d_step_joint(x, v, V, xi, F, xm, fext, eps, cf, pp, kind, rbm, rbx, pvx, w,
             for j in range(N):
                 xm[j, p] = x[j, p] + 0.5 * h * v[j, p]
             for j in range(N):
-                fext[j, p] = _coupling_force(xm, j, (j + N - 1) % N, (j + 1) % N, p, k, k4, k3)
+                jmm, jm, jp, jpp = _ring_neighbours(j, N)
+                fext[j, p] = _coupling_force(xm[jmm, p], xm[jm, p], xm[j, p], xm[jp, p], xm[jpp, p], k, k4, k3)
         _joint_substeps(x, v, V, xi, F, fext, pvx, p, sk[i], cf, pp, gen)
 
 
 
-@njit(cache=True, nogil=True)
-def noise(cf: np.ndarray, z: np.ndarray, buf: np.ndarray) -> np.ndarray:
+@njit(cache=True, nogil=True, inline="always")
+def noise(cf: np.ndarray, z: np.ndarray, buf: np.ndarray) -> None:
     """The level's increment for one step, L z (z four normals per unit), written to ``buf``."""
     _noise(cf, z, buf)
-    return buf
 
 
-@njit(cache=True, nogil=True)
+@njit(cache=True, nogil=True, inline="always")
 def compose(cf_a: np.ndarray, cf_b: np.ndarray, e1: np.ndarray, e2: np.ndarray, out: np.ndarray) -> None:
     """Increment of one step ``cf_b`` from two steps ``cf_a`` in a row (:func:`_compose`)."""
     _compose(cf_a, e1, e2, out)
 
 
-@njit(cache=True, nogil=True)
+@njit(cache=True, nogil=True, inline="always")
 def step(x, v, V, xi, F, stuck, pvx, eps, cf, pp, kind, xm, fext, cs, rbm, rbx, w, counters, gen) -> None:
     """One joint step of a level with increment ``eps`` (xi included)."""
     _d_step_joint(x, v, V, xi, F, xm, fext, eps, cf, pp, kind, rbm, rbx, pvx, w, gen)
 
 
-@njit(cache=True, nogil=True)
+@njit(cache=True, nogil=True, inline="always")
 def advance(xi: np.ndarray, eps: np.ndarray, cf: np.ndarray) -> None:
     """Nothing: the step already moved xi."""
 
 
-@njit(cache=True, nogil=True)
+@njit(cache=True, nogil=True, inline="always")
 def twin_xi(xi: np.ndarray) -> np.ndarray:
     """The twin has its own xi (its transition moves xi with its own factor)."""
     return np.zeros_like(xi)
