@@ -12,7 +12,7 @@ from scipy.integrate import quad
 from fpe_harvester import Harvester, solve
 from fpe_harvester.landscape.energy import RingEnergy
 from montecarlo import MonteCarlo
-from montecarlo._kernels import _coupling_force
+from montecarlo._kernels import _coupling_force, _ring_neighbours
 from montecarlo.escape import escape_study
 from montecarlo.scheme import linear_stiffness
 from montecarlo.switching import _count_switches, buckled_labels, switching_times
@@ -35,9 +35,13 @@ def _kernel_force(h: Harvester, x: np.ndarray) -> np.ndarray:
     """The kernels' total coupling force on each unit: the midpoint part plus the part kept in
     the linear flow."""
     N = x.size
-    xm = x.reshape(N, 1).copy()
     c = linear_stiffness(h)  # harmonic potential excluded below: n != 2
-    f = np.array([_coupling_force(xm, j, (j + N - 1) % N, (j + 1) % N, 0, h.k, h.k4, h.k3) for j in range(N)])
+
+    def force(j: int) -> float:
+        jmm, jm, jp, jpp = _ring_neighbours(j, N)
+        return _coupling_force(x[jmm], x[jm], x[j], x[jp], x[jpp], h.k, h.k4, h.k3)
+
+    f = np.array([force(j) for j in range(N)])
     return f - c * x
 
 
