@@ -5,7 +5,10 @@ the slowest relaxation time, the harmonic twin whose moments are control variate
 started from the twin's stationary law), then runs batches of independent replicas (each
 ``paths`` rings for ``t_burn + t_run``) until the relative error on eta (standard error and,
 with ``richardson=True``, the time-step bias estimate, in quadrature) is below ``tol`` or the
-wall-time budget ``max_time`` is spent; then the status says ``NOT_CONVERGED``.
+wall-time budget ``max_time`` is spent; then the status says ``NOT_CONVERGED``. A first batch
+that the budget cannot cover even at :data:`FASTEST_UNIT_STEPS` (a burn-in of a slowly relaxing
+system can take minutes) is not started: the result is ``NOT_CONVERGED`` without numbers, and
+the message gives the budget it would need.
 
 Time step: with ``extrapolate`` (opt-in) three coupled levels ``dt/2, dt, 2 dt`` run on the same
 noise and the reported numbers are the Richardson extrapolation from ``(dt, dt/2)``; its error
@@ -36,7 +39,7 @@ from fpe_harvester.errors import ParameterError, check_int, check_real
 from fpe_harvester.exact import classify, max_sin2
 from fpe_harvester.model import Harvester
 from fpe_harvester.parallel import default_threads
-from fpe_harvester.result import Stats
+from fpe_harvester.result import Stats, Status
 
 from .controls.twin import linearized_stiffness, natural_amplitude
 from .estimate import Estimate, estimate
@@ -75,6 +78,12 @@ _EXTRAPOLATE_COARSER = 2.0
 _BURN_RESTARTS = 3
 #: Tolerance from which the automatic paths per replica drop from 64 to 16.
 _LOOSE_TOL = 5e-3
+#: An upper bound on the path loop's speed, in unit-steps (one unit of one path advanced by one
+#: ``dt``) per second and thread, used to refuse a first batch that ``max_time`` cannot cover
+#: (a batch is not interrupted). Seven times the fastest rate measured, 2.8e7 for a harmonic
+#: N = 3 ring (single units 1.0-1.2e7, an n = 3 ring 1.9e7; one thread, no Richardson level), so
+#: that no run the budget could cover is refused on a faster machine.
+FASTEST_UNIT_STEPS = 2e8
 #: Automatic measured time per path, in burn-ins (when longer than the default below).
 _RUN_PER_BURN = 3.0
 #: Default measured time per path without and with the martingale controls. The martingale
@@ -339,7 +348,10 @@ class MonteCarlo:
             t_run0 = self.t_run or _T_RUN
             pil_burn = burn_in(relaxation_time(h, kappa), self.tol, t_run0) if self.t_burn is None \
                 else self.t_burn
-            if self.control and math.isfinite(pil_burn):
+            pilot_cost = self.least_seconds(h, dt, 16, max(2, self._batch()), pil_burn + t_run0)
+            if self.control and math.isfinite(pil_burn) and pilot_cost > self.max_time:
+                notes["twin"] += f" (no pilot run: it needs >= {pilot_cost:.3g} s, beyond max_time)"
+            elif self.control and math.isfinite(pil_burn):
                 pilot = simulate(h, dt=dt, paths=16, replicas=max(2, self._batch()),
                                  t_burn=pil_burn, t_run=t_run0, seed=seed, threshold=self.threshold(h),
                                  threads=self.threads, first_replica=_PILOT_FIRST, joint=self.joint)
@@ -373,6 +385,29 @@ class MonteCarlo:
             t_run = dt
         return Plan(dt=dt, t_burn=t_burn, t_run=t_run, paths=paths, twin=twin, start=start,
                     relaxation_time=tau_r, notes=notes)
+
+    def least_seconds(self, h: Harvester, dt: float, paths: int, replicas: int, t_path: float) -> float:
+        """A lower bound on the wall time, in seconds, of ``replicas`` x ``paths`` paths of ``h``
+        over a path time ``t_path`` (burn-in + measured) at step ``dt``: their unit-steps at
+        :data:`FASTEST_UNIT_STEPS` per second on each thread."""
+        threads = self.threads or default_threads()
+        return h.N * paths * replicas * (t_path / dt) / (FASTEST_UNIT_STEPS * threads)
+
+    def _beyond_budget(self, h: Harvester, plan: Plan, wall: float) -> Stats | None:
+        """The ``NOT_CONVERGED`` result, without numbers, when ``max_time`` cannot cover the
+        first batch of ``min_replicas`` (``wall``: seconds spent planning, reported); else None."""
+        need = self.least_seconds(h, plan.dt, plan.paths, self.min_replicas, plan.t_burn + plan.t_run)
+        if need <= self.max_time:
+            return None
+        info = {"dt": plan.dt, "t_burn": plan.t_burn, "t_run": plan.t_run, "paths": plan.paths,
+                "relaxation_time": plan.relaxation_time, "least_seconds": need, "wall_time": wall,
+                "seed": self.seed}
+        return Stats(status=Status.NOT_CONVERGED, method=self.name, info=info, message=(
+            f"not converged: max_time = {self.max_time:g} s cannot cover the first batch "
+            f"({self.min_replicas} replicas x {plan.paths} paths over t_burn + t_run = "
+            f"{plan.t_burn:.3g} + {plan.t_run:.3g} at dt = {plan.dt:g}, relaxation time "
+            f"{plan.relaxation_time:.3g}), which needs at least {need:.3g} s: raise max_time above "
+            f"that, or give t_burn. No statistics."))
 
     def _default_run(self) -> float:
         return _T_RUN_MART if self.martingale and self.tol <= _T_RUN_MART_TOL else _T_RUN
@@ -494,6 +529,10 @@ class MonteCarlo:
             short = dataclasses.replace(self, max_replicas=self.min_replicas, tol=0.999)
             ens, est, met, plan = short.run(h)
         else:
-            ens, est, met, plan = self.run(h)
+            plan = self.plan(h)
+            refusal = self._beyond_budget(h, plan, time.perf_counter() - start)
+            if refusal is not None:
+                return refusal
+            ens, est, met, plan = self.run(h, plan)
         return result(h, ens, est, met, plan, time.perf_counter() - start, harmonic_status,
                       name=self.name, tol=self.tol, threshold=self.threshold(h), batch=self._batch())

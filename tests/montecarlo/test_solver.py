@@ -156,6 +156,23 @@ def test_time_budget_gives_not_converged_with_numbers() -> None:
     assert r.eta is not None and np.isfinite(r.eta_err)
 
 
+def test_first_batch_beyond_the_budget_is_not_started() -> None:
+    """A slowly relaxing nonlinear unit (m = 1000) needs a burn-in that a 0.3 s budget
+    cannot cover even at the loop's fastest rate: neither the pilot nor a batch runs, the status
+    is not converged, no numbers, and the message names max_time and the time it needs."""
+    h = Harvester.build(a=0.5, n=4, m=1e3)
+    mc = MonteCarlo(seed=1, max_time=0.3, progress=False)
+    r = mc.solve(h)
+    assert r.status is Status.NOT_CONVERGED and r.eta is None and r.V2 is None
+    need = r.info["least_seconds"]
+    assert need > 0.3 and f"{need:.3g} s" in r.message and "max_time = 0.3 s" in r.message
+    plan = mc.plan(h)
+    assert "no pilot run" in plan.notes["twin"]
+    assert need == mc.least_seconds(h, plan.dt, plan.paths, mc.min_replicas, plan.t_burn + plan.t_run)
+    # the same budget covers a fast-relaxing unit: it runs
+    assert MonteCarlo(seed=1, max_time=0.3, progress=False, tol=0.1).solve(Harvester.build(a=0.5)).eta is not None
+
+
 def test_uncoupled_kink_ring_equals_single_unit() -> None:
     # k = 0: three independent n = 1 units; exercises the ring code path of the kink scheme
     opts = dict(dt=0.04, paths=48, t_run=40.0, t_burn=20.0, min_replicas=6, max_replicas=6,
