@@ -73,12 +73,15 @@ from ...moments import conditional_fields, harvester_moments
 from ...plane import DGLine, PlaneMesh
 
 __all__ = ["KinkFrame", "KinkLevel", "KinkHierarchy", "KinkPlane", "kink_plane", "face_parts", "mode_transport",
-           "ModeOperator", "ModePreconditioner", "CoarseCorrection", "solve_kink_level", "GMRES_GIGABYTES"]
+           "ModeOperator", "ModePreconditioner", "CoarseCorrection", "solve_kink_level", "GMRES_GIGABYTES", "GMRES_RESTART"]
 
-#: Memory (GB) of the GMRES basis: its restart length is what fits (at most the iteration
-#: budget). Measured at n = 1, a = 1: a restart length of 150 doubled the iterations of the
-#: levels that needed more (M = 18: 210, M = 20: 235, against about 100 at M = 16).
-GMRES_GIGABYTES = 1.5
+#: Memory (GB) of the GMRES basis and its longest restart length: the restart length is
+#: what fits, at most GMRES_RESTART. Measured at n = 1, a = 1: a restart length of 150
+#: doubled the iterations of the levels that needed more (M = 18: 210, M = 20: 235, against
+#: about 100 at M = 16; levels that converge need at most 235). Longer cycles only make a
+#: level that does not converge dearer (n = 1, a = 2, M = 8: 600 iterations in one cycle
+#: orthogonalize against up to 600 vectors).
+GMRES_GIGABYTES, GMRES_RESTART = 1.5, 250
 
 
 @dataclass(frozen=True)
@@ -662,7 +665,7 @@ def _solve(h: Harvester, M: int, mesh: PlaneMesh, order: int, frame: KinkFrame, 
         return y.ravel()
 
     rhs = unorm.ravel()
-    restart = restart_length(rhs.size, maxiter, GMRES_GIGABYTES)
+    restart = restart_length(rhs.size, min(maxiter, GMRES_RESTART), GMRES_GIGABYTES)
     d, info, _ = gmres(matvec, apply, rhs, x0, rtol, restart, maxiter, callback=count)
     if info != 0:
         raise NotConvergedError(f"GMRES did not reach rtol = {rtol:.1e} in {its[0]} iterations "

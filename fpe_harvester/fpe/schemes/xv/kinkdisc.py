@@ -33,7 +33,7 @@ from ....model import Harvester
 from ...hermite import equivalent_harmonic
 from ...plane import PlaneMesh
 from ...protocol import Discretization
-from .kink import GMRES_GIGABYTES, CoarseCorrection, KinkFrame, KinkLevel, solve_kink_level
+from .kink import GMRES_GIGABYTES, GMRES_RESTART, CoarseCorrection, KinkFrame, KinkLevel, solve_kink_level
 
 __all__ = ["KinkDG", "kink_domain", "KinkSettings", "COARSE_DEGREE", "CHECK_CEILING"]
 
@@ -222,7 +222,7 @@ class KinkDG(Discretization):
         factors and the levels kept: about 100 doubles per unknown of the half plane
         (measured peak at n = 1, a = 1, M = 20, degree 4, 8.3e5 unknowns: 2.45 GB)."""
         half = self.unknowns(M, size) / 2
-        return min(GMRES_GIGABYTES, 8 * half * (GMRES_MAXITER + 1) / 1e9) + 100 * 8 * half / 1e9 + 0.2
+        return min(GMRES_GIGABYTES, 8 * half * (GMRES_RESTART + 1) / 1e9) + 100 * 8 * half / 1e9 + 0.2
 
     def max_degree(self, size: int) -> int:
         return 60  # M and the (x, v) mesh resolve different variables
