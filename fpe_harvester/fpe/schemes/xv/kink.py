@@ -76,12 +76,13 @@ __all__ = ["KinkFrame", "KinkLevel", "KinkHierarchy", "KinkPlane", "kink_plane",
            "ModeOperator", "ModePreconditioner", "CoarseCorrection", "solve_kink_level", "GMRES_GIGABYTES", "GMRES_RESTART"]
 
 #: Memory (GB) of the GMRES basis and its longest restart length: the restart length is
-#: what fits, at most GMRES_RESTART. Measured at n = 1, a = 1: a restart length of 150
-#: doubled the iterations of the levels that needed more (M = 18: 210, M = 20: 235, against
-#: about 100 at M = 16; levels that converge need at most 235). Longer cycles only make a
-#: level that does not converge dearer (n = 1, a = 2, M = 8: 600 iterations in one cycle
-#: orthogonalize against up to 600 vectors).
-GMRES_GIGABYTES, GMRES_RESTART = 1.5, 250
+#: what fits, at most GMRES_RESTART. A restart length of 150 doubled the iterations of the
+#: levels of n = 1, a = 1 that needed more (degree 3: M = 18 210, M = 20 235, against about
+#: 100 at M = 16), but the refinement now takes those levels at degree 4, where they need at
+#: most 140. Longer cycles change what fails at a strong kink: at n = 1, a = 2 the level
+#: M = 8 converges unrestarted (26 s) where GMRES(150) runs out of its budget (600
+#: iterations) and ends the refinement, which then goes on for minutes with no estimate.
+GMRES_GIGABYTES, GMRES_RESTART = 1.5, 150
 
 
 @dataclass(frozen=True)
