@@ -3,12 +3,11 @@
 :func:`scipy.sparse.linalg.gmres` orthogonalizes by modified Gram-Schmidt, one Python-level
 dot product and update per basis vector and iteration: at the kink solver's largest levels
 (n = 1, a = 1, M = 20: 5e5 unknowns, 235 iterations) that was 29 s of the 236 s spent in
-GMRES, and its restart length (150 there) doubled the iterations once a level needed more.
-:func:`gmres` is the same method (the same Krylov space, the same stopping rule on the
-preconditioned residual, checked against the true residual at the end of a cycle) with
-classical Gram-Schmidt (two matrix-vector products with the basis, BLAS), repeated where
-cancellation calls for it (as accurate as modified Gram-Schmidt), and a restart length
-bounded by memory, not by a fixed count.
+GMRES. :func:`gmres` is the same method (the same Krylov space, the same restarts, the same
+stopping rule on the preconditioned residual, checked against the true residual at the end
+of a cycle) with classical Gram-Schmidt (two matrix-vector products with the basis, BLAS),
+repeated where cancellation calls for it (as accurate as modified Gram-Schmidt);
+:func:`restart_length` bounds the restart length by memory.
 """
 
 from __future__ import annotations
