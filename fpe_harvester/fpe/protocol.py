@@ -120,6 +120,13 @@ class Discretization(Protocol):
         :attr:`mesh_check_degree`)."""
         return self.mesh_check_degree
 
+    @property
+    def check_ceiling(self) -> int | None:
+        """Highest degree of a mesh check (None: none, the check follows M at M - 4). A
+        discretization whose mesh error hardly changes with M checks its mesh there at
+        every M, at a fraction of the cost of a check at M - 4."""
+        return None
+
     def solve(self, M: int, size: int, lower: Level | None = None) -> Level:
         """Solve level (M, size); ``lower`` is a solved lower degree on the same mesh."""
         ...

@@ -368,7 +368,7 @@ def _mesh_check(levels: Levels, est: Estimate, nh: int, Mc: int | None = None,
                 enough: float = 0.0) -> Estimate:
     """The mesh error of ``nh`` elements per half, measured at M - 4 (at least its
     ``mesh_check_degree``, and at least the discretization's ``check_floor`` if that is
-    below M - 2; or at ``Mc``)
+    below M - 2, at most its ``check_ceiling``; or at ``Mc``)
     against twice the elements (the next mesh of the discretization).
 
     With the difference d of the two meshes and an error :math:`\\propto N^{-q}`, the
@@ -387,6 +387,8 @@ def _mesh_check(levels: Levels, est: Estimate, nh: int, Mc: int | None = None,
     if Mc is None:
         floor = levels.disc.check_floor
         Mc = min(M, max(M - 4, min(floor, M - 2), levels.disc.mesh_check_degree))
+        ceiling = levels.disc.check_ceiling
+        Mc = Mc if ceiling is None else min(Mc, ceiling)
     a, b = levels.get(Mc, nh), levels.get(Mc, 2 * nh)
     # A third, coarser mesh gives the observed order, but only at a low degree: at high M
     # a coarse mesh is numerically meaningless for steep potentials.

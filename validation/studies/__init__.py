@@ -5,7 +5,8 @@
 * benchmarks, error against wall time, whose short versions the report's benchmark section runs
   (:mod:`validation.sections.benchmarks`): :mod:`.exact` (against scipy's dense Lyapunov solve),
   :mod:`.fpe` (Fokker--Planck; :mod:`.kink` and :mod:`.xmesh` are its kink and x-mesh parts) and
-  :mod:`.montecarlo` (which runs the Monte Carlo studies below in one go);
+  :mod:`.montecarlo` (which runs the Monte Carlo studies below in one go); :mod:`.xvspeed` times
+  the level solves of the Fokker--Planck scheme ``"xv"`` against a base commit;
 * Monte Carlo design studies: :mod:`.mc_rng`, :mod:`.mc_throughput`, :mod:`.mc_equal_error`,
   :mod:`.mc_bias`, :mod:`.mc_tau`, :mod:`.mc_steep`, :mod:`.mc_controls`, :mod:`.mc_martingale`,
   :mod:`.mc_policy`, :mod:`.mc_boundary`, :mod:`.mc_kink_dt`;

@@ -33,9 +33,9 @@ from ....model import Harvester
 from ...hermite import equivalent_harmonic
 from ...plane import PlaneMesh
 from ...protocol import Discretization
-from .kink import CoarseCorrection, KinkFrame, KinkLevel, solve_kink_level
+from .kink import GMRES_GIGABYTES, GMRES_RESTART, CoarseCorrection, KinkFrame, KinkLevel, solve_kink_level
 
-__all__ = ["KinkDG", "kink_domain", "KinkSettings", "COARSE_DEGREE"]
+__all__ = ["KinkDG", "kink_domain", "KinkSettings", "COARSE_DEGREE", "CHECK_CEILING"]
 
 #: Hermite degree of the coarse correction (:class:`~.kink.CoarseCorrection`).
 COARSE_DEGREE = 2
@@ -63,6 +63,9 @@ GMRES_TOL = 1e-2
 #: (n = 1, a = 2 at M = 8; n = 1.25, a = 2 at its last level) jump from <= 123 to > 1400 and
 #: ran to the old fixed budget of 1500 (44 s of the 52 s the a = 2 solve took to fail).
 GMRES_FLOOR, GMRES_GROWTH, GMRES_MAXITER = 600, 4, 1500
+
+#: Highest Hermite degree of a mesh check (:attr:`KinkDG.check_ceiling`).
+CHECK_CEILING = 10
 
 #: Degrees of the pilot level, tried in turn until one is physical. M = 2 suffices for
 #: a <= 1 (defaults); at a = 2 the harmonic first guess makes it unphysical (V2 < 0) and
@@ -146,9 +149,13 @@ class KinkDG(Discretization):
                    "the law of V is multi-scale: trapped units near V = 0, running ones far out); use "
                    "method='mc', or fix M to inspect the levels")
     work_exponents: tuple[float, float] = (1.0, 2.0)
-    #: The mesh error hardly depends on M (a = 1, p = 3 against 4: 1.1e-5 at M = 6, 1.3e-5
-    #: at M = 8), so the mesh is checked at a low degree.
+    #: The mesh error hardly depends on M (a = 1, p = 3 against 4: 1.4e-5 at M = 6, 1.7e-5
+    #: at M = 14, 16, 18 and 20; p = 4 against 5: 1.7e-6 at M = 16), so the mesh is checked
+    #: at a low degree (at most CHECK_CEILING), and the first check, at M = 6, decides the
+    #: refinement at once (``refine_early``): checks at M - 4 and the high levels of a mesh
+    #: that the later check rejected were 400 of the 850 s of n = 1, a = 1 at tol 1e-4.
     mesh_check_degree: int = 4
+    refine_early: bool = True
     _coarse: dict[int, CoarseCorrection] = field(default_factory=dict, repr=False, compare=False)
     _iterations: list[int] = field(default_factory=list, repr=False, compare=False)
 
@@ -179,6 +186,10 @@ class KinkDG(Discretization):
         return cls(h, mesh, frame, st.order, {k: mo[k] for k in ("eta", "V2", "Pin", "v2", "vV")},
                    time.perf_counter() - t0, min(max(GMRES_TOL * tol, 1e-11), 1e-6), deadline)
 
+    @property
+    def check_ceiling(self) -> int:
+        return CHECK_CEILING
+
     def degree(self, size: int) -> int:
         """DG degree p of the mesh knob ``size`` (1, 2, 4, ...)."""
         return self.order + int(round(math.log2(size)))
@@ -207,8 +218,11 @@ class KinkDG(Discretization):
         return 2 * self.base.elements * (self.degree(size) + 1) ** 2 * math.comb(M + 2, 2)
 
     def gigabytes(self, M: int, size: int) -> float:
-        """GMRES basis (200 vectors) and the operator: about 250 doubles per unknown."""
-        return 250 * 8 * self.unknowns(M, size) / 2 / 1e9 + 0.2
+        """The GMRES basis (at most :data:`~.kink.GMRES_GIGABYTES`) and the operator, the
+        factors and the levels kept: about 100 doubles per unknown of the half plane
+        (measured peak at n = 1, a = 1, M = 20, degree 4, 8.3e5 unknowns: 2.45 GB)."""
+        half = self.unknowns(M, size) / 2
+        return min(GMRES_GIGABYTES, 8 * half * (GMRES_RESTART + 1) / 1e9) + 100 * 8 * half / 1e9 + 0.2
 
     def max_degree(self, size: int) -> int:
         return 60  # M and the (x, v) mesh resolve different variables
