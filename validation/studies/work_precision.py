@@ -162,8 +162,13 @@ def _em_pilot(h: Harvester, seed: int) -> dict[str, float]:
     return {"replicas": 4, "rel_se": est.se["eta"] / abs(est.mean["eta"]), "seconds": wall}
 
 
-def _runner(method: str, h: Harvester, cfg: dict[str, Any]) -> Callable[[float, int], tuple[float, Any, Any, str]]:
-    """``run(tol, seed) -> (wall [s], eta, reported error, status)`` of one solver."""
+#: What a point records of each Monte Carlo run's ``info`` (how the time was spent).
+_RUN_INFO = ("control_set", "variance_reduction", "replicas", "paths", "t_run", "dt")
+
+
+def _runner(method: str, h: Harvester, cfg: dict[str, Any]) -> Callable[[float, int], tuple[Any, ...]]:
+    """``run(tol, seed) -> (wall [s], eta, reported error, status[, info])`` of one solver; the
+    Monte Carlo runs add the entries :data:`_RUN_INFO` of their ``info``."""
     if method == "euler-maruyama":
         pilot = _em_pilot(h, seed=99)
         return lambda tol, seed: _em_run(h, tol, seed, pilot, cfg["run_s"])
@@ -171,18 +176,20 @@ def _runner(method: str, h: Harvester, cfg: dict[str, Any]) -> Callable[[float, 
         "max_time": cfg["run_s"], "progress": False, **MC_OPTIONS,
         **({"control": False, "martingale": False} if method == "mc plain" else {})}
 
-    def one(tol: float, seed: int) -> tuple[float, float, float, str]:
+    def one(tol: float, seed: int) -> tuple[Any, ...]:
         wall, r = _timed(lambda: solve(h, method.split()[0], tol=tol, **options,
                                        **({} if method == "fpe" else {"seed": seed})))
-        return wall, r.eta, r.eta_err, r.status.value
+        info = () if method == "fpe" else ({k: r.info.get(k) for k in _RUN_INFO},)
+        return (wall, r.eta, r.eta_err, r.status.value, *info)
 
     return one
 
 
-def ladder(run_one: Callable[[float, int], tuple[float, Any, Any, str]], tols: tuple[float, ...],
+def ladder(run_one: Callable[[float, int], tuple[Any, ...]], tols: tuple[float, ...],
            seeds: int, ref_eta: float, budget_s: float, order: float = 0.0) -> list[dict[str, Any]]:
     """One point per tolerance, tightest last: the rms actual relative error over ``seeds``
-    runs and the mean reported relative error, and the mean wall time [s].
+    runs and the mean reported relative error, the mean wall time [s], and each run's info
+    when ``run_one`` returns one (a fifth item).
 
     Stops after a tolerance at which a run did not converge, and before one whose predicted
     cost would take the total past ``budget_s``: the last point's time times
@@ -207,7 +214,8 @@ def ladder(run_one: Callable[[float, int], tuple[float, Any, Any, str]], tols: t
         points.append({"tol": tol, "seconds": float(np.mean([r[0] for r in runs])),
                        "error": math.sqrt(float(np.mean(actual))),
                        "reported": float(np.mean([(r[2] or math.nan) / abs(r[1]) for r in done])),
-                       "runs": len(done), "statuses": sorted({r[3] for r in runs})})
+                       "runs": len(done), "statuses": sorted({r[3] for r in runs}),
+                       **({"info": [r[4] for r in runs]} if all(len(r) > 4 for r in runs) else {})})
         if any(r[3] != "stable" for r in runs):
             break
     return points
