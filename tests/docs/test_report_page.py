@@ -64,8 +64,8 @@ def test_the_check_finds_a_broken_image_a_missing_file_and_a_missing_anchor(brow
     (tmp_path / "page.html").write_text(
         f"<!DOCTYPE html><html><body><h2 id='here'>x</h2><img src='ok.png'>"
         f"<img src='data:image/png;base64,{good}'><img src='data:image/png;base64,{good[:40]}'>"
-        "<a href='#here'>ok</a><a href='ok.png'>ok</a><a href='#nowhere'>anchor</a><a href='gone.html'>file</a>"
-        "</body></html>")
+        "<a href='#here'>ok</a><a href='ok.png'>ok</a><a href='#nowhere'>anchor</a>"
+        "<a href='gone.html'>file</a></body></html>")
     info, broken, dead = check_page(browser, tmp_path, "page.html")
     assert info["images"] == 3 and len(broken) == 1 and broken[0].startswith("data:image/png;base64,")
     assert sorted(d.split(" (")[1] for d in dead) == ["no such anchor)", "no such file)"]

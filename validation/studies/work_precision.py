@@ -1,8 +1,11 @@
 """Work-precision diagrams: each solver's actual error on eta against its wall time.
 
 The field's convention (SciMLBenchmarks, DifferentialEquations.jl): every method on the same
-axes, over a range of tolerances from 1e-2 down to the smallest each reaches within a budget,
-the error measured against a reference that does not share its errors.
+axes, over a range of tolerances down to the smallest each reaches within a budget, the error
+measured against a reference that does not share its errors. Monte Carlo starts at 5e-2 with
+2 paths per replica and at least 8 replicas (:data:`MC_OPTIONS`), so that its loosest points
+are not all at the first batch the solver's defaults run (1e-3 to 5e-3 at any tolerance from
+1e-2 up) and its curves span two decades of error; Fokker--Planck starts at 1e-2.
 
 * **harmonic ring** (a = 0.5, k = -0.2): the exact solver's wall time against the ring size N
   up to 1e6, beside scipy's dense 4N x 4N Lyapunov solve (what a user would otherwise call) for
@@ -18,10 +21,11 @@ the error measured against a reference that does not share its errors.
 References (:func:`reference`): for Monte Carlo, the reference table's Fokker--Planck entry
 (units) or its independent long Monte Carlo run (the ring); for Fokker--Planck, its entry at a
 tighter tolerance (n = 3) or the kink's independent long Monte Carlo run. An error below the
-reference's own is not resolved: the figure shows that floor.
+reference's own is not resolved: the figure shows that floor, and the table's span in decades
+(:func:`span`) counts only the errors above it.
 
 ``python -m validation.studies.work_precision [--quick] [--out DIR]`` writes
-``work_precision.json`` and ``work_precision.png`` (full: about 25 min; quick: < 2 min).
+``work_precision.json`` and ``work_precision.png`` (full: about 35 min; quick: about 1 min).
 """
 
 from __future__ import annotations
@@ -37,8 +41,8 @@ import numpy as np
 from fpe_harvester import Harvester, solve
 from validation.studies.cli import bench_main, save_benchmark
 
-__all__ = ["STEM", "RECORDED", "COMMAND", "CAPTION", "CASES", "METHODS", "MC_OPTIONS", "reference", "harmonic",
-           "ladder", "run", "draw", "plot", "span", "summary_rows"]
+__all__ = ["STEM", "RECORDED", "COMMAND", "CAPTION", "CASES", "METHODS", "MC_OPTIONS", "reference",
+           "harmonic", "ladder", "run", "draw", "plot", "span", "summary_rows"]
 
 #: Name of the written ``.json`` and ``.png``.
 STEM = "work_precision"
@@ -49,9 +53,10 @@ COMMAND = "python -m validation.studies.work_precision --out validation/data"
 #: What the figure shows.
 CAPTION = ("Work-precision diagrams. Left: the harmonic ring's exact solver against scipy's dense Lyapunov solve, "
            "wall time against ring size. Other panels: actual relative error of eta against wall time, one curve "
-           "per solver over tolerances from 1e-2 down (Monte Carlo: rms over seeds; small dots: the mean error the "
-           "runs reported), plain Monte Carlo and a numpy Euler-Maruyama script as the baselines; dotted grey: the "
-           "reference's own error, below which an error is not resolved.")
+           "per solver over tolerances from 5e-2 (Monte Carlo) or 1e-2 (Fokker-Planck) down (Monte Carlo: rms "
+           "over seeds; small dots: the mean error the runs reported), plain Monte Carlo and a numpy "
+           "Euler-Maruyama script as the baselines; dotted grey: the reference's own error, below which an error "
+           "is not resolved; each panel names its references.")
 
 #: The nonlinear cases: key -> (title, Harvester.build arguments).
 CASES: dict[str, tuple[str, dict[str, Any]]] = {
@@ -321,7 +326,8 @@ def summary_rows(res: dict[str, Any]) -> tuple[list[str], list[list[str]]]:
         errs = [r["error"] for r in mine if r["error"] is not None]
         rows.append([res["harmonic"]["title"], method, f"N = {mine[0]['N']} ... {mine[-1]['N']}",
                      f"{max(errs):.2g} (largest)" if errs else "-",
-                     f"{mine[-1]['seconds']:.3g} (N = {mine[-1]['N']})", "-", "-", res["harmonic"]["reference"]])
+                     f"{mine[-1]['seconds']:.3g} (N = {mine[-1]['N']})", "-", "-",
+                     res["harmonic"]["reference"]])
     return head, rows
 
 
