@@ -1,8 +1,11 @@
 """Work-precision diagrams: each solver's actual error on eta against its wall time.
 
 The field's convention (SciMLBenchmarks, DifferentialEquations.jl): every method on the same
-axes, over a range of tolerances from 1e-2 down to the smallest each reaches within a budget,
-the error measured against a reference that does not share its errors.
+axes, over a range of tolerances down to the smallest each reaches within a budget, the error
+measured against a reference that does not share its errors. Monte Carlo starts at 5e-2 with
+2 paths per replica and at least 8 replicas (:data:`MC_OPTIONS`), so that its loosest points
+are not all at the first batch the solver's defaults run (1e-3 to 5e-3 at any tolerance from
+1e-2 up), and its curves cover more of the error range; Fokker--Planck starts at 1e-2.
 
 * **harmonic ring** (a = 0.5, k = -0.2): the exact solver's wall time against the ring size N
   up to 1e6, beside scipy's dense 4N x 4N Lyapunov solve (what a user would otherwise call) for
@@ -18,10 +21,11 @@ the error measured against a reference that does not share its errors.
 References (:func:`reference`): for Monte Carlo, the reference table's Fokker--Planck entry
 (units) or its independent long Monte Carlo run (the ring); for Fokker--Planck, its entry at a
 tighter tolerance (n = 3) or the kink's independent long Monte Carlo run. An error below the
-reference's own is not resolved: the figure shows that floor.
+reference's own is not resolved: the figure shows that floor, and the table's span in decades
+(:func:`span`) counts only the errors above it.
 
 ``python -m validation.studies.work_precision [--quick] [--out DIR]`` writes
-``work_precision.json`` and ``work_precision.png`` (full: about 25 min; quick: < 2 min).
+``work_precision.json`` and ``work_precision.png`` (full: about 20-40 min; quick: about 1 min).
 """
 
 from __future__ import annotations
@@ -37,8 +41,8 @@ import numpy as np
 from fpe_harvester import Harvester, solve
 from validation.studies.cli import bench_main, save_benchmark
 
-__all__ = ["STEM", "RECORDED", "COMMAND", "CAPTION", "CASES", "METHODS", "reference", "harmonic", "ladder", "run",
-           "draw", "plot", "summary_rows"]
+__all__ = ["STEM", "RECORDED", "COMMAND", "CAPTION", "CASES", "METHODS", "MC_OPTIONS", "reference",
+           "harmonic", "ladder", "run", "draw", "plot", "span", "summary_rows"]
 
 #: Name of the written ``.json`` and ``.png``.
 STEM = "work_precision"
@@ -49,9 +53,10 @@ COMMAND = "python -m validation.studies.work_precision --out validation/data"
 #: What the figure shows.
 CAPTION = ("Work-precision diagrams. Left: the harmonic ring's exact solver against scipy's dense Lyapunov solve, "
            "wall time against ring size. Other panels: actual relative error of eta against wall time, one curve "
-           "per solver over tolerances from 1e-2 down (Monte Carlo: rms over seeds; small dots: the mean error the "
-           "runs reported), plain Monte Carlo and a numpy Euler-Maruyama script as the baselines; dotted grey: the "
-           "reference's own error, below which an error is not resolved.")
+           "per solver over tolerances from 5e-2 (Monte Carlo) or 1e-2 (Fokker-Planck) down (Monte Carlo: rms "
+           "over seeds; small dots: the mean error the runs reported), plain Monte Carlo and a numpy "
+           "Euler-Maruyama script as the baselines; dotted grey: the reference's own error, below which an error "
+           "is not resolved; each panel names its references.")
 
 #: The nonlinear cases: key -> (title, Harvester.build arguments).
 CASES: dict[str, tuple[str, dict[str, Any]]] = {
@@ -62,6 +67,16 @@ CASES: dict[str, tuple[str, dict[str, Any]]] = {
 }
 #: Solvers and baselines, in drawing order.
 METHODS = ("fpe", "mc", "mc plain", "euler-maruyama")
+#: Options of every Monte Carlo run (with and without control variates): 2 paths per replica and
+#: at least 8 replicas, instead of the solver's 16-64 and 32. At its defaults the solver's first
+#: batch already gives an error of 1e-3 to 5e-3 at any tolerance from 1e-2 up, so a curve could
+#: not start above it (with 8 replicas of 2 paths: 1.7e-2 to 3.9e-2); and at equal path time, more
+#: replicas let the regression use the richest control set (ring n = 3, N = 3, a = 0.5, k = -0.5,
+#: t_run = 400: at 32 replicas of 19 paths only the twin, variance reduction 2.5-2.8; at 64 of 4
+#: the martingale and twin sets, 3-6). Not fewer than 8: with 2, a run stops on a standard error
+#: that 2 replicas happened to make small (full run, tol 1e-2: one seed in four stopped at 2
+#: replicas, and the rms actual error of the four was 3e-2, against 4e-3 with 8).
+MC_OPTIONS: dict[str, Any] = {"paths": 2, "min_replicas": 8}
 #: Euler--Maruyama baseline: time step [s], paths per replica, burn-in and pilot window [s].
 EM_DT, EM_PATHS, EM_BURN, EM_PILOT = 0.01, 256, 20.0, 50.0
 
@@ -69,10 +84,10 @@ EM_DT, EM_PATHS, EM_BURN, EM_PILOT = 0.01, 256, 20.0, 50.0
 def _settings(quick: bool) -> dict[str, Any]:
     """Tolerances, seeds and budgets [s] (per run, and per solver and case in total)."""
     if quick:
-        return {"tols": (1e-2, 3e-3), "fpe_tols": (1e-2, 1e-3), "seeds": 2, "run_s": 8.0, "budget_s": 5.0,
+        return {"tols": (5e-2, 1e-2), "fpe_tols": (1e-2, 1e-3), "seeds": 2, "run_s": 8.0, "budget_s": 5.0,
                 "ring_N": (3, 100, 10_000, 1_000_000), "dense_N": (3, 10, 30), "mp_N_max": 100}
-    return {"tols": (1e-2, 5e-3, 2e-3, 1e-3, 5e-4, 2e-4, 1e-4), "fpe_tols": (1e-2, 1e-3, 1e-4, 1e-5, 1e-6),
-            "seeds": 4, "run_s": 60.0, "budget_s": 120.0,
+    return {"tols": (5e-2, 2e-2, 1e-2, 5e-3, 2e-3, 1e-3, 5e-4, 2e-4, 1e-4),
+            "fpe_tols": (1e-2, 1e-3, 1e-4, 1e-5, 1e-6), "seeds": 4, "run_s": 60.0, "budget_s": 130.0,
             "ring_N": (3, 10, 100, 1000, 10_000, 100_000, 1_000_000), "dense_N": (3, 10, 30, 100, 200),
             "mp_N_max": 1000}
 
@@ -91,12 +106,13 @@ def reference(key: str, method: str) -> dict[str, Any]:
     h = Harvester.build(**system)
     if method == "fpe" and h.n == 1.0:
         d = recorded_kink(h.a)
-        return {"eta": d["eta"], "rel_err": d["eta_err"] / d["eta"],
+        return {"eta": d["eta"], "rel_err": d["eta_err"] / d["eta"], "short": "long Monte Carlo run",
                 "source": f"long Monte Carlo run (kink_mc_reference_values.json a{h.a:g}, seed {d['seed']})"}
     label = (f"mc n = {h.n:g}, N = {h.N}, a = {h.a:g}, k = {h.k:g}" if h.N > 1
              else f"fpe n = {h.n:g}, a = {h.a:g}")
     e = load()[label]
-    return {"eta": e["eta"], "rel_err": e["eta_err"] / e["eta"],
+    short = "Monte Carlo" if e["method"] == "mc" else "Fokker-Planck"
+    return {"eta": e["eta"], "rel_err": e["eta_err"] / e["eta"], "short": f"{short} table entry",
             "source": f"reference table '{label}' ({e['method']}, commit {e['commit']})"}
 
 
@@ -154,30 +170,49 @@ def _em_pilot(h: Harvester, seed: int) -> dict[str, float]:
     return {"replicas": 4, "rel_se": est.se["eta"] / abs(est.mean["eta"]), "seconds": wall}
 
 
-def _runner(method: str, h: Harvester, cfg: dict[str, Any]) -> Callable[[float, int], tuple[float, Any, Any, str]]:
-    """``run(tol, seed) -> (wall [s], eta, reported error, status)`` of one solver."""
+#: What a point records of each Monte Carlo run's ``info`` (how the time was spent).
+_RUN_INFO = ("control_set", "variance_reduction", "replicas", "paths", "t_run", "dt")
+
+
+def _runner(method: str, h: Harvester, cfg: dict[str, Any]) -> Callable[[float, int], tuple[Any, ...]]:
+    """``run(tol, seed) -> (wall [s], eta, reported error, status[, info])`` of one solver; the
+    Monte Carlo runs add the entries :data:`_RUN_INFO` of their ``info``."""
     if method == "euler-maruyama":
         pilot = _em_pilot(h, seed=99)
         return lambda tol, seed: _em_run(h, tol, seed, pilot, cfg["run_s"])
     options: dict[str, Any] = {"max_seconds": cfg["run_s"]} if method == "fpe" else {
-        "max_time": cfg["run_s"], "progress": False, **({"control": False, "martingale": False}
-                                                        if method == "mc plain" else {})}
+        "max_time": cfg["run_s"], "progress": False, **MC_OPTIONS,
+        **({"control": False, "martingale": False} if method == "mc plain" else {})}
 
-    def one(tol: float, seed: int) -> tuple[float, float, float, str]:
+    def one(tol: float, seed: int) -> tuple[Any, ...]:
         wall, r = _timed(lambda: solve(h, method.split()[0], tol=tol, **options,
                                        **({} if method == "fpe" else {"seed": seed})))
-        return wall, r.eta, r.eta_err, r.status.value
+        info = () if method == "fpe" else ({k: r.info.get(k) for k in _RUN_INFO},)
+        return (wall, r.eta, r.eta_err, r.status.value, *info)
 
     return one
 
 
-def ladder(run_one: Callable[[float, int], tuple[float, Any, Any, str]], tols: tuple[float, ...],
-           seeds: int, ref_eta: float, budget_s: float) -> list[dict[str, Any]]:
+def ladder(run_one: Callable[[float, int], tuple[Any, ...]], tols: tuple[float, ...],
+           seeds: int, ref_eta: float, budget_s: float, order: float = 0.0) -> list[dict[str, Any]]:
     """One point per tolerance, tightest last: the rms actual relative error over ``seeds``
-    runs and the mean reported relative error, and the mean wall time [s]. Stops after a
-    tolerance at which a run did not converge or the total time passed ``budget_s``."""
-    points, spent = [], 0.0
+    runs and the mean reported relative error, the mean wall time [s], and each run's info
+    when ``run_one`` returns one (a fifth item).
+
+    Stops after a tolerance at which a run did not converge, and before one whose predicted
+    cost would take the total past ``budget_s``: the last point's time times
+    ``(reported / tol) ** order`` per seed (``order`` 2 for Monte Carlo, whose standard error
+    falls like one over the square root of the cost; 0, the last point's time, for
+    Fokker--Planck, whose cost does not follow its error so simply).
+    """
+    points: list[dict[str, Any]] = []
+    spent = 0.0
     for tol in tols:
+        if points:
+            last = points[-1]
+            scale = max(1.0, last["reported"] / tol) ** order if math.isfinite(last["reported"]) else 1.0
+            if spent + seeds * last["seconds"] * scale > budget_s:
+                break
         runs = [run_one(tol, 1000 + s) for s in range(seeds)]
         spent += sum(r[0] for r in runs)
         done = [r for r in runs if r[1] is not None]
@@ -187,8 +222,9 @@ def ladder(run_one: Callable[[float, int], tuple[float, Any, Any, str]], tols: t
         points.append({"tol": tol, "seconds": float(np.mean([r[0] for r in runs])),
                        "error": math.sqrt(float(np.mean(actual))),
                        "reported": float(np.mean([(r[2] or math.nan) / abs(r[1]) for r in done])),
-                       "runs": len(done), "statuses": sorted({r[3] for r in runs})})
-        if spent > budget_s or any(r[3] != "stable" for r in runs):
+                       "runs": len(done), "statuses": sorted({r[3] for r in runs}),
+                       **({"info": [r[4] for r in runs]} if all(len(r) > 4 for r in runs) else {})})
+        if any(r[3] != "stable" for r in runs):
             break
     return points
 
@@ -204,7 +240,7 @@ def _case(key: str, quick: bool) -> dict[str, Any]:
         ref = reference(key, "fpe" if method == "fpe" else "mc")
         fpe = method == "fpe"
         points = ladder(_runner(method, h, cfg), cfg["fpe_tols"] if fpe else cfg["tols"], 1 if fpe else cfg["seeds"],
-                        ref["eta"], cfg["budget_s"])
+                        ref["eta"], cfg["budget_s"], order=0.0 if fpe else 2.0)
         curves.append({"method": method, "reference": ref, "points": points})
     return {"title": title, "system": system, "curves": curves}
 
@@ -223,9 +259,15 @@ def run(quick: bool = False, out: Path | str | None = None) -> dict[str, Any]:
 _STYLE = {"fpe": ("o-", "C0"), "mc": ("s-", "C1"), "mc plain": ("^--", "C2"), "euler-maruyama": ("v:", "C3"),
           "exact": ("o-", "C0"), "scipy dense Lyapunov": ("s--", "C3")}
 
+#: Method names in the panels' reference notes.
+_SHORT = {"euler-maruyama": "EM"}
+
 
 def draw(res: dict[str, Any], axes: Any) -> None:
-    """Draw the diagrams on ``axes`` (at least 1 + len(CASES) matplotlib axes, flat)."""
+    """Draw the diagrams on ``axes`` (at least 1 + len(CASES) matplotlib axes, flat); each panel
+    names the reference of each of its curves."""
+    from matplotlib.ticker import NullFormatter
+
     ax = axes[0]
     rows = res["harmonic"]["rows"]
     for method in ("exact", "scipy dense Lyapunov"):
@@ -243,12 +285,24 @@ def draw(res: dict[str, Any], axes: Any) -> None:
                       label=curve["method"])
             if curve["method"] in ("mc", "mc plain"):
                 ax.loglog([p["seconds"] for p in pts], [p["reported"] for p in pts], ".", color=color, alpha=0.5)
-            floors[curve["reference"]["source"]] = curve["reference"]["rel_err"]
-        for rel in set(floors.values()):
+            ref = curve["reference"]
+            floors.setdefault((ref.get("short", ref["source"]), ref["rel_err"]), []).append(curve["method"])
+        for _, rel in floors:
             ax.axhline(rel, color="grey", lw=0.8, ls=":")
+        ax.text(0.02, 0.02, "\n".join(f"reference of {'/'.join(_SHORT.get(x, x) for x in m)}:\n  {name} "
+                                       f"(rel. error {rel:.1g})" for (name, rel), m in floors.items()),
+                transform=ax.transAxes, fontsize=6, va="bottom")
+        ax.xaxis.set_minor_formatter(NullFormatter())
         ax.set(xlabel="wall time [s]", ylabel="actual relative error of eta", title=case["title"])
         ax.title.set_fontsize(9)
         ax.legend(fontsize=7)
+
+
+def span(points: list[dict[str, Any]], floor: float) -> float:
+    """Decades of actual error a curve covers, counting only errors above the reference's own
+    relative error ``floor`` (smaller ones are not resolved): log10(largest / smallest)."""
+    errs = [max(p["error"], floor) for p in points if p["error"] > 0 or floor > 0]
+    return math.log10(max(errs) / min(errs)) if errs and min(errs) > 0 else 0.0
 
 
 def summary_rows(res: dict[str, Any]) -> tuple[list[str], list[list[str]]]:
@@ -256,25 +310,27 @@ def summary_rows(res: dict[str, Any]) -> tuple[list[str], list[list[str]]]:
     run, the smallest actual error reached and its wall time, the reported over the actual
     error at that point, and the reference."""
     head = ["case", "solver", "tolerances", "smallest actual error", "wall time there [s]",
-            "reported / actual there", "reference"]
+            "reported / actual there", "span [decades]", "reference"]
     rows = []
     for case in res["cases"].values():
         for c in case["curves"]:
             pts = c["points"]
             if not pts:
-                rows.append([case["title"], c["method"], "-", "no result within the budget", "-", "-",
+                rows.append([case["title"], c["method"], "-", "no result within the budget", "-", "-", "-",
                              c["reference"]["source"]])
                 continue
             best = min(pts, key=lambda p: p["error"])
             ratio = best["reported"] / best["error"] if best["error"] > 0 else math.inf
             rows.append([case["title"], c["method"], f"{pts[0]['tol']:g} ... {pts[-1]['tol']:g}",
-                         f"{best['error']:.2g}", f"{best['seconds']:.3g}", f"{ratio:.2g}", c["reference"]["source"]])
+                         f"{best['error']:.2g}", f"{best['seconds']:.3g}", f"{ratio:.2g}",
+                         f"{span(pts, c['reference']['rel_err']):.2g}", c["reference"]["source"]])
     for method in ("exact", "scipy dense Lyapunov"):
         mine = [r for r in res["harmonic"]["rows"] if r["method"] == method]
         errs = [r["error"] for r in mine if r["error"] is not None]
         rows.append([res["harmonic"]["title"], method, f"N = {mine[0]['N']} ... {mine[-1]['N']}",
                      f"{max(errs):.2g} (largest)" if errs else "-",
-                     f"{mine[-1]['seconds']:.3g} (N = {mine[-1]['N']})", "-", res["harmonic"]["reference"]])
+                     f"{mine[-1]['seconds']:.3g} (N = {mine[-1]['N']})", "-", "-",
+                     res["harmonic"]["reference"]])
     return head, rows
 
 

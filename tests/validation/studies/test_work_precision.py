@@ -19,14 +19,28 @@ def _fake(errors: dict[float, float], status: str = "stable"):
     return run_one, calls
 
 
-def test_ladder_records_rms_actual_error_over_seeds_and_stops_at_the_budget():
+def test_ladder_records_rms_actual_error_over_seeds_and_stops_before_the_budget():
     run_one, calls = _fake({1e-2: 0.01, 1e-3: 0.001, 1e-4: 1e-4})
-    pts = wp.ladder(run_one, (1e-2, 1e-3, 1e-4), seeds=3, ref_eta=1.0, budget_s=1.0)
-    # 3 seeds at 1e-2 cost 0.6 s, at 1e-3 1.9 s: the budget is passed after the second tolerance
+    pts = wp.ladder(run_one, (1e-2, 1e-3, 1e-4), seeds=3, ref_eta=1.0, budget_s=3.0)
+    # 3 seeds at 1e-2 cost 0.6 s, at 1e-3 1.9 s: 1e-4, predicted at 1.9 s more, would pass 3 s
     assert [p["tol"] for p in pts] == [1e-2, 1e-3]
     assert len(calls) == 6 and len({s for _, s in calls}) == 3
     assert pts[0]["error"] == pytest.approx(0.01) and pts[1]["error"] == pytest.approx(0.001)
     assert pts[0]["reported"] == pytest.approx(0.5e-2 / 1.0, rel=0.02) and pts[0]["runs"] == 3
+
+
+def test_ladder_predicts_monte_carlo_costs_from_the_reported_error():
+    run_one, calls = _fake({1e-2: 0.01, 1e-3: 0.001})
+    # reported 5e-3 at 1e-2: 1e-3 predicted to cost (5e-3 / 1e-3)^2 = 25 times the 0.6 s spent
+    assert [p["tol"] for p in wp.ladder(run_one, (1e-2, 1e-3), 3, 1.0, 15.0, order=2.0)] == [1e-2]
+    assert [p["tol"] for p in wp.ladder(run_one, (1e-2, 1e-3), 3, 1.0, 16.0, order=2.0)] == [1e-2, 1e-3]
+    assert [p["tol"] for p in wp.ladder(run_one, (1e-2, 1e-3), 3, 1.0, 1.0)] == [1e-2]
+
+
+def test_span_counts_decades_above_the_reference_error():
+    pts = [{"error": e} for e in (3e-2, 1e-3, 2e-5)]
+    assert wp.span(pts, 1e-6) == pytest.approx(math.log10(3e-2 / 2e-5))
+    assert wp.span(pts, 3e-4) == pytest.approx(2.0)
 
 
 def test_ladder_stops_after_a_run_that_did_not_converge_and_skips_runs_without_numbers():
@@ -106,3 +120,6 @@ def test_the_recorded_full_run_has_every_solver_as_a_curve():
     for case in res["cases"].values():
         assert {c["method"] for c in case["curves"]} >= set(wp.METHODS) - {"fpe"}
         assert all(len(c["points"]) >= 2 for c in case["curves"]), case["title"]
+        # the Monte Carlo solver's curve covers more than a decade of resolved error
+        (mc,) = [c for c in case["curves"] if c["method"] == "mc"]
+        assert wp.span(mc["points"], mc["reference"]["rel_err"]) > 1.0, case["title"]
