@@ -46,8 +46,9 @@ from fpe_harvester.fpe.schemes.xv.kinkdisc import kink_domain
 from fpe_harvester.model import Harvester
 
 from .cli import bench_main, study_runner
+from .xvw_w import kron3, moments_w, transport_w
 
-__all__ = ["XVWMesh", "XVWResult", "solve_xvw", "CASES", "QUICK_CASES", "study", "run"]
+__all__ = ["XVWMesh", "XVWResult", "solve_xvw", "reference_scales", "case_row", "CASES", "QUICK_CASES", "study", "run"]
 
 
 @dataclass(frozen=True)
@@ -68,6 +69,16 @@ class XVWMesh:
         :math:`V_c` in units of the standard deviation of V (equivalent harmonic unit).
     v_width : float
         :math:`L_V` in the same units.
+    v_reach : float
+        If > 0, :math:`L_V` is at least this fraction of :math:`K_c\\tau_p L_v`, the voltage a unit
+        running at the edge speed :math:`L_v` charges to (the heavy tails of V at the strong kink).
+    v_geometric : bool
+        Bulk V elements in geometric progression from :math:`V_c` to :math:`L_V` (else spaced
+        like :math:`t^{1.5}`).
+    pV : int
+        DG degree in V (0: p).
+    variant : str
+        ``"V"``: the third coordinate is V; ``"W"``: it is :math:`W = V - K_c x` (:mod:`.xvw_w`).
     """
 
     p: int = 2
@@ -81,6 +92,10 @@ class XVWMesh:
     v_bulk: int = 3
     v_core: float = 0.5
     v_width: float = 6.0
+    v_reach: float = 0.0
+    v_geometric: bool = False
+    pV: int = 0
+    variant: str = "V"
 
 
 @dataclass(frozen=True)
@@ -121,6 +136,19 @@ def _scales(h: Harvester) -> tuple[float, float]:
     return float(res.v2), float(res.V2)
 
 
+def reference_scales(a: float) -> tuple[float, float]:
+    r"""(v2, V2) of n = 1 at ``a`` from the reference table (Fokker--Planck at a <= 1, Monte Carlo
+    at a = 2), v2 by the identities :math:`\langle vV\rangle = V^2/(K_c\tau_p)`,
+    :math:`m\gamma\langle v^2\rangle = P_{in} - K_v\langle vV\rangle` (defaults)."""
+    from pathlib import Path
+
+    table = json.loads((Path(__file__).parents[1] / "references" / "data" / "reference_values.json").read_text())
+    row = table.get(f"fpe n = 1, a = {a:g}") or table[f"mc n = 1, a = {a:g}"]
+    p = Harvester.build(n=1, a=a).params
+    vV = row["V2"] / (p.Kc * p.tau_p)
+    return (row["Pin"] - p.Kv * vV) / (p.m * p.gamma), row["V2"]
+
+
 def _axes(h: Harvester, ms: XVWMesh, scales: tuple[float, float] | None = None
           ) -> tuple[DGLine, DGLine, DGLine]:
     """The three 1-D DG spaces: x in [0, Lx], v in [-Lv, Lv], V in [-LV, LV], for the moments
@@ -132,12 +160,16 @@ def _axes(h: Harvester, ms: XVWMesh, scales: tuple[float, float] | None = None
     plane = PlaneMesh(Lx=Lx, Lv=Lv, Ec=p.m * v2, a=h.a, layers=ms.layers, ratio=ms.ratio,
                       bulk_x=ms.bulk_x, bulk_v=ms.bulk_v, grading=2.5)
     sV = math.sqrt(V2)
-    core, edge = ms.v_core * sV, ms.v_width * sV
+    core = ms.v_core * sV
+    edge = max(ms.v_width * sV, ms.v_reach * p.Kc * p.tau_p * Lv)
+    if ms.variant == "W":
+        edge += p.Kc * Lx   # W = V - Kc x: the same V range at every x of the tensor mesh
     inner = core * ms.v_ratio ** np.arange(ms.v_layers - 1, -1, -1)
-    outer = core + (edge - core) * np.linspace(0.0, 1.0, ms.v_bulk + 1)[1:] ** 1.5
+    t = np.linspace(0.0, 1.0, ms.v_bulk + 1)[1:]
+    outer = core * (edge / core) ** t if ms.v_geometric else core + (edge - core) * t**1.5
     half = np.concatenate([[0.0], inner, outer])
     V_nodes = np.concatenate([-half[:0:-1], half])
-    return DGLine(plane.x_nodes(), ms.p), DGLine(plane.v_nodes(), ms.p), DGLine(V_nodes, ms.p)
+    return DGLine(plane.x_nodes(), ms.p), DGLine(plane.v_nodes(), ms.p), DGLine(V_nodes, ms.pV or ms.p)
 
 
 def _xi_modes(h: Harvester, K: int) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
@@ -183,26 +215,26 @@ def assemble(h: Harvester, ms: XVWMesh, scales: tuple[float, float] | None = Non
     X, Vv, W = _axes(h, ms, scales)
     lam, R, gen, parity = _xi_modes(h, ms.K)
     Mx, Mv, MW = X.mass(), Vv.mass(), W.mass()
-    Mv1, MW1 = Vv.mass(power=1), W.mass(power=1)
-    Dx, Dv, Dv1, DW, DW1 = X.derivative(), Vv.derivative(), Vv.derivative(1), W.derivative(), W.derivative(1)
-    kron3 = lambda a, b, c: sp.kron(a, sp.kron(b, c, format="csr"), format="csr")  # noqa: E731
-    common = (-kron3(Dx, Mv1, MW) + p.gamma * kron3(Mx, Dv1, MW) + (p.Kv / p.m) * kron3(Mx, Dv, MW1)
-              - p.Kc * kron3(Mx, Mv1, DW) + (1.0 / p.tau_p) * kron3(Mx, Mv, DW1))
+    Dv = Vv.derivative()
     vol_f = -kron3(Mx, Dv, MW)                   # times f_i = (-a + sigma lambda_i) / m
     vpos, vneg = Vv.signed_parts(np.array([0.0]), 1.0)
     Vp, Vn = _block(vpos[0]), _block(vneg[0])
     nf = X.elements + 1
     xface = _face_sum(X, [sp.kron(Vp, MW)] * nf, [sp.kron(Vn, MW)] * nf, True)
-    # V faces: speed Kc v - V_f / tau_p, linear in v
-    sp_pos, sp_neg = Vv.signed_parts(-W.nodes / p.tau_p, p.Kc)
-    wface = sp.kron(Mx, _face_sum(W, [_block(a) for a in sp_pos], [_block(a) for a in sp_neg], False))
-    T = []
-    for li in lam:
-        f = (-h.a + p.sigma * li) / p.m
-        # v faces: speed f - gamma v_f - (Kv / m) V, linear in V
-        pos, neg = W.signed_parts(f - p.gamma * Vv.nodes, -p.Kv / p.m)
-        vface = _face_sum(Vv, [_block(a) for a in pos], [_block(a) for a in neg], True)
-        T.append((common + f * vol_f + xface + wface + sp.kron(Mx, vface)).tocsr())
+    if ms.variant == "W":
+        T = transport_w(h, X, Vv, W, lam, xface, vol_f)
+        third = moments_w(h, X, Vv, W)
+    else:
+        Mv1, MW1 = Vv.mass(power=1), W.mass(power=1)
+        Dx, Dv1, DW, DW1 = X.derivative(), Vv.derivative(1), W.derivative(), W.derivative(1)
+        common = (-kron3(Dx, Mv1, MW) + p.gamma * kron3(Mx, Dv1, MW) + (p.Kv / p.m) * kron3(Mx, Dv, MW1)
+                  - p.Kc * kron3(Mx, Mv1, DW) + (1.0 / p.tau_p) * kron3(Mx, Mv, DW1))
+        # V faces: speed Kc v - V_f / tau_p, linear in v
+        sp_pos, sp_neg = Vv.signed_parts(-W.nodes / p.tau_p, p.Kc)
+        wface = sp.kron(Mx, _face_sum(W, [_block(a) for a in sp_pos], [_block(a) for a in sp_neg], False))
+        T = [_transport_v(h, X, Vv, W, li, common + xface + wface, vol_f) for li in lam]
+        third = {"V2": np.kron(X.integral(), np.kron(Vv.integral(), W.integral(2))),
+                 "vV": np.kron(X.integral(), np.kron(Vv.integral(1), W.integral(1)))}
     e0 = np.zeros(X.size)
     e0[0] = 1.0
     flip_v = sp.csr_matrix(np.fliplr(np.eye(Vv.size)))
@@ -211,11 +243,22 @@ def assemble(h: Harvester, ms: XVWMesh, scales: tuple[float, float] | None = Non
     mass = kron3(Mx, Mv, MW)
     ix, iv, iW = X.integral(), Vv.integral(), W.integral()
     return {"T": T, "mass": mass, "mirror": mirror, "gen": gen, "parity": parity, "R": R,
-            "one": np.kron(ix, np.kron(iv, iW)), "V2": np.kron(ix, np.kron(iv, W.integral(2))),
+            "one": np.kron(ix, np.kron(iv, iW)), **third,
             "vxi": np.kron(ix, np.kron(Vv.integral(1), iW)) * math.sqrt(p.D / p.tau),
-            "vV": np.kron(ix, np.kron(Vv.integral(1), W.integral(1))),
             "v2": np.kron(ix, np.kron(Vv.integral(2), iW)),
             "lines": (X, Vv, W)}
+
+
+def _transport_v(h: Harvester, X: DGLine, Vv: DGLine, W: DGLine, li: float, shared: sp.csr_matrix,
+                 vol_f: sp.csr_matrix) -> sp.csr_matrix:
+    """Transport matrix of the xi-mode at the node ``li`` in (x, v, V): ``shared`` (volume
+    terms and the x and V faces) plus the mode's force and its v faces."""
+    p = h.params
+    f = (-h.a + p.sigma * li) / p.m
+    # v faces: speed f - gamma v_f - (Kv / m) V, linear in V
+    pos, neg = W.signed_parts(f - p.gamma * Vv.nodes, -p.Kv / p.m)
+    vface = _face_sum(Vv, [_block(a) for a in pos], [_block(a) for a in neg], True)
+    return (shared + f * vol_f + sp.kron(X.mass(), vface)).tocsr()
 
 
 def _operator_blocks(asm: dict[str, Any], i: int, j: int) -> sp.csr_matrix:
@@ -224,19 +267,38 @@ def _operator_blocks(asm: dict[str, Any], i: int, j: int) -> sp.csr_matrix:
     return (blk + asm["T"][i]).tocsr() if i == j else blk.tocsr()
 
 
+def _apply(asm: dict[str, Any]) -> Any:
+    """The full operator as a function of the coefficients (xi-mode outer): the transport per
+    mode plus the noise and mirror couplings as dense K x K mode products (the assembled
+    matrix would hold K mass blocks per row, 2.4 GB at p = 3 on scheme xv's (x, v) mesh)."""
+    T, mass, mirror, gen, parity = (asm[k] for k in ("T", "mass", "mirror", "gen", "parity"))
+    K, n3 = len(T), mass.shape[0]
+
+    def apply(d: np.ndarray) -> np.ndarray:
+        D = d.reshape(K, n3)
+        out = np.stack([T[i] @ D[i] for i in range(K)])
+        out -= (mass @ (gen @ D).T).T + (mirror @ (parity @ D).T).T
+        return out.ravel()
+
+    return apply
+
+
 def solve_xvw(h: Harvester, ms: XVWMesh, rtol: float = 1e-9, maxiter: int = 600,
-              blocks: str = "lu") -> XVWResult:
+              blocks: str = "lu", scales: tuple[float, float] | None = None, drop_tol: float = 1e-4) -> XVWResult:
     """Assemble and solve one level; raise :class:`NotConvergedError` if GMRES stalls.
 
     ``blocks``: the preconditioner's solve of each mirror-coupled pair of xi-modes, ``"lu"``
-    (exact, SuperLU) or ``"ilu"`` (SuperLU's incomplete LU, drop tolerance 1e-4, fill 10).
+    (exact, SuperLU) or ``"ilu"`` (SuperLU's incomplete LU, drop tolerance ``drop_tol``, fill 10;
+    measured on a pair of a = 2 with 30240 unknowns: exact LU 78e6 nonzeros, 15 s, 0.078 s a
+    solve; ILU at 1e-3 2.5e6, 2.3 s, 0.007 s, 1.3 % residual of the block solve);
+    ``scales`` = (v2, V2) set the mesh (default :func:`_scales`).
     """
     tracemalloc.start()
     t0 = time.perf_counter()
-    asm = assemble(h, ms)
+    asm = assemble(h, ms, scales)
     K = ms.K
-    A = sp.bmat([[_operator_blocks(asm, i, j) for j in range(K)] for i in range(K)], format="csr")
     n3 = asm["mass"].shape[0]
+    A = _apply(asm)
     t1 = time.perf_counter()
     groups, seen = [], set()
     for i in range(K):
@@ -246,14 +308,14 @@ def solve_xvw(h: Harvester, ms: XVWMesh, rtol: float = 1e-9, maxiter: int = 600,
         seen.update(grp)
         blk = sp.bmat([[_operator_blocks(asm, r, c) for c in grp] for r in grp], format="csc")
         lu = spla.splu(blk, permc_spec="COLAMD") if blocks == "lu" else \
-            spla.spilu(blk, drop_tol=1e-4, fill_factor=10.0)
+            spla.spilu(blk, drop_tol=drop_tol, fill_factor=10.0)
         groups.append((grp, lu))
     t2 = time.perf_counter()
     u = np.kron(asm["R"][0], asm["one"])
     u /= np.linalg.norm(u)
 
     def matvec(d: np.ndarray) -> np.ndarray:
-        return A @ d + u * float(u @ d)
+        return A(d) + u * float(u @ d)
 
     def prec(r: np.ndarray) -> np.ndarray:
         out = np.empty_like(r)
@@ -285,9 +347,11 @@ def solve_xvw(h: Harvester, ms: XVWMesh, rtol: float = 1e-9, maxiter: int = 600,
     q = h.params
     # outflow through the edges of the domain per unit time and mass: test function 1 in
     # (x, v, V) and h_0 in xi (the noise and the interior faces conserve mass)
-    leak = float(np.kron(asm["R"][0], np.ones(n3)) @ (A @ d)) / (0.5 * mass)
+    leak = float(np.kron(asm["R"][0], np.ones(n3)) @ A(d)) / (0.5 * mass)
+    # negative part of the (x, v, V) marginal at the Lobatto nodes (weights: the basis integrals)
+    negative = -2.0 * float(asm["one"] @ np.minimum(c0, 0.0)) / mass
     residuals = {"V2": (V2 - q.Kc * q.tau_p * vV) / V2, "power": (Pin - q.m * q.gamma * v2 - q.Kv * vV) / Pin,
-                 "leak": leak}
+                 "leak": leak, "negative": negative}
     rss = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1e6  # kB on Linux
     return XVWResult(V2 / (q.R * Pin), V2, Pin, N, its[0], residuals,
                      {"assembly": t1 - t0, "factorization": t2 - t1, "gmres": t3 - t2}, peak, ms, rss)
@@ -310,19 +374,26 @@ QUICK_CASES = CASES[:2]
 BASE = {"layers": 2, "bulk_x": 3, "bulk_v": 2, "v_layers": 2, "v_bulk": 2}
 
 
+def case_row(a: float, case: dict[str, Any], scales: tuple[float, float] | None = None) -> dict[str, Any]:
+    """Solve one case (:data:`BASE` with the mesh changes in ``case``; its keys ``blocks``,
+    ``rtol`` and ``maxiter`` go to :func:`solve_xvw`) at n = 1, ``a``; the row of the study's
+    JSON (a case whose GMRES stalls is recorded with its message)."""
+    changes = dict(case)
+    options = {k: changes.pop(k) for k in ("blocks", "rtol", "maxiter", "drop_tol") if k in changes}
+    ms = XVWMesh(**{**BASE, **changes})
+    try:
+        res = solve_xvw(Harvester.build(n=1, a=a), ms, scales=scales, **options)
+        return {"a": a, **options, **res.to_dict()}
+    except NotConvergedError as exc:
+        return {"a": a, **options, "mesh": ms.__dict__, "failed": str(exc)}
+
+
 def study(quick: bool) -> dict[str, Any]:
     """Solve every case (each on :data:`BASE` with its changes); a case whose GMRES stalls is
     recorded with its message."""
     rows = []
     for a, case in QUICK_CASES if quick else CASES:
-        changes = dict(case)
-        options = {"blocks": changes.pop("blocks")} if "blocks" in changes else {}
-        ms = XVWMesh(**{**BASE, **changes})
-        try:
-            res = solve_xvw(Harvester.build(n=1, a=a), ms, **options)
-            rows.append({"a": a, **options, **res.to_dict()})
-        except NotConvergedError as exc:
-            rows.append({"a": a, **options, "mesh": ms.__dict__, "failed": str(exc)})
+        rows.append(case_row(a, case))
         print(json.dumps(rows[-1]), flush=True)
     return {"rows": rows}
 
