@@ -21,8 +21,12 @@ Discretization of the half space x >= 0 (the density is symmetric under
   and each element is split at its root (:meth:`DGLine.signed_parts`). On x = 0 the inflow
   (v > 0) is the mirror image of the outflow.
 * Solve: GMRES on the system bordered by the normalization, preconditioned by the exact
-  (sparse LU) solve of each pair of mirror-coupled modes' 3-D transport (block Jacobi across
-  xi-modes; the (x, v) rotation's cycles are inside each block).
+  (sparse LU) or incomplete (ILU) solve of each pair of mirror-coupled modes' 3-D transport
+  (block Jacobi across xi-modes; the (x, v) rotation's cycles are inside each block).
+* Variant ``"W"`` (:mod:`.xvw_w`): the third coordinate is :math:`W = V - K_c x`.
+
+The mesh scales come from the reference table (:func:`reference_scales`) in the second series
+(:data:`CASES`, one case per process, logged in ``validation/data/xvw.json``).
 """
 
 from __future__ import annotations
@@ -48,7 +52,7 @@ from fpe_harvester.model import Harvester
 from .cli import bench_main, study_runner
 from .xvw_w import kron3, moments_w, transport_w
 
-__all__ = ["XVWMesh", "XVWResult", "solve_xvw", "reference_scales", "case_row", "CASES", "QUICK_CASES", "study", "run"]
+__all__ = ["XVWMesh", "XVWResult", "solve_xvw", "reference_scales", "case_row", "log_case", "CASES", "QUICK_CASES", "study", "run"]
 
 
 @dataclass(frozen=True)
@@ -357,32 +361,46 @@ def solve_xvw(h: Harvester, ms: XVWMesh, rtol: float = 1e-9, maxiter: int = 600,
                      {"assembly": t1 - t0, "factorization": t2 - t1, "gmres": t3 - t2}, peak, ms, rss)
 
 
-#: (a, mesh changes) of the study (about 30 min on 2 loaded cores, at most 2.4 GB): refinement in
-#: degree, xi-modes and V layers at a = 0.5
-#: (reference: scheme xv, eta = 0.6103035 +- 4e-5), then a = 1 (0.4075292 +- 2.4e-5) and a = 2
-#: (Monte Carlo 0.12288 +- 0.00020).
+_REACH = {"v_reach": 1.0, "v_geometric": True}
+_ILU = {"blocks": "ilu", "drop_tol": 1e-3}
+#: Scheme xv's (x, v) mesh (4 layers toward the trap, 5 + 4 bulk elements), GMRES to 1e-6.
+_XV = {"layers": 4, "bulk_x": 5, "bulk_v": 4, **_REACH, **_ILU, "rtol": 1e-6, "maxiter": 400}
+#: (a, changes to :data:`BASE`) of the study, one process each (``validation/data/xvw.json``;
+#: about 75 min on 2 shared cores, at most 0.8 GB): the V domain reaching the running units'
+#: voltage, the W variant, ILU blocks, then scheme xv's (x, v) mesh and V layers at a = 0.5
+#: (reference: scheme xv, eta = 0.6103035 +- 4e-5), a = 1 (0.4075292 +- 2.4e-5) and a = 2
+#: (Monte Carlo 0.12288 +- 0.00020). A run that passed 570 s was stopped (``failed``).
 CASES: tuple[tuple[float, dict[str, Any]], ...] = (
-    (0.5, {"p": 1, "K": 3}), (0.5, {"p": 2, "K": 3}), (0.5, {"p": 2, "K": 5}), (0.5, {"p": 2, "K": 7}),
-    (0.5, {"p": 2, "K": 5, "v_layers": 5}), (0.5, {"p": 2, "K": 5, "bulk_x": 5, "bulk_v": 3}),
-    (1.0, {"p": 2, "K": 5}), (2.0, {"p": 2, "K": 5}), (2.0, {"p": 2, "K": 5, "v_layers": 5}),
-    (2.0, {"p": 2, "K": 5, "layers": 4}), (0.5, {"p": 2, "K": 5, "blocks": "ilu"}),
-    (1.0, {"p": 2, "K": 5, "bulk_x": 5, "bulk_v": 3}), (2.0, {"p": 2, "K": 5, "v_width": 15.0, "v_bulk": 4}),
-    (2.0, {"p": 2, "K": 5, "bulk_x": 5, "bulk_v": 3, "v_width": 10.0, "v_bulk": 4, "blocks": "ilu"}),
+    (0.5, {"p": 2, "K": 5}), (0.5, {"p": 2, "K": 5, "variant": "W"}),
+    (0.5, {"p": 2, "K": 5, "v_bulk": 3, **_REACH}), (0.5, {"p": 2, "K": 5, "v_bulk": 3, "v_geometric": True, "variant": "W"}),
+    (0.5, {"p": 2, "K": 5, "v_bulk": 3, **_REACH, **_ILU}),
+    (2.0, {"p": 2, "K": 5, "v_bulk": 4, "v_layers": 3, **_REACH}),
+    (2.0, {"p": 2, "K": 5, "v_bulk": 4, "v_layers": 3, **_REACH, "variant": "W"}),
+    (2.0, {"p": 2, "K": 5, "v_bulk": 4, "v_layers": 3, **_REACH, **_ILU}),
+    (0.5, {"p": 2, "K": 5, **_XV, "v_bulk": 3, "rtol": 1e-9, "maxiter": 600}),
+    (2.0, {"p": 2, "K": 5, **_XV, "v_bulk": 4, "v_layers": 3, "rtol": 1e-9, "maxiter": 600}),
+    (2.0, {"p": 2, "K": 5, **_XV, "v_bulk": 3, "v_layers": 2}),
+    (2.0, {"p": 2, "K": 5, **_XV, "v_bulk": 3, "v_layers": 2, "variant": "W"}),
+    (2.0, {"p": 2, "K": 5, **_XV, "v_bulk": 4, "v_layers": 3}),
+    (1.0, {"p": 2, "K": 5, **_XV, "v_bulk": 3, "v_layers": 2}),
+    (2.0, {"p": 2, "K": 5, "v_bulk": 4, "v_layers": 3, **_REACH, **_ILU, "rtol": 1e-6, "maxiter": 400, "variant": "W"}),
+    (2.0, {"p": 2, "K": 3, **_XV, "v_bulk": 4, "v_layers": 3}),
 )
-QUICK_CASES = CASES[:2]
+QUICK_CASES: tuple[tuple[float, dict[str, Any]], ...] = ((0.5, {"p": 1, "K": 3}), (0.5, {"p": 2, "K": 3}))
 #: The smallest (x, v) mesh of the study: 2 layers toward the trap, 3 + 2 bulk elements.
 BASE = {"layers": 2, "bulk_x": 3, "bulk_v": 2, "v_layers": 2, "v_bulk": 2}
 
 
 def case_row(a: float, case: dict[str, Any], scales: tuple[float, float] | None = None) -> dict[str, Any]:
     """Solve one case (:data:`BASE` with the mesh changes in ``case``; its keys ``blocks``,
-    ``rtol`` and ``maxiter`` go to :func:`solve_xvw`) at n = 1, ``a``; the row of the study's
-    JSON (a case whose GMRES stalls is recorded with its message)."""
+    ``rtol``, ``maxiter`` and ``drop_tol`` go to :func:`solve_xvw`) at n = 1, ``a``, on the mesh
+    scales ``scales`` (default :func:`reference_scales`); the row of the study's JSON (a case
+    whose GMRES stalls is recorded with its message)."""
     changes = dict(case)
     options = {k: changes.pop(k) for k in ("blocks", "rtol", "maxiter", "drop_tol") if k in changes}
     ms = XVWMesh(**{**BASE, **changes})
     try:
-        res = solve_xvw(Harvester.build(n=1, a=a), ms, scales=scales, **options)
+        res = solve_xvw(Harvester.build(n=1, a=a), ms, scales=scales or reference_scales(a), **options)
         return {"a": a, **options, **res.to_dict()}
     except NotConvergedError as exc:
         return {"a": a, **options, "mesh": ms.__dict__, "failed": str(exc)}
@@ -411,5 +429,22 @@ def _draw(res: dict[str, Any], ax: Any) -> None:
 
 run = study_runner(study, "xvw", _draw)
 
+def log_case(argv: list[str]) -> dict[str, Any]:
+    """One case in this process, appended as a JSON line to a log (the study's runs, one per
+    process so that ``maxrss_gb`` is the run's own peak): ``--case A CASE_JSON LABEL LOG``."""
+    a, case, label, log = float(argv[0]), json.loads(argv[1]), argv[2], argv[3]
+    t0 = time.perf_counter()
+    row = {"label": label, "case": case, **case_row(a, case)}
+    row["wall_s"] = time.perf_counter() - t0
+    with open(log, "a") as f:
+        f.write(json.dumps(row) + "\n")
+    return row
+
+
 if __name__ == "__main__":  # pragma: no cover
-    bench_main(run, __doc__)
+    import sys
+
+    if sys.argv[1:2] == ["--case"]:
+        print(json.dumps(log_case(sys.argv[2:])))
+    else:
+        bench_main(run, __doc__)
