@@ -121,7 +121,8 @@ def moments_w(h: Harvester, X: DGLine, Vv: DGLine, W: DGLine) -> dict[str, Any]:
     Kc = h.params.Kc
     ix, iv, iW = X.integral(), Vv.integral(), W.integral()
     k3 = lambda a, b, c: np.kron(a, np.kron(b, c))  # noqa: E731
-    V2 = k3(ix, iv, W.integral(2)) + 2.0 * Kc * k3(X.integral(1), iv, W.integral(1)) + Kc**2 * k3(X.integral(2), iv, iW)
+    V2 = (k3(ix, iv, W.integral(2)) + 2.0 * Kc * k3(X.integral(1), iv, W.integral(1))
+          + Kc**2 * k3(X.integral(2), iv, iW))
     vV = k3(ix, Vv.integral(1), W.integral(1)) + Kc * k3(X.integral(1), Vv.integral(1), iW)
     return {"V2": V2, "vV": vV}
 

@@ -65,7 +65,8 @@ def test_the_w_variant_is_the_v_variant_without_the_charging_coupling():
     h = Harvester.build(n=1, a=1)
     h = h.replace(params=h.params.replace(Kc=1e-12))
     ms = XVWMesh(**{**BASE, "p": 1, "K": 3})
-    A, B = assemble(h, ms, scales=(0.15, 0.078)), assemble(h, dataclasses.replace(ms, variant="W"), scales=(0.15, 0.078))
+    A = assemble(h, ms, scales=(0.15, 0.078))
+    B = assemble(h, dataclasses.replace(ms, variant="W"), scales=(0.15, 0.078))
     for Ta, Tb in zip(A["T"], B["T"]):
         assert abs(Ta - Tb).max() < 1e-9 * abs(Ta).max()
 
