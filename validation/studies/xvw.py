@@ -36,7 +36,8 @@ Measured (``validation/data/xvw.json``; p = 2, K = 5, ILU blocks unless said oth
   359 s; a = 1 eta -1.0 % (V2 +1.6 %, Pin +2.7 %), identities 6e-4 and 8e-6, 88 iterations,
   229 s; a = 2 eta +16 % (V2 +21 %, Pin +4 %), V2 identity 0.44, negative mass 0.63 of the
   mass. With 14 V elements (272160 unknowns) a = 2 gives eta +18 %, V2 identity 0.022,
-  negative mass 0.56; with K = 3 xi-modes V2 < 0 (K = 5 is not converged at a = 2).
+  negative mass 0.56; with K = 3 xi-modes V2 < 0 (K = 5 is not converged at a = 2; K = 7,
+  272160 unknowns, did not finish in 500 s).
 * The W variant needs a tensor (x, W) mesh reaching :math:`|W| \\le L_V + K_c L_x`, whose bulk
   is coarse where the mass is: on the small mesh eta 5.2 at a = 0.5 (V: 0.619), and at a = 2
   both variants are far from a density (V 1.19, W 0.076, negative mass 1.15 and 0.64).
