@@ -13,7 +13,8 @@
 * the kink (n = 1): :mod:`.kinkstudy` (its time-step law) and :mod:`.kinkref` (an independent
   reference scheme with exact crossings);
 * the strong kink's candidate discretization: :mod:`.xvw` (DG in (x, v, V) with V graded toward
-  0, discrete ordinates in xi; measured, not a product scheme).
+  0, discrete ordinates in xi; measured, not a product scheme) and its W = V - K_c x variant
+  :mod:`.xvw_w`.
 
 The modules are imported when run, not here.
 """

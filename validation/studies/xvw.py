@@ -21,8 +21,29 @@ Discretization of the half space x >= 0 (the density is symmetric under
   and each element is split at its root (:meth:`DGLine.signed_parts`). On x = 0 the inflow
   (v > 0) is the mirror image of the outflow.
 * Solve: GMRES on the system bordered by the normalization, preconditioned by the exact
-  (sparse LU) solve of each pair of mirror-coupled modes' 3-D transport (block Jacobi across
-  xi-modes; the (x, v) rotation's cycles are inside each block).
+  (sparse LU) or incomplete (ILU) solve of each pair of mirror-coupled modes' 3-D transport
+  (block Jacobi across xi-modes; the (x, v) rotation's cycles are inside each block).
+* Variant ``"W"`` (:mod:`.xvw_w`): the third coordinate is :math:`W = V - K_c x`.
+
+Measured (``validation/data/xvw.json``; p = 2, K = 5, ILU blocks unless said otherwise):
+
+* Reaching the running units' voltage :math:`K_c\\tau_p L_v` (V bulk geometric) cuts the
+  outflow through the edges at a = 2 from 0.077 to 1e-5.
+* ILU blocks at drop tolerance 1e-3 give the exact-LU answer (eta to 1e-9) in a third of the
+  time and a fifth of the memory (a = 0.5, 54000 unknowns: 61 s, 0.21 GB against 200 s, 1.1 GB).
+* On scheme xv's (x, v) mesh (4 layers, 5 + 4 bulk elements), 10 V elements (194400 unknowns):
+  a = 0.5 eta +0.12 % (V2 +0.03 %, Pin -0.10 %), identities 3e-4 and 5e-5, 126 iterations,
+  359 s; a = 1 eta -1.0 % (V2 +1.6 %, Pin +2.7 %), identities 6e-4 and 8e-6, 88 iterations,
+  229 s; a = 2 eta +16 % (V2 +21 %, Pin +4 %), V2 identity 0.44, negative mass 0.63 of the
+  mass. With 14 V elements (272160 unknowns) a = 2 gives eta +18 %, V2 identity 0.022,
+  negative mass 0.56; with K = 3 xi-modes V2 < 0 (K = 5 is not converged at a = 2; K = 7,
+  272160 unknowns, did not finish in 500 s).
+* The W variant needs a tensor (x, W) mesh reaching :math:`|W| \\le L_V + K_c L_x`, whose bulk
+  is coarse where the mass is: on the small mesh eta 5.2 at a = 0.5 (V: 0.619), and at a = 2
+  both variants are far from a density (V 1.19, W 0.076, negative mass 1.15 and 0.64).
+
+The mesh scales come from the reference table (:func:`reference_scales`) in the second series
+(:data:`CASES`, one case per process, logged in ``validation/data/xvw.json``).
 """
 
 from __future__ import annotations
@@ -46,8 +67,10 @@ from fpe_harvester.fpe.schemes.xv.kinkdisc import kink_domain
 from fpe_harvester.model import Harvester
 
 from .cli import bench_main, study_runner
+from .xvw_w import kron3, moments_w, transport_w
 
-__all__ = ["XVWMesh", "XVWResult", "solve_xvw", "CASES", "QUICK_CASES", "study", "run"]
+__all__ = ["XVWMesh", "XVWResult", "solve_xvw", "reference_scales", "case_row", "log_case", "CASES",
+           "QUICK_CASES", "study", "run"]
 
 
 @dataclass(frozen=True)
@@ -68,6 +91,16 @@ class XVWMesh:
         :math:`V_c` in units of the standard deviation of V (equivalent harmonic unit).
     v_width : float
         :math:`L_V` in the same units.
+    v_reach : float
+        If > 0, :math:`L_V` is at least this fraction of :math:`K_c\\tau_p L_v`, the voltage a unit
+        running at the edge speed :math:`L_v` charges to (the heavy tails of V at the strong kink).
+    v_geometric : bool
+        Bulk V elements in geometric progression from :math:`V_c` to :math:`L_V` (else spaced
+        like :math:`t^{1.5}`).
+    pV : int
+        DG degree in V (0: p).
+    variant : str
+        ``"V"``: the third coordinate is V; ``"W"``: it is :math:`W = V - K_c x` (:mod:`.xvw_w`).
     """
 
     p: int = 2
@@ -81,6 +114,10 @@ class XVWMesh:
     v_bulk: int = 3
     v_core: float = 0.5
     v_width: float = 6.0
+    v_reach: float = 0.0
+    v_geometric: bool = False
+    pV: int = 0
+    variant: str = "V"
 
 
 @dataclass(frozen=True)
@@ -121,6 +158,20 @@ def _scales(h: Harvester) -> tuple[float, float]:
     return float(res.v2), float(res.V2)
 
 
+def reference_scales(a: float) -> tuple[float, float]:
+    r"""(v2, V2) of n = 1 at ``a`` from the reference table (Fokker--Planck at a <= 1, Monte Carlo
+    at a = 2), v2 by the identities :math:`\langle vV\rangle = V^2/(K_c\tau_p)`,
+    :math:`m\gamma\langle v^2\rangle = P_{in} - K_v\langle vV\rangle` (defaults)."""
+    from pathlib import Path
+
+    path = Path(__file__).parents[1] / "references" / "data" / "reference_values.json"
+    table = json.loads(path.read_text())
+    row = table.get(f"fpe n = 1, a = {a:g}") or table[f"mc n = 1, a = {a:g}"]
+    p = Harvester.build(n=1, a=a).params
+    vV = row["V2"] / (p.Kc * p.tau_p)
+    return (row["Pin"] - p.Kv * vV) / (p.m * p.gamma), row["V2"]
+
+
 def _axes(h: Harvester, ms: XVWMesh, scales: tuple[float, float] | None = None
           ) -> tuple[DGLine, DGLine, DGLine]:
     """The three 1-D DG spaces: x in [0, Lx], v in [-Lv, Lv], V in [-LV, LV], for the moments
@@ -132,12 +183,16 @@ def _axes(h: Harvester, ms: XVWMesh, scales: tuple[float, float] | None = None
     plane = PlaneMesh(Lx=Lx, Lv=Lv, Ec=p.m * v2, a=h.a, layers=ms.layers, ratio=ms.ratio,
                       bulk_x=ms.bulk_x, bulk_v=ms.bulk_v, grading=2.5)
     sV = math.sqrt(V2)
-    core, edge = ms.v_core * sV, ms.v_width * sV
+    core = ms.v_core * sV
+    edge = max(ms.v_width * sV, ms.v_reach * p.Kc * p.tau_p * Lv)
+    if ms.variant == "W":
+        edge += p.Kc * Lx   # W = V - Kc x: the same V range at every x of the tensor mesh
     inner = core * ms.v_ratio ** np.arange(ms.v_layers - 1, -1, -1)
-    outer = core + (edge - core) * np.linspace(0.0, 1.0, ms.v_bulk + 1)[1:] ** 1.5
+    t = np.linspace(0.0, 1.0, ms.v_bulk + 1)[1:]
+    outer = core * (edge / core) ** t if ms.v_geometric else core + (edge - core) * t**1.5
     half = np.concatenate([[0.0], inner, outer])
     V_nodes = np.concatenate([-half[:0:-1], half])
-    return DGLine(plane.x_nodes(), ms.p), DGLine(plane.v_nodes(), ms.p), DGLine(V_nodes, ms.p)
+    return DGLine(plane.x_nodes(), ms.p), DGLine(plane.v_nodes(), ms.p), DGLine(V_nodes, ms.pV or ms.p)
 
 
 def _xi_modes(h: Harvester, K: int) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
@@ -183,26 +238,26 @@ def assemble(h: Harvester, ms: XVWMesh, scales: tuple[float, float] | None = Non
     X, Vv, W = _axes(h, ms, scales)
     lam, R, gen, parity = _xi_modes(h, ms.K)
     Mx, Mv, MW = X.mass(), Vv.mass(), W.mass()
-    Mv1, MW1 = Vv.mass(power=1), W.mass(power=1)
-    Dx, Dv, Dv1, DW, DW1 = X.derivative(), Vv.derivative(), Vv.derivative(1), W.derivative(), W.derivative(1)
-    kron3 = lambda a, b, c: sp.kron(a, sp.kron(b, c, format="csr"), format="csr")  # noqa: E731
-    common = (-kron3(Dx, Mv1, MW) + p.gamma * kron3(Mx, Dv1, MW) + (p.Kv / p.m) * kron3(Mx, Dv, MW1)
-              - p.Kc * kron3(Mx, Mv1, DW) + (1.0 / p.tau_p) * kron3(Mx, Mv, DW1))
+    Dv = Vv.derivative()
     vol_f = -kron3(Mx, Dv, MW)                   # times f_i = (-a + sigma lambda_i) / m
     vpos, vneg = Vv.signed_parts(np.array([0.0]), 1.0)
     Vp, Vn = _block(vpos[0]), _block(vneg[0])
     nf = X.elements + 1
     xface = _face_sum(X, [sp.kron(Vp, MW)] * nf, [sp.kron(Vn, MW)] * nf, True)
-    # V faces: speed Kc v - V_f / tau_p, linear in v
-    sp_pos, sp_neg = Vv.signed_parts(-W.nodes / p.tau_p, p.Kc)
-    wface = sp.kron(Mx, _face_sum(W, [_block(a) for a in sp_pos], [_block(a) for a in sp_neg], False))
-    T = []
-    for li in lam:
-        f = (-h.a + p.sigma * li) / p.m
-        # v faces: speed f - gamma v_f - (Kv / m) V, linear in V
-        pos, neg = W.signed_parts(f - p.gamma * Vv.nodes, -p.Kv / p.m)
-        vface = _face_sum(Vv, [_block(a) for a in pos], [_block(a) for a in neg], True)
-        T.append((common + f * vol_f + xface + wface + sp.kron(Mx, vface)).tocsr())
+    if ms.variant == "W":
+        T = transport_w(h, X, Vv, W, lam, xface, vol_f)
+        third = moments_w(h, X, Vv, W)
+    else:
+        Mv1, MW1 = Vv.mass(power=1), W.mass(power=1)
+        Dx, Dv1, DW, DW1 = X.derivative(), Vv.derivative(1), W.derivative(), W.derivative(1)
+        common = (-kron3(Dx, Mv1, MW) + p.gamma * kron3(Mx, Dv1, MW) + (p.Kv / p.m) * kron3(Mx, Dv, MW1)
+                  - p.Kc * kron3(Mx, Mv1, DW) + (1.0 / p.tau_p) * kron3(Mx, Mv, DW1))
+        # V faces: speed Kc v - V_f / tau_p, linear in v
+        sp_pos, sp_neg = Vv.signed_parts(-W.nodes / p.tau_p, p.Kc)
+        wface = sp.kron(Mx, _face_sum(W, [_block(a) for a in sp_pos], [_block(a) for a in sp_neg], False))
+        T = [_transport_v(h, X, Vv, W, li, common + xface + wface, vol_f) for li in lam]
+        third = {"V2": np.kron(X.integral(), np.kron(Vv.integral(), W.integral(2))),
+                 "vV": np.kron(X.integral(), np.kron(Vv.integral(1), W.integral(1)))}
     e0 = np.zeros(X.size)
     e0[0] = 1.0
     flip_v = sp.csr_matrix(np.fliplr(np.eye(Vv.size)))
@@ -211,11 +266,22 @@ def assemble(h: Harvester, ms: XVWMesh, scales: tuple[float, float] | None = Non
     mass = kron3(Mx, Mv, MW)
     ix, iv, iW = X.integral(), Vv.integral(), W.integral()
     return {"T": T, "mass": mass, "mirror": mirror, "gen": gen, "parity": parity, "R": R,
-            "one": np.kron(ix, np.kron(iv, iW)), "V2": np.kron(ix, np.kron(iv, W.integral(2))),
+            "one": np.kron(ix, np.kron(iv, iW)), **third,
             "vxi": np.kron(ix, np.kron(Vv.integral(1), iW)) * math.sqrt(p.D / p.tau),
-            "vV": np.kron(ix, np.kron(Vv.integral(1), W.integral(1))),
             "v2": np.kron(ix, np.kron(Vv.integral(2), iW)),
             "lines": (X, Vv, W)}
+
+
+def _transport_v(h: Harvester, X: DGLine, Vv: DGLine, W: DGLine, li: float, shared: sp.csr_matrix,
+                 vol_f: sp.csr_matrix) -> sp.csr_matrix:
+    """Transport matrix of the xi-mode at the node ``li`` in (x, v, V): ``shared`` (volume
+    terms and the x and V faces) plus the mode's force and its v faces."""
+    p = h.params
+    f = (-h.a + p.sigma * li) / p.m
+    # v faces: speed f - gamma v_f - (Kv / m) V, linear in V
+    pos, neg = W.signed_parts(f - p.gamma * Vv.nodes, -p.Kv / p.m)
+    vface = _face_sum(Vv, [_block(a) for a in pos], [_block(a) for a in neg], True)
+    return (shared + f * vol_f + sp.kron(X.mass(), vface)).tocsr()
 
 
 def _operator_blocks(asm: dict[str, Any], i: int, j: int) -> sp.csr_matrix:
@@ -224,19 +290,39 @@ def _operator_blocks(asm: dict[str, Any], i: int, j: int) -> sp.csr_matrix:
     return (blk + asm["T"][i]).tocsr() if i == j else blk.tocsr()
 
 
+def _apply(asm: dict[str, Any]) -> Any:
+    """The full operator as a function of the coefficients (xi-mode outer): the transport per
+    mode plus the noise and mirror couplings as dense K x K mode products (the assembled
+    matrix would hold K mass blocks per row, 2.4 GB at p = 3 on scheme xv's (x, v) mesh)."""
+    T, mass, mirror, gen, parity = (asm[k] for k in ("T", "mass", "mirror", "gen", "parity"))
+    K, n3 = len(T), mass.shape[0]
+
+    def apply(d: np.ndarray) -> np.ndarray:
+        D = d.reshape(K, n3)
+        out = np.stack([T[i] @ D[i] for i in range(K)])
+        out -= (mass @ (gen @ D).T).T + (mirror @ (parity @ D).T).T
+        return out.ravel()
+
+    return apply
+
+
 def solve_xvw(h: Harvester, ms: XVWMesh, rtol: float = 1e-9, maxiter: int = 600,
-              blocks: str = "lu") -> XVWResult:
+              blocks: str = "lu", scales: tuple[float, float] | None = None, drop_tol: float = 1e-4
+              ) -> XVWResult:
     """Assemble and solve one level; raise :class:`NotConvergedError` if GMRES stalls.
 
     ``blocks``: the preconditioner's solve of each mirror-coupled pair of xi-modes, ``"lu"``
-    (exact, SuperLU) or ``"ilu"`` (SuperLU's incomplete LU, drop tolerance 1e-4, fill 10).
+    (exact, SuperLU) or ``"ilu"`` (SuperLU's incomplete LU, drop tolerance ``drop_tol``, fill 10;
+    measured on a pair of a = 2 with 30240 unknowns: exact LU 78e6 nonzeros, 15 s, 0.078 s a
+    solve; ILU at 1e-3 2.5e6, 2.3 s, 0.007 s, 1.3 % residual of the block solve);
+    ``scales`` = (v2, V2) set the mesh (default :func:`_scales`).
     """
     tracemalloc.start()
     t0 = time.perf_counter()
-    asm = assemble(h, ms)
+    asm = assemble(h, ms, scales)
     K = ms.K
-    A = sp.bmat([[_operator_blocks(asm, i, j) for j in range(K)] for i in range(K)], format="csr")
     n3 = asm["mass"].shape[0]
+    A = _apply(asm)
     t1 = time.perf_counter()
     groups, seen = [], set()
     for i in range(K):
@@ -246,14 +332,14 @@ def solve_xvw(h: Harvester, ms: XVWMesh, rtol: float = 1e-9, maxiter: int = 600,
         seen.update(grp)
         blk = sp.bmat([[_operator_blocks(asm, r, c) for c in grp] for r in grp], format="csc")
         lu = spla.splu(blk, permc_spec="COLAMD") if blocks == "lu" else \
-            spla.spilu(blk, drop_tol=1e-4, fill_factor=10.0)
+            spla.spilu(blk, drop_tol=drop_tol, fill_factor=10.0)
         groups.append((grp, lu))
     t2 = time.perf_counter()
     u = np.kron(asm["R"][0], asm["one"])
     u /= np.linalg.norm(u)
 
     def matvec(d: np.ndarray) -> np.ndarray:
-        return A @ d + u * float(u @ d)
+        return A(d) + u * float(u @ d)
 
     def prec(r: np.ndarray) -> np.ndarray:
         out = np.empty_like(r)
@@ -285,29 +371,62 @@ def solve_xvw(h: Harvester, ms: XVWMesh, rtol: float = 1e-9, maxiter: int = 600,
     q = h.params
     # outflow through the edges of the domain per unit time and mass: test function 1 in
     # (x, v, V) and h_0 in xi (the noise and the interior faces conserve mass)
-    leak = float(np.kron(asm["R"][0], np.ones(n3)) @ (A @ d)) / (0.5 * mass)
+    leak = float(np.kron(asm["R"][0], np.ones(n3)) @ A(d)) / (0.5 * mass)
+    # negative part of the (x, v, V) marginal at the Lobatto nodes (weights: the basis integrals)
+    negative = -2.0 * float(asm["one"] @ np.minimum(c0, 0.0)) / mass
     residuals = {"V2": (V2 - q.Kc * q.tau_p * vV) / V2, "power": (Pin - q.m * q.gamma * v2 - q.Kv * vV) / Pin,
-                 "leak": leak}
+                 "leak": leak, "negative": negative}
     rss = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1e6  # kB on Linux
     return XVWResult(V2 / (q.R * Pin), V2, Pin, N, its[0], residuals,
                      {"assembly": t1 - t0, "factorization": t2 - t1, "gmres": t3 - t2}, peak, ms, rss)
 
 
-#: (a, mesh changes) of the study (about 30 min on 2 loaded cores, at most 2.4 GB): refinement in
-#: degree, xi-modes and V layers at a = 0.5
-#: (reference: scheme xv, eta = 0.6103035 +- 4e-5), then a = 1 (0.4075292 +- 2.4e-5) and a = 2
-#: (Monte Carlo 0.12288 +- 0.00020).
+_REACH = {"v_reach": 1.0, "v_geometric": True}
+_ILU = {"blocks": "ilu", "drop_tol": 1e-3}
+#: Scheme xv's (x, v) mesh (4 layers toward the trap, 5 + 4 bulk elements), GMRES to 1e-6.
+_XV = {"layers": 4, "bulk_x": 5, "bulk_v": 4, **_REACH, **_ILU, "rtol": 1e-6, "maxiter": 400}
+#: (a, changes to :data:`BASE`) of the study, one process each (``validation/data/xvw.json``;
+#: about 75 min on 2 shared cores, at most 0.8 GB): the V domain reaching the running units'
+#: voltage, the W variant, ILU blocks, then scheme xv's (x, v) mesh and V layers at a = 0.5
+#: (reference: scheme xv, eta = 0.6103035 +- 4e-5), a = 1 (0.4075292 +- 2.4e-5) and a = 2
+#: (Monte Carlo 0.12288 +- 0.00020). A run that passed 570 s was stopped (``failed``).
 CASES: tuple[tuple[float, dict[str, Any]], ...] = (
-    (0.5, {"p": 1, "K": 3}), (0.5, {"p": 2, "K": 3}), (0.5, {"p": 2, "K": 5}), (0.5, {"p": 2, "K": 7}),
-    (0.5, {"p": 2, "K": 5, "v_layers": 5}), (0.5, {"p": 2, "K": 5, "bulk_x": 5, "bulk_v": 3}),
-    (1.0, {"p": 2, "K": 5}), (2.0, {"p": 2, "K": 5}), (2.0, {"p": 2, "K": 5, "v_layers": 5}),
-    (2.0, {"p": 2, "K": 5, "layers": 4}), (0.5, {"p": 2, "K": 5, "blocks": "ilu"}),
-    (1.0, {"p": 2, "K": 5, "bulk_x": 5, "bulk_v": 3}), (2.0, {"p": 2, "K": 5, "v_width": 15.0, "v_bulk": 4}),
-    (2.0, {"p": 2, "K": 5, "bulk_x": 5, "bulk_v": 3, "v_width": 10.0, "v_bulk": 4, "blocks": "ilu"}),
+    (0.5, {"p": 2, "K": 5}), (0.5, {"p": 2, "K": 5, "variant": "W"}),
+    (0.5, {"p": 2, "K": 5, "v_bulk": 3, **_REACH}),
+    (0.5, {"p": 2, "K": 5, "v_bulk": 3, "v_geometric": True, "variant": "W"}),
+    (0.5, {"p": 2, "K": 5, "v_bulk": 3, **_REACH, **_ILU}),
+    (2.0, {"p": 2, "K": 5, "v_bulk": 4, "v_layers": 3, **_REACH}),
+    (2.0, {"p": 2, "K": 5, "v_bulk": 4, "v_layers": 3, **_REACH, "variant": "W"}),
+    (2.0, {"p": 2, "K": 5, "v_bulk": 4, "v_layers": 3, **_REACH, **_ILU}),
+    (0.5, {"p": 2, "K": 5, **_XV, "v_bulk": 3, "rtol": 1e-9, "maxiter": 600}),
+    (2.0, {"p": 2, "K": 5, **_XV, "v_bulk": 4, "v_layers": 3, "rtol": 1e-9, "maxiter": 600}),
+    (2.0, {"p": 2, "K": 5, **_XV, "v_bulk": 3, "v_layers": 2}),
+    (2.0, {"p": 2, "K": 5, **_XV, "v_bulk": 3, "v_layers": 2, "variant": "W"}),
+    (2.0, {"p": 2, "K": 5, **_XV, "v_bulk": 4, "v_layers": 3}),
+    (1.0, {"p": 2, "K": 5, **_XV, "v_bulk": 3, "v_layers": 2}),
+    (2.0, {"p": 2, "K": 5, "v_bulk": 4, "v_layers": 3, **_REACH, **_ILU, "rtol": 1e-6, "maxiter": 400,
+           "variant": "W"}),
+    (2.0, {"p": 2, "K": 3, **_XV, "v_bulk": 4, "v_layers": 3}),
+    (2.0, {"p": 2, "K": 7, **_XV, "v_bulk": 3, "v_layers": 2}),
 )
-QUICK_CASES = CASES[:2]
+QUICK_CASES: tuple[tuple[float, dict[str, Any]], ...] = ((0.5, {"p": 1, "K": 3}), (0.5, {"p": 2, "K": 3}))
 #: The smallest (x, v) mesh of the study: 2 layers toward the trap, 3 + 2 bulk elements.
 BASE = {"layers": 2, "bulk_x": 3, "bulk_v": 2, "v_layers": 2, "v_bulk": 2}
+
+
+def case_row(a: float, case: dict[str, Any], scales: tuple[float, float] | None = None) -> dict[str, Any]:
+    """Solve one case (:data:`BASE` with the mesh changes in ``case``; its keys ``blocks``,
+    ``rtol``, ``maxiter`` and ``drop_tol`` go to :func:`solve_xvw`) at n = 1, ``a``, on the mesh
+    scales ``scales`` (default :func:`reference_scales`); the row of the study's JSON (a case
+    whose GMRES stalls is recorded with its message)."""
+    changes = dict(case)
+    options = {k: changes.pop(k) for k in ("blocks", "rtol", "maxiter", "drop_tol") if k in changes}
+    ms = XVWMesh(**{**BASE, **changes})
+    try:
+        res = solve_xvw(Harvester.build(n=1, a=a), ms, scales=scales or reference_scales(a), **options)
+        return {"a": a, **options, **res.to_dict()}
+    except NotConvergedError as exc:
+        return {"a": a, **options, "mesh": ms.__dict__, "failed": str(exc)}
 
 
 def study(quick: bool) -> dict[str, Any]:
@@ -315,14 +434,7 @@ def study(quick: bool) -> dict[str, Any]:
     recorded with its message."""
     rows = []
     for a, case in QUICK_CASES if quick else CASES:
-        changes = dict(case)
-        options = {"blocks": changes.pop("blocks")} if "blocks" in changes else {}
-        ms = XVWMesh(**{**BASE, **changes})
-        try:
-            res = solve_xvw(Harvester.build(n=1, a=a), ms, **options)
-            rows.append({"a": a, **options, **res.to_dict()})
-        except NotConvergedError as exc:
-            rows.append({"a": a, **options, "mesh": ms.__dict__, "failed": str(exc)})
+        rows.append(case_row(a, case))
         print(json.dumps(rows[-1]), flush=True)
     return {"rows": rows}
 
@@ -340,5 +452,22 @@ def _draw(res: dict[str, Any], ax: Any) -> None:
 
 run = study_runner(study, "xvw", _draw)
 
+def log_case(argv: list[str]) -> dict[str, Any]:
+    """One case in this process, appended as a JSON line to a log (the study's runs, one per
+    process so that ``maxrss_gb`` is the run's own peak): ``--case A CASE_JSON LABEL LOG``."""
+    a, case, label, log = float(argv[0]), json.loads(argv[1]), argv[2], argv[3]
+    t0 = time.perf_counter()
+    row = {"label": label, "case": case, **case_row(a, case)}
+    row["wall_s"] = time.perf_counter() - t0
+    with open(log, "a") as f:
+        f.write(json.dumps(row) + "\n")
+    return row
+
+
 if __name__ == "__main__":  # pragma: no cover
-    bench_main(run, __doc__)
+    import sys
+
+    if sys.argv[1:2] == ["--case"]:
+        print(json.dumps(log_case(sys.argv[2:])))
+    else:
+        bench_main(run, __doc__)
