@@ -14,7 +14,7 @@ Three parts, with CPU seconds (process or calling thread), for a machine shared 
 
 Medians of repeats; compare two trees by running this in each, one after the other (timings on a
 shared machine drift). ``python -m validation.studies.mc_throughput [--quick] --out validation/data``
-writes ``mc_throughput.json`` and ``mc_throughput.png``.
+writes ``bench_montecarlo_throughput.json`` and ``.png`` (the name the Monte Carlo benchmark reads).
 """
 
 from __future__ import annotations
@@ -31,7 +31,7 @@ from validation.studies.cli import bench_main, study_runner
 __all__ = ["STEM", "rate", "throughput", "kernel_ns", "solve_cpu", "study", "run"]
 
 #: Name of the written ``.json`` and ``.png``.
-STEM = "mc_throughput"
+STEM = "bench_montecarlo_throughput"
 
 #: Systems of the solve timings (keyword arguments of :meth:`Harvester.build`).
 SOLVE_CASES = {"harmonic_ring_N3_k-0.33": {"N": 3, "k": -0.33},
