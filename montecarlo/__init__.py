@@ -23,6 +23,13 @@ with the twin's (:func:`estimate` picks the set).
 
 from __future__ import annotations
 
+from pathlib import Path
+
+from ._cache import clear_stale_kernels
+
+# before any kernel module is imported (and its cached kernels loaded)
+clear_stale_kernels(Path(__file__).parent)
+
 from .controls import Regression, linearized_stiffness, regression_estimate, twin_expectations
 from .escape import EscapeCurve, escape_study
 from .estimate import Estimate, estimate
