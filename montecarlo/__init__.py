@@ -23,13 +23,8 @@ with the twin's (:func:`estimate` picks the set).
 
 from __future__ import annotations
 
-from pathlib import Path
-
-from ._cache import clear_stale_kernels
-
-# before any kernel module is imported (and its cached kernels loaded)
-clear_stale_kernels(Path(__file__).parent)
-
+# first: it drops stale cached kernels before any kernel module loads them
+from . import _cache  # noqa: F401
 from .controls import Regression, linearized_stiffness, regression_estimate, twin_expectations
 from .escape import EscapeCurve, escape_study
 from .estimate import Estimate, estimate

@@ -8,6 +8,7 @@ kernel called the coupling force with its old signature and gave non-finite stat
 package stamps its ``__pycache__`` with a hash of all its sources and deletes the cached
 kernels (``*.nbi``, ``*.nbc``) when the hash changes. Only caches in the source tree are
 handled; a cache directory of the user's own choosing (``NUMBA_CACHE_DIR``) is not touched.
+Importing this module (the package does, before its kernel modules) checks the package.
 """
 
 from __future__ import annotations
@@ -52,3 +53,6 @@ def clear_stale_kernels(root: Path) -> bool:
     except OSError:
         return False
     return True
+
+
+clear_stale_kernels(Path(__file__).parent)
