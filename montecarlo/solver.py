@@ -80,10 +80,11 @@ _BURN_RESTARTS = 3
 _LOOSE_TOL = 5e-3
 #: An upper bound on the path loop's speed, in unit-steps (one unit of one path advanced by one
 #: ``dt``) per second and thread, used to refuse a first batch that ``max_time`` cannot cover
-#: (a batch is not interrupted). Seven times the fastest rate measured, 2.8e7 for a harmonic
-#: N = 3 ring (single units 1.0-1.2e7, an n = 3 ring 1.9e7; one thread, no Richardson level), so
-#: that no run the budget could cover is refused on a faster machine.
-FASTEST_UNIT_STEPS = 2e8
+#: (a batch is not interrupted). Eight times the fastest rate measured, 6.2e7 per CPU-second for
+#: a harmonic unit at the fine level alone (``python -m validation.studies.mc_throughput``; the
+#: solver's own runs, with the Richardson level: 1.0-2.8e7), so that no run the budget could
+#: cover is refused on a faster machine.
+FASTEST_UNIT_STEPS = 5e8
 #: Automatic measured time per path, in burn-ins (when longer than the default below).
 _RUN_PER_BURN = 3.0
 #: Default measured time per path without and with the martingale controls. The martingale

@@ -157,10 +157,10 @@ def test_time_budget_gives_not_converged_with_numbers() -> None:
 
 
 def test_first_batch_beyond_the_budget_is_not_started() -> None:
-    """A slowly relaxing nonlinear unit (m = 1000) needs a burn-in that a 0.3 s budget
+    """A slowly relaxing nonlinear unit (m = 1e4) needs a burn-in that a 0.3 s budget
     cannot cover even at the loop's fastest rate: neither the pilot nor a batch runs, the status
     is not converged, no numbers, and the message names max_time and the time it needs."""
-    h = Harvester.build(a=0.5, n=4, m=1e3)
+    h = Harvester.build(a=0.5, n=4, m=1e4)
     mc = MonteCarlo(seed=1, max_time=0.3, progress=False)
     r = mc.solve(h)
     assert r.status is Status.NOT_CONVERGED and r.eta is None and r.V2 is None
