@@ -172,7 +172,7 @@ def _run(tag, gen, s, out) -> None:
     n_bd = s.n_mart - n_state(N) - min(N // 2, MG_DIST) - 1 if use_mg else 0
     g_bd, gprev_bd = np.zeros(max(n_bd, 0)), np.zeros(max(n_bd, 0))
     xi0 = np.zeros((N, P))
-    mg_started = False
+    mg_points = 0  # martingale points taken (an int: a bool flag compiled mg_measure twice)
     n_upd = 0  # xi updates of the fine level since the last martingale point
     h = cf_c[12] if coupled else cf_f[12]
     _start(gen, s.chol, math.sqrt(pp[11]), xf, vf, Vf, xif)
@@ -214,9 +214,9 @@ def _run(tag, gen, s, out) -> None:
                 counts[0] += _measure(xf, vf, Vf, xif, sf, Ff, w, cf_f, pp, kind, sums[0], pf)
                 if use_mg and sub == 0:
                     dec = cf_f[13] ** n_upd
-                    mg_measure(xf, vf, Vf, xif, w, pp[7], pp[8], phi, xi0, mg, first, mg_started, dec,
+                    mg_measure(xf, vf, Vf, xif, w, pp[7], pp[8], phi, xi0, mg, first, mg_points > 0, dec,
                                pp[11] * (1.0 - dec * dec), g_bd, gprev_bd)
-                    mg_started = True
+                    mg_points += 1
                     n_upd = 0
                 if twin:
                     measure_twin(xt, vt, Vt, xit, w, cf_t, sums[0], pp[8], pt)

@@ -96,8 +96,8 @@ def compose(cf_a: np.ndarray, cf_b: np.ndarray, e1: np.ndarray, e2: np.ndarray, 
             out[1, j, p] = e1[1, j, p] + b * e1[0, j, p] + e2[1, j, p]
 
 
-@njit(cache=True, nogil=True, inline="always")
-def step(x, v, V, xi, F, stuck, pvx, eps, cf, pp, kind, xm, fext, cs, rbm, rbx, w, counters, gen) -> None:
+@njit(cache=True, nogil=True)
+def step(x, v, V, xi, F, stuck, pvx, eps, cf, pp, kind, xm, fext, cs, rbm, rbx, w, counters) -> None:
     """The frozen step's flow at the step's mean of xi (held in the scratch ``rbm``), then xi
     moved to its end value and ``pvx`` set to v times its conditional mean (module docstring)."""
     N, P = x.shape

@@ -53,7 +53,10 @@ class StepScheme:
             noise ``eps``. ``kind`` is the on-site treatment
             (:data:`montecarlo._kernels.KIND_LINEAR`, ``KIND_KICK``, ``KIND_KINK``), ``xm``,
             ``fext``, ``cs``, ``rbm``, ``rbx`` shared scratch, ``w`` the live paths,
-            ``counters`` the kink statistics, ``gen`` for steps that draw extra normals.
+            ``counters`` the kink statistics, ``gen`` for steps that draw extra normals. The
+            kernel takes the subset of these it needs, by parameter name, in any order (the
+            frozen step's is ``_d_step(x, v, V, xi, F, stuck, xm, fext, w, cf, pp, kind,
+            counters, cs)``).
         ``advance(xi, eps, cf)``
             After the level was measured: whatever of its noise the step left (the OU update of
             xi), or nothing.
@@ -62,11 +65,13 @@ class StepScheme:
             leaves xi to ``advance`` (the twin is then never advanced), its own otherwise.
 
     Arrays are passed one by one, not in tuples: reading arrays out of tuples in the loop cost
-    up to 20 % in reference counting at small chunks. The kernels are inlined into the loop
-    (``inline="always"``, here and in :mod:`montecarlo.steps.dispatch`) and ``noise`` fills a
-    fixed buffer instead of returning an array: compiled as calls, the two wrapper layers of
-    about 20 arrays each and the array returned made a freshly compiled loop 2.1-2.5x slower
-    than the two loops it replaced at the solver's chunks of 2 paths.
+    up to 20 % in reference counting at small chunks. ``step`` is called directly (an
+    intrinsic, :func:`montecarlo.steps.dispatch.step`); the small kernels are inlined into the
+    loop (``inline="always"``) and ``noise`` fills a fixed buffer instead of returning an
+    array. Measured at the solver's chunks (2-16 paths): every numba call with array
+    arguments costs tens of ns, so a compiled wrapper layer or a call per small kernel made
+    the loop 1.2-1.5x slower than the two loops it replaced, and an inlined wrapper of the
+    step 1.15-1.3x (its parameters became reference-counted copies of the loop's arrays).
     """
 
     name: str = ""

@@ -210,12 +210,6 @@ def compose(cf_a: np.ndarray, cf_b: np.ndarray, e1: np.ndarray, e2: np.ndarray, 
 
 
 @njit(cache=True, nogil=True, inline="always")
-def step(x, v, V, xi, F, stuck, pvx, eps, cf, pp, kind, xm, fext, cs, rbm, rbx, w, counters, gen) -> None:
-    """One joint step of a level with increment ``eps`` (xi included)."""
-    _d_step_joint(x, v, V, xi, F, xm, fext, eps, cf, pp, kind, rbm, rbx, pvx, w, gen)
-
-
-@njit(cache=True, nogil=True, inline="always")
 def advance(xi: np.ndarray, eps: np.ndarray, cf: np.ndarray) -> None:
     """Nothing: the step already moved xi."""
 
@@ -231,7 +225,7 @@ class JointStep(StepScheme):
 
     name = "joint"
     tag = JointTag(4)
-    kernels = Kernels(4, noise, compose, step, advance, twin_xi)
+    kernels = Kernels(4, noise, compose, _d_step_joint, advance, twin_xi)
 
     def coefficients(self, h: Harvester, dt: float) -> np.ndarray:
         return step_coefficients(h, dt, joint=True)
