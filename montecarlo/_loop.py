@@ -125,14 +125,17 @@ def run_chunk(gen: np.random.Generator, scheme: StepScheme, s: Setup, out: Sums)
 def _init_levels(s, f, c, cc, t) -> None:
     """Every level starts where the fine level's start put it (with the same kicked force);
     levels are tuples (x, v, V, xi, F, stuck, pvx) of (N, P) arrays."""
+    # element loops, not slice copies: those compiled numba's shape-checking copy per
+    # dimension (about 2 s of a cold start)
     x, v, V, xi, F = f[0], f[1], f[2], f[3], f[4]
-    for lv in (c, cc, t):
-        lv[0][:], lv[1][:], lv[2][:], lv[3][:] = x, v, V, xi
-    if s.kind != KIND_LINEAR:
-        for j in range(s.N):
-            for p in range(s.P):
+    kicked = s.kind != KIND_LINEAR
+    for j in range(s.N):
+        for p in range(s.P):
+            if kicked:
                 F[j, p] = _kick_force(x[j, p], s.pp)
-        c[4][:], cc[4][:] = F, F
+            for lv in (c, cc, t):
+                lv[0][j, p], lv[1][j, p], lv[2][j, p], lv[3][j, p] = x[j, p], v[j, p], V[j, p], xi[j, p]
+            c[4][j, p], cc[4][j, p] = F[j, p], F[j, p]
 
 
 @njit(cache=True, nogil=True)
@@ -239,4 +242,7 @@ def _run(tag, gen, s, out) -> None:
                 counts[3] += _measure(xcc, vcc, Vcc, xicc, scc, Fcc, w, cf_cc, pp, kind, sums[3], pcc)
             advance(tag, xicc, ecc, cf_cc)
         elif third:
-            ec0[:] = ec
+            for r in range(nz):
+                for j in range(N):
+                    for p in range(P):
+                        ec0[r, j, p] = ec[r, j, p]
