@@ -101,6 +101,15 @@ class XVWMesh:
         DG degree in V (0: p).
     variant : str
         ``"V"``: the third coordinate is V; ``"W"``: it is :math:`W = V - K_c x` (:mod:`.xvw_w`).
+    e_split : float
+        Hybrid (:mod:`.xvw_hybrid`): (x, v) elements whose lowest energy
+        :math:`m v^2/2 + a x^n` reaches ``e_split`` carry ``kv`` Hermite functions in V instead
+        of the V mesh (inf: none, the V variant).
+    kv : int
+        Hermite functions in V per bulk element of the hybrid.
+    frame : str
+        The hybrid's Hermite frames: ``"sign"`` (one for the bulk of x > 0) or ``"element"``
+        (a centre per element) (:func:`.xvw_hybrid._frames`).
     """
 
     p: int = 2
@@ -118,6 +127,9 @@ class XVWMesh:
     v_geometric: bool = False
     pV: int = 0
     variant: str = "V"
+    e_split: float = math.inf
+    kv: int = 6
+    frame: str = "sign"
 
 
 @dataclass(frozen=True)
@@ -158,16 +170,16 @@ def _scales(h: Harvester) -> tuple[float, float]:
     return float(res.v2), float(res.V2)
 
 
-def reference_scales(a: float) -> tuple[float, float]:
-    r"""(v2, V2) of n = 1 at ``a`` from the reference table (Fokker--Planck at a <= 1, Monte Carlo
-    at a = 2), v2 by the identities :math:`\langle vV\rangle = V^2/(K_c\tau_p)`,
+def reference_scales(a: float, n: float = 1.0) -> tuple[float, float]:
+    r"""(v2, V2) at ``n``, ``a`` from the reference table (Fokker--Planck, else Monte Carlo; at
+    n = 1: Fokker--Planck at a <= 1, Monte Carlo at a = 2), v2 by the identities :math:`\langle vV\rangle = V^2/(K_c\tau_p)`,
     :math:`m\gamma\langle v^2\rangle = P_{in} - K_v\langle vV\rangle` (defaults)."""
     from pathlib import Path
 
     path = Path(__file__).parents[1] / "references" / "data" / "reference_values.json"
     table = json.loads(path.read_text())
-    row = table.get(f"fpe n = 1, a = {a:g}") or table[f"mc n = 1, a = {a:g}"]
-    p = Harvester.build(n=1, a=a).params
+    row = table.get(f"fpe n = {n:g}, a = {a:g}") or table[f"mc n = {n:g}, a = {a:g}"]
+    p = Harvester.build(n=n, a=a).params
     vV = row["V2"] / (p.Kc * p.tau_p)
     return (row["Pin"] - p.Kv * vV) / (p.m * p.gamma), row["V2"]
 
@@ -180,7 +192,10 @@ def _axes(h: Harvester, ms: XVWMesh, scales: tuple[float, float] | None = None
     v2, V2 = _scales(h) if scales is None else scales
     sF = math.sqrt(p.sigma**2 * p.D / p.tau + p.Kv**2 * V2)
     Lx, Lv = kink_domain(h, v2, sF)
-    plane = PlaneMesh(Lx=Lx, Lv=Lv, Ec=p.m * v2, a=h.a, layers=ms.layers, ratio=ms.ratio,
+    # the core box reaches U(x_c) = a x_c^n = E_c (PlaneMesh sets x_c = E_c / a)
+    Ec = p.m * v2
+    a_eff = h.a if h.n == 1.0 else Ec / (Ec / h.a) ** (1.0 / h.n)
+    plane = PlaneMesh(Lx=Lx, Lv=Lv, Ec=Ec, a=a_eff, layers=ms.layers, ratio=ms.ratio,
                       bulk_x=ms.bulk_x, bulk_v=ms.bulk_v, grading=2.5)
     sV = math.sqrt(V2)
     core = ms.v_core * sV
@@ -319,7 +334,12 @@ def solve_xvw(h: Harvester, ms: XVWMesh, rtol: float = 1e-9, maxiter: int = 600,
     """
     tracemalloc.start()
     t0 = time.perf_counter()
-    asm = assemble(h, ms, scales)
+    if math.isfinite(ms.e_split) or h.n != 1.0:
+        from .xvw_hybrid import assemble_hybrid  # imports this module
+
+        asm = assemble_hybrid(h, ms, scales)
+    else:
+        asm = assemble(h, ms, scales)
     K = ms.K
     n3 = asm["mass"].shape[0]
     A = _apply(asm)
@@ -371,9 +391,10 @@ def solve_xvw(h: Harvester, ms: XVWMesh, rtol: float = 1e-9, maxiter: int = 600,
     q = h.params
     # outflow through the edges of the domain per unit time and mass: test function 1 in
     # (x, v, V) and h_0 in xi (the noise and the interior faces conserve mass)
-    leak = float(np.kron(asm["R"][0], np.ones(n3)) @ A(d)) / (0.5 * mass)
+    unit = asm.get("unit", np.ones(n3))
+    leak = math.nan if unit is None else float(np.kron(asm["R"][0], unit) @ A(d)) / (0.5 * mass)
     # negative part of the (x, v, V) marginal at the Lobatto nodes (weights: the basis integrals)
-    negative = -2.0 * float(asm["one"] @ np.minimum(c0, 0.0)) / mass
+    negative = 2.0 * (asm["negative"](c0) if "negative" in asm else -float(asm["one"] @ np.minimum(c0, 0.0))) / mass
     residuals = {"V2": (V2 - q.Kc * q.tau_p * vV) / V2, "power": (Pin - q.m * q.gamma * v2 - q.Kv * vV) / Pin,
                  "leak": leak, "negative": negative}
     rss = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1e6  # kB on Linux
@@ -416,17 +437,24 @@ BASE = {"layers": 2, "bulk_x": 3, "bulk_v": 2, "v_layers": 2, "v_bulk": 2}
 
 def case_row(a: float, case: dict[str, Any], scales: tuple[float, float] | None = None) -> dict[str, Any]:
     """Solve one case (:data:`BASE` with the mesh changes in ``case``; its keys ``blocks``,
-    ``rtol``, ``maxiter`` and ``drop_tol`` go to :func:`solve_xvw`) at n = 1, ``a``, on the mesh
-    scales ``scales`` (default :func:`reference_scales`); the row of the study's JSON (a case
-    whose GMRES stalls is recorded with its message)."""
+    ``rtol``, ``maxiter`` and ``drop_tol`` go to :func:`solve_xvw`, ``n`` (default 1) to the
+    model) at ``a``, on the mesh scales ``scales`` (default :func:`reference_scales`, else
+    :func:`_scales` where the table has no row); the row of the study's JSON (a case whose
+    GMRES stalls is recorded with its message)."""
     changes = dict(case)
     options = {k: changes.pop(k) for k in ("blocks", "rtol", "maxiter", "drop_tol") if k in changes}
+    n = float(changes.pop("n", 1.0))
     ms = XVWMesh(**{**BASE, **changes})
+    if scales is None:
+        try:
+            scales = reference_scales(a, n)
+        except KeyError:
+            scales = None
     try:
-        res = solve_xvw(Harvester.build(n=1, a=a), ms, scales=scales or reference_scales(a), **options)
-        return {"a": a, **options, **res.to_dict()}
+        res = solve_xvw(Harvester.build(n=n, a=a), ms, scales=scales, **options)
+        return {"a": a, "n": n, **options, **res.to_dict()}
     except NotConvergedError as exc:
-        return {"a": a, **options, "mesh": ms.__dict__, "failed": str(exc)}
+        return {"a": a, "n": n, **options, "mesh": ms.__dict__, "failed": str(exc)}
 
 
 def study(quick: bool) -> dict[str, Any]:
@@ -459,6 +487,7 @@ def log_case(argv: list[str]) -> dict[str, Any]:
     t0 = time.perf_counter()
     row = {"label": label, "case": case, **case_row(a, case)}
     row["wall_s"] = time.perf_counter() - t0
+    row["cpu_s"] = time.process_time()
     with open(log, "a") as f:
         f.write(json.dumps(row) + "\n")
     return row
