@@ -38,8 +38,7 @@ from numpy.polynomial import legendre as npleg
 from fpe_harvester.fpe.plane import DGLine, lobatto_points
 from fpe_harvester.model import Harvester
 
-from .xvw import XVWMesh, _axes, _face_sum, _xi_modes
-from .xvw_w import kron3
+from .xvw import XVWMesh, _axes, _xi_modes
 
 __all__ = ["VBasis", "VRule", "element_frames", "assemble_hybrid", "element_order"]
 
@@ -243,7 +242,7 @@ def _vmatrices(b: VBasis, rule: VRule) -> tuple[Any, Any, Any, Any]:
     r"""Mass, V-weighted mass, :math:`\int\theta_k'\psi_l` and :math:`\int V\theta_k'\psi_l` of one basis."""
     if b.k == 0:
         W = b.line
-        return W.mass(), W.mass(power=1), W.derivative(), W.derivative(1)
+        return tuple(m.toarray() for m in (W.mass(), W.mass(power=1), W.derivative(), W.derivative(1)))
     f, df = rule.values(b, True)
     g = rule.values(b)[0]
     w, V = rule.w[:, None], rule.V[:, None]
@@ -251,23 +250,32 @@ def _vmatrices(b: VBasis, rule: VRule) -> tuple[Any, Any, Any, Any]:
 
 
 class _Blocks:
-    """Sparse blocks keyed by (test element, trial element), summed, then one matrix."""
+    """Blocks keyed by (test element, trial element), kept as triplets and summed into one
+    sparse matrix (the local blocks are small dense arrays: scipy's per-block overhead
+    was most of the assembly time)."""
 
     def __init__(self, offsets: np.ndarray) -> None:
-        self.offsets, self.parts = offsets, {}
+        self.offsets = offsets
+        self.parts: list[tuple[np.ndarray, np.ndarray, np.ndarray]] = []
 
     def add(self, i: int, j: int, blk: Any) -> None:
-        self.parts[(i, j)] = self.parts[(i, j)] + blk if (i, j) in self.parts else sp.csr_matrix(blk)
+        if sp.issparse(blk):
+            c = blk.tocoo()
+            r, k, v = c.row, c.col, c.data
+        else:
+            r, k = np.nonzero(blk)
+            v = blk[r, k]
+        self.parts.append((r + self.offsets[i], k + self.offsets[j], v))
 
     def matrix(self) -> sp.csr_matrix:
         n = self.offsets[-1]
-        rows, cols, vals = [], [], []
-        for (i, j), blk in self.parts.items():
-            c = blk.tocoo()
-            rows.append(c.row + self.offsets[i])
-            cols.append(c.col + self.offsets[j])
-            vals.append(c.data)
-        return sp.csr_matrix((np.concatenate(vals), (np.concatenate(rows), np.concatenate(cols))), shape=(n, n))
+        r, k, v = (np.concatenate(a) for a in zip(*self.parts))
+        return sp.csr_matrix((v, (r, k)), shape=(n, n))
+
+
+def _k3(a: np.ndarray, b: np.ndarray, c: np.ndarray) -> np.ndarray:
+    """Dense Kronecker product of three small matrices (a outer)."""
+    return np.kron(np.kron(a, b), c)
 
 
 def _xpoints(h: Harvester, X: DGLine, ix: int, Mx: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -282,13 +290,12 @@ def _xpoints(h: Harvester, X: DGLine, ix: int, Mx: np.ndarray) -> tuple[np.ndarr
     return np.einsum("q,qi,qj->qij", 0.5 * (hi - lo) * gw, phi, phi), -h.a * h.n * xq ** (h.n - 1.0)
 
 
-def _place(px: np.ndarray, xw: np.ndarray, C: np.ndarray, a: int, b: int, pv: int) -> sp.csr_matrix:
+def _place(px: int, xw: np.ndarray, C: np.ndarray, a: int, b: int, pv: int) -> np.ndarray:
     """:math:`\\sum_q` (x factor ``xw[q]``) x (v unit matrix at (a, b)) x (V factor ``C[q]``),
     ordered x outer, v middle, V inner."""
-    blk = np.einsum("qij,qkl->ikjl", xw, C)
     out = np.zeros((px, pv, C.shape[1], px, pv, C.shape[2]))
-    out[:, a, :, :, b, :] = blk
-    return sp.csr_matrix(out.reshape(px * pv * C.shape[1], -1))
+    out[:, a, :, :, b, :] = np.einsum("qij,qkl->ikjl", xw, C)
+    return out.reshape(px * pv * C.shape[1], -1)
 
 
 def _vfaces(h: Harvester, X: DGLine, Vv: DGLine, bases: list[VBasis], rule: VRule, lam: np.ndarray,
@@ -326,12 +333,12 @@ def _xfaces_mirror(X: DGLine, Vv: DGLine, bases: list[VBasis], rule: VRule, comm
             for et, sign, tend in sides:
                 for eu, _, uend in sides:
                     vpart = vpos[iv] if uend == p1 - 1 else vneg[iv]
-                    common.add(et, eu, sign * kron3(_unit(X.p, tend, uend), vpart, rule.pair(bases[et], bases[eu])))
+                    common.add(et, eu, sign * _k3(_unit(X.p, tend, uend), vpart, rule.pair(bases[et], bases[eu])))
     flip = np.fliplr(np.eye(Vv.p + 1))
     for iv in range(Ev):
         if Vv.nodes[iv] >= 0.0:
             et, eu = iv, Ev - 1 - iv
-            mirror.add(et, eu, kron3(_unit(X.p, 0, 0), vpos[iv] @ flip, rule.pair(bases[et], bases[eu], flip=True)))
+            mirror.add(et, eu, _k3(_unit(X.p, 0, 0), vpos[iv] @ flip, rule.pair(bases[et], bases[eu], flip=True)))
 
 
 def _moments(h: Harvester, X: DGLine, Vv: DGLine, bases: list[VBasis], rule: VRule) -> dict[str, Any]:
@@ -374,23 +381,27 @@ def _volume(h: Harvester, X: DGLine, Vv: DGLine, W: DGLine, bases: list[VBasis],
     Mx, Dx = _local(X.mass(), X), _local(X.derivative(), X)
     FX = _local(X.mass() if h.n == 1.0 else h.n * X.power_mass(h.n - 1.0), X) * (-h.a / p.m)
     Mv, Mv1, Dv, Dv1 = (_local(m, Vv) for m in (Vv.mass(), Vv.mass(power=1), Vv.derivative(), Vv.derivative(1)))
+    # V faces of the mesh: speed Kc v - V_f / tau_p, linear in v; per face f the V factors
+    # (l_f - r_f) l_f^T (upwind from below) and (l_f - r_f) r_f^T
     sp_pos, sp_neg = Vv.signed_parts(-W.nodes / p.tau_p, p.Kc)
+    ends = [(W.left_of(f), W.right_of(f)) for f in range(W.elements + 1)]
+    Fp = np.stack([np.outer(lf - rf, lf) for lf, rf in ends])
+    Fn = np.stack([np.outer(lf - rf, rf) for lf, rf in ends])
     mats: dict[int, tuple[Any, ...]] = {}
     for e, b in enumerate(bases):
         ix, iv = divmod(e, Vv.elements)
         if id(b) not in mats:
             mats[id(b)] = _vmatrices(b, rule)
         M, M1, D, D1 = mats[id(b)]
-        blk = (-kron3(Dx[ix], Mv1[iv], M) + p.gamma * kron3(Mx[ix], Dv1[iv], M)
-               + (p.Kv / p.m) * kron3(Mx[ix], Dv[iv], M1) - p.Kc * kron3(Mx[ix], Mv1[iv], D)
-               + (1.0 / p.tau_p) * kron3(Mx[ix], Mv[iv], D1) - kron3(FX[ix], Dv[iv], M))
+        blk = (-_k3(Dx[ix], Mv1[iv], M) + p.gamma * _k3(Mx[ix], Dv1[iv], M)
+               + (p.Kv / p.m) * _k3(Mx[ix], Dv[iv], M1) - p.Kc * _k3(Mx[ix], Mv1[iv], D)
+               + (1.0 / p.tau_p) * _k3(Mx[ix], Mv[iv], D1) - _k3(FX[ix], Dv[iv], M))
         if b.k == 0:
-            # V faces of the mesh: speed Kc v - V_f / tau_p, linear in v (v element iv's part)
-            blk = blk + sp.kron(Mx[ix], _face_sum(W, [sp.csr_matrix(a[iv]) for a in sp_pos],
-                                                  [sp.csr_matrix(a[iv]) for a in sp_neg], False))
+            face = np.einsum("fab,fij->aibj", sp_pos[:, iv], Fp) + np.einsum("fab,fij->aibj", sp_neg[:, iv], Fn)
+            blk = blk + np.kron(Mx[ix], face.reshape(blk.shape[0] // Mx[ix].shape[0], -1))
         common.add(e, e, blk)
-        volxi.add(e, e, -kron3(Mx[ix], Dv[iv], M))
-        mass.add(e, e, kron3(Mx[ix], Mv[iv], M))
+        volxi.add(e, e, -_k3(Mx[ix], Dv[iv], M))
+        mass.add(e, e, _k3(Mx[ix], Mv[iv], M))
 
 
 def assemble_hybrid(h: Harvester, ms: XVWMesh, scales: tuple[float, float] | None = None) -> dict[str, Any]:
