@@ -52,6 +52,7 @@ import functools
 import json
 import math
 import resource
+import sys
 import time
 import tracemalloc
 from dataclasses import dataclass
@@ -322,16 +323,22 @@ def _apply(asm: dict[str, Any]) -> Any:
 
 
 def solve_xvw(h: Harvester, ms: XVWMesh, rtol: float = 1e-9, maxiter: int = 600,
-              blocks: str = "lu", scales: tuple[float, float] | None = None, drop_tol: float = 1e-4
-              ) -> XVWResult:
+              blocks: str = "lu", scales: tuple[float, float] | None = None, drop_tol: float = 1e-4,
+              progress: bool = False) -> XVWResult:
     """Assemble and solve one level; raise :class:`NotConvergedError` if GMRES stalls.
 
     ``blocks``: the preconditioner's solve of each mirror-coupled pair of xi-modes, ``"lu"``
     (exact, SuperLU) or ``"ilu"`` (SuperLU's incomplete LU, drop tolerance ``drop_tol``, fill 10;
     measured on a pair of a = 2 with 30240 unknowns: exact LU 78e6 nonzeros, 15 s, 0.078 s a
     solve; ILU at 1e-3 2.5e6, 2.3 s, 0.007 s, 1.3 % residual of the block solve);
-    ``scales`` = (v2, V2) set the mesh (default :func:`_scales`).
+    ``scales`` = (v2, V2) set the mesh (default :func:`_scales`); ``progress`` prints the phases'
+    seconds and every 20th GMRES residual to stderr (a run stopped by a time limit shows where).
     """
+
+    def say(msg: str) -> None:
+        if progress:
+            print(f"[{time.perf_counter() - t0:7.1f} s] {msg}", file=sys.stderr, flush=True)
+
     tracemalloc.start()
     t0 = time.perf_counter()
     if math.isfinite(ms.e_split) or h.n != 1.0:
@@ -344,6 +351,7 @@ def solve_xvw(h: Harvester, ms: XVWMesh, rtol: float = 1e-9, maxiter: int = 600,
     n3 = asm["mass"].shape[0]
     A = _apply(asm)
     t1 = time.perf_counter()
+    say(f"assembled: {K} modes x {n3} unknowns")
     groups, seen = [], set()
     for i in range(K):
         if i in seen:
@@ -355,6 +363,7 @@ def solve_xvw(h: Harvester, ms: XVWMesh, rtol: float = 1e-9, maxiter: int = 600,
             spla.spilu(blk, drop_tol=drop_tol, fill_factor=10.0)
         groups.append((grp, lu))
     t2 = time.perf_counter()
+    say("preconditioner factorized")
     u = np.kron(asm["R"][0], asm["one"])
     u /= np.linalg.norm(u)
 
@@ -370,8 +379,10 @@ def solve_xvw(h: Harvester, ms: XVWMesh, rtol: float = 1e-9, maxiter: int = 600,
 
     its = [0]
 
-    def count(_: Any) -> None:
+    def count(res: Any) -> None:
         its[0] += 1
+        if its[0] % 20 == 0:
+            say(f"GMRES iteration {its[0]}: residual {float(res):.2e}")
 
     N = K * n3
     d, info = spla.gmres(spla.LinearOperator((N, N), matvec=matvec), u, M=spla.LinearOperator((N, N), matvec=prec),
@@ -443,6 +454,7 @@ def case_row(a: float, case: dict[str, Any], scales: tuple[float, float] | None 
     GMRES stalls is recorded with its message)."""
     changes = dict(case)
     options = {k: changes.pop(k) for k in ("blocks", "rtol", "maxiter", "drop_tol") if k in changes}
+    progress = bool(changes.pop("progress", False))
     n = float(changes.pop("n", 1.0))
     ms = XVWMesh(**{**BASE, **changes})
     if scales is None:
@@ -451,7 +463,7 @@ def case_row(a: float, case: dict[str, Any], scales: tuple[float, float] | None 
         except KeyError:
             scales = None
     try:
-        res = solve_xvw(Harvester.build(n=n, a=a), ms, scales=scales, **options)
+        res = solve_xvw(Harvester.build(n=n, a=a), ms, scales=scales, progress=progress, **options)
         return {"a": a, "n": n, **options, **res.to_dict()}
     except NotConvergedError as exc:
         return {"a": a, "n": n, **options, "mesh": ms.__dict__, "failed": str(exc)}
@@ -485,7 +497,7 @@ def log_case(argv: list[str]) -> dict[str, Any]:
     process so that ``maxrss_gb`` is the run's own peak): ``--case A CASE_JSON LABEL LOG``."""
     a, case, label, log = float(argv[0]), json.loads(argv[1]), argv[2], argv[3]
     t0 = time.perf_counter()
-    row = {"label": label, "case": case, **case_row(a, case)}
+    row = {"label": label, "case": case, **case_row(a, {**case, "progress": True})}
     row["wall_s"] = time.perf_counter() - t0
     row["cpu_s"] = time.process_time()
     with open(log, "a") as f:
@@ -494,8 +506,6 @@ def log_case(argv: list[str]) -> dict[str, Any]:
 
 
 if __name__ == "__main__":  # pragma: no cover
-    import sys
-
     if sys.argv[1:2] == ["--case"]:
         print(json.dumps(log_case(sys.argv[2:])))
     else:

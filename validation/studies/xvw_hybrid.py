@@ -200,7 +200,11 @@ def _bases(h: Harvester, ms: XVWMesh, X: DGLine, Vv: DGLine, W: DGLine) -> list[
     E = 0.5 * h.params.m * vlow[None, :] + h.a * X.nodes[:-1, None] ** h.n
     bulk = E >= ms.e_split
     c, s = _frames(h, ms, X, Vv, E)
-    return [VBasis(None, float(c[i, j]), float(s[i, j]), ms.kv) if bulk[i, j] else mesh
+    # equal frames share one object: the V rule's integrals are kept per pair of objects
+    frames: dict[tuple[float, float], VBasis] = {}
+    for key in zip(c[bulk].tolist(), s[bulk].tolist()):
+        frames.setdefault(key, VBasis(None, key[0], key[1], ms.kv))
+    return [frames[(float(c[i, j]), float(s[i, j]))] if bulk[i, j] else mesh
             for i in range(X.elements) for j in range(Vv.elements)]
 
 
