@@ -111,6 +111,8 @@ class XVWMesh:
     frame : str
         The hybrid's Hermite frames: ``"sign"`` (one for the bulk of x > 0) or ``"element"``
         (a centre per element) (:func:`.xvw_hybrid._frames`).
+    frame_width : float
+        The frames' width in units of the standard deviation of V they are built from (> 0).
     """
 
     p: int = 2
@@ -131,6 +133,7 @@ class XVWMesh:
     e_split: float = math.inf
     kv: int = 6
     frame: str = "sign"
+    frame_width: float = 1.0
 
 
 @dataclass(frozen=True)

@@ -222,12 +222,12 @@ def _frames(h: Harvester, ms: XVWMesh, X: DGLine, Vv: DGLine, E: np.ndarray) -> 
     c, s = element_frames(h, X, Vv, _samples(h))
     bulk = E >= ms.e_split
     if ms.frame == "element":
-        return c, np.full(c.shape, float(s[bulk].max()) if bulk.any() else 1.0)
+        return c, np.full(c.shape, ms.frame_width * float(s[bulk].max()) if bulk.any() else 1.0)
     x, v, V = _samples(h).T
     flip = x < 0.0
     x, v, V = np.where(flip, -x, x), np.where(flip, -v, v), np.where(flip, -V, V)
     inbulk = 0.5 * h.params.m * v**2 + h.a * x**h.n >= ms.e_split
-    return np.full(c.shape, float(V[inbulk].mean())), np.full(c.shape, float(V[inbulk].std()))
+    return np.full(c.shape, float(V[inbulk].mean())), np.full(c.shape, ms.frame_width * float(V[inbulk].std()))
 
 
 def _rule(bases: list[VBasis], W: DGLine) -> VRule:
