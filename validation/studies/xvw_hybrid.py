@@ -29,10 +29,11 @@ came out 13 at a = 0.5). Measured (``validation/data/xvw.json``; scheme xv's (x,
 K = 5, 10 V elements on the trap, ``e_split`` = 1e-2, ``kv`` = 6, exact LU blocks; ILU blocks
 break GMRES down):
 
-* a = 0.5: 58320 unknowns (V mesh everywhere: 194400), eta +0.23 % (V mesh: +0.12 %),
-  identities 9e-7 and 2e-5, negative mass 0.047, 116 iterations, 72 CPU-s, 1.3 GB;
-* a = 1: 58320 unknowns, eta -0.45 % (V mesh: -1.0 %), identities 1.5e-5 and 1.2e-4,
-  negative mass 0.40, 96 iterations, 48 CPU-s, 1.4 GB;
+* a = 0.5: 58320 unknowns (V mesh everywhere, ILU blocks: 194400), eta +0.23 % (V mesh:
+  +0.12 %), identities 9e-7 and 2e-5, negative mass 0.047 (0.043), 116 iterations (78),
+  72 CPU-s (69), 1.3 GB (0.62);
+* a = 1: 58320 unknowns, eta -0.45 % (-1.0 %), identities 1.5e-5 and 1.2e-4, negative mass
+  0.40 (0.053), 96 iterations (88), 48 CPU-s (64), 1.4 GB (0.60);
 * a = 2: not a density (K = 5: eta 0.358 against 0.12288, negative mass 4750 times the mass,
   GMRES stalls at a true residual 6e-4; K = 3: stalls at 0.058). The bulk's test polynomials
   take the inflow from the trap's V mesh, which reaches :math:`L_V` = 127 frame widths at
@@ -135,7 +136,8 @@ class VRule:
             n = self.breaks.size - 1
             per = [np.einsum("iqk,iq,iql->ikl", fa.reshape(n, _NG, -1), (self.w * self.V**j).reshape(n, _NG),
                              fb.reshape(n, _NG, -1)) for j in (0, 1)]
-            self._cum[key] = [np.concatenate([np.zeros((1,) + p.shape[1:]), np.cumsum(p, axis=0)]) for p in per]
+            self._cum[key] = [np.concatenate([np.zeros((1,) + p.shape[1:]), np.cumsum(p, axis=0)])
+                              for p in per]
         return self._cum[key]
 
     def split(self, a: VBasis, b: VBasis, t: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -149,7 +151,8 @@ class VRule:
         lo = self.breaks[j]
         pts = lo[:, None] + 0.5 * (t - lo)[:, None] * (g + 1.0)
         wts = 0.5 * (t - lo)[:, None] * gw
-        pa, pb = (x.values(pts.ravel(), test)[0].reshape(t.size, _NG, -1) for x, test in ((a, True), (b, False)))
+        pa, pb = (x.values(pts.ravel(), test)[0].reshape(t.size, _NG, -1)
+                  for x, test in ((a, True), (b, False)))
         below = [cum[i][j] + np.einsum("tqk,tq,tql->tkl", pa, wts * pts**i, pb) for i in (0, 1)]
         return below[0], below[1], cum[1][-1]
 
@@ -243,7 +246,8 @@ def _frames(h: Harvester, ms: XVWMesh, X: DGLine, Vv: DGLine, E: np.ndarray) -> 
     flip = x < 0.0
     x, v, V = np.where(flip, -x, x), np.where(flip, -v, v), np.where(flip, -V, V)
     inbulk = 0.5 * h.params.m * v**2 + h.a * x**h.n >= ms.e_split
-    return np.full(c.shape, float(V[inbulk].mean())), np.full(c.shape, ms.frame_width * float(V[inbulk].std()))
+    width = ms.frame_width * float(V[inbulk].std())
+    return np.full(c.shape, float(V[inbulk].mean())), np.full(c.shape, width)
 
 
 def _rule(bases: list[VBasis], W: DGLine) -> VRule:
@@ -328,7 +332,8 @@ def _vfaces(h: Harvester, X: DGLine, Vv: DGLine, bases: list[VBasis], rule: VRul
         xw, F = _xpoints(h, X, ix, Mx)
         for g in range(Ev + 1):
             s0 = (F[None, :] + p.sigma * lam[:, None]) / p.m - p.gamma * Vv.nodes[g]   # (K, q)
-            sides = [(e, sign, end) for e, sign, end in ((ix * Ev + g - 1, 1.0, p1 - 1), (ix * Ev + g, -1.0, 0))
+            sides = [(e, sign, end) for e, sign, end in ((ix * Ev + g - 1, 1.0, p1 - 1),
+                                                         (ix * Ev + g, -1.0, 0))
                      if (g > 0 if sign > 0 else g < Ev)]
             for et, sign, tend in sides:
                 for eu, _, uend in sides:
@@ -348,17 +353,20 @@ def _xfaces_mirror(X: DGLine, Vv: DGLine, bases: list[VBasis], rule: VRule, comm
     vpos, vneg = (a[0] for a in Vv.signed_parts(np.array([0.0]), 1.0))
     for f in range(Ex + 1):
         for iv in range(Ev):
-            sides = [(e, sign, end) for e, sign, end in (((f - 1) * Ev + iv, 1.0, p1 - 1), (f * Ev + iv, -1.0, 0))
+            sides = [(e, sign, end) for e, sign, end in (((f - 1) * Ev + iv, 1.0, p1 - 1),
+                                                         (f * Ev + iv, -1.0, 0))
                      if (f > 0 if sign > 0 else f < Ex)]
             for et, sign, tend in sides:
                 for eu, _, uend in sides:
                     vpart = vpos[iv] if uend == p1 - 1 else vneg[iv]
-                    common.add(et, eu, sign * _k3(_unit(X.p, tend, uend), vpart, rule.pair(bases[et], bases[eu])))
+                    C = rule.pair(bases[et], bases[eu])
+                    common.add(et, eu, sign * _k3(_unit(X.p, tend, uend), vpart, C))
     flip = np.fliplr(np.eye(Vv.p + 1))
     for iv in range(Ev):
         if Vv.nodes[iv] >= 0.0:
             et, eu = iv, Ev - 1 - iv
-            mirror.add(et, eu, _k3(_unit(X.p, 0, 0), vpos[iv] @ flip, rule.pair(bases[et], bases[eu], flip=True)))
+            C = rule.pair(bases[et], bases[eu], flip=True)
+            mirror.add(et, eu, _k3(_unit(X.p, 0, 0), vpos[iv] @ flip, C))
 
 
 def _moments(h: Harvester, X: DGLine, Vv: DGLine, bases: list[VBasis], rule: VRule) -> dict[str, Any]:
@@ -400,7 +408,8 @@ def _volume(h: Harvester, X: DGLine, Vv: DGLine, W: DGLine, bases: list[VBasis],
     p = h.params
     Mx, Dx = _local(X.mass(), X), _local(X.derivative(), X)
     FX = _local(X.mass() if h.n == 1.0 else h.n * X.power_mass(h.n - 1.0), X) * (-h.a / p.m)
-    Mv, Mv1, Dv, Dv1 = (_local(m, Vv) for m in (Vv.mass(), Vv.mass(power=1), Vv.derivative(), Vv.derivative(1)))
+    Mv, Mv1, Dv, Dv1 = (_local(m, Vv) for m in (Vv.mass(), Vv.mass(power=1), Vv.derivative(),
+                                                 Vv.derivative(1)))
     # V faces of the mesh: speed Kc v - V_f / tau_p, linear in v; per face f the V factors
     # (l_f - r_f) l_f^T (upwind from below) and (l_f - r_f) r_f^T
     sp_pos, sp_neg = Vv.signed_parts(-W.nodes / p.tau_p, p.Kc)
@@ -417,7 +426,8 @@ def _volume(h: Harvester, X: DGLine, Vv: DGLine, W: DGLine, bases: list[VBasis],
                + (p.Kv / p.m) * _k3(Mx[ix], Dv[iv], M1) - p.Kc * _k3(Mx[ix], Mv1[iv], D)
                + (1.0 / p.tau_p) * _k3(Mx[ix], Mv[iv], D1) - _k3(FX[ix], Dv[iv], M))
         if b.k == 0:
-            face = np.einsum("fab,fij->aibj", sp_pos[:, iv], Fp) + np.einsum("fab,fij->aibj", sp_neg[:, iv], Fn)
+            face = (np.einsum("fab,fij->aibj", sp_pos[:, iv], Fp)
+                    + np.einsum("fab,fij->aibj", sp_neg[:, iv], Fn))
             blk = blk + np.kron(Mx[ix], face.reshape(blk.shape[0] // Mx[ix].shape[0], -1))
         common.add(e, e, blk)
         volxi.add(e, e, -_k3(Mx[ix], Dv[iv], M))
