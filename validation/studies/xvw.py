@@ -41,6 +41,11 @@ Measured (``validation/data/xvw.json``; p = 2, K = 5, ILU blocks unless said oth
 * K = 7 xi-modes at a = 2 (10 V elements, 272160 unknowns, 154 iterations, 107 CPU-s): eta
   +1.7 %, but V2 +23 % and Pin +21 %, V2 identity 0.91 and negative mass 0.60: K is not
   converged (K = 5: eta +16 %, V2 +21 %, Pin +4 %).
+* Other directions at a = 2 (K = 5, 10 V elements): a fifth trap layer in (x, v) changes
+  nothing (eta +15.87 % against +15.89 %); the (x, v) bulk refined from 5 + 4 to 7 + 6
+  elements (297000 unknowns, 88 CPU-s) gives eta +14.4 %, V2 identity 0.10 (0.44), negative
+  mass 0.59; coarsened to 3 + 2, eta +232 %; degree 3 on that coarse bulk (268800 unknowns)
+  did not finish in 600 s (GMRES stalled near 2.5e-3).
 * The force :math:`a n x^{n-1}` (through :mod:`.xvw_hybrid`'s assembly, K = 5, 194400
   unknowns): n = 1.5, a = 2 eta -0.94 % (scheme xv 0.20694), identities 7e-3 and 3e-4,
   negative mass 0.098; n = 1.25, a = 2 eta -2.0 % (Monte Carlo 0.16210 +- 0.00019),
