@@ -13,8 +13,9 @@
 * the kink (n = 1): :mod:`.kinkstudy` (its time-step law) and :mod:`.kinkref` (an independent
   reference scheme with exact crossings);
 * the strong kink's candidate discretization: :mod:`.xvw` (DG in (x, v, V) with V graded toward
-  0, discrete ordinates in xi; measured, not a product scheme) and its W = V - K_c x variant
-  :mod:`.xvw_w`.
+  0, discrete ordinates in xi; measured, not a product scheme), its W = V - K_c x variant
+  :mod:`.xvw_w` and its hybrid :mod:`.xvw_hybrid` (Hermite functions in V on the bulk's
+  (x, v) elements, the V mesh on the trap's; also the force of 1 < n).
 
 The modules are imported when run, not here.
 """

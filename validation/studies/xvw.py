@@ -38,6 +38,18 @@ Measured (``validation/data/xvw.json``; p = 2, K = 5, ILU blocks unless said oth
   mass. With 14 V elements (272160 unknowns) a = 2 gives eta +18 %, V2 identity 0.022,
   negative mass 0.56; with K = 3 xi-modes V2 < 0 (K = 5 is not converged at a = 2; K = 7,
   272160 unknowns, did not finish in 500 s).
+* K = 7 xi-modes at a = 2 (10 V elements, 272160 unknowns, 154 iterations, 107 CPU-s): eta
+  +1.7 %, but V2 +23 % and Pin +21 %, V2 identity 0.91 and negative mass 0.60: K is not
+  converged (K = 5: eta +16 %, V2 +21 %, Pin +4 %).
+* Other directions at a = 2 (K = 5, 10 V elements): a fifth trap layer in (x, v) changes
+  nothing (eta +15.87 % against +15.89 %); the (x, v) bulk refined from 5 + 4 to 7 + 6
+  elements (297000 unknowns, 88 CPU-s) gives eta +14.4 %, V2 identity 0.10 (0.44), negative
+  mass 0.59; coarsened to 3 + 2, eta +232 %; degree 3 on that coarse bulk (268800 unknowns)
+  did not finish in 600 s (GMRES stalled near 2.5e-3).
+* The force :math:`a n x^{n-1}` (through :mod:`.xvw_hybrid`'s assembly, K = 5, 194400
+  unknowns): n = 1.5, a = 2 eta -0.94 % (scheme xv 0.20694), identities 7e-3 and 3e-4,
+  negative mass 0.098; n = 1.25, a = 2 eta -2.0 % (Monte Carlo 0.16210 +- 0.00019),
+  identities 4.6e-3 and 1.3e-3, negative mass 0.16.
 * The W variant needs a tensor (x, W) mesh reaching :math:`|W| \\le L_V + K_c L_x`, whose bulk
   is coarse where the mass is: on the small mesh eta 5.2 at a = 0.5 (V: 0.619), and at a = 2
   both variants are far from a density (V 1.19, W 0.076, negative mass 1.15 and 0.64).
@@ -52,6 +64,7 @@ import functools
 import json
 import math
 import resource
+import sys
 import time
 import tracemalloc
 from dataclasses import dataclass
@@ -101,6 +114,17 @@ class XVWMesh:
         DG degree in V (0: p).
     variant : str
         ``"V"``: the third coordinate is V; ``"W"``: it is :math:`W = V - K_c x` (:mod:`.xvw_w`).
+    e_split : float
+        Hybrid (:mod:`.xvw_hybrid`): (x, v) elements whose lowest energy
+        :math:`m v^2/2 + a x^n` reaches ``e_split`` carry ``kv`` Hermite functions in V instead
+        of the V mesh (inf: none, the V variant).
+    kv : int
+        Hermite functions in V per bulk element of the hybrid.
+    frame : str
+        The hybrid's Hermite frames: ``"sign"`` (one for the bulk of x > 0) or ``"element"``
+        (a centre per element) (:func:`.xvw_hybrid._frames`).
+    frame_width : float
+        The frames' width in units of the standard deviation of V they are built from (> 0).
     """
 
     p: int = 2
@@ -118,6 +142,10 @@ class XVWMesh:
     v_geometric: bool = False
     pV: int = 0
     variant: str = "V"
+    e_split: float = math.inf
+    kv: int = 6
+    frame: str = "sign"
+    frame_width: float = 1.0
 
 
 @dataclass(frozen=True)
@@ -158,16 +186,17 @@ def _scales(h: Harvester) -> tuple[float, float]:
     return float(res.v2), float(res.V2)
 
 
-def reference_scales(a: float) -> tuple[float, float]:
-    r"""(v2, V2) of n = 1 at ``a`` from the reference table (Fokker--Planck at a <= 1, Monte Carlo
-    at a = 2), v2 by the identities :math:`\langle vV\rangle = V^2/(K_c\tau_p)`,
+def reference_scales(a: float, n: float = 1.0) -> tuple[float, float]:
+    r"""(v2, V2) at ``n``, ``a`` from the reference table (Fokker--Planck, else Monte Carlo; at
+    n = 1: Fokker--Planck at a <= 1, Monte Carlo at a = 2), v2 by the identities
+    :math:`\langle vV\rangle = V^2/(K_c\tau_p)`,
     :math:`m\gamma\langle v^2\rangle = P_{in} - K_v\langle vV\rangle` (defaults)."""
     from pathlib import Path
 
     path = Path(__file__).parents[1] / "references" / "data" / "reference_values.json"
     table = json.loads(path.read_text())
-    row = table.get(f"fpe n = 1, a = {a:g}") or table[f"mc n = 1, a = {a:g}"]
-    p = Harvester.build(n=1, a=a).params
+    row = table.get(f"fpe n = {n:g}, a = {a:g}") or table[f"mc n = {n:g}, a = {a:g}"]
+    p = Harvester.build(n=n, a=a).params
     vV = row["V2"] / (p.Kc * p.tau_p)
     return (row["Pin"] - p.Kv * vV) / (p.m * p.gamma), row["V2"]
 
@@ -180,7 +209,10 @@ def _axes(h: Harvester, ms: XVWMesh, scales: tuple[float, float] | None = None
     v2, V2 = _scales(h) if scales is None else scales
     sF = math.sqrt(p.sigma**2 * p.D / p.tau + p.Kv**2 * V2)
     Lx, Lv = kink_domain(h, v2, sF)
-    plane = PlaneMesh(Lx=Lx, Lv=Lv, Ec=p.m * v2, a=h.a, layers=ms.layers, ratio=ms.ratio,
+    # the core box reaches U(x_c) = a x_c^n = E_c (PlaneMesh sets x_c = E_c / a)
+    Ec = p.m * v2
+    a_eff = h.a if h.n == 1.0 else Ec / (Ec / h.a) ** (1.0 / h.n)
+    plane = PlaneMesh(Lx=Lx, Lv=Lv, Ec=Ec, a=a_eff, layers=ms.layers, ratio=ms.ratio,
                       bulk_x=ms.bulk_x, bulk_v=ms.bulk_v, grading=2.5)
     sV = math.sqrt(V2)
     core = ms.v_core * sV
@@ -307,23 +339,35 @@ def _apply(asm: dict[str, Any]) -> Any:
 
 
 def solve_xvw(h: Harvester, ms: XVWMesh, rtol: float = 1e-9, maxiter: int = 600,
-              blocks: str = "lu", scales: tuple[float, float] | None = None, drop_tol: float = 1e-4
-              ) -> XVWResult:
+              blocks: str = "lu", scales: tuple[float, float] | None = None, drop_tol: float = 1e-4,
+              progress: bool = False) -> XVWResult:
     """Assemble and solve one level; raise :class:`NotConvergedError` if GMRES stalls.
 
     ``blocks``: the preconditioner's solve of each mirror-coupled pair of xi-modes, ``"lu"``
     (exact, SuperLU) or ``"ilu"`` (SuperLU's incomplete LU, drop tolerance ``drop_tol``, fill 10;
     measured on a pair of a = 2 with 30240 unknowns: exact LU 78e6 nonzeros, 15 s, 0.078 s a
     solve; ILU at 1e-3 2.5e6, 2.3 s, 0.007 s, 1.3 % residual of the block solve);
-    ``scales`` = (v2, V2) set the mesh (default :func:`_scales`).
+    ``scales`` = (v2, V2) set the mesh (default :func:`_scales`); ``progress`` prints the phases'
+    seconds and every 20th GMRES residual to stderr (a run stopped by a time limit shows where).
     """
+
+    def say(msg: str) -> None:
+        if progress:
+            print(f"[{time.perf_counter() - t0:7.1f} s] {msg}", file=sys.stderr, flush=True)
+
     tracemalloc.start()
     t0 = time.perf_counter()
-    asm = assemble(h, ms, scales)
+    if math.isfinite(ms.e_split) or h.n != 1.0:
+        from .xvw_hybrid import assemble_hybrid  # imports this module
+
+        asm = assemble_hybrid(h, ms, scales)
+    else:
+        asm = assemble(h, ms, scales)
     K = ms.K
     n3 = asm["mass"].shape[0]
     A = _apply(asm)
     t1 = time.perf_counter()
+    say(f"assembled: {K} modes x {n3} unknowns")
     groups, seen = [], set()
     for i in range(K):
         if i in seen:
@@ -335,6 +379,7 @@ def solve_xvw(h: Harvester, ms: XVWMesh, rtol: float = 1e-9, maxiter: int = 600,
             spla.spilu(blk, drop_tol=drop_tol, fill_factor=10.0)
         groups.append((grp, lu))
     t2 = time.perf_counter()
+    say("preconditioner factorized")
     u = np.kron(asm["R"][0], asm["one"])
     u /= np.linalg.norm(u)
 
@@ -350,8 +395,10 @@ def solve_xvw(h: Harvester, ms: XVWMesh, rtol: float = 1e-9, maxiter: int = 600,
 
     its = [0]
 
-    def count(_: Any) -> None:
+    def count(res: Any) -> None:
         its[0] += 1
+        if its[0] % 20 == 0:
+            say(f"GMRES iteration {its[0]}: residual {float(res):.2e}")
 
     N = K * n3
     d, info = spla.gmres(spla.LinearOperator((N, N), matvec=matvec), u, M=spla.LinearOperator((N, N), matvec=prec),
@@ -360,25 +407,40 @@ def solve_xvw(h: Harvester, ms: XVWMesh, rtol: float = 1e-9, maxiter: int = 600,
     t3 = time.perf_counter()
     peak = tracemalloc.get_traced_memory()[1] / 1e9
     tracemalloc.stop()
-    if info != 0:
-        raise NotConvergedError(f"GMRES did not converge in {its[0]} iterations ({N} unknowns)")
-    C = d.reshape(K, n3)
+    # a stalled GMRES whose iterate still solves the system to 1e-3 is kept (its true residual
+    # is reported): at a = 2 the hybrid stalls near 1e-5 (measured)
+    solved = float(np.linalg.norm(matvec(d) - u))
+    if info != 0 and not solved < 1e-3:
+        raise NotConvergedError(f"GMRES did not converge in {its[0]} iterations ({N} unknowns, "
+                                f"residual {solved:.2e})")
+    eta, V2, Pin, residuals = _measure(h, asm, d, A(d))
+    residuals["solve"] = solved
+    rss = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1e6  # kB on Linux
+    return XVWResult(eta, V2, Pin, N, its[0], residuals,
+                     {"assembly": t1 - t0, "factorization": t2 - t1, "gmres": t3 - t2}, peak, ms, rss)
+
+
+def _measure(h: Harvester, asm: dict[str, Any], d: np.ndarray, Ad: np.ndarray
+             ) -> tuple[float, float, float, dict[str, float]]:
+    """eta, V2, Pin and the residuals of the identities, the outflow and the negative mass of
+    the solution ``d`` (``Ad``: the operator applied to it; half-space integrals doubled)."""
+    q = h.params
+    K = len(asm["T"])
+    C = d.reshape(K, -1)
     c0, c1 = asm["R"][0] @ C, asm["R"][1] @ C
     mass = 2.0 * float(asm["one"] @ c0)
     V2 = 2.0 * float(asm["V2"] @ c0) / mass
-    Pin = h.params.sigma * 2.0 * float(asm["vxi"] @ c1) / mass
+    Pin = q.sigma * 2.0 * float(asm["vxi"] @ c1) / mass
     vV, v2 = (2.0 * float(asm[k] @ c0) / mass for k in ("vV", "v2"))
-    q = h.params
     # outflow through the edges of the domain per unit time and mass: test function 1 in
     # (x, v, V) and h_0 in xi (the noise and the interior faces conserve mass)
-    leak = float(np.kron(asm["R"][0], np.ones(n3)) @ A(d)) / (0.5 * mass)
+    unit = asm.get("unit", np.ones(C.shape[1]))
+    leak = float(np.kron(asm["R"][0], unit) @ Ad) / (0.5 * mass)
     # negative part of the (x, v, V) marginal at the Lobatto nodes (weights: the basis integrals)
-    negative = -2.0 * float(asm["one"] @ np.minimum(c0, 0.0)) / mass
+    neg = asm["negative"](c0) if "negative" in asm else -float(asm["one"] @ np.minimum(c0, 0.0))
     residuals = {"V2": (V2 - q.Kc * q.tau_p * vV) / V2, "power": (Pin - q.m * q.gamma * v2 - q.Kv * vV) / Pin,
-                 "leak": leak, "negative": negative}
-    rss = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1e6  # kB on Linux
-    return XVWResult(V2 / (q.R * Pin), V2, Pin, N, its[0], residuals,
-                     {"assembly": t1 - t0, "factorization": t2 - t1, "gmres": t3 - t2}, peak, ms, rss)
+                 "leak": leak, "negative": 2.0 * neg / mass}
+    return V2 / (q.R * Pin), V2, Pin, residuals
 
 
 _REACH = {"v_reach": 1.0, "v_geometric": True}
@@ -416,17 +478,25 @@ BASE = {"layers": 2, "bulk_x": 3, "bulk_v": 2, "v_layers": 2, "v_bulk": 2}
 
 def case_row(a: float, case: dict[str, Any], scales: tuple[float, float] | None = None) -> dict[str, Any]:
     """Solve one case (:data:`BASE` with the mesh changes in ``case``; its keys ``blocks``,
-    ``rtol``, ``maxiter`` and ``drop_tol`` go to :func:`solve_xvw`) at n = 1, ``a``, on the mesh
-    scales ``scales`` (default :func:`reference_scales`); the row of the study's JSON (a case
-    whose GMRES stalls is recorded with its message)."""
+    ``rtol``, ``maxiter`` and ``drop_tol`` go to :func:`solve_xvw`, ``n`` (default 1) to the
+    model) at ``a``, on the mesh scales ``scales`` (default :func:`reference_scales`, else
+    :func:`_scales` where the table has no row); the row of the study's JSON (a case whose
+    GMRES stalls is recorded with its message)."""
     changes = dict(case)
     options = {k: changes.pop(k) for k in ("blocks", "rtol", "maxiter", "drop_tol") if k in changes}
+    progress = bool(changes.pop("progress", False))
+    n = float(changes.pop("n", 1.0))
     ms = XVWMesh(**{**BASE, **changes})
+    if scales is None:
+        try:
+            scales = reference_scales(a, n)
+        except KeyError:
+            scales = None
     try:
-        res = solve_xvw(Harvester.build(n=1, a=a), ms, scales=scales or reference_scales(a), **options)
-        return {"a": a, **options, **res.to_dict()}
+        res = solve_xvw(Harvester.build(n=n, a=a), ms, scales=scales, progress=progress, **options)
+        return {"a": a, "n": n, **options, **res.to_dict()}
     except NotConvergedError as exc:
-        return {"a": a, **options, "mesh": ms.__dict__, "failed": str(exc)}
+        return {"a": a, "n": n, **options, "mesh": ms.__dict__, "failed": str(exc)}
 
 
 def study(quick: bool) -> dict[str, Any]:
@@ -457,16 +527,15 @@ def log_case(argv: list[str]) -> dict[str, Any]:
     process so that ``maxrss_gb`` is the run's own peak): ``--case A CASE_JSON LABEL LOG``."""
     a, case, label, log = float(argv[0]), json.loads(argv[1]), argv[2], argv[3]
     t0 = time.perf_counter()
-    row = {"label": label, "case": case, **case_row(a, case)}
+    row = {"label": label, "case": case, **case_row(a, {**case, "progress": True})}
     row["wall_s"] = time.perf_counter() - t0
+    row["cpu_s"] = time.process_time()
     with open(log, "a") as f:
         f.write(json.dumps(row) + "\n")
     return row
 
 
 if __name__ == "__main__":  # pragma: no cover
-    import sys
-
     if sys.argv[1:2] == ["--case"]:
         print(json.dumps(log_case(sys.argv[2:])))
     else:
