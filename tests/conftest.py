@@ -1,49 +1,17 @@
 """Shared test set-up: strict floating point, headless plots, seeded rng, fuzz profiles, and
-numba's on-disk cache made safe for the parallel test workers."""
+one test process per CPU (pytest-xdist)."""
 
 from __future__ import annotations
-
-import fcntl
-import functools
-import os
 
 import matplotlib
 import numpy as np
 import pytest
 from hypothesis import HealthCheck, given, settings
-from numba.core.caching import IndexDataCacheFile
 
+import montecarlo  # noqa: F401  (its import serializes numba's cache saves: the workers compile at once)
 from fpe_harvester.parallel import default_threads
 
 matplotlib.use("Agg")
-
-
-def _one_writer_at_a_time(save):  # noqa: ANN001, ANN202
-    """``IndexDataCacheFile.save`` under an exclusive lock on the cache folder.
-
-    The suite runs in two processes (pytest-xdist) that compile the same kernels at the same
-    time on a cold cache. numba's ``save`` reads a function's index, takes the first free data
-    file number, writes the index, then the data file, all unlocked: two processes saving two
-    variants of one function (``montecarlo``'s step kinds share a function name) can both take
-    number 1, and the index can end up naming the other variant's machine code, which every
-    later process would load. Holding a lock on the folder from the read to the last write
-    makes the two saves one after the other. A load needs no lock (it finds the data file of
-    an entry or compiles again).
-    """
-
-    @functools.wraps(save)
-    def locked(self: IndexDataCacheFile, key: object, data: object) -> None:
-        folder = os.open(self._cache_path, os.O_RDONLY)
-        try:
-            fcntl.flock(folder, fcntl.LOCK_EX)
-            save(self, key, data)
-        finally:
-            os.close(folder)  # closing releases the lock
-
-    return locked
-
-
-IndexDataCacheFile.save = _one_writer_at_a_time(IndexDataCacheFile.save)
 
 
 def pytest_xdist_auto_num_workers(config: pytest.Config) -> int:

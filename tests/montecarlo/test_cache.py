@@ -29,3 +29,28 @@ def test_cached_kernels_survive_unchanged_sources_and_go_when_a_callee_changes(t
 def test_the_package_is_stamped_with_its_own_sources() -> None:
     root = Path(montecarlo.__file__).parent
     assert (root / "__pycache__" / STAMP_NAME).read_text() == source_stamp(root)
+
+
+def test_a_cache_save_waits_for_another_process_lock(tmp_path: Path) -> None:
+    """A save (numba's ``IndexDataCacheFile.save``, serialized on import) blocks while another
+    descriptor holds the folder's lock, as a second process's save would, and completes after."""
+    import fcntl
+    import os
+    import threading
+
+    from numba.core.caching import IndexDataCacheFile
+
+    from montecarlo._cache import serialize_cache_saves
+
+    assert serialize_cache_saves()
+    cache = IndexDataCacheFile(str(tmp_path), "kernel", source_stamp=("stamp", 1))
+    other = os.open(tmp_path, os.O_RDONLY)
+    fcntl.flock(other, fcntl.LOCK_EX)
+    saver = threading.Thread(target=cache.save, args=(("sig",), b"machine code"))
+    saver.start()
+    saver.join(0.3)
+    held = saver.is_alive() and not list(tmp_path.glob("*.nbi"))
+    os.close(other)
+    saver.join(10)
+    assert held, "the save did not wait for the lock"
+    assert not saver.is_alive() and cache.load(("sig",)) == b"machine code"
