@@ -75,7 +75,7 @@ from ...plane import DGLine, PlaneMesh
 from .modesolve import ModePreconditioner
 
 __all__ = ["KinkFrame", "KinkLevel", "KinkHierarchy", "KinkPlane", "kink_plane", "face_parts", "mode_transport",
-           "ModeOperator", "CoarseCorrection", "solve_kink_level", "GMRES_GIGABYTES", "GMRES_RESTART"]
+           "ModeOperator", "CoarseCorrection", "solve_kink_level", "GMRES_GIGABYTES", "GMRES_RESTART", "SWEEP_THREADS"]
 
 #: Memory (GB) of the GMRES basis and its longest restart length: the restart length is
 #: what fits, at most GMRES_RESTART. A restart length of 150 doubled the iterations of the
@@ -85,6 +85,9 @@ __all__ = ["KinkFrame", "KinkLevel", "KinkHierarchy", "KinkPlane", "kink_plane",
 #: M = 8 converges unrestarted (26 s) where GMRES(150) runs out of its budget (600
 #: iterations) and ends the refinement, which then goes on for minutes with no estimate.
 GMRES_GIGABYTES, GMRES_RESTART = 1.5, 150
+
+#: Threads of the preconditioner's sweep (:class:`~.modesolve.ModePreconditioner`).
+SWEEP_THREADS = 1
 
 
 @dataclass(frozen=True)
@@ -602,7 +605,7 @@ def _solve(h: Harvester, M: int, mesh: PlaneMesh, order: int, frame: KinkFrame, 
     pl = kink_plane(h, mesh, order, hi.gamma_e, hi.kappa)
     parts = face_parts(pl, hi)
     T = mode_transport(pl, hi, parts)
-    prec = ModePreconditioner(T, pl, hi)
+    prec = ModePreconditioner(T, pl, hi, SWEEP_THREADS)
     n, nh = pl.S_I.shape[0], hi.hb.size
     # bordering in the mode basis: u = w = (integral of the test functions) on beta = 0
     U = np.outer(pl.integrals["1"], hi.R[0])

@@ -41,6 +41,8 @@ and SuperLU's factors of a group hold only 1.6 times the entries of the group's 
 
 from __future__ import annotations
 
+import functools
+from concurrent.futures import ThreadPoolExecutor
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
@@ -55,6 +57,12 @@ __all__ = ["ModePreconditioner", "mode_groups"]
 #: Entries of the parity in the mode basis below this are rounding of R (the parity maps
 #: each mode to one other).
 PARITY_TOL = 1e-8
+
+
+@functools.cache
+def _helper() -> ThreadPoolExecutor:
+    """The thread that sweeps the second segment (made once)."""
+    return ThreadPoolExecutor(1, thread_name_prefix="mode-sweep")
 
 
 def mode_groups(hi: KinkHierarchy) -> list[np.ndarray]:
@@ -89,7 +97,9 @@ class ModePreconditioner:
         The Hermite degree's matrices in the mode basis.
     """
 
-    def __init__(self, T: list[sp.csr_matrix], pl: KinkPlane, hi: KinkHierarchy) -> None:
+    def __init__(self, T: list[sp.csr_matrix], pl: KinkPlane, hi: KinkHierarchy, threads: int = 1) -> None:
+        if threads not in (1, 2):
+            raise ValueError(f"threads must be 1 or 2, got {threads!r}")
         self.groups = mode_groups(hi)
         self.order = np.concatenate(self.groups)
         self.bounds = np.cumsum([0] + [g.size for g in self.groups])
@@ -99,11 +109,15 @@ class ModePreconditioner:
         # (in the factors) removed
         C = [np.tril(Km[np.ix_(self.order, self.order)], -1) for Km in couplings]
         self.C = np.concatenate(C, axis=0)                      # (terms * modes, modes)
-        # S_k = -(x mass) kron (v mass): applied as two small dense products
+        # S_k = -(x mass) kron (v mass), applied as small dense products: Mx (W_0 Mv + W_1 Mv1) + Mx1 W_2 Mv
         X, Vl = pl.X, pl.Vl
         self.shape = (X.size, Vl.size)
-        self.masses = [(X.mass().toarray(), Vl.mass().toarray()), (X.mass().toarray(), Vl.mass(power=1).toarray()),
-                       (X.mass(power=1).toarray(), Vl.mass().toarray())][:len(couplings)]
+        self.Mx, self.Mx1 = X.mass().toarray(), X.mass(power=1).toarray()
+        self.Mv, self.Mv1 = Vl.mass().toarray(), Vl.mass(power=1).toarray()
+        # threads = 2: two segments of about half the modes each, swept concurrently
+        # (SuperLU's solve and BLAS release the GIL); the second does without the coupling to the first
+        cut = int(np.searchsorted(self.bounds, self.bounds[-1] / 2)) if threads == 2 else len(self.groups)
+        self.segments = [(0, cut)] + ([(cut, len(self.groups))] if cut < len(self.groups) else [])
 
     @staticmethod
     def _factor(grp: np.ndarray, T: list[sp.csr_matrix], pl: KinkPlane, hi: KinkHierarchy) -> Any:
@@ -121,18 +135,31 @@ class ModePreconditioner:
 
     def __call__(self, r: np.ndarray) -> np.ndarray:
         """The sweep for the residual ``r`` ((x, v) unknowns by modes)."""
-        nh = self.order.size
         R = np.ascontiguousarray(r[:, self.order].T)            # (modes, unknowns), sweep order
         Y = np.empty_like(R)
-        terms = len(self.masses)
-        for lu, s, e in zip(self.lus, self.bounds[:-1], self.bounds[1:]):
-            rhs = R[s:e]
-            if s:
-                rows = (np.arange(s, e)[None, :] + nh * np.arange(terms)[:, None]).ravel()
-                W = (self.C[rows, :s] @ Y[:s]).reshape(terms, e - s, *self.shape)
-                # r_g - sum_k S_k W_k, with S_k = -(Mx_k kron Mv_k)
-                rhs = rhs + sum(Mx @ (W[k] @ Mv) for k, (Mx, Mv) in enumerate(self.masses)).reshape(e - s, -1)
-            Y[s:e] = lu.solve(np.ascontiguousarray(rhs).ravel()).reshape(e - s, -1)
+        if len(self.segments) == 1:
+            self._sweep(R, Y, *self.segments[0])
+        else:
+            job = _helper().submit(self._sweep, R, Y, *self.segments[1])
+            self._sweep(R, Y, *self.segments[0])
+            job.result()
         out = np.empty_like(r)
         out[:, self.order] = Y.T
         return out
+
+    def _sweep(self, R: np.ndarray, Y: np.ndarray, first: int, last: int) -> None:
+        """Solve the groups ``first`` to ``last - 1`` in turn into ``Y`` (sweep order), each
+        with the coupling to the groups of the segment solved before it."""
+        nh, terms = self.order.size, self.C.shape[0] // self.order.size
+        s0 = self.bounds[first]
+        for lu, s, e in zip(self.lus[first:last], self.bounds[first:last], self.bounds[first + 1:last + 1]):
+            rhs = R[s:e]
+            if s > s0:
+                rows = (np.arange(s, e)[None, :] + nh * np.arange(terms)[:, None]).ravel()
+                W = (self.C[rows, s0:s] @ Y[s0:s]).reshape(terms, e - s, *self.shape)
+                # r_g - sum_k S_k W_k, with S_k = -(Mx_k kron Mv_k)
+                Z = self.Mx @ (W[0] @ self.Mv + W[1] @ self.Mv1)
+                if terms == 3:
+                    Z += self.Mx1 @ (W[2] @ self.Mv)
+                rhs = rhs + Z.reshape(e - s, -1)
+            Y[s:e] = lu.solve(np.ascontiguousarray(rhs).ravel()).reshape(e - s, -1)
