@@ -13,6 +13,7 @@ from fpe_harvester.fpe import HermiteBasis, stationary
 from fpe_harvester.fpe.plane import DGLine, PlaneMesh, lobatto_points
 from fpe_harvester.fpe.schemes.xv import kink
 from fpe_harvester.fpe.schemes.xv.kinkdisc import KinkDG, KinkSettings, kink_domain
+from fpe_harvester.fpe.schemes.xv.modesolve import ModePreconditioner
 
 
 def test_lobatto_points_are_the_extrema_of_legendre() -> None:
@@ -117,6 +118,38 @@ def test_mode_operator_matches_the_assembled_hierarchy(small: tuple[Harvester, K
     # mass conservation: the beta = 0 row of the Hermite-basis operator sums to the outflow
     # only (no interior source): the test function 1 sees no K0/K1/K2 term
     assert np.allclose((hi.R @ hi.K0m @ hi.R.T)[0], 0.0, atol=1e-12)
+
+
+@pytest.mark.parametrize("threads", [1, 2])
+def test_mode_sweep_solves_the_block_lower_triangle(small: tuple[Harvester, KinkDG], threads: int) -> None:
+    """The preconditioner's sweep solves A's block lower triangle over the mode groups in
+    sweep order (each group's block without the coupling of its two modes by K0, K1, K2;
+    with two threads, each segment's), checked against the matrix-free operator, with a
+    shifted frame (K2 != 0)."""
+    h, disc = small
+    fr = kink.KinkFrame(disc.frame.Sigma, np.array([0.1, 0.4]), np.array([0.3, 0.0]))
+    hi = kink.KinkHierarchy.of(h, 4, fr)
+    pl = kink.kink_plane(h, disc.base, 2, hi.gamma_e, hi.kappa)
+    parts = kink.face_parts(pl, hi)
+    prec = ModePreconditioner(kink.mode_transport(pl, hi, parts), pl, hi, threads)
+    op = kink.ModeOperator(pl, hi, parts)
+    assert sorted(np.concatenate(prec.groups).tolist()) == list(range(hi.hb.size))
+    assert any(g.size == 2 for g in prec.groups)
+    r = np.random.default_rng(2).standard_normal((pl.S_I.shape[0], hi.hb.size))
+    y = prec(r)
+    done = np.zeros(hi.hb.size, dtype=bool)
+    for k, g in enumerate(prec.groups):
+        if k == prec.segments[-1][0]:
+            done[:] = False
+        done[g] = True
+        lower = op(np.where(done, y, 0.0))[:, g]
+        for Km, S in ((hi.K0m, pl.S_K0), (hi.K1m, pl.S_K1), (hi.K2m, pl.S_K2)):
+            own = Km[np.ix_(g, g)] - np.diag(np.diag(Km[np.ix_(g, g)]))
+            lower -= S @ y[:, g] @ own.T
+        assert np.allclose(lower, r[:, g], atol=1e-10 * np.abs(r).max())
+    assert len(prec.segments) == threads
+    with pytest.raises(ValueError, match="threads must be 1 or 2"):
+        ModePreconditioner([], pl, hi, 3)
 
 
 def test_level_is_a_density_with_the_stationary_identities(small: tuple[Harvester, KinkDG]) -> None:

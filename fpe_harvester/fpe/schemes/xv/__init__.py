@@ -1,5 +1,5 @@
 """Scheme ``"xv"``: DG in (x, v) graded toward the trap, Hermite functions of (V, xi)
-(:mod:`.kink` the level, :mod:`.kinkdisc` the refinement family, :mod:`.scheme` the plan
+(:mod:`.kink` the level, :mod:`.modesolve` its preconditioner, :mod:`.kinkdisc` the refinement family, :mod:`.scheme` the plan
 and the registry entry)."""
 
 from __future__ import annotations

@@ -45,11 +45,12 @@ so the mesh needs no layers toward the origin.
 
 The linear system (the stationary density is its null vector, normalized) is solved by
 GMRES in the mode basis, preconditioned by the exact solves of every mode's scalar
-transport with the diagonal of the mode coupling (:class:`ModePreconditioner`): the
-transport around the trap is cyclic (the flow spirals into the origin), and a solve per
-mode resolves the cycles exactly on any mesh, while GMRES handles the coupling between
-modes (noise and relaxation of (V, xi)). Measured on a = 2 with four layers at M = 6:
-164 iterations in 11 s, against 566 iterations in 205 s with element-block symmetric
+transport (with its parity partner), swept mode by mode with the coupling between modes
+(noise and relaxation of (V, xi)) in Gauss--Seidel fashion
+(:class:`~.modesolve.ModePreconditioner`): the transport around the trap is cyclic (the
+flow spirals into the origin), and a solve per mode resolves the cycles exactly on any
+mesh. Measured on a = 2 with four layers at M = 6: 164 iterations in 11 s with the modes
+solved independently, against 566 iterations in 205 s with element-block symmetric
 Gauss--Seidel, whose sweeps cannot follow the rotation.
 """
 
@@ -71,9 +72,10 @@ from ...hermite import HermiteBasis
 from ...krylov import gmres, restart_length
 from ...moments import conditional_fields, harvester_moments
 from ...plane import DGLine, PlaneMesh
+from .modesolve import ModePreconditioner
 
 __all__ = ["KinkFrame", "KinkLevel", "KinkHierarchy", "KinkPlane", "kink_plane", "face_parts", "mode_transport",
-           "ModeOperator", "ModePreconditioner", "CoarseCorrection", "solve_kink_level", "GMRES_GIGABYTES", "GMRES_RESTART"]
+           "ModeOperator", "CoarseCorrection", "solve_kink_level", "GMRES_GIGABYTES", "GMRES_RESTART", "SWEEP_THREADS"]
 
 #: Memory (GB) of the GMRES basis and its longest restart length: the restart length is
 #: what fits, at most GMRES_RESTART. A restart length of 150 doubled the iterations of the
@@ -83,6 +85,9 @@ __all__ = ["KinkFrame", "KinkLevel", "KinkHierarchy", "KinkPlane", "kink_plane",
 #: M = 8 converges unrestarted (26 s) where GMRES(150) runs out of its budget (600
 #: iterations) and ends the refinement, which then goes on for minutes with no estimate.
 GMRES_GIGABYTES, GMRES_RESTART = 1.5, 150
+
+#: Threads of the preconditioner's sweep (:class:`~.modesolve.ModePreconditioner`).
+SWEEP_THREADS = 1
 
 
 @dataclass(frozen=True)
@@ -373,36 +378,6 @@ def _face_matrix(pl: KinkPlane, parts: tuple[np.ndarray, np.ndarray]) -> sp.csr_
     return sp.csr_matrix((np.concatenate(vals), (np.concatenate(rows), np.concatenate(cols))), shape=(size, size))
 
 
-class ModePreconditioner:
-    """Exact solve of each mode's transport with the diagonal of the mode coupling.
-
-    Modes that the mirror condition couples (nodes :math:`\\pm\\lambda` of one chain) are
-    solved together. Sparse LU (SuperLU) of systems of the size of the scalar (x, v) space.
-    """
-
-    def __init__(self, T: list[sp.csr_matrix], pl: KinkPlane, hi: KinkHierarchy) -> None:
-        n = len(T)
-        self.groups: list[tuple[np.ndarray, Any]] = []
-        seen = np.zeros(n, dtype=bool)
-        for i in range(n):
-            if seen[i]:
-                continue
-            grp = np.unique(np.concatenate([[i], np.flatnonzero(np.abs(hi.Pm[:, i]) > 1e-8)]))
-            seen[grp] = True
-            blocks = [[hi.Pm[r, c] * pl.S_S for c in grp] for r in grp]
-            for k, r in enumerate(grp):
-                blocks[k][k] = (blocks[k][k] + T[r] + hi.K0m[r, r] * pl.S_K0 + hi.K1m[r, r] * pl.S_K1
-                                + hi.K2m[r, r] * pl.S_K2)
-            # MMD on A^T A: a third of COLAMD's fill, half its solve time (a = 1, M = 8)
-            self.groups.append((grp, spla.splu(sp.bmat(blocks, format="csc"), permc_spec="MMD_ATA")))
-
-    def __call__(self, r: np.ndarray) -> np.ndarray:
-        out = np.empty_like(r)
-        for grp, lu in self.groups:
-            out[:, grp] = lu.solve(np.ascontiguousarray(r[:, grp].T).ravel()).reshape(len(grp), -1).T
-        return out
-
-
 class CoarseCorrection:
     """Exact solve of the kink discretization truncated at the low Hermite degree ``Mc``.
 
@@ -608,7 +583,7 @@ def _moments(h: Harvester, pl: KinkPlane, hi: KinkHierarchy, frame: KinkFrame, C
 def solve_kink_level(h: Harvester, M: int, mesh: PlaneMesh, order: int, frame: KinkFrame,
                      rtol: float = 1e-9, guess: KinkLevel | None = None, maxiter: int = 1500,
                      coarse: CoarseCorrection | None = None, deadline: float | None = None) -> KinkLevel:
-    """Assemble and solve one level (GMRES in the mode basis, :class:`ModePreconditioner`).
+    """Assemble and solve one level (GMRES in the mode basis, :class:`~.modesolve.ModePreconditioner`).
 
     The stationary density is the null vector of the operator A (nonsingular only through
     the outflow at the domain's edge); GMRES solves the bordered system
@@ -630,7 +605,7 @@ def _solve(h: Harvester, M: int, mesh: PlaneMesh, order: int, frame: KinkFrame, 
     pl = kink_plane(h, mesh, order, hi.gamma_e, hi.kappa)
     parts = face_parts(pl, hi)
     T = mode_transport(pl, hi, parts)
-    prec = ModePreconditioner(T, pl, hi)
+    prec = ModePreconditioner(T, pl, hi, SWEEP_THREADS)
     n, nh = pl.S_I.shape[0], hi.hb.size
     # bordering in the mode basis: u = w = (integral of the test functions) on beta = 0
     U = np.outer(pl.integrals["1"], hi.R[0])
