@@ -109,4 +109,3 @@ def _advance(tag, xi, eps, cf):
 def _twin_xi(tag, xi):
     f = _kernels(tag).twin_xi
     return lambda tag, xi: f(xi)
-
