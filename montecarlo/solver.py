@@ -349,20 +349,13 @@ class MonteCarlo:
             t_run0 = self.t_run or _T_RUN
             pil_burn = burn_in(relaxation_time(h, kappa), self.tol, t_run0) if self.t_burn is None \
                 else self.t_burn
-            pilot_cost = self.least_seconds(h, dt, 16, max(2, self._batch()), pil_burn + t_run0)
-            if self.control and math.isfinite(pil_burn) and pilot_cost > self.max_time:
-                notes["twin"] += f" (no pilot run: it needs >= {pilot_cost:.3g} s, beyond max_time)"
-            elif self.control and math.isfinite(pil_burn):
-                pilot = simulate(h, dt=dt, paths=16, replicas=max(2, self._batch()),
-                                 t_burn=pil_burn, t_run=t_run0, seed=seed, threshold=self.threshold(h),
-                                 threads=self.threads, first_replica=_PILOT_FIRST, joint=self.joint)
-                m = pilot.moments(0)
-                ok = np.isfinite(m["xdU"]) & np.isfinite(m["x2"])
-                if ok.any() and m["x2"][ok].mean() > 0 and m["xdU"][ok].mean() > 0:
-                    kp = linearized_stiffness(h, float(m["xdU"][ok].mean()), float(m["x2"][ok].mean()))
-                    if kp is not None:
-                        kappa = kp
-                        notes["twin"] = "pilot <x U'(x)>/<x^2>"
+            if self.control and math.isfinite(pil_burn):
+                pilot_cost = self.least_seconds(h, dt, 16, max(2, self._batch()), pil_burn + t_run0)
+                if pilot_cost > self.max_time:
+                    notes["twin"] += f" (no pilot run: it needs >= {pilot_cost:.3g} s, beyond max_time)"
+                elif (kp := self._pilot_stiffness(h, dt, pil_burn, t_run0, seed)) is not None:
+                    kappa = kp
+                    notes["twin"] = "pilot <x U'(x)>/<x^2>"
             # the kink's averaged-noise step (tau < dt) has no twin
             averaged = scheme_kind(h) == KIND_KINK and uses_joint_step(h, dt)
             twin = kappa if self.control and not averaged else None
@@ -386,6 +379,19 @@ class MonteCarlo:
             t_run = dt
         return Plan(dt=dt, t_burn=t_burn, t_run=t_run, paths=paths, twin=twin, start=start,
                     relaxation_time=tau_r, notes=notes)
+
+    def _pilot_stiffness(self, h: Harvester, dt: float, t_burn: float, t_run: float,
+                         seed: int) -> float | None:
+        """The twin's stiffness from a short pilot run's <x U'(x)> / <x^2> (None if the pilot's
+        moments give none)."""
+        pilot = simulate(h, dt=dt, paths=16, replicas=max(2, self._batch()), t_burn=t_burn, t_run=t_run,
+                         seed=seed, threshold=self.threshold(h), threads=self.threads,
+                         first_replica=_PILOT_FIRST, joint=self.joint)
+        m = pilot.moments(0)
+        ok = np.isfinite(m["xdU"]) & np.isfinite(m["x2"])
+        if not (ok.any() and m["x2"][ok].mean() > 0 and m["xdU"][ok].mean() > 0):
+            return None
+        return linearized_stiffness(h, float(m["xdU"][ok].mean()), float(m["x2"][ok].mean()))
 
     def least_seconds(self, h: Harvester, dt: float, paths: int, replicas: int, t_path: float) -> float:
         """A lower bound on the wall time, in seconds, of ``replicas`` x ``paths`` paths of ``h``
