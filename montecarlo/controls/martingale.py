@@ -193,6 +193,10 @@ def mg_measure(x, v, V, xi, w, a, n, phi, xi0, acc, first: bool, started: bool, 
             acc[0, K + d] += s
             if first:
                 acc[1, K + d] += s
-    gprev[:] = g
+    # element loops, not slice copies: those compile numba's shape-checked copy per dimension
+    for k in range(g.size):
+        gprev[k] = g[k]
     mg_phi(x, v, V, xi, w, a, n, phi)
-    xi0[:, :] = xi
+    for j in range(N):
+        for p in range(P):
+            xi0[j, p] = xi[j, p]

@@ -25,8 +25,8 @@ from numba import njit
 
 from fpe_harvester.model import Harvester
 
-from .._kernels import (KIND_KICK, KIND_KINK, MAX_SUBSTEPS, _coupling_force, _kick, _kick_force,
-                        _ring_neighbours, _stiff_amplitude, _substeps)
+from .._kernels import (KIND_KICK, KIND_KINK, MAX_SUBSTEPS, _kick, _kick_force, _ring_coupling,
+                        _stiff_amplitude, _substeps)
 from .._kink import _kink_flow
 from ..scheme import step_coefficients
 from .base import Kernels, StepScheme
@@ -40,20 +40,17 @@ class FrozenTag(NamedTuple):
 
 @njit(cache=True, nogil=True)
 def _external_force(xi, xm, f, pp) -> None:
-    """f = sigma xi + the coupling force (:func:`_coupling_force`) at the predicted midpoints."""
+    """f = sigma xi + the coupling force (:func:`_ring_coupling`) at the predicted midpoints."""
     N, P = xi.shape
-    sigma, k, k4, k3 = pp[5], pp[6], pp[14], pp[15]
-    # the diffusive coupling alone reads two neighbours, not four: at two paths per chunk the
-    # general force's loads and tests cost 10-20 % of a harmonic ring's step
-    plain = k4 == 0.0 and k3 == 0.0
-    for j in range(N):
-        jmm, jm, jp, jpp = _ring_neighbours(j, N)
+    sigma = pp[5]
+    if N > 1:
+        _ring_coupling(xm, f, pp, 0, P)
+        for j in range(N):
+            for p in range(P):
+                f[j, p] = sigma * xi[j, p] + f[j, p]
+    else:
         for p in range(P):
-            f[j, p] = sigma * xi[j, p]
-            if N > 1 and plain:
-                f[j, p] += k * (xm[jm, p] + xm[jp, p])
-            elif N > 1:
-                f[j, p] += _coupling_force(xm[jmm, p], xm[jm, p], xm[j, p], xm[jp, p], xm[jpp, p], k, k4, k3)
+            f[0, p] = sigma * xi[0, p]
 
 
 @njit(cache=True, nogil=True)
@@ -136,8 +133,9 @@ def _d_step(x, v, V, xi, F, stuck, xm, fext, w, cf, pp, kind, counters, cs) -> N
                 for j in range(N):
                     s0[0, j, i], s0[1, j, i], s0[2, j, i], s0[3, j, i] = x[j, p], v[j, p], V[j, p], F[j, p]
                 i += 1
+    # the kicks' update flags are runtime bools: literal True and False compiled _kick twice
     if kicks:
-        _kick(x, v, F, h, pp, False)
+        _kick(x, v, F, h, pp, not kicks)
     if N > 1:
         for j in range(N):
             for p in range(P):
@@ -148,7 +146,7 @@ def _d_step(x, v, V, xi, F, stuck, xm, fext, w, cf, pp, kind, counters, cs) -> N
     else:
         _linear_flow(x, v, V, fext, cf)
     if kicks:
-        _kick(x, v, F, h, pp, True)
+        _kick(x, v, F, h, pp, kicks)
     for i in range(n_stiff):
         p = sp[i]
         for j in range(N):
@@ -156,11 +154,9 @@ def _d_step(x, v, V, xi, F, stuck, xm, fext, w, cf, pp, kind, counters, cs) -> N
         if N > 1:  # neighbours at their midpoints predicted from the start of the step
             for j in range(N):
                 xm[j, p] = x[j, p] + 0.5 * h * v[j, p]
-            sigma, k, k4, k3 = pp[5], pp[6], pp[14], pp[15]
+            _ring_coupling(xm, fext, pp, p, p + 1)
             for j in range(N):
-                jmm, jm, jp, jpp = _ring_neighbours(j, N)
-                fext[j, p] = sigma * xi[j, p] + _coupling_force(xm[jmm, p], xm[jm, p], xm[j, p], xm[jp, p],
-                                                                xm[jpp, p], k, k4, k3)
+                fext[j, p] = pp[5] * xi[j, p] + fext[j, p]
         _substep_path(x, v, V, F, fext, p, sk[i], cf, pp)
 
 

@@ -22,8 +22,8 @@ from numba import njit
 
 from fpe_harvester.model import Harvester
 
-from .._kernels import (CF_JOINT, JOINT_BLOCK, KIND_KICK, _coupling_force, _kick, _kick_force,
-                        _ring_neighbours, _stiff_amplitude, _substeps)
+from .._kernels import (CF_JOINT, JOINT_BLOCK, KIND_KICK, _kick, _kick_force, _ring_coupling,
+                        _stiff_amplitude, _substeps)
 from ..scheme import joint_step_refusal, step_coefficients
 from .base import Kernels, StepScheme
 
@@ -156,23 +156,20 @@ def _d_step_joint(x, v, V, xi, F, xm, fext, eps, cf, pp, kind, rbm, rbx, pvx, w,
                     s0[3, j, i], s0[4, j, i] = xi[j, p], F[j, p]
                 i += 1
         n_stiff = i
+    # the kicks' update flags are runtime bools: literal True and False compiled _kick twice
     if kicks:
-        _kick(x, v, F, h, pp, False)
-    k, k4, k3 = pp[6], pp[14], pp[15]
-    for j in range(N):
-        for p in range(P):
-            fext[j, p] = 0.0
+        _kick(x, v, F, h, pp, not kicks)
     if N > 1:
         for j in range(N):
             for p in range(P):
                 xm[j, p] = x[j, p] + 0.5 * h * v[j, p]
-        for j in range(N):
-            jmm, jm, jp, jpp = _ring_neighbours(j, N)
-            for p in range(P):
-                fext[j, p] = _coupling_force(xm[jmm, p], xm[jm, p], xm[j, p], xm[jp, p], xm[jpp, p], k, k4, k3)
+        _ring_coupling(xm, fext, pp, 0, P)
+    else:
+        for p in range(P):
+            fext[0, p] = 0.0
     _joint_flow(x, v, V, xi, fext, eps, cf, rbm, rbx)
     if kicks:
-        _kick(x, v, F, h, pp, True)
+        _kick(x, v, F, h, pp, kicks)
         hk = 0.5 * h / pp[0]
         beta = cf[CF_JOINT + 38]
         for j in range(N):
@@ -190,9 +187,7 @@ def _d_step_joint(x, v, V, xi, F, xm, fext, eps, cf, pp, kind, rbm, rbx, pvx, w,
         if N > 1:
             for j in range(N):
                 xm[j, p] = x[j, p] + 0.5 * h * v[j, p]
-            for j in range(N):
-                jmm, jm, jp, jpp = _ring_neighbours(j, N)
-                fext[j, p] = _coupling_force(xm[jmm, p], xm[jm, p], xm[j, p], xm[jp, p], xm[jpp, p], k, k4, k3)
+            _ring_coupling(xm, fext, pp, p, p + 1)
         _joint_substeps(x, v, V, xi, F, fext, pvx, p, sk[i], cf, pp, gen)
 
 
