@@ -26,7 +26,7 @@ reference's own is not resolved: the figure shows that floor, and the table's sp
 
 ``python -m validation.studies.work_precision [--quick] [--out DIR]`` writes
 ``work_precision.json`` and ``work_precision.png`` (full: about 1-1.5 h on a quiet 2-core machine, estimated
-from the recorded run's costs with the Monte Carlo budget of :func:`_settings`; quick: about 1 min).
+from the recorded run's costs with its Monte Carlo budget of 900 s per case; quick: about 1 min).
 """
 
 from __future__ import annotations
