@@ -20,14 +20,6 @@ def pytest_xdist_auto_num_workers(config: pytest.Config) -> int:
     return default_threads()
 
 
-# ``--dist loadgroup`` (pyproject's addopts) and the group "joint-and-averaged-steps": every test
-# that runs the path loop with the joint or the averaged step runs in one process, and the group,
-# the largest, is dealt first. On a cold numba cache a step's first run compiles the loop (10-30
-# CPU-s): two processes reaching one step at once each compiled it (measured: 30 CPU-s twice).
-# Meanwhile the other process compiles the frozen step, which the other Monte Carlo tests run,
-# at tests/examples, long before the group's last test needs it. Other tests go one at a time.
-
-
 @pytest.fixture(autouse=True)
 def _strict_floats():
     old = np.seterr(all="raise", under="ignore")

@@ -95,7 +95,6 @@ def test_fokker_planck_fuzz(fuzz) -> None:
     fuzz(_fpe, {"ci": 8, "long": 300}, h=harvester(st.just(1), EXPONENTS))
 
 
-@pytest.mark.xdist_group("joint-and-averaged-steps")
 def test_monte_carlo_fuzz_single_units_and_harmonic_rings(fuzz) -> None:
     fuzz(_mc, {"ci": 10, "long": 300},
          h=st.one_of(harvester(st.just(1), EXPONENTS), harvester(st.integers(2, 4), st.just(2.0))))
@@ -105,7 +104,6 @@ def test_monte_carlo_fuzz_nonlinear_rings(fuzz) -> None:
     fuzz(_mc, {"ci": 6, "long": 300}, h=harvester(st.integers(2, 4), EXPONENTS.filter(lambda n: n != 2.0)))
 
 
-@pytest.mark.xdist_group("joint-and-averaged-steps")
 def test_confined_ring_that_blows_up_numerically_is_not_called_unstable() -> None:
     """Found by the fuzz test above: n = 4 (always confined), stiff (m = 0.012): paths blow up."""
     h = Harvester.build(a=74, n=4, N=2, k=-6.2, m=0.012461067711525808, gamma=72.08507599473113,

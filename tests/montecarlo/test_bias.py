@@ -34,7 +34,6 @@ def test_harmonic_bias_is_second_order() -> None:
     assert 1.7 < order < 2.3, order
 
 
-@pytest.mark.xdist_group("joint-and-averaged-steps")
 @pytest.mark.parametrize("tau", [1.0, 1e-4])
 def test_joint_step_has_no_bias_on_a_harmonic_unit(tau: float) -> None:
     # the joint step is the exact transition of a harmonic unit: eta(dt/2) - eta(dt) on common
@@ -57,8 +56,7 @@ def test_richardson_bias_estimate_matches_actual_error() -> None:
     assert abs((r.eta - r.info["bias_eta"]) - exact) < abs(r.eta - exact)
 
 
-@pytest.mark.parametrize(
-    "joint", [False, pytest.param(True, marks=pytest.mark.xdist_group("joint-and-averaged-steps"))])
+@pytest.mark.parametrize("joint", [False, True])
 def test_smooth_nonlinear_bias_is_second_order(joint: bool) -> None:
     h = Harvester.build(a=0.5, n=4, N=3, k=-0.3)
     dts = (0.2, 0.1)

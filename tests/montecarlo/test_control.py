@@ -43,8 +43,7 @@ def test_initial_law_is_the_ring_covariance() -> None:
     assert np.allclose(C, dense, rtol=2e-3, atol=2e-4 * np.abs(dense).max())
 
 
-@pytest.mark.parametrize(
-    "joint", [False, pytest.param(True, marks=pytest.mark.xdist_group("joint-and-averaged-steps"))])
+@pytest.mark.parametrize("joint", [False, True])
 def test_simulated_twin_matches_its_discrete_expectations_not_the_continuous_ones(joint: bool) -> None:
     # dt = 0.4: the scheme's bias (~5 %) is far larger than the standard errors
     h = Harvester.build(a=0.5, n=3, N=3, k=-0.2)
@@ -67,8 +66,7 @@ def test_simulated_twin_matches_its_discrete_expectations_not_the_continuous_one
         assert abs(m["t_vxi"].mean() - cont["vxi"]) > 10 * se
 
 
-@pytest.mark.parametrize(
-    "joint", [False, pytest.param(True, marks=pytest.mark.xdist_group("joint-and-averaged-steps"))])
+@pytest.mark.parametrize("joint", [False, True])
 def test_control_variates_are_unbiased_on_a_harmonic_system(joint: bool) -> None:
     # the system is harmonic, so its discrete-time expectation is known exactly; a twin of
     # another stiffness must not bias the estimate, and must reduce its variance

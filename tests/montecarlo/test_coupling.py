@@ -96,14 +96,12 @@ def _check_boltzmann(h: Harvester, expect: float, seed: int = 1, tol: float = 1e
 _WHITE = dict(N=2, Kv=0.0, tau=1e-4)
 
 
-@pytest.mark.xdist_group("joint-and-averaged-steps")
 def test_boltzmann_harmonic_cubic_bonds() -> None:
     """n = 2, a = 0.5, k = -0.2, k3 = 0.1: <d^2> = 1.384024 (quadrature checks the number)."""
     assert _bond_d2(0.5, -0.2, 0.1) == pytest.approx(1.384024, abs=1e-6)
     _check_boltzmann(Harvester.build(a=0.5, n=2, k=-0.2, k3=0.1, **_WHITE), 1.384024)
 
 
-@pytest.mark.xdist_group("joint-and-averaged-steps")
 @pytest.mark.parametrize("k, k3, expect, tol", [(-0.4, 0.1, 2.007773, 1e-2), (0.0, 0.0, 2.0, 5e-3)])
 def test_boltzmann_harmonic_more(k: float, k3: float, expect: float, tol: float) -> None:
     """n = 2, a = 0.5: the double well in d held by k3 beyond -a/2, and the uncoupled pair
@@ -112,7 +110,6 @@ def test_boltzmann_harmonic_more(k: float, k3: float, expect: float, tol: float)
     _check_boltzmann(Harvester.build(a=0.5, n=2, k=k, k3=k3, **_WHITE), expect, tol=tol)
 
 
-@pytest.mark.xdist_group("joint-and-averaged-steps")
 def test_boltzmann_k4() -> None:
     """n = 2, a = 0.5, k = -0.45, k4 = 0.05, k3 = 0.1: k4 shifts k by 4 k4 at N = 2; the value
     by quadrature of the bond law."""
@@ -121,7 +118,6 @@ def test_boltzmann_k4() -> None:
     _check_boltzmann(Harvester.build(a=0.5, n=2, k=-0.45, k4=0.05, k3=0.1, **_WHITE), expect)
 
 
-@pytest.mark.xdist_group("joint-and-averaged-steps")
 @pytest.mark.parametrize("a, k, expect", [(0.5, -0.1, 1.362075), (1.0, -0.5, 1.999117)])
 def test_boltzmann_n15(a: float, k: float, expect: float) -> None:
     """n = 1.5, k3 = 0.1 (values by integrating out the centre of mass)."""
@@ -169,7 +165,6 @@ def test_switching_slower_in_deeper_wells() -> None:
     assert deep.buckled_share > 0.95
 
 
-@pytest.mark.xdist_group("joint-and-averaged-steps")
 @pytest.mark.parametrize("k, k3, expect", [(-0.5, 0.1, 2.838682), (-1.5, 1.0, 1.060775)])
 def test_boltzmann_kink_white_noise(k: float, k3: float, expect: float) -> None:
     """n = 1, a = 1 at tau = 1e-4: the kink scheme's averaged-noise step reaches the white-noise

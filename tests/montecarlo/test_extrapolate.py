@@ -40,8 +40,7 @@ def test_residual_rule_bounds_the_extrapolation_error_of_harmonic_schemes(k: flo
     assert abs(r_fine - exact) <= abs(eta[dt / 2] - exact) + 1e-12
 
 
-@pytest.mark.parametrize(
-    "joint", [False, pytest.param(True, marks=pytest.mark.xdist_group("joint-and-averaged-steps"))])
+@pytest.mark.parametrize("joint", [False, True])
 def test_coarsest_level_has_the_law_of_its_own_step(joint: bool) -> None:
     # harmonic ring at coarse steps: the coupled differences of each level from the fine one
     # must match the exact discrete values' differences, which the frozen step resolves (the

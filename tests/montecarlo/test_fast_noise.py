@@ -67,7 +67,6 @@ def test_white_noise_limit_is_continuous() -> None:
     assert mats[-1][2][1, 1] == pytest.approx(2.0 * 0.02, rel=0.05)
 
 
-@pytest.mark.xdist_group("joint-and-averaged-steps")
 def test_step_choice_and_refusal() -> None:
     assert uses_joint_step(Harvester.build(a=0.5, n=3, tau=1e-4), 0.02)
     assert not uses_joint_step(Harvester.build(a=0.5, n=3, tau=1.0), 0.02)
@@ -80,7 +79,6 @@ def test_step_choice_and_refusal() -> None:
         simulate(Harvester.build(a=0.5, n=1, tau=1e-4), dt=0.02, paths=2, replicas=1, t_run=1.0, twin=1.0)
 
 
-@pytest.mark.xdist_group("joint-and-averaged-steps")
 def test_twin_at_fast_noise_matches_its_expectations() -> None:
     h = Harvester.build(a=0.5, n=3, tau=1e-4)
     e = simulate(h, dt=0.02, paths=64, replicas=16, t_burn=0.0, t_run=50.0, seed=8, twin=1.2, start="twin")
@@ -93,7 +91,6 @@ def test_twin_at_fast_noise_matches_its_expectations() -> None:
         assert abs(x.mean() - e.twin_mean[name]) < 4 * se + 1e-12 * abs(x.mean()), name
 
 
-@pytest.mark.xdist_group("joint-and-averaged-steps")
 @pytest.mark.parametrize(("N", "k"), [(1, 0.0), (3, -0.2)])
 def test_fast_noise_harmonic_unit_matches_exact(N: int, k: float) -> None:
     h = Harvester.build(a=0.5, n=2, N=N, k=k, tau=1e-4)
@@ -107,7 +104,6 @@ def test_fast_noise_harmonic_unit_matches_exact(N: int, k: float) -> None:
         assert abs(value - ref) < 4 * err + 1e-12 * abs(value), (name, value, err, ref)
 
 
-@pytest.mark.xdist_group("joint-and-averaged-steps")
 def test_fast_noise_cubic_unit_agrees_with_fokker_planck() -> None:
     h = Harvester.build(a=0.5, n=3, tau=1e-4)
     fp = solve(h, "fpe", tol=1e-5)

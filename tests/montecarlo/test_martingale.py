@@ -15,8 +15,7 @@ from montecarlo.controls.regression import enough_dof, regression_estimate
 from montecarlo.controls.twin import poisson_controls, twin_expectations
 
 
-@pytest.mark.parametrize(
-    "joint", [False, pytest.param(True, marks=pytest.mark.xdist_group("joint-and-averaged-steps"))])
+@pytest.mark.parametrize("joint", [False, True])
 def test_martingale_sums_have_mean_zero_and_leave_the_paths_unchanged(joint: bool) -> None:
     # a nonlinear ring at a coarse step: every martingale control's mean must be 0 whatever the
     # bias of the scheme (chi^2 of the z-scores of all controls against its 0.1 % tail); the
