@@ -296,9 +296,12 @@ def _coupling_force(x2m: float, xm: float, x: float, xp: float, x2p: float, k: f
 
 
 @njit(cache=True, nogil=True)
-def _ring_coupling(xm: np.ndarray, f: np.ndarray, pp: np.ndarray, p0: int, p1: int) -> None:
-    """f[:, p0:p1] = the coupling force (:func:`_coupling_force`) on each unit of paths p0 to
-    p1 - 1, from their midpoints ``xm`` (N, P)."""
+def _ring_coupling(xm: np.ndarray, f: np.ndarray, pp: np.ndarray, p0: int, p1: int, base: np.ndarray,
+                   scale: float) -> None:
+    """f[:, p0:p1] = scale * base + the coupling force (:func:`_coupling_force`) on each unit of
+    paths p0 to p1 - 1, from their midpoints ``xm`` (N, P). The frozen step adds its noise force
+    (base xi, scale sigma) in the same pass: a second pass over f made a harmonic ring's step
+    slower; the joint step passes scale 0."""
     N = xm.shape[0]
     k, k4, k3 = pp[6], pp[14], pp[15]
     # the diffusive coupling alone reads two neighbours, not four: at two paths per chunk the
@@ -307,10 +310,11 @@ def _ring_coupling(xm: np.ndarray, f: np.ndarray, pp: np.ndarray, p0: int, p1: i
     for j in range(N):
         jmm, jm, jp, jpp = _ring_neighbours(j, N)
         for p in range(p0, p1):
+            f[j, p] = scale * base[j, p]
             if plain:
-                f[j, p] = k * (xm[jm, p] + xm[jp, p])
+                f[j, p] += k * (xm[jm, p] + xm[jp, p])
             else:
-                f[j, p] = _coupling_force(xm[jmm, p], xm[jm, p], xm[j, p], xm[jp, p], xm[jpp, p], k, k4, k3)
+                f[j, p] += _coupling_force(xm[jmm, p], xm[jm, p], xm[j, p], xm[jp, p], xm[jpp, p], k, k4, k3)
 
 
 @njit(cache=True, nogil=True, inline="always")

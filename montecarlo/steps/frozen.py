@@ -25,8 +25,8 @@ from numba import njit
 
 from fpe_harvester.model import Harvester
 
-from .._kernels import (KIND_KICK, KIND_KINK, MAX_SUBSTEPS, _coupling_force, _kick, _kick_force,
-                        _ring_coupling, _ring_neighbours, _stiff_amplitude, _substeps)
+from .._kernels import (KIND_KICK, KIND_KINK, MAX_SUBSTEPS, _kick, _kick_force, _ring_coupling,
+                        _stiff_amplitude, _substeps)
 from .._kink import _kink_flow
 from ..scheme import step_coefficients
 from .base import Kernels, StepScheme
@@ -40,21 +40,13 @@ class FrozenTag(NamedTuple):
 
 @njit(cache=True, nogil=True)
 def _external_force(xi, xm, f, pp) -> None:
-    """f = sigma xi + the coupling force (:func:`_ring_coupling`'s) at the predicted midpoints."""
+    """f = sigma xi + the coupling force (:func:`_ring_coupling`) at the predicted midpoints."""
     N, P = xi.shape
-    sigma, k, k4, k3 = pp[5], pp[6], pp[14], pp[15]
-    # one fused pass, not _ring_coupling and then a second pass adding sigma xi: the second pass
-    # made a harmonic ring's step 7-8 % slower (quiet machine, 5 processes x 21 runs each); the
-    # diffusive coupling alone reads two neighbours, not four
-    plain = k4 == 0.0 and k3 == 0.0
-    for j in range(N):
-        jmm, jm, jp, jpp = _ring_neighbours(j, N)
+    if N > 1:
+        _ring_coupling(xm, f, pp, 0, P, xi, pp[5])
+    else:
         for p in range(P):
-            f[j, p] = sigma * xi[j, p]
-            if N > 1 and plain:
-                f[j, p] += k * (xm[jm, p] + xm[jp, p])
-            elif N > 1:
-                f[j, p] += _coupling_force(xm[jmm, p], xm[jm, p], xm[j, p], xm[jp, p], xm[jpp, p], k, k4, k3)
+            f[0, p] = pp[5] * xi[0, p]
 
 
 @njit(cache=True, nogil=True)
@@ -158,9 +150,7 @@ def _d_step(x, v, V, xi, F, stuck, xm, fext, w, cf, pp, kind, counters, cs) -> N
         if N > 1:  # neighbours at their midpoints predicted from the start of the step
             for j in range(N):
                 xm[j, p] = x[j, p] + 0.5 * h * v[j, p]
-            _ring_coupling(xm, fext, pp, p, p + 1)
-            for j in range(N):
-                fext[j, p] = pp[5] * xi[j, p] + fext[j, p]
+            _ring_coupling(xm, fext, pp, p, p + 1, xi, pp[5])
         _substep_path(x, v, V, F, fext, p, sk[i], cf, pp)
 
 

@@ -163,7 +163,7 @@ def _d_step_joint(x, v, V, xi, F, xm, fext, eps, cf, pp, kind, rbm, rbx, pvx, w,
         for j in range(N):
             for p in range(P):
                 xm[j, p] = x[j, p] + 0.5 * h * v[j, p]
-        _ring_coupling(xm, fext, pp, 0, P)
+        _ring_coupling(xm, fext, pp, 0, P, xi, 0.0)
     else:
         for p in range(P):
             fext[0, p] = 0.0
@@ -187,7 +187,7 @@ def _d_step_joint(x, v, V, xi, F, xm, fext, eps, cf, pp, kind, rbm, rbx, pvx, w,
         if N > 1:
             for j in range(N):
                 xm[j, p] = x[j, p] + 0.5 * h * v[j, p]
-            _ring_coupling(xm, fext, pp, p, p + 1)
+            _ring_coupling(xm, fext, pp, p, p + 1, xi, 0.0)
         _joint_substeps(x, v, V, xi, F, fext, pvx, p, sk[i], cf, pp, gen)
 
 
