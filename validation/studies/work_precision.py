@@ -203,8 +203,9 @@ def _runner(method: str, h: Harvester, cfg: dict[str, Any]) -> Callable[[float, 
 def ladder(run_one: Callable[[float, int], tuple[Any, ...]], tols: tuple[float, ...],
            seeds: int, ref_eta: float, budget_s: float, order: float = 0.0) -> list[dict[str, Any]]:
     """One point per tolerance, tightest last: the rms actual relative error over ``seeds``
-    runs and the mean reported relative error, the mean wall time [s], and each run's info
-    when ``run_one`` returns one (a fifth item).
+    runs and the mean reported relative error, the mean wall time [s], each run's eta (so that
+    the errors can be measured again against a better reference, :func:`rescore`), and each
+    run's info when ``run_one`` returns one (a fifth item).
 
     Stops after a tolerance at which a run did not converge, and before one whose predicted
     cost would take the total past ``budget_s``: the last point's time times
@@ -229,7 +230,7 @@ def ladder(run_one: Callable[[float, int], tuple[Any, ...]], tols: tuple[float, 
         points.append({"tol": tol, "seconds": float(np.mean([r[0] for r in runs])),
                        "error": math.sqrt(float(np.mean(actual))),
                        "reported": float(np.mean([(r[2] or math.nan) / abs(r[1]) for r in done])),
-                       "runs": len(done), "statuses": sorted({r[3] for r in runs}),
+                       "runs": len(done), "statuses": sorted({r[3] for r in runs}), "etas": [r[1] for r in done],
                        **({"info": [r[4] for r in runs]} if all(len(r) > 4 for r in runs) else {})})
         if any(r[3] != "stable" for r in runs):
             break
