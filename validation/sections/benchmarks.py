@@ -118,10 +118,17 @@ def _work_precision(ctx: Context, sec: Section) -> list[CheckResult]:
                                note=f"Data: validation/data/{wp.STEM}.json; regenerate: {wp.COMMAND}."))
     thin = [f"{case['title']}: {c['method']} ({len(c['points'])} points)" for case in res["cases"].values()
             for c in case["curves"] if len(c["points"]) < 2]
+    spans = [(case["title"], c["method"], wp.span(c["points"], c["reference"]["rel_err"]))
+             for case in res["cases"].values() for c in case["curves"] if c["method"] in wp.SOLVERS]
+    short = [f"{title}: {method} {d:.2g}" for title, method, d in spans if d < wp.DECADES]
     return [expect("work-precision data: every solver of every case is a curve", _SECTION,
                    not thin and not res["quick"],
                    f"{len(res['cases'])} cases from a {'quick' if res['quick'] else 'full'} run; curves with fewer "
-                   f"than two points: {'; '.join(thin) or 'none'}")]
+                   f"than two points: {'; '.join(thin) or 'none'}"),
+            expect(f"work-precision data: each solver's curve spans {wp.DECADES:g} decades of resolved error",
+                   _SECTION, not short and not res["quick"],
+                   f"smallest span {min(d for *_, d in spans):.2g} decades over {len(spans)} curves "
+                   f"(errors above each reference's own); short: {'; '.join(short) or 'none'}")]
 
 
 def _include(ctx: Context, mod: Any, sec: Section, targets: Table) -> None:

@@ -20,7 +20,8 @@ are not all at the first batch the solver's defaults run (1e-3 to 5e-3 at any to
 
 References (:func:`reference`): for Monte Carlo, the reference table's Fokker--Planck entry
 (units) or its independent long Monte Carlo run (the ring); for Fokker--Planck, its entry at a
-tighter tolerance (n = 3) or the kink's independent long Monte Carlo run. An error below the
+tolerance ten times tighter than the curve's tightest point (:func:`fpe_tols`), which at the
+kink agrees with the independent long Monte Carlo runs (:func:`kink_agreement`). An error below the
 reference's own is not resolved: the figure shows that floor, and the table's span in decades
 (:func:`span`) counts only the errors above it.
 
@@ -42,7 +43,8 @@ import numpy as np
 from fpe_harvester import Harvester, solve
 from validation.studies.cli import bench_main, save_benchmark
 
-__all__ = ["STEM", "RECORDED", "COMMAND", "CAPTION", "CASES", "METHODS", "MC_OPTIONS", "reference",
+__all__ = ["STEM", "RECORDED", "COMMAND", "CAPTION", "CASES", "METHODS", "SOLVERS", "DECADES", "MC_OPTIONS", "reference",
+           "fpe_tols", "kink_agreement",
            "harmonic", "ladder", "run", "draw", "plot", "span", "summary_rows"]
 
 #: Name of the written ``.json`` and ``.png``.
@@ -68,6 +70,10 @@ CASES: dict[str, tuple[str, dict[str, Any]]] = {
 }
 #: Solvers and baselines, in drawing order.
 METHODS = ("fpe", "mc", "mc plain", "euler-maruyama")
+#: The library's solvers among :data:`METHODS` (the others are the baselines a user would write).
+SOLVERS = ("fpe", "mc")
+#: Decades of resolved error each solver's curve covers in the recorded full run (the report checks it).
+DECADES = 2.0
 #: Options of every Monte Carlo run (with and without control variates): 2 paths per replica and
 #: at least 8 replicas, instead of the solver's 16-64 and 32. At its defaults the solver's first
 #: batch already gives an error of 1e-3 to 5e-3 at any tolerance from 1e-2 up, so a curve could
@@ -99,28 +105,45 @@ def _settings(quick: bool) -> dict[str, Any]:
             "mp_N_max": 1000}
 
 
-def reference(key: str, method: str) -> dict[str, Any]:
-    """The reference of case ``key`` for ``method``'s errors: ``{"eta", "rel_err", "source"}``.
+def reference(key: str) -> dict[str, Any]:
+    """The reference of case ``key`` for every solver's errors: ``{"eta", "rel_err", "source",
+    "short", "tol"}`` (``tol`` the reference's own tolerance, 0 for a Monte Carlo run).
 
-    Never the method's own result at a similar setting: Monte Carlo is measured against
+    Never a solver's own result at a similar setting: Monte Carlo is measured against
     Fokker--Planck (units) or an independent long run (the ring); Fokker--Planck against its
-    table entry at 1e-8 (n = 3: ten times tighter than the tightest point) or, at the kink,
-    where its table entry is only 1e-4, against the independent long Monte Carlo run.
+    table entry at a tolerance ten times tighter than its tightest point (:func:`fpe_tols`:
+    n = 3 at 1e-8, the kink at 1e-6 and 1e-5), cross-checked by the kink's independent long
+    Monte Carlo runs (:func:`kink_agreement`).
     """
-    from validation.references.reftable import load, recorded_kink
+    from validation.references.reftable import load
 
     _, system = CASES[key]
     h = Harvester.build(**system)
-    if method == "fpe" and h.n == 1.0:
-        d = recorded_kink(h.a)
-        return {"eta": d["eta"], "rel_err": d["eta_err"] / d["eta"], "short": "long Monte Carlo run",
-                "source": f"long Monte Carlo run (kink_mc_reference_values.json a{h.a:g}, seed {d['seed']})"}
     label = (f"mc n = {h.n:g}, N = {h.N}, a = {h.a:g}, k = {h.k:g}" if h.N > 1
              else f"fpe n = {h.n:g}, a = {h.a:g}")
     e = load()[label]
     short = "Monte Carlo" if e["method"] == "mc" else "Fokker-Planck"
     return {"eta": e["eta"], "rel_err": e["eta_err"] / e["eta"], "short": f"{short} table entry",
-            "source": f"reference table '{label}' ({e['method']}, commit {e['commit']})"}
+            "tol": float(e["options"]["tol"]) if e["method"] == "fpe" else 0.0,
+            "source": f"reference table '{label}' ({e['method']}, tol {e['options']['tol']:g}, commit {e['commit']})"}
+
+
+def fpe_tols(tols: tuple[float, ...], ref: dict[str, Any]) -> tuple[float, ...]:
+    """The Fokker--Planck tolerances measured against ``ref``: those at least ten times looser
+    than the reference's own, so that no point repeats the reference's computation."""
+    return tuple(t for t in tols if t >= 10.0 * ref["tol"])
+
+
+def kink_agreement(a: float) -> dict[str, float]:
+    """The kink's Fokker--Planck reference (n = 1, ``a``) against its independent long Monte
+    Carlo run: ``{"diff", "sigma"}``, the relative difference and the same in combined
+    standard errors."""
+    from validation.references.reftable import load, recorded_kink
+
+    ref = load()[f"fpe n = 1, a = {a:g}"]
+    mc = recorded_kink(a)
+    diff = mc["eta"] / ref["eta"] - 1.0
+    return {"diff": diff, "sigma": abs(mc["eta"] - ref["eta"]) / math.hypot(mc["eta_err"], ref["eta_err"])}
 
 
 def _timed(fn: Callable[[], Any]) -> tuple[float, Any]:
@@ -245,9 +268,10 @@ def _case(key: str, quick: bool) -> dict[str, Any]:
     for method in METHODS:
         if method == "fpe" and h.N > 1:
             continue
-        ref = reference(key, "fpe" if method == "fpe" else "mc")
+        ref = reference(key)
         fpe = method == "fpe"
-        points = ladder(_runner(method, h, cfg), cfg["fpe_tols"] if fpe else cfg["tols"], 1 if fpe else cfg["seeds"],
+        points = ladder(_runner(method, h, cfg), fpe_tols(cfg["fpe_tols"], ref) if fpe else cfg["tols"],
+                        1 if fpe else cfg["seeds"],
                         ref["eta"], cfg["mc_budget_s" if method == "mc" else "budget_s"], order=0.0 if fpe else 2.0)
         curves.append({"method": method, "reference": ref, "points": points})
     return {"title": title, "system": system, "curves": curves}

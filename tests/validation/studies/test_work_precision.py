@@ -50,11 +50,26 @@ def test_ladder_stops_after_a_run_that_did_not_converge_and_skips_runs_without_n
 
 
 def test_references_do_not_share_the_errors_of_the_solver_measured():
-    kink_fpe, kink_mc = wp.reference("kink_a0.5", "fpe"), wp.reference("kink_a0.5", "mc")
-    assert "Monte Carlo" in kink_fpe["source"] and "'fpe n = 1, a = 0.5'" in kink_mc["source"]
-    ring = wp.reference("ring_n3", "mc")
-    assert "'mc n = 3, N = 3, a = 0.5, k = -0.5'" in ring["source"] and ring["rel_err"] < 5e-4
-    assert wp.reference("unit_n3", "fpe")["rel_err"] < 1e-6  # ten times below the tightest point
+    """Units: the Fokker-Planck table entry, whose tolerance is ten times below the curve's
+    tightest point; the ring: its long Monte Carlo run."""
+    for key in ("unit_n3", "kink_a0.5", "kink_a1"):
+        ref = wp.reference(key)
+        assert "fpe n = " in ref["source"] and ref["tol"] <= 1e-5
+        tols = wp.fpe_tols((1e-2, 1e-3, 1e-4, 1e-5, 1e-6, 1e-7), ref)
+        assert tols[0] == 1e-2 and min(tols) >= 10 * ref["tol"] and len(tols) >= 3, key
+    assert wp.reference("unit_n3")["rel_err"] < 1e-7
+    ring = wp.reference("ring_n3")
+    assert "'mc n = 3, N = 3, a = 0.5, k = -0.5'" in ring["source"] and ring["rel_err"] < 5e-4 and ring["tol"] == 0
+    assert wp.fpe_tols((1e-2, 1e-7), {"tol": 1e-8}) == (1e-2, 1e-7)
+    assert wp.fpe_tols((1e-2, 1e-7), {"tol": 1e-6}) == (1e-2,)
+
+
+@pytest.mark.parametrize("a", [0.5, 1.0])
+def test_the_kinks_fokker_planck_references_agree_with_the_long_monte_carlo_runs(a):
+    """The independent check of the Fokker-Planck kink curves' references: the long Monte
+    Carlo runs (about 3e-4) agree within 3 combined standard errors."""
+    agree = wp.kink_agreement(a)
+    assert agree["sigma"] < 3.0 and abs(agree["diff"]) < 1e-3, agree
 
 
 def test_euler_maruyama_runs_predicted_past_the_budget_are_not_started():
@@ -100,12 +115,18 @@ def test_the_report_draws_the_recorded_diagrams_and_fails_thin_or_quick_data(tmp
     monkeypatch.setattr(wp, "RECORDED", recorded)
     ctx = Context(quick=True, out=tmp_path, cache=SolveCache())
     sec = Section("b", "B")
-    (check,) = benchmarks._work_precision(ctx, sec)
-    assert check.passed and sec.figures[0].path.exists() and sec.tables[0].title.startswith("Work-precision")
+    thin, spans = benchmarks._work_precision(ctx, sec)
+    assert thin.passed and spans.passed and sec.figures[0].path.exists()
+    assert sec.tables[0].title.startswith("Work-precision") and "smallest span 2.7 decades" in spans.detail
+    # a solver's curve over less than two decades of resolved error fails the second check only
+    res["cases"]["kink_a1"]["curves"][0]["reference"]["rel_err"] = 1e-4
+    recorded.write_text(json.dumps(res))
+    thin, spans = benchmarks._work_precision(ctx, Section("b", "B"))
+    assert thin.passed and not spans.passed and "kink n = 1, a = 1: fpe 1.7" in spans.detail
     res["cases"]["ring_n3"]["curves"][0]["points"] = res["cases"]["ring_n3"]["curves"][0]["points"][:1]
     recorded.write_text(json.dumps(res))
-    (check,) = benchmarks._work_precision(ctx, Section("b", "B"))
-    assert not check.passed and "(1 points)" in check.detail
+    thin, _ = benchmarks._work_precision(ctx, Section("b", "B"))
+    assert not thin.passed and "(1 points)" in thin.detail
     recorded.unlink()
     assert not benchmarks._work_precision(ctx, Section("b", "B"))[0].passed
 
