@@ -43,9 +43,8 @@ import numpy as np
 from fpe_harvester import Harvester, solve
 from validation.studies.cli import bench_main, save_benchmark
 
-__all__ = ["STEM", "RECORDED", "COMMAND", "CAPTION", "CASES", "METHODS", "SOLVERS", "DECADES", "MC_OPTIONS", "reference",
-           "fpe_tols", "kink_agreement",
-           "harmonic", "ladder", "run", "draw", "plot", "span", "summary_rows"]
+__all__ = ["STEM", "RECORDED", "COMMAND", "CAPTION", "CASES", "METHODS", "SOLVERS", "DECADES", "MC_OPTIONS",
+           "reference", "fpe_tols", "kink_agreement", "harmonic", "ladder", "run", "draw", "plot", "span", "summary_rows"]
 
 #: Name of the written ``.json`` and ``.png``.
 STEM = "work_precision"
@@ -227,8 +226,8 @@ def ladder(run_one: Callable[[float, int], tuple[Any, ...]], tols: tuple[float, 
            seeds: int, ref_eta: float, budget_s: float, order: float = 0.0) -> list[dict[str, Any]]:
     """One point per tolerance, tightest last: the rms actual relative error over ``seeds``
     runs and the mean reported relative error, the mean wall time [s], each run's eta (so that
-    the errors can be measured again against a better reference, :func:`rescore`), and each
-    run's info when ``run_one`` returns one (a fifth item).
+    the errors can be measured again against another reference without running again), and
+    each run's info when ``run_one`` returns one (a fifth item).
 
     Stops after a tolerance at which a run did not converge, and before one whose predicted
     cost would take the total past ``budget_s``: the last point's time times
