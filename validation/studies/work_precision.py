@@ -44,7 +44,8 @@ from fpe_harvester import Harvester, solve
 from validation.studies.cli import bench_main, save_benchmark
 
 __all__ = ["STEM", "RECORDED", "COMMAND", "CAPTION", "CASES", "METHODS", "SOLVERS", "DECADES", "MC_OPTIONS",
-           "reference", "fpe_tols", "kink_agreement", "harmonic", "ladder", "run", "draw", "plot", "span", "summary_rows"]
+           "reference", "fpe_tols", "kink_agreement", "harmonic", "ladder", "run", "draw", "plot", "span",
+           "summary_rows"]
 
 #: Name of the written ``.json`` and ``.png``.
 STEM = "work_precision"
