@@ -93,14 +93,15 @@ def _settings(quick: bool) -> dict[str, Any]:
     with its control variates (the solver a user calls) gets a larger budget than the baselines:
     its error falls like one over the square root of the cost, so two decades of error from its
     loosest point (2e-2 to 4e-2, the first batch) cost 1e4 times that point's time, about 300 s
-    per seed at its tightest tolerance."""
+    per seed at its tightest tolerance. Fokker--Planck too: at the kink (a = 1) its tolerance
+    1e-4 takes about 170 s, and its loosest point is already at about 1e-3."""
     if quick:
         return {"tols": (5e-2, 1e-2), "fpe_tols": (1e-2, 1e-3), "seeds": 2, "run_s": 8.0, "budget_s": 5.0,
-                "mc_run_s": 8.0, "mc_budget_s": 5.0,
+                "mc_run_s": 8.0, "mc_budget_s": 5.0, "fpe_run_s": 8.0, "fpe_budget_s": 5.0,
                 "ring_N": (3, 100, 10_000, 1_000_000), "dense_N": (3, 10, 30), "mp_N_max": 100}
     return {"tols": (5e-2, 2e-2, 1e-2, 5e-3, 2e-3, 1e-3, 5e-4, 2e-4, 1e-4),
             "fpe_tols": (1e-2, 1e-3, 1e-4, 1e-5, 1e-6, 1e-7), "seeds": 4, "run_s": 60.0, "budget_s": 130.0,
-            "mc_run_s": 400.0, "mc_budget_s": 900.0,
+            "mc_run_s": 400.0, "mc_budget_s": 900.0, "fpe_run_s": 300.0, "fpe_budget_s": 600.0,
             "ring_N": (3, 10, 100, 1000, 10_000, 100_000, 1_000_000), "dense_N": (3, 10, 30, 100, 200),
             "mp_N_max": 1000}
 
@@ -210,7 +211,7 @@ def _runner(method: str, h: Harvester, cfg: dict[str, Any]) -> Callable[[float, 
     if method == "euler-maruyama":
         pilot = _em_pilot(h, seed=99)
         return lambda tol, seed: _em_run(h, tol, seed, pilot, cfg["run_s"])
-    options: dict[str, Any] = {"max_seconds": cfg["run_s"]} if method == "fpe" else {
+    options: dict[str, Any] = {"max_seconds": cfg["fpe_run_s"]} if method == "fpe" else {
         "max_time": cfg["mc_run_s" if method == "mc" else "run_s"], "progress": False, **MC_OPTIONS,
         **({"control": False, "martingale": False} if method == "mc plain" else {})}
 
@@ -272,7 +273,8 @@ def _case(key: str, quick: bool) -> dict[str, Any]:
         fpe = method == "fpe"
         points = ladder(_runner(method, h, cfg), fpe_tols(cfg["fpe_tols"], ref) if fpe else cfg["tols"],
                         1 if fpe else cfg["seeds"],
-                        ref["eta"], cfg["mc_budget_s" if method == "mc" else "budget_s"], order=0.0 if fpe else 2.0)
+                        ref["eta"], cfg[{"mc": "mc_budget_s", "fpe": "fpe_budget_s"}.get(method, "budget_s")],
+                        order=0.0 if fpe else 2.0)
         curves.append({"method": method, "reference": ref, "points": points})
     return {"title": title, "system": system, "curves": curves}
 
