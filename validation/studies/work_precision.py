@@ -26,8 +26,8 @@ reference's own is not resolved: the figure shows that floor, and the table's sp
 (:func:`span`) counts only the errors above it.
 
 ``python -m validation.studies.work_precision [--quick] [--out DIR]`` writes
-``work_precision.json`` and ``work_precision.png`` (full: about 1-1.5 h on a quiet 2-core machine, estimated
-from the recorded run's costs with its Monte Carlo budget of 900 s per case; quick: about 1 min).
+``work_precision.json`` and ``work_precision.png`` (full: 38 min on a quiet 2-core machine, the
+recorded run; quick: about 30 s).
 """
 
 from __future__ import annotations
