@@ -118,9 +118,7 @@ def _work_precision(ctx: Context, sec: Section) -> list[CheckResult]:
                                note=f"Data: validation/data/{wp.STEM}.json; regenerate: {wp.COMMAND}."))
     thin = [f"{case['title']}: {c['method']} ({len(c['points'])} points)" for case in res["cases"].values()
             for c in case["curves"] if len(c["points"]) < 2]
-    # a curve that reaches its reference's own error shows all that reference can resolve
-    spans = [(case["title"], c["method"], wp.span(c["points"], c["reference"]["rel_err"]),
-              min(p["error"] for p in c["points"]) <= c["reference"]["rel_err"])
+    spans = [(case["title"], c["method"], *wp.resolved(c))
              for case in res["cases"].values() for c in case["curves"] if c["method"] in wp.SOLVERS and c["points"]]
     short = [f"{title}: {method} {d:.2g}" for title, method, d, floor in spans if d < wp.DECADES and not floor]
     floored = [f"{title}: {method} {d:.2g}" for title, method, d, floor in spans if d < wp.DECADES and floor]

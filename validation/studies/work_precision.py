@@ -45,7 +45,7 @@ from validation.studies.cli import bench_main, save_benchmark
 
 __all__ = ["STEM", "RECORDED", "COMMAND", "CAPTION", "CASES", "METHODS", "SOLVERS", "DECADES", "MC_OPTIONS",
            "reference", "fpe_tols", "kink_agreement", "harmonic", "ladder", "run", "draw", "plot", "span",
-           "summary_rows"]
+           "resolved", "summary_rows"]
 
 #: Name of the written ``.json`` and ``.png``.
 STEM = "work_precision"
@@ -266,10 +266,10 @@ def _case(key: str, quick: bool) -> dict[str, Any]:
     title, system = CASES[key]
     h = Harvester.build(**system)
     curves = []
+    ref = reference(key)
     for method in METHODS:
         if method == "fpe" and h.N > 1:
             continue
-        ref = reference(key)
         fpe = method == "fpe"
         points = ladder(_runner(method, h, cfg), fpe_tols(cfg["fpe_tols"], ref) if fpe else cfg["tols"],
                         1 if fpe else cfg["seeds"],
@@ -337,6 +337,13 @@ def span(points: list[dict[str, Any]], floor: float) -> float:
     relative error ``floor`` (smaller ones are not resolved): log10(largest / smallest)."""
     errs = [max(p["error"], floor) for p in points if p["error"] > 0 or floor > 0]
     return math.log10(max(errs) / min(errs)) if errs and min(errs) > 0 else 0.0
+
+
+def resolved(curve: dict[str, Any]) -> tuple[float, bool]:
+    """A curve's :func:`span` above its reference's own error, and whether its smallest error
+    reaches that error (then it shows all the reference can resolve, whatever its span)."""
+    floor = curve["reference"]["rel_err"]
+    return span(curve["points"], floor), min(p["error"] for p in curve["points"]) <= floor
 
 
 def summary_rows(res: dict[str, Any]) -> tuple[list[str], list[list[str]]]:
