@@ -19,7 +19,8 @@ decades above its reference's own error).
   martingale=False``: no control variates) and a numpy Euler--Maruyama script vectorised over
   paths (:func:`montecarlo.simulate_naive` at the usual dt = 0.01, its run length chosen from
   a pilot run to meet each tolerance). A Monte Carlo point is the rms actual error over
-  several seeds at one tolerance, beside the mean error the runs reported.
+  several seeds at one tolerance, beside the mean error the runs reported. Each solver's first run
+  of a case, at its loosest tolerance, is not timed (numba compiling or loading kernels).
 
 References (:func:`reference`): for Monte Carlo, the reference table's Fokker--Planck entry
 (units) or its independent long Monte Carlo run (the ring); for Fokker--Planck, its entry at a
@@ -274,8 +275,13 @@ def _case(key: str, quick: bool) -> dict[str, Any]:
         if method == "fpe" and h.N > 1:
             continue
         fpe = method == "fpe"
-        points = ladder(_runner(method, h, cfg), fpe_tols(cfg["fpe_tols"], ref) if fpe else cfg["tols"],
-                        1 if fpe else cfg["seeds"],
+        run_one = _runner(method, h, cfg)
+        tols = fpe_tols(cfg["fpe_tols"], ref) if fpe else cfg["tols"]
+        if not quick:
+            # one untimed run first: numba compiling or loading the kernels is not the solver's cost
+            # (measured cold: the n = 3 unit's first Monte Carlo point took 4.8 s, the next 0.1 s)
+            run_one(tols[0], 999)
+        points = ladder(run_one, tols, 1 if fpe else cfg["seeds"],
                         ref["eta"], cfg[{"mc": "mc_budget_s", "fpe": "fpe_budget_s"}.get(method, "budget_s")],
                         order=0.0 if fpe else 2.0)
         curves.append({"method": method, "reference": ref, "points": points})
