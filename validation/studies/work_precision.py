@@ -30,7 +30,7 @@ reference's own is not resolved: the figure shows that floor, and the table's sp
 (:func:`span`) counts only the errors above it.
 
 ``python -m validation.studies.work_precision [--quick] [--out DIR]`` writes
-``work_precision.json`` and ``work_precision.png`` (full: 38 min on a quiet 2-core machine, the
+``work_precision.json`` and ``work_precision.png`` (full: 39 min on a quiet 2-core machine, the
 recorded run; quick: about 30 s).
 """
 
