@@ -26,7 +26,9 @@ coefficient arrays:
 The steps themselves are :mod:`montecarlo.steps.frozen` (frozen-xi Strang splitting) and
 :mod:`montecarlo.steps.joint` (the joint Gaussian step of (x, v, V, xi), ``cf[CF_JOINT] = 1``),
 the kink's exact piecewise flow :mod:`montecarlo._kink`. The ring's coupling force is computed in
-one place, :func:`_ring_coupling` (:func:`_coupling_force` per unit).
+one place, :func:`_ring_coupling` (:func:`_coupling_force` per unit). It and :func:`_kick` exist
+twice, as an ordinary call and inlined (``..._inline``), from one body: the general step kernels
+call them, the fast ones inline them (:class:`montecarlo.steps.base.StepScheme`).
 """
 
 from __future__ import annotations
@@ -89,8 +91,8 @@ def _kick_force(x: float, pp: np.ndarray) -> float:
     return F
 
 
-@njit(cache=True, nogil=True)
-def _kick(x, v, F, h, pp, update) -> None:
+@njit(cache=True, nogil=True, inline="always")
+def _kick_inline(x, v, F, h, pp, update) -> None:
     """Half kick v += (h/2) F/m; with ``update`` first recompute F (:func:`_kick_force`)."""
     N, P = x.shape
     m = pp[0]
@@ -102,11 +104,31 @@ def _kick(x, v, F, h, pp, update) -> None:
             v[j, p] += hk * F[j, p]
 
 
+#: :func:`_kick_inline` as an ordinary call, for the steps' general kernels (their fast kernels
+#: inline it: :class:`~montecarlo.steps.base.StepScheme`).
+_kick = njit(cache=True, nogil=True)(_kick_inline.py_func)
+
+
 
 @njit(cache=True, nogil=True, inline="always")
 def _stiff_amplitude(pp: np.ndarray, h: float) -> float:
     """The |x| beyond which a step h sees h^2 U''(x)/m > STIFF_LIMIT (n > 2)."""
     return (STIFF_LIMIT * pp[0] / (h * h * pp[7] * pp[8] * (pp[8] - 1.0))) ** (1.0 / (pp[8] - 2.0))
+
+
+@njit(cache=True, nogil=True, inline="always")
+def _near_wall(x, v, h: float, xstar: float, thr: float) -> bool:
+    """Whether some unit is beyond ``xstar`` at the step's start or its predicted end, so that
+    its path's step needs substeps (:func:`_substeps`); never when ``xstar`` is not below the
+    escape amplitude ``thr``."""
+    if xstar >= thr:
+        return False
+    N, P = x.shape
+    for p in range(P):
+        for j in range(N):
+            if max(abs(x[j, p]), abs(x[j, p] + h * v[j, p])) > xstar:
+                return True
+    return False
 
 
 @njit(cache=True, nogil=True)
@@ -295,8 +317,8 @@ def _coupling_force(x2m: float, xm: float, x: float, xp: float, x2p: float, k: f
     return F
 
 
-@njit(cache=True, nogil=True)
-def _ring_coupling(xm: np.ndarray, f: np.ndarray, pp: np.ndarray, p0: int, p1: int, base: np.ndarray,
+@njit(cache=True, nogil=True, inline="always")
+def _ring_coupling_inline(xm: np.ndarray, f: np.ndarray, pp: np.ndarray, p0: int, p1: int, base: np.ndarray,
                    scale: float) -> None:
     """f[:, p0:p1] = scale * base + the coupling force (:func:`_coupling_force`) on each unit of
     paths p0 to p1 - 1, from their midpoints ``xm`` (N, P). The frozen step adds its noise force
@@ -315,6 +337,10 @@ def _ring_coupling(xm: np.ndarray, f: np.ndarray, pp: np.ndarray, p0: int, p1: i
                 f[j, p] += k * (xm[jm, p] + xm[jp, p])
             else:
                 f[j, p] += _coupling_force(xm[jmm, p], xm[jm, p], xm[j, p], xm[jp, p], xm[jpp, p], k, k4, k3)
+
+
+#: :func:`_ring_coupling_inline` as an ordinary call, for the steps' general kernels.
+_ring_coupling = njit(cache=True, nogil=True)(_ring_coupling_inline.py_func)
 
 
 @njit(cache=True, nogil=True, inline="always")

@@ -80,23 +80,40 @@ def _compose(tag, cf_a, cf_b, e1, e2, out):
 
 @intrinsic
 def step(typingctx, tag, x, v, V, xi, F, stuck, pvx, eps, cf, pp, kind, xm, fext, cs, rbm, rbx, w, counters, gen):
-    """Advance one level over one step: a direct call of ``kernels.step`` of the scheme ``tag``
-    with the arguments (of :data:`STEP_ARGS`) that the kernel's parameters name.
+    """Advance one level over one step: a direct call of ``kernels.fast`` of the scheme ``tag``
+    and, where it declines (or the scheme has none), of ``kernels.step``, each with the
+    arguments (of :data:`STEP_ARGS`) that the kernel's parameters name.
 
     An intrinsic, not an inlined wrapper: inlined, the wrapper's parameters became copies of
     the loop's arrays, each reference-counted at every step, which cost 15-30 % of the loop at
     the solver's small chunks; a compiled wrapper cost as much in its call.
     """
     given = (x, v, V, xi, F, stuck, pvx, eps, cf, pp, kind, xm, fext, cs, rbm, rbx, w, counters, gen)
-    kernel = _kernels(tag).step
+    ks = _kernels(tag)
+    general = _call(typingctx, ks.step, given)
+    fast = _call(typingctx, ks.fast, given) if ks.fast is not None else None
+
+    def codegen(context, builder, sig, args):
+        if fast is None:
+            general(context, builder, args)
+        else:
+            done = fast(context, builder, args)
+            with builder.if_then(builder.not_(done), likely=False):
+                general(context, builder, args)
+        return context.get_dummy_value()
+    return types.none(tag, *given), codegen
+
+
+def _call(typingctx, kernel, given):
+    """Code generator of a direct call of ``kernel`` with the arguments of :data:`STEP_ARGS` that
+    its parameters name; returns the kernel's value."""
     pick = [STEP_ARGS.index(name) for name in inspect.signature(kernel.py_func).parameters]
     fnty = types.Dispatcher(kernel)
     ksig = typingctx.resolve_function_type(fnty, tuple(given[i] for i in pick), {})
 
-    def codegen(context, builder, sig, args):
-        context.get_function(fnty, ksig)(builder, [args[1 + i] for i in pick])
-        return context.get_dummy_value()
-    return types.none(tag, *given), codegen
+    def gen(context, builder, args):
+        return context.get_function(fnty, ksig)(builder, [args[1 + i] for i in pick])
+    return gen
 
 
 @overload(advance, jit_options={"cache": True, "nogil": True}, inline="always")
