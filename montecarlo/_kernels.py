@@ -344,6 +344,22 @@ _ring_coupling = njit(cache=True, nogil=True)(_ring_coupling_inline.py_func)
 
 
 @njit(cache=True, nogil=True, inline="always")
+def _neighbour_force(x, v, xi, xm, fext, pp, h: float, scale: float, noise: bool) -> None:
+    """``fext`` = the ring's coupling force (:func:`_ring_coupling`) at the units' predicted
+    midpoints ``xm`` = x + (h/2) v, plus ``scale * xi`` with ``noise`` (the frozen step's noise
+    force; the joint step's flow has xi itself); inlined into every step kernel."""
+    N, P = x.shape
+    if N > 1:
+        for j in range(N):
+            for p in range(P):
+                xm[j, p] = x[j, p] + 0.5 * h * v[j, p]
+        _ring_coupling_inline(xm, fext, pp, 0, P, xi, scale)
+    else:
+        for p in range(P):
+            fext[0, p] = scale * xi[0, p] if noise else 0.0
+
+
+@njit(cache=True, nogil=True, inline="always")
 def _ring_neighbours(j: int, N: int) -> tuple[int, int, int, int]:
     """Indices of units j - 2, j - 1, j + 1, j + 2 on a ring of N (modulo N). Compares, not
     ``%``: an integer division per index was a fifth of the coupling's cost at two paths per chunk."""

@@ -25,8 +25,8 @@ from numba import njit
 
 from fpe_harvester.model import Harvester
 
-from .._kernels import (KIND_KICK, KIND_KINK, MAX_SUBSTEPS, _kick, _kick_force, _kick_inline, _ring_coupling,
-                        _ring_coupling_inline, _near_wall, _stiff_amplitude, _substeps)
+from .._kernels import (KIND_KICK, KIND_KINK, MAX_SUBSTEPS, _kick, _kick_force, _kick_inline, _near_wall,
+                        _neighbour_force, _ring_coupling, _stiff_amplitude, _substeps)
 from .._kink import _kink_flow
 from ..scheme import step_coefficients
 from .base import Kernels, StepScheme
@@ -126,14 +126,7 @@ def _d_step(x, v, V, xi, F, stuck, xm, fext, w, cf, pp, kind, counters, cs) -> N
         _kick(x, v, F, h, pp, not kicks)
     # the external force sigma xi plus the coupling at the predicted midpoints, called directly:
     # a wrapper around _ring_coupling cost a third of the force's time at two paths per chunk
-    if N > 1:
-        for j in range(N):
-            for p in range(P):
-                xm[j, p] = x[j, p] + 0.5 * h * v[j, p]
-        _ring_coupling(xm, fext, pp, 0, P, xi, pp[5])
-    else:
-        for p in range(P):
-            fext[0, p] = pp[5] * xi[0, p]
+    _neighbour_force(x, v, xi, xm, fext, pp, h, pp[5], True)
     if kind == KIND_KINK:
         _kink_flow(x, v, V, stuck, fext, w, cf, pp, counters, cs)
     else:
@@ -171,14 +164,7 @@ def _d_step_fast(x, v, V, xi, F, xm, fext, cf, pp, kind) -> bool:
     if fast:
         if kicks:
             _kick_inline(x, v, F, h, pp, not kicks)
-        if N > 1:
-            for j in range(N):
-                for p in range(P):
-                    xm[j, p] = x[j, p] + 0.5 * h * v[j, p]
-            _ring_coupling_inline(xm, fext, pp, 0, P, xi, pp[5])
-        else:
-            for p in range(P):
-                fext[0, p] = pp[5] * xi[0, p]
+        _neighbour_force(x, v, xi, xm, fext, pp, h, pp[5], True)
         _linear_flow_inline(x, v, V, fext, cf)
         if kicks:
             _kick_inline(x, v, F, h, pp, kicks)
