@@ -21,6 +21,7 @@ class Kernels(NamedTuple):
     advance: Callable
     twin_xi: Callable
     fast: Callable | None = None
+    slow_kind: int = -1
 
 
 class StepScheme:
@@ -68,7 +69,8 @@ class StepScheme:
             ``step`` for the common case in a kernel of its own, taking a subset of ``step``'s
             arguments by name: the same operations (bit-identical), its small kernels inlined;
             it returns False, with nothing changed, where ``step`` must take the step (a stiff
-            wall, the kink's flow). The loop calls it first. The frozen step's made a harmonic
+            wall, the kink's flow). The loop calls it first, except for the on-site treatment
+            ``slow_kind``, which it never takes. The frozen step's made a harmonic
             ring's loop at two paths per chunk 0.88x of 940829b's instead of 1.07-1.21x; the
             joint step has none (one built like it measured no gain, 1.06-1.09x against
             1.05-1.07x).

@@ -212,7 +212,7 @@ class FrozenStep(StepScheme):
 
     name = "frozen"
     tag = FrozenTag(1)
-    kernels = Kernels(1, noise, compose, _d_step, advance, twin_xi, _d_step_fast)
+    kernels = Kernels(1, noise, compose, _d_step, advance, twin_xi, _d_step_fast, KIND_KINK)
 
     def coefficients(self, h: Harvester, dt: float) -> np.ndarray:
         return step_coefficients(h, dt, joint=False)
