@@ -22,7 +22,7 @@ from numba import njit
 
 from fpe_harvester.model import Harvester
 
-from .._kernels import (CF_JOINT, JOINT_BLOCK, KIND_KICK, _kick, _kick_force, _neighbour_force, _ring_coupling,
+from .._kernels import (CF_JOINT, JOINT_BLOCK, KIND_KICK, _kick, _kick_force, _ring_coupling,
                         _stiff_amplitude, _substeps)
 from ..scheme import joint_step_refusal, step_coefficients
 from .base import Kernels, StepScheme
@@ -159,7 +159,14 @@ def _d_step_joint(x, v, V, xi, F, xm, fext, eps, cf, pp, kind, rbm, rbx, pvx, w,
     # the kicks' update flags are runtime bools: literal True and False compiled _kick twice
     if kicks:
         _kick(x, v, F, h, pp, not kicks)
-    _neighbour_force(x, v, xi, xm, fext, pp, h, 0.0, False)
+    if N > 1:
+        for j in range(N):
+            for p in range(P):
+                xm[j, p] = x[j, p] + 0.5 * h * v[j, p]
+        _ring_coupling(xm, fext, pp, 0, P, xi, 0.0)
+    else:
+        for p in range(P):
+            fext[0, p] = 0.0
     _joint_flow(x, v, V, xi, fext, eps, cf, rbm, rbx)
     if kicks:
         _kick(x, v, F, h, pp, kicks)
