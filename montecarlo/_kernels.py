@@ -344,21 +344,21 @@ _ring_coupling = njit(cache=True, nogil=True)(_ring_coupling_inline.py_func)
 
 
 @njit(cache=True, nogil=True, inline="always")
-def _neighbour_force(x, v, xi, xm, fext, pp, h: float, scale: float, noise: bool) -> None:
-    """``fext`` = the ring's coupling force (:func:`_ring_coupling`) at the units' predicted
-    midpoints ``xm`` = x + (h/2) v, plus ``scale * xi`` with ``noise`` (the frozen step's noise
-    force; the joint step's flow has xi itself); inlined into the frozen step's kernels. The
-    joint step keeps its own loop: inlined into its general kernel, this made the n = 3 unit
-    at tau = 1e-4 about 4 % slower (medians of four processes, 1.057x against 1.02x of 940829b)."""
+def _neighbour_force(x, v, xi, xm, fext, pp, h: float) -> None:
+    """The frozen step's external force: ``fext`` = sigma xi plus the ring's coupling force
+    (:func:`_ring_coupling`) at the units' predicted midpoints ``xm`` = x + (h/2) v; inlined
+    into both frozen kernels. The joint step keeps its own loop: inlined into its general
+    kernel, this made the n = 3 unit at tau = 1e-4 about 4 % slower (medians of four
+    processes, 1.057x against 1.02x of 940829b)."""
     N, P = x.shape
     if N > 1:
         for j in range(N):
             for p in range(P):
                 xm[j, p] = x[j, p] + 0.5 * h * v[j, p]
-        _ring_coupling_inline(xm, fext, pp, 0, P, xi, scale)
+        _ring_coupling_inline(xm, fext, pp, 0, P, xi, pp[5])
     else:
         for p in range(P):
-            fext[0, p] = scale * xi[0, p] if noise else 0.0
+            fext[0, p] = pp[5] * xi[0, p]
 
 
 @njit(cache=True, nogil=True, inline="always")

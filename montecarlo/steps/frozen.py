@@ -126,7 +126,7 @@ def _d_step(x, v, V, xi, F, stuck, xm, fext, w, cf, pp, kind, counters, cs) -> N
         _kick(x, v, F, h, pp, not kicks)
     # the external force sigma xi plus the coupling at the predicted midpoints, called directly:
     # a wrapper around _ring_coupling cost a third of the force's time at two paths per chunk
-    _neighbour_force(x, v, xi, xm, fext, pp, h, pp[5], True)
+    _neighbour_force(x, v, xi, xm, fext, pp, h)
     if kind == KIND_KINK:
         _kink_flow(x, v, V, stuck, fext, w, cf, pp, counters, cs)
     else:
@@ -164,7 +164,7 @@ def _d_step_fast(x, v, V, xi, F, xm, fext, cf, pp, kind) -> bool:
     if fast:
         if kicks:
             _kick_inline(x, v, F, h, pp, not kicks)
-        _neighbour_force(x, v, xi, xm, fext, pp, h, pp[5], True)
+        _neighbour_force(x, v, xi, xm, fext, pp, h)
         _linear_flow_inline(x, v, V, fext, cf)
         if kicks:
             _kick_inline(x, v, F, h, pp, kicks)
