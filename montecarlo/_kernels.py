@@ -117,6 +117,13 @@ def _stiff_amplitude(pp: np.ndarray, h: float) -> float:
 
 
 @njit(cache=True, nogil=True, inline="always")
+def _reach(x: float, v: float, h: float) -> float:
+    """How far from 0 a unit at (x, v) gets within a step h, as the stiff walls' tests take it:
+    the farther of |x| and |x + h v|."""
+    return max(abs(x), abs(x + h * v))
+
+
+@njit(cache=True, nogil=True, inline="always")
 def _near_wall(x, v, h: float, xstar: float, thr: float) -> bool:
     """Whether some unit is beyond ``xstar`` at the step's start or its predicted end, so that
     its path's step needs substeps (:func:`_substeps`); never when ``xstar`` is not below the
@@ -126,7 +133,7 @@ def _near_wall(x, v, h: float, xstar: float, thr: float) -> bool:
     N, P = x.shape
     for p in range(P):
         for j in range(N):
-            if max(abs(x[j, p]), abs(x[j, p] + h * v[j, p])) > xstar:
+            if _reach(x[j, p], v[j, p], h) > xstar:
                 return True
     return False
 
@@ -136,7 +143,7 @@ def _substeps(x: float, v: float, h: float, xstar: float, pp: np.ndarray) -> int
     """Substeps a unit at (x, v) needs within a step h: :math:`h^2 U''(x_e)/m` at the farther of
     x and x + h v (U'' = a n (n-1)|x|^(n-2), growing with |x|); 1 below ``xstar``, where it is
     STIFF_LIMIT."""
-    xe = max(abs(x), abs(x + h * v))
+    xe = _reach(x, v, h)
     if xe <= xstar:
         return 1
     a, n = pp[7], pp[8]

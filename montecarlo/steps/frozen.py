@@ -26,7 +26,7 @@ from numba import njit
 from fpe_harvester.model import Harvester
 
 from .._kernels import (KIND_KICK, KIND_KINK, MAX_SUBSTEPS, _kick, _kick_force, _kick_inline, _near_wall,
-                        _neighbour_force, _ring_coupling, _stiff_amplitude, _substeps)
+                        _neighbour_force, _reach, _ring_coupling, _stiff_amplitude, _substeps)
 from .._kink import _kink_flow
 from ..scheme import step_coefficients
 from .base import Kernels, StepScheme
@@ -104,7 +104,7 @@ def _d_step(x, v, V, xi, F, stuck, xm, fext, w, cf, pp, kind, counters, cs) -> N
     if xstar < pp[10]:  # stiffness reachable before the escape amplitude: scan the paths
         for p in range(P):
             for j in range(N):
-                if max(abs(x[j, p]), abs(x[j, p] + h * v[j, p])) > xstar:
+                if _reach(x[j, p], v[j, p], h) > xstar:
                     n_stiff += 1
                     break
     if n_stiff > 0:

@@ -22,8 +22,8 @@ from numba import njit
 
 from fpe_harvester.model import Harvester
 
-from .._kernels import (CF_JOINT, JOINT_BLOCK, KIND_KICK, _kick, _kick_force, _ring_coupling,
-                        _stiff_amplitude, _substeps)
+from .._kernels import (CF_JOINT, JOINT_BLOCK, KIND_KICK, _kick, _kick_force, _reach,
+                        _ring_coupling, _stiff_amplitude, _substeps)
 from ..scheme import joint_step_refusal, step_coefficients
 from .base import Kernels, StepScheme
 
@@ -135,7 +135,7 @@ def _d_step_joint(x, v, V, xi, F, xm, fext, eps, cf, pp, kind, rbm, rbx, pvx, w,
     if xstar < pp[10]:
         for p in range(P):
             for j in range(N):
-                if w[p] > 0.0 and max(abs(x[j, p]), abs(x[j, p] + h * v[j, p])) > xstar:
+                if w[p] > 0.0 and _reach(x[j, p], v[j, p], h) > xstar:
                     n_stiff += 1
                     break
     if n_stiff > 0:
