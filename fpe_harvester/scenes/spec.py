@@ -50,11 +50,12 @@ from typing import Any
 
 import numpy as np
 
-from ..errors import ParameterError, check_choice, check_int, check_real
+from ..errors import MethodNotAvailableError, ParameterError, check_choice, check_int, check_real
 from ..exact import k_di
 from ..model import Harvester, Params
 from ..result import QUANTITIES
-from ..solve import METHODS
+from ..solve import get_solver
+from ..solvers import METHODS
 
 __all__ = [
     "DERIVED",
@@ -407,6 +408,7 @@ class Scene:
             check_choice("options", key, tuple(METHODS))
             if not isinstance(opts, Mapping):
                 raise _bad(f"options.{key}", opts, "expected a table of solver settings")
+            _check_solver_options(key, opts)
         object.__setattr__(self, "options", MappingProxyType({k: MappingProxyType(dict(v))
                                                               for k, v in self.options.items()}))
         outs = tuple(self.outputs)
@@ -475,6 +477,17 @@ class Scene:
         return math.prod(len(ax.values) for ax in self.axes)
 
 
+def _check_solver_options(method: str, opts: Mapping[str, Any]) -> None:
+    """``options.<method>``: settings the solver has, with valid values (it is built with them once).
+    A solver not installed here is not checked: its points say so when they run."""
+    try:
+        get_solver(method, **opts)
+    except MethodNotAvailableError:
+        return
+    except ParameterError as exc:
+        raise ParameterError(f"options.{method}: {exc}") from None
+
+
 _TOP_KEYS = ("name", "title", "description", "system", "axes", "observables", "rtol", "method",
              "options", "optimize", "figures", "outputs", "quick")
 _QUICK_KEYS = ("rtol", "axes", "options", "optimize", "method", "observables", "figures", "outputs")
@@ -497,13 +510,6 @@ def scene_from_dict(data: Mapping[str, Any], name: str | None = None) -> Scene:
             merged["optimize"] = {**dict(data.get("optimize", {})), **dict(overrides.pop("optimize"))}
         merged.update(overrides)
         quick = scene_from_dict(merged, name)
-    sys_table = _keys("system", data.get("system", {}), ("a", "n", "N", "k", "k4", "k3", "params", *_PARAMS))
-    params = dict(_keys("system.params", sys_table.pop("params", {}), _PARAMS))
-    params.update({key: sys_table.pop(key) for key in _PARAMS if key in sys_table})
-    try:
-        system = Harvester.build(**{**sys_table, **params})
-    except TypeError as exc:
-        raise ParameterError(f"system: {exc}") from None
     axes_table = data.get("axes", {})
     if not isinstance(axes_table, Mapping):
         raise _bad("axes", axes_table, "expected a table of axis name = values")
@@ -513,10 +519,35 @@ def scene_from_dict(data: Mapping[str, Any], name: str | None = None) -> Scene:
         opt = _keys("optimize", data["optimize"], ("maximize", "over", "bounds", "points"),
                     required=("over",))
         optimize = Optimize(**opt)
-    figures = []
     fig_list = data.get("figures", [])
     if not isinstance(fig_list, list):
         raise _bad("figures", fig_list, "expected an array of tables [[figures]]")
+    scene = Scene(
+        name=name,
+        title=str(data.get("title", "")),
+        description=str(data.get("description", "")),
+        system=_system(data.get("system")),
+        axes=axes,
+        observables=_as_tuple(data.get("observables", ("eta",)), "observables"),
+        rtol=data.get("rtol", 1e-3),
+        method=data.get("method", "auto"),
+        options=_keys("options", data.get("options", {}), tuple(METHODS)),
+        optimize=optimize,
+        figures=_figures(fig_list),
+        outputs=_as_tuple(data.get("outputs", OUTPUTS), "outputs"),
+        quick=quick,
+    )
+    if not data.get("system"):
+        raise ParameterError(
+            f"system: {'the table is empty' if 'system' in data else 'missing required table'}; a scene states "
+            "its base harvester, e.g. [system] with a = 0.5, n = 2, N = 3 (keys: a, n, N, k, k4, k3, params, "
+            f"{', '.join(_PARAMS)})")
+    return scene
+
+
+def _figures(fig_list: list[Any]) -> tuple[FigureSpec, ...]:
+    """The ``[[figures]]`` tables as :class:`FigureSpec` objects."""
+    figures = []
     for i, spec in enumerate(fig_list):
         where = f"figures[{i}]"
         table = _keys(where, spec, ("name", "x", "y", "series", "select", "logx", "logy",
@@ -529,21 +560,20 @@ def scene_from_dict(data: Mapping[str, Any], name: str | None = None) -> Scene:
         if "select" in table:
             table["select"] = _keys(f"{where}.select", table["select"], AXIS_NAMES)
         figures.append(FigureSpec(**table))
-    return Scene(
-        name=name,
-        title=str(data.get("title", "")),
-        description=str(data.get("description", "")),
-        system=system,
-        axes=axes,
-        observables=_as_tuple(data.get("observables", ("eta",)), "observables"),
-        rtol=data.get("rtol", 1e-3),
-        method=data.get("method", "auto"),
-        options=_keys("options", data.get("options", {}), tuple(METHODS)),
-        optimize=optimize,
-        figures=tuple(figures),
-        outputs=_as_tuple(data.get("outputs", OUTPUTS), "outputs"),
-        quick=quick,
-    )
+    return tuple(figures)
+
+
+def _system(table: Any) -> Harvester:
+    """The ``[system]`` table as the base harvester (the defaults when it is missing or empty: the
+    caller refuses those once the rest of the scene is checked)."""
+    sys_table = _keys("system", {} if table is None else table,
+                      ("a", "n", "N", "k", "k4", "k3", "params", *_PARAMS))
+    params = dict(_keys("system.params", sys_table.pop("params", {}), _PARAMS))
+    params.update({key: sys_table.pop(key) for key in _PARAMS if key in sys_table})
+    try:
+        return Harvester.build(**{**sys_table, **params})
+    except TypeError as exc:
+        raise ParameterError(f"system: {exc}") from None
 
 
 def _as_tuple(value: Any, where: str) -> tuple:
