@@ -78,7 +78,7 @@ class Optimum:
         ``stable`` (converged), ``marginal`` (a supremum at the stability threshold) or
         ``not_converged``; ``message`` says why and what to do.
     method : str
-        ``"exact"`` or ``"mc"`` (the solver of the objective), or ``"callable"``.
+        The solver of the objective (``"exact"``, ``"mc"``), or ``"callable"``.
     info : Mapping
         Details: bracket, window, the points evaluated and their batch means, curvature,
         batches, evaluations, wall time.
@@ -496,13 +496,15 @@ def optimize(
         Search interval; default :func:`default_bounds` (``over = "k"`` only).
     maximize : str
         Observable, one of :data:`~fpe_harvester.result.QUANTITIES` (default ``"eta"``).
-    method : {"auto", "exact", "mc"}
-        Solver of the objective: ``"auto"`` is exact for a harmonic system (deterministic:
-        bounded scalar search), Monte Carlo otherwise (noisy: :func:`maximize_noisy` with common
-        random numbers).
+    method : {"auto", "exact", "fpe", "mc"}
+        Solver of the objective. The optimizer takes one whose objective is exact to round-off
+        (bounded scalar search) or random with common random numbers across the interval
+        (:func:`maximize_noisy`); Fokker--Planck is neither. ``"auto"``: the first solver of
+        ``method="auto"``'s order that handles the interval's middle and is of such a kind
+        (exact for a harmonic system, Monte Carlo otherwise).
     tol : float, optional
-        Monte Carlo: target standard error of the optimum's position, > 0 (batches are doubled up
-        to 32 until met). Default: the ``batches`` given.
+        Random objective: target standard error of the optimum's position, > 0 (batches are
+        doubled up to 32 until met). Default: the ``batches`` given.
     seed : int
         Base seed, >= 0: batch ``b`` uses one child seed of it at every point.
     batches : int
@@ -515,8 +517,9 @@ def optimize(
     points : int
         Bracketing grid size, >= 3 (default 9).
     mc_tol : float
-        Accuracy, in (0, 1), that plans the Monte Carlo time step, burn-in and run length (once,
-        at the middle of the interval, then frozen so that all points share their noise).
+        Random objective: the solver's tolerance, in (0, 1), that plans its runs (for Monte Carlo
+        the time step, burn-in and run length), once at the middle of the interval, then frozen so
+        that all points share their noise.
     confidence : float
         Level of the confidence intervals, in (0, 1).
     progress : bool or None
@@ -525,9 +528,9 @@ def optimize(
     Returns
     -------
     Optimum
-        ``to_dict()`` gives e.g. ``k_opt, k_opt_err, eta_max, eta_max_err, method, status``.
-        With Monte Carlo, ``eta_max_err`` also holds the time-step error at the optimum
-        (:meth:`montecarlo.Estimate.systematic`).
+        ``x_opt`` and ``value`` with their errors (``to_dict()`` has the same names). With a
+        random solver, ``value_err`` also holds the solver's systematic (time-step) error at the
+        optimum where it reports one (Monte Carlo: :meth:`montecarlo.Estimate.systematic`).
 
     Raises
     ------

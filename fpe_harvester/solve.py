@@ -109,7 +109,8 @@ def _build(method: str | Solver, common: Mapping[str, Any], options: Mapping[str
         args, ignored = _arguments(type(method), common, {})
         return (dataclasses.replace(method, **args) if args else method), ignored
     cls = solver_class(method)
-    args, ignored = _arguments(cls, common, own)
+    # built by name, a solver draws a progress bar only on a terminal unless told otherwise
+    args, ignored = _arguments(cls, {"progress": None, **common}, own)
     try:
         return cls(**args), ignored
     except TypeError as exc:
@@ -298,6 +299,10 @@ def _answerer(h: Harvester, method: str | Solver, common: Mapping[str, Any], ext
     return name, solver, ignored, declined
 
 
+#: Seconds a solve runs before its progress bar appears (quick solves draw none).
+BAR_DELAY = 1.0
+
+
 def _run(solver: Solver, h: Harvester) -> Stats:
     """``solver.solve(h)``; a solver that reports progress in lines, asked for a bar, gets one on
     stderr whose last line is the value it reports."""
@@ -307,7 +312,7 @@ def _run(solver: Solver, h: Harvester) -> Stats:
 
     where = f" N={h.N}" if h.N > 1 else ""
     with tqdm(desc=f"{solver.name} n={h.n:g} a={h.a:g}{where}", unit="step", file=sys.stderr,
-              delay=1.0) as bar:
+              delay=BAR_DELAY) as bar:
         def line(text: str) -> None:
             bar.set_postfix_str(text[:70], refresh=False)
             bar.update(1)

@@ -349,16 +349,18 @@ class Scene:
     observables : tuple of str
         Subset of :data:`~fpe_harvester.result.QUANTITIES` and :data:`DERIVED` to report.
     rtol : float
-        Wanted relative accuracy on eta, in (0, 1). Passed as ``tol`` to the
-        Fokker--Planck and Monte Carlo solvers; ignored by the exact solver.
+        Wanted relative accuracy on eta, in (0, 1). Passed as ``tol`` to every solver that
+        takes a tolerance (Fokker--Planck, Monte Carlo); the exact solver has none.
     method : {"auto", "exact", "fpe", "mc"}
-        ``"auto"`` picks the cheapest adequate solver per point; a Fokker--Planck point that
-        misses ``rtol`` (no numbers, or an error above it) is tried again with Monte Carlo,
-        which is kept when it reaches ``rtol`` or has the smaller relative error on eta (the
-        Monte Carlo settings are ``options["mc"]``; its wall-time budget ``max_time`` is 600 s
-        per point unless set there).
+        ``"auto"``: per point, the first solver that handles it (as
+        :func:`~fpe_harvester.solve.solve` chooses); where it misses ``rtol`` (no numbers, or an
+        error above it) the next one is tried and kept when it reaches ``rtol`` or has the smaller
+        relative error on eta (with its settings from ``options``; its wall-time budget is
+        :data:`~fpe_harvester.scenes.run.SCENE_FALLBACK_SECONDS`, 600 s, unless set there).
+        A named method must handle every point: the run checks that before it starts.
     options : mapping of method name to mapping
-        Extra constructor settings per solver (e.g. ``{"mc": {"dt": 0.01}}``).
+        Extra constructor settings per solver (e.g. ``{"mc": {"dt": 0.01}}``), checked when
+        the scene is made: an option the solver does not have, or an invalid value, is an error.
     optimize : Optimize or None
         Turn each point into the optimum over one field.
     figures : tuple of FigureSpec
