@@ -33,7 +33,8 @@ Python from the frozen dataclasses below. A minimal TOML scene::
 Optional tables: ``[options.fpe]`` / ``[options.mc]`` (solver settings), ``[optimize]``
 (``maximize = "eta"``, ``over = "k"``, ``bounds = ["k_di", 0.0]``, ``points = 41``:
 each point of the other axes becomes the optimum over ``over``), ``outputs = ["table",
-"csv", "json"]``.
+"csv", "json"]``. ``[system]`` is required and not empty. Every table, key, type and default:
+the docs page ``scene-format`` (docs/scene-format.md).
 """
 
 from __future__ import annotations
@@ -336,7 +337,8 @@ class FigureSpec:
 
 @dataclass(frozen=True)
 class Scene:
-    """A declarative study. See the module docstring for the TOML form.
+    """A declarative study; its TOML form (every table, key, type and default) is the docs page
+    ``scene-format`` (docs/scene-format.md).
 
     Parameters
     ----------
