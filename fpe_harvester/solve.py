@@ -20,10 +20,10 @@ import sys
 from collections.abc import Callable, Mapping, Sequence
 from typing import Any
 
+from . import solvers as registry
 from .errors import MethodNotAvailableError, ParameterError, check_int, check_real
 from .model import Harvester
 from .result import QUANTITIES, Stats, Status
-from . import solvers as registry
 from .solvers import COMMON_SETTINGS, METHODS, Capabilities, Solver, option_names, solver_class, title
 
 __all__ = ["Solver", "METHODS", "FALLBACK_SECONDS", "get_solver", "choose_method", "solve", "solve_many",
@@ -109,8 +109,7 @@ def _build(method: str | Solver, common: Mapping[str, Any], options: Mapping[str
         args, ignored = _arguments(type(method), common, {})
         return (dataclasses.replace(method, **args) if args else method), ignored
     cls = solver_class(method)
-    # built by name, a solver draws a progress bar only on a terminal unless told otherwise
-    args, ignored = _arguments(cls, {"progress": None, **common}, own)
+    args, ignored = _arguments(cls, common, own)
     try:
         return cls(**args), ignored
     except TypeError as exc:
@@ -266,6 +265,8 @@ def solve(h: Harvester, method: str | Solver = "auto", *, fallback_time: float |
     if fallback_time is not None:
         fallback_time = check_real("fallback_time", fallback_time, low=0.0)
     common, extra = _split(settings)
+    # a solver built here draws a progress bar only on a terminal, unless told otherwise
+    common = {"progress": None, **common} if isinstance(method, str) else common
     options = _solver_options(solver_options)
     name, solver, ignored, declined = _answerer(h, method, common, extra, options)
     res = _annotate(_run(solver, h), h, ignored)
@@ -391,6 +392,7 @@ def solve_many(hs: Sequence[Harvester], method: str | Solver = "auto", *,
         if not isinstance(h, Harvester):
             raise ParameterError(f"every point must be a Harvester, got {h!r} (type {type(h).__name__})")
     common, extra = _split(settings)
+    common = {"progress": None, **common} if isinstance(method, str) else common
     options = _solver_options(solver_options)
     out: list[Stats | None] = [None] * len(hs)
     groups: dict[int, tuple[Solver, list[str], list[tuple[int, dict[str, str]]]]] = {}

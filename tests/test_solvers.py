@@ -78,6 +78,18 @@ class Toy:
                                                                 "budget": self.budget})
 
 
+@dataclass(frozen=True)
+class BarToy(Toy):
+    """The toy drawing its own progress bar: records the ``progress`` it was given."""
+
+    name: ClassVar[str] = "bartoy"
+    capabilities: ClassVar[Capabilities] = dataclasses.replace(Toy.capabilities, title="Bar toy", progress="bar")
+    progress: bool | None = None
+
+    def solve(self, h: Harvester) -> Stats:
+        return dataclasses.replace(exact_stats([h])[0], method=self.name, info={"progress": self.progress})
+
+
 @pytest.fixture
 def toy(monkeypatch: pytest.MonkeyPatch) -> type:
     """The toy registered (one entry) and asked first by auto."""
@@ -132,11 +144,14 @@ def test_the_optimizer_asks_what_kind_of_objective_it_gives(toy: type) -> None:
 def test_progress_bars_only_on_a_terminal_and_the_last_line_is_the_reported_value(
         toy: type, monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str]) -> None:
     monkeypatch.setattr(solve_module, "BAR_DELAY", 0.0)
+    monkeypatch.setitem(METHODS, "bartoy", BarToy)
     solve(UNIT, "toy")  # progress=None and stderr is no terminal (captured): no bar
     assert capsys.readouterr().err == ""
-    assert get_solver("mc").progress is False and get_solver("fpe").progress is False
+    assert solve(UNIT, "bartoy").info["progress"] is False  # a solver drawing its own bar: told not to
+    assert solve(UNIT, "bartoy", progress=True).info["progress"] is True
     monkeypatch.setattr(solve_module, "_terminal", lambda: True)
-    assert get_solver("mc").progress is None  # on a terminal: its own bar, after its own delay
+    assert solve(UNIT, "bartoy").info["progress"] is None  # on a terminal: its own rule (and delay)
+    assert get_solver("fpe").progress is False  # a solver object keeps its own default
     r = solve(UNIT, "toy")
     err = capsys.readouterr().err
     assert "toy n=2 a=0.5" in err and "3step" in err.replace(" ", "")

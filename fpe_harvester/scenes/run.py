@@ -105,19 +105,20 @@ class _Runner:
                 continue
         return out
 
-    def solver_of(self, h: Harvester) -> str:
-        """The solver that answers for ``h``.
+    def solver_of(self, h: Harvester, every: dict[str, dict[str, Any]] | None = None) -> str:
+        """The solver that answers for ``h`` (``every``: :meth:`all_settings` of ``h``, if known).
 
         Raises
         ------
         ParameterError
             No solver (or not the scene's method) handles ``h``; the message names the point.
         """
+        every = self.all_settings(h) if every is None else every
         try:
             if self.scene.method == "auto":
-                return choose_method(h, solver_options=self.all_settings(h))
+                return choose_method(h, solver_options=every)
             name = self.scene.method
-            reason = get_solver(name, **self.settings(name, h)).unsupported_reason(h)
+            reason = get_solver(name, **every.get(name, {})).unsupported_reason(h)
         except MethodNotAvailableError as exc:
             reason, name = str(exc), self.scene.method
         if reason:
@@ -128,8 +129,8 @@ class _Runner:
 
     def key(self, h: Harvester) -> tuple[str, str, dict[str, dict[str, Any]]]:
         """The cache key of ``h``, its solver and the settings of every solver it may use."""
-        name = self.solver_of(h)
         every = self.all_settings(h)
+        name = self.solver_of(h, every)
         rtol = None if capabilities(name).tol is None else self.scene.rtol
         return point_key(h, name, rtol, every[name]), name, every
 
