@@ -170,6 +170,10 @@ def test_stats_carry_their_system_and_go_into_pandas():
     assert frame.loc[0, "eta"] == r.eta and frame.loc[0, "k"] == -0.33
     assert math.isnan(frame.loc[0, "d2_err"]) is False  # a ring has d2
     assert Stats(eta=1.0).to_record()["status"] == "stable"  # no system: only the results
+    from fpe_harvester.scenes.cache import stats_from_dict
+
+    back = stats_from_dict(d)  # a result through JSON (the scene cache, a Dask worker) keeps its system
+    assert back.harvester == h and back.to_dict() == r.to_dict()
     with pytest.raises(ParameterError, match="harvester must be a Harvester"):
         Stats(harvester={"a": 0.5})
 
