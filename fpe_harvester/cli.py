@@ -421,9 +421,9 @@ def build_parser() -> argparse.ArgumentParser:
                    help="solver of the objective (default auto: the first that handles the system and gives "
                         "an exact or a common-random-number objective: exact for n = 2, else mc)")
     p.add_argument("--tol", type=_number, default=None,
-                   help="Monte Carlo: target standard error of the optimum's position, > 0 (adds batches)")
+                   help="random objective: target standard error of the optimum's position, > 0 (adds batches)")
     p.add_argument("--batches", type=int, default=8, help="independent common-random-number batches, >= 3")
-    p.add_argument("--replicas", type=int, default=48, help="Monte Carlo replicas per point and batch, >= 2")
+    p.add_argument("--replicas", type=int, default=48, help="replicas per point and batch of a random objective, >= 2 (default 48)")
     p.add_argument("--seed", type=int, default=2017, help="base random seed, >= 0 (default 2017)")
     p.add_argument("--json", action="store_true", help="print one JSON object")
     p.add_argument("--no-progress", action="store_true", help="no progress bar")
@@ -450,7 +450,8 @@ def build_parser() -> argparse.ArgumentParser:
     q.add_argument("--json", action="store_true", help="print one JSON object")
     q.add_argument("--no-progress", action="store_true", help="no progress bar")
     q.add_argument("--workers", type=int, default=None, metavar="P",
-                   help="processes for Fokker-Planck points (default 1; Monte Carlo is threaded); "
+                   help="processes for the points of single-threaded solvers, Fokker-Planck (default 1; Monte "
+                        "Carlo runs its own threads); "
                         "with --dask local: the cluster's workers (default: one per CPU)")
     where = q.add_mutually_exclusive_group()
     where.add_argument("--scheduler", metavar="ADDRESS",
