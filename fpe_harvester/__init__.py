@@ -38,7 +38,7 @@ from .optimum import Optimum, maximize_noisy, optimize
 from .result import QUANTITIES, Stats, Status
 from .scenes import Axis, FigureSpec, Optimize, Scene, SceneResult, list_scenes, load_scene, run_scene
 from .solve import choose_method, get_solver, solve, solve_many
-from .solvers import AUTO_ORDER, METHODS, Capabilities, Tolerance
+from .solvers import METHODS, Capabilities, Tolerance
 from .sweep import Sweep, sweep
 
 __version__ = "0.1.0"
@@ -57,7 +57,6 @@ __all__ = [
     "get_solver",
     "choose_method",
     "METHODS",
-    "AUTO_ORDER",
     "Capabilities",
     "Tolerance",
     "Exact",

@@ -5,7 +5,7 @@ each one takes is read from its declared :class:`~fpe_harvester.solvers.Capabili
 from its name. The common settings (``tol``, ``seed``, ``max_time`` or ``max_seconds``,
 ``progress``) are accepted for every method: each solver uses those it has, and the result's
 ``info["ignored"]`` lists the others. ``method="auto"`` asks the solvers in the order of
-:data:`~fpe_harvester.solvers.AUTO_ORDER` whether they handle the system and the first that does
+:data:`~fpe_harvester.solvers.METHODS` whether they handle the system and the first that does
 answers; where it stops short of its tolerance (status ``not_converged``) the next one that
 handles the system runs within a time budget and :func:`fallback_result` keeps the better
 numbers. That policy lives here only: the command line, the scenes and the optimizer call
@@ -20,7 +20,6 @@ import sys
 from collections.abc import Callable, Mapping, Sequence
 from typing import Any
 
-from . import solvers as registry
 from .errors import MethodNotAvailableError, ParameterError, check_int, check_real
 from .model import Harvester
 from .result import QUANTITIES, Stats, Status
@@ -132,10 +131,10 @@ def _candidate(name: str, h: Harvester, common: Mapping[str, Any], options: Mapp
 def _choose(h: Harvester, common: Mapping[str, Any], options: Mapping[str, Mapping[str, Any]],
             extra: Mapping[str, Any], after: str | None = None,
             unusable: Callable[[Capabilities], str | None] | None = None) -> tuple[str, dict[str, str]]:
-    """The first solver of :data:`~fpe_harvester.solvers.AUTO_ORDER` (after ``after``; with
+    """The first solver of :data:`~fpe_harvester.solvers.METHODS` (after ``after``; with
     ``unusable``, among those it finds no fault with) that handles ``h``, and the reasons of those
     that declined. ``extra`` options go to the solvers that have them all."""
-    order = registry.AUTO_ORDER  # read at each call: the registry is the one place that orders them
+    order = list(METHODS)  # read at each call: the registry is the one place that orders them
     order = order[order.index(after) + 1:] if after else order
     declined: dict[str, str] = {}
     for name in order:
@@ -193,7 +192,7 @@ def get_solver(method: str | Solver = "auto", h: Harvester | None = None, **sett
 def choose_method(h: Harvester, solver_options: Mapping[str, Mapping[str, Any]] | None = None,
                   unusable: Callable[[Capabilities], str | None] | None = None, **settings: Any) -> str:
     """The name of the solver ``method="auto"`` picks for ``h``: the first of
-    :data:`~fpe_harvester.solvers.AUTO_ORDER` whose ``unsupported_reason(h)`` is None with these
+    :data:`~fpe_harvester.solvers.METHODS` whose ``unsupported_reason(h)`` is None with these
     settings (harmonic: exact; one nonlinear unit: Fokker--Planck, where it declares it can
     answer; anything else: Monte Carlo). ``solver_options`` and ``settings`` are those of
     :func:`solve` (a solver's settings can decide whether it handles ``h``); ``unusable``, given
@@ -357,7 +356,7 @@ def _fallback(h: Harvester, first: Stats, name: str, common: Mapping[str, Any],
     """The next solver after ``name`` that handles ``h``, within ``seconds`` (wall time) and the
     same settings, merged with ``first`` by :func:`fallback_result`; ``progress`` False (the
     caller's) silences its bar too. Without one, ``first`` is returned with a note."""
-    if name == registry.AUTO_ORDER[-1]:
+    if name == list(METHODS)[-1]:
         return first
     quiet = {**common, "progress": False if common.get("progress") is False else None}
     try:

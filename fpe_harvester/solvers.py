@@ -8,8 +8,8 @@ progress, how its points are best run and its vectorized ``solve_many`` if it ha
 drivers (:func:`~fpe_harvester.solve.solve`, the command line, the scenes, the optimizer) read
 only these. :data:`METHODS` maps names to solver classes as ``"module:Class"`` import paths
 (imported on first use, so that the Monte Carlo and Fokker--Planck stacks load only when asked
-for), and :data:`AUTO_ORDER` is the order in which ``method="auto"`` asks them. A new solver is
-one module and one entry in each.
+for); its order is the order in which ``method="auto"`` asks them. A new solver is one module
+and one entry there.
 """
 
 from __future__ import annotations
@@ -24,7 +24,7 @@ from .errors import MethodNotAvailableError, ParameterError
 from .model import Harvester
 from .result import Stats
 
-__all__ = ["Tolerance", "Capabilities", "Solver", "METHODS", "AUTO_ORDER", "COMMON_SETTINGS",
+__all__ = ["Tolerance", "Capabilities", "Solver", "METHODS", "COMMON_SETTINGS",
            "solver_class", "capabilities", "title", "option_names"]
 
 
@@ -112,16 +112,14 @@ class Solver(Protocol):
         """The stationary statistics of ``h``."""
 
 
-#: Solver classes by name, as ``"module:Class"`` import paths (or the class itself).
+#: Solver classes by name, as ``"module:Class"`` import paths (or the class itself), in the order
+#: in which ``method="auto"`` asks them whether they handle a system: the cheapest first; the
+#: first that does answers, the next one takes over where it stops short of its tolerance.
 METHODS: dict[str, str | type] = {
     "exact": "fpe_harvester.exact:Exact",
     "fpe": "fpe_harvester.fpe:FokkerPlanck",
     "mc": "montecarlo:MonteCarlo",
 }
-
-#: The order in which ``method="auto"`` asks the solvers whether they handle a system: the
-#: cheapest first; the first that does answers, the next one takes over where it stops short.
-AUTO_ORDER: tuple[str, ...] = ("exact", "fpe", "mc")
 
 #: Settings every method accepts: each solver uses those it has and ignores the others
 #: (``max_seconds`` is another name of ``max_time``).

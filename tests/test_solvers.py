@@ -7,7 +7,7 @@ from __future__ import annotations
 import dataclasses
 import importlib
 import json
-from collections.abc import Callable
+from collections.abc import Callable, Iterator
 from dataclasses import dataclass
 from typing import ClassVar
 
@@ -20,7 +20,7 @@ from fpe_harvester.exact import exact_stats
 from fpe_harvester.optimum import optimize
 from fpe_harvester.scenes import Axis
 from fpe_harvester.scenes.cache import point_seed
-from fpe_harvester.solvers import AUTO_ORDER, METHODS, Capabilities, Tolerance, option_names, solver_class
+from fpe_harvester.solvers import METHODS, Capabilities, Tolerance, option_names, solver_class
 
 # the module, not the function of the same name that the package exports
 solve_module = importlib.import_module("fpe_harvester.solve")
@@ -30,7 +30,7 @@ solve_module = importlib.import_module("fpe_harvester.solve")
 def test_declared_capabilities_match_the_solver(name: str) -> None:
     cls = solver_class(name)
     caps, fields = cls.capabilities, {f.name: f for f in dataclasses.fields(cls)}
-    assert name in AUTO_ORDER and cls.name == name
+    assert cls.name == name
     if caps.tol is None:
         assert "tol" not in fields
     else:
@@ -91,11 +91,14 @@ class BarToy(Toy):
 
 
 @pytest.fixture
-def toy(monkeypatch: pytest.MonkeyPatch) -> type:
-    """The toy registered (one entry) and asked first by auto."""
-    monkeypatch.setitem(METHODS, "toy", Toy)
-    monkeypatch.setattr(solvers, "AUTO_ORDER", ("toy", *AUTO_ORDER))
-    return Toy
+def toy() -> Iterator[type]:
+    """The toy registered: one entry, the first (auto asks it first)."""
+    before = dict(METHODS)
+    METHODS.clear()
+    METHODS.update({"toy": Toy, **before})
+    yield Toy
+    METHODS.clear()
+    METHODS.update(before)
 
 
 UNIT, RING = Harvester.build(a=0.5, n=2), Harvester.build(a=0.5, n=2, N=3, k=-0.2)
