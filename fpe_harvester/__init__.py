@@ -1,8 +1,10 @@
 """fpe-harvester: stationary statistics of noise-driven piezoelectric energy harvesters.
 
 Public API: the model (:class:`Params`, :class:`Potential`, :class:`Harvester`), the one
-entry point :func:`solve` with its result :class:`Stats`, the exact harmonic solver
-(:class:`Exact`, :func:`exact_sweep`), stability thresholds (:func:`k_di`,
+entry point :func:`solve` with its result :class:`Stats` (and :func:`solve_many`, and
+:func:`sweep` over parameter grids, a table with the parameters beside the results), what
+solvers declare (:class:`Capabilities`, the registry :data:`METHODS`), the exact harmonic
+solver (:class:`Exact`, :func:`exact_sweep`), stability thresholds (:func:`k_di`,
 :func:`threshold`), optima with error bars (:func:`optimize`, :func:`maximize_noisy`) and
 declarative studies (:class:`Scene`, :func:`run_scene`).
 
@@ -35,7 +37,9 @@ from .model import Harvester, Params, Potential
 from .optimum import Optimum, maximize_noisy, optimize
 from .result import QUANTITIES, Stats, Status
 from .scenes import Axis, FigureSpec, Optimize, Scene, SceneResult, list_scenes, load_scene, run_scene
-from .solve import METHODS, choose_method, get_solver, solve
+from .solve import choose_method, get_solver, solve, solve_many
+from .solvers import METHODS, Capabilities, Tolerance
+from .sweep import Sweep, sweep
 
 __version__ = "0.1.0"
 
@@ -47,9 +51,14 @@ __all__ = [
     "Status",
     "QUANTITIES",
     "solve",
+    "solve_many",
+    "sweep",
+    "Sweep",
     "get_solver",
     "choose_method",
     "METHODS",
+    "Capabilities",
+    "Tolerance",
     "Exact",
     "exact_sweep",
     "Threshold",

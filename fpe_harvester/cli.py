@@ -4,9 +4,12 @@ validation's ``validate``).
 
 Every command prints a readable table, or one JSON object with ``--json``. Never a traceback:
 bad input (an argument out of range, a parameter set whose answer is beyond double precision,
-an output folder that cannot be created) gives a one-line error naming the argument and exit
-code 2; an interrupt exits 130; anything else is a one-line internal error with exit code 1
-(set ``HARVESTER_DEBUG=1`` for the traceback).
+an output folder that cannot be created, a scene no solver can run) gives a one-line error
+naming the argument and exit code 2; an interrupt exits 130; anything else is a one-line
+internal error with exit code 1 (set ``HARVESTER_DEBUG=1`` for the traceback). A scene that
+ends with failed or unavailable points exits 1 and says how many; ``stats --strict`` exits 3
+when the status is not ``stable``. The solvers are asked what they take
+(:mod:`~fpe_harvester.solvers`): no command knows a method by its name.
 """
 
 from __future__ import annotations
@@ -26,8 +29,9 @@ from typing import Any, NoReturn
 from .errors import HarvesterError, ParameterError
 from .exact import threshold
 from .model import MAX_EXPONENT, Harvester, Params
-from .result import QUANTITIES
-from .solve import FALLBACK_SECONDS, METHODS, choose_method, solve
+from .result import QUANTITIES, Status
+from .solve import FALLBACK_SECONDS, solve
+from .solvers import METHODS, title
 
 __all__ = ["COMMAND_GROUP", "main", "build_parser", "writable_folder"]
 
@@ -45,7 +49,24 @@ class _Parser(argparse.ArgumentParser):
                                                    re.IGNORECASE)
 
     def error(self, message: str) -> NoReturn:
-        self.exit(2, f"{self.prog}: error: {message}\n")
+        self.exit(2, f"{self.prog}: error: {message}{_param_hint(message)}\n")
+
+
+#: Physical parameters, which are given as ``--param NAME=VALUE``.
+_PARAM_NAMES = tuple(f.name for f in dataclasses.fields(Params))
+
+
+def _param_hint(message: str) -> str:
+    """For an option that is a physical parameter (``--tau -1``), the hint ``--param tau=-1``."""
+    if not message.startswith("unrecognized arguments:"):
+        return ""
+    words = message.removeprefix("unrecognized arguments:").split()
+    for i, word in enumerate(words):
+        name, _, value = word.removeprefix("--").partition("=")
+        if word.startswith("--") and name in _PARAM_NAMES:
+            value = value or (words[i + 1] if i + 1 < len(words) else "VALUE")
+            return f"; physical parameters are given as --param NAME=VALUE: --param {name}={value}"
+    return ""
 
 
 def _number(text: str) -> float:
@@ -99,74 +120,43 @@ def _fmt(value: float | None, err: float | None = None) -> tuple[str, str]:
     return f"{value:.10g}", ("-" if err is None else f"{err:.3g}")
 
 
-#: What --tol and --seed mean to each solver (None: the solver has no such setting).
-_TOL = {"exact": None, "fpe": "(0, 0.1]", "mc": "(0, 1)"}
+def _settings(args: argparse.Namespace) -> dict[str, Any]:
+    """The common settings given (``--tol``, ``--seed``, ``--max-time``, ``--no-progress``) and the
+    solver's own (``--opt``)."""
+    settings = {key: _parse_value(val) for key, val in args.opt}
+    for key in ("tol", "seed", "max_time"):
+        if getattr(args, key) is not None:
+            settings[key] = getattr(args, key)
+    settings["progress"] = False if args.no_progress or args.json else None
+    return settings
 
 
-def _solver_options(args: argparse.Namespace, method: str) -> dict[str, Any]:
-    """``--opt``, ``--tol``, ``--seed`` and ``--no-progress`` as settings of ``method``'s solver."""
-    options = {key: _parse_value(val) for key, val in args.opt}
-    if args.tol is not None:
-        if _TOL[method] is None:
-            raise ParameterError(
-                f"--tol {args.tol:g}: the exact solver (harmonic n = 2) takes no tolerance, its results are "
-                f"exact to round-off; drop --tol, or choose --method fpe (tol in {_TOL['fpe']}) or "
-                f"--method mc (tol in {_TOL['mc']})")
-        options["tol"] = args.tol
-    if args.seed is not None:
-        if method != "mc":
-            raise ParameterError(f"--seed {args.seed}: only Monte Carlo (--method mc) is random; the {method} "
-                                 "solver is deterministic and takes no seed")
-        options["seed"] = args.seed
-    if args.no_progress and method in ("fpe", "mc"):
-        options["progress"] = False
-    return options
-
-
-def _fpe_bar(h: Harvester) -> Any:
-    """A tqdm bar on stderr fed by the Fokker-Planck solver's one line per refinement level."""
-    from tqdm import tqdm
-
-    bar = tqdm(desc=f"fpe n={h.n:g} a={h.a:g}", unit="level", file=sys.stderr, delay=1.0)
-
-    def level(line: str) -> None:
-        bar.set_postfix_str(line[:70], refresh=False)
-        bar.update(1)
-
-    return bar, level
+#: Exit status of ``stats --strict`` when the result's status is not ``stable``.
+NOT_STABLE = 3
 
 
 def cmd_stats(args: argparse.Namespace) -> int:
     h = Harvester.build(a=args.a, n=args.n, N=args.N, k=args.k, k4=args.k4, k3=args.k3)
     h = h.replace(params=_params(args.param))
-    method = args.method if args.method != "auto" else choose_method(h)
-    options = _solver_options(args, method)
-    bar = None
-    if method == "fpe" and "progress" not in options:
-        bar, options["progress"] = _fpe_bar(h)
-    try:
-        # "auto" itself (not the method it picks), so that Monte Carlo steps in where
-        # Fokker-Planck stops short of the tolerance
-        result = solve(h, args.method, fallback_time=args.fallback_time, **options)
-    finally:
-        if bar is not None:
-            bar.close()
+    result = solve(h, args.method, fallback_time=args.fallback_time, **_settings(args))
+    code = NOT_STABLE if args.strict and result.status is not Status.STABLE else 0
     if args.json:
-        out = result.to_dict()
-        out["harvester"] = h.to_dict()
-        print(json.dumps(out, indent=2))
-        return 0
+        print(json.dumps(result.to_dict(), indent=2))
+        return code
     print(
         f"Harvester: U(x) = {h.a:g}|x|^{h.n:g}, N = {h.N}, k = {h.k:g}{_higher_couplings(h)}; "
         f"method = {result.method}; status = {result.status.value}"
     )
     if result.message and result.message != "stable":
         print(result.message)
+    ignored = [f"--{key.replace('_', '-')}" for key in result.info.get("ignored", ())]
+    if ignored:
+        print(f"note: the {title(result.method)} solver has no use for {', '.join(ignored)}: ignored")
     rows = [(name, *_fmt(*result.value(name))) for name in QUANTITIES]
     _print_table(rows, ("quantity", "value", "error"))
     if result.growth_rate is not None:
         print(f"largest growth rate of the drift: {result.growth_rate:.6g}")
-    return 0
+    return code
 
 
 def _higher_couplings(h: Harvester) -> str:
@@ -197,12 +187,10 @@ def cmd_optimize(args: argparse.Namespace) -> int:
                    method=args.method, tol=args.tol, seed=args.seed, batches=args.batches,
                    replicas=args.replicas, progress=False if args.no_progress or args.json else None)
     if args.json:
-        out = opt.to_dict()
-        out["harvester"] = h.to_dict()
-        print(json.dumps(out, indent=2))
+        print(json.dumps({**opt.to_dict(), "harvester": h.to_dict()}, indent=2))
         return 0
-    print(f"Harvester: U(x) = {h.a:g}|x|^{h.n:g}, N = {h.N}{_higher_couplings(h)}; maximize {opt.maximize} over {opt.over}; "
-          f"method = {opt.method}; status = {opt.status.value}")
+    print(f"Harvester: U(x) = {h.a:g}|x|^{h.n:g}, N = {h.N}{_higher_couplings(h)}; maximize {opt.maximize} "
+          f"over {opt.over}; method = {opt.method}; status = {opt.status.value}")
     print(opt.message)
     level = f"{opt.confidence:.0%} interval"
 
@@ -213,7 +201,7 @@ def cmd_optimize(args: argparse.Namespace) -> int:
                   (f"{opt.maximize}_max", *_fmt(opt.value, opt.value_err), ci(opt.value_ci))],
                  ("quantity", "value", "error", level))
     if "wall_time" in opt.info:
-        print(f"{opt.info.get('evaluations')} Monte Carlo runs in {opt.info['wall_time']:.1f} s")
+        print(f"{opt.info.get('evaluations')} {title(opt.method)} runs in {opt.info['wall_time']:.1f} s")
     return 0
 
 
@@ -226,8 +214,7 @@ def cmd_landscape(args: argparse.Namespace) -> int:
         print(json.dumps(ls.to_dict(), indent=2))
         return 0
     e = ls.energy
-    print(f"E(x) = sum {e.a:g}|x_j|^{e.n:g} + ({e.k:g}/2) sum d^2 + ({e.k4:g}/2) sum (Lx)^2 + ({e.k3:g}/4) sum d^4, "
-          f"N = {e.N}")
+    print(f"E(x) = {_energy_text(e)}, N = {e.N}")
     print(ls.message)
     if ls.buckling is not None:
         b = ls.buckling
@@ -243,6 +230,16 @@ def cmd_landscape(args: argparse.Namespace) -> int:
     if len(ls.equilibria) > args.max_rows:
         print(f"... {len(ls.equilibria) - args.max_rows} more (--max-rows, or --json for all)")
     return 0
+
+
+def _energy_text(e: Any) -> str:
+    """The ring energy with its nonzero terms only, each coefficient's sign written once:
+    ``sum 1|x_j|^1 - (2/2) sum d^2 + (1/4) sum d^4``."""
+    text = f"sum {e.a:g}|x_j|^{e.n:g}"
+    for coefficient, divisor, term in ((e.k, 2, "sum d^2"), (e.k4, 2, "sum (Lx)^2"), (e.k3, 4, "sum d^4")):
+        if coefficient != 0.0:
+            text += f" {'-' if coefficient < 0 else '+'} ({abs(coefficient):g}/{divisor}) {term}"
+    return text
 
 
 def writable_folder(flag: str, path: str) -> str:
@@ -278,6 +275,7 @@ def _with_couplings(scene: Any, args: argparse.Namespace) -> Any:
 def cmd_scene(args: argparse.Namespace) -> int:
     """List the shipped scenes, or run one and print its table and output paths."""
     from .scenes import list_scenes, load_scene, run_scene
+    from .scenes.result import ERROR, NOT_AVAILABLE
 
     if args.action == "list":
         scenes = [load_scene(name) for name in list_scenes()]
@@ -288,13 +286,23 @@ def cmd_scene(args: argparse.Namespace) -> int:
         _print_table([(s.name, f"{s.n_points}/{s.variant(True).n_points}", s.title) for s in scenes],
                      ("scene", "points (full/quick)", "title"))
         return 0
-    result = run_scene(_with_couplings(load_scene(args.scene), args), writable_folder("--out", args.out),
-                       quick=args.quick,
-                       progress=False if args.no_progress or args.json else None, workers=args.workers,
-                       scheduler=_scheduler(args))
+    out = writable_folder("--out", args.out)
+    try:
+        result = run_scene(_with_couplings(load_scene(args.scene), args), out, quick=args.quick,
+                           progress=False if args.no_progress or args.json else None, workers=args.workers,
+                           scheduler=_scheduler(args))
+    except KeyboardInterrupt:
+        from .scenes.cache import CACHE_NAME, PointCache
+
+        saved = len(PointCache(Path(out)))
+        print(f"harvester scene run: interrupted; {saved} finished points are saved in "
+              f"{Path(out) / CACHE_NAME}: run the same command again to resume (they are reused, only the "
+              "others are computed)", file=sys.stderr)
+        return 130
+    failed = sum(row.status in (ERROR, NOT_AVAILABLE) for row in result.rows)
     if args.json:
         print(json.dumps(result.to_dict(), indent=2, default=str))
-        return 0
+        return _failed_points(failed, len(result.rows))
     print(f"{result.scene.title or result.scene.name}{' (quick)' if args.quick else ''}")
     print(result.table())
     print(f"\n{len(result.rows)} points: {result.computed} computed, {result.reused} reused, "
@@ -306,7 +314,16 @@ def cmd_scene(args: argparse.Namespace) -> int:
                         ("table", result.table_path), *result.figures.items()):
         if path is not None:
             print(f"{label}: {path}")
-    return 0
+    return _failed_points(failed, len(result.rows))
+
+
+def _failed_points(failed: int, total: int) -> int:
+    """Exit status of a scene run: 1 (and a line on stderr) when points failed or had no solver."""
+    if not failed:
+        return 0
+    print(f"harvester scene run: {failed} of {total} points failed or had no solver available (status error "
+          "or not_available; their messages say why); the others are saved", file=sys.stderr)
+    return 1
 
 
 COMMANDS: dict[str, Callable[[argparse.Namespace], int]] = {
@@ -369,18 +386,24 @@ def build_parser() -> argparse.ArgumentParser:
     _harvester_arguments(p, N=1)
     p.add_argument("--k", type=_number, default=0.0, help="coupling k (default 0)")
     p.add_argument("--method", choices=("auto", *METHODS), default="auto",
-                   help="solver (default auto: exact for n = 2, fpe for one nonlinear unit, else mc)")
+                   help="solver (default auto: the first of exact, fpe, mc that handles the system)")
     p.add_argument("--tol", type=_number, default=None,
-                   help="requested relative error on eta: fpe (0, 0.1], mc (0, 1); exact needs none")
-    p.add_argument("--seed", type=int, default=None, help="random seed, >= 0 (Monte Carlo only)")
+                   help="requested relative error on eta, in (0, 1) (each solver checks its own range; one "
+                        "without a tolerance, exact, ignores it)")
+    p.add_argument("--seed", type=int, default=None, help="random seed, >= 0 (a deterministic solver ignores it)")
+    p.add_argument("--max-time", type=_number, default=None, metavar="SECONDS",
+                   help="wall-time budget of the solver, > 0 (one without a budget ignores it)")
     p.add_argument("--opt", type=_key_value, action="append", default=[], metavar="NAME=VALUE",
-                   help="solver setting passed to the solver; repeatable")
+                   help="a setting of the solver itself (e.g. dt=0.01 for mc, M=8 for fpe); repeatable")
     p.add_argument("--fallback-time", type=_number, default=FALLBACK_SECONDS, metavar="SECONDS",
-                   help="method auto: where Fokker-Planck stops short of the tolerance, Monte Carlo runs for at "
-                        f"most this many seconds and gives the numbers if better (default {FALLBACK_SECONDS:g}; "
-                        "0: no fallback)")
+                   help="method auto: where the answering solver stops short of the tolerance, the next one "
+                        "runs for at most this many seconds and gives the numbers if better "
+                        f"(default {FALLBACK_SECONDS:g}; 0: no fallback)")
+    p.add_argument("--strict", action="store_true",
+                   help=f"exit with status {NOT_STABLE} when the result is not stable (marginal, unstable, "
+                        "metastable or not converged); without it the status is only printed")
     p.add_argument("--json", action="store_true", help="print one JSON object")
-    p.add_argument("--no-progress", action="store_true", help="no progress bar (fpe, mc)")
+    p.add_argument("--no-progress", action="store_true", help="no progress bar")
 
     p = sub.add_parser("threshold", help="diffusive-instability threshold k_di of a harmonic ring")
     p.add_argument("--N", type=int, default=3, help="number of units (default 3)")
@@ -394,12 +417,13 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--maximize", default="eta", help="observable maximized (default eta)")
     p.add_argument("--bounds", type=_number, nargs=2, default=None, metavar=("LOW", "HIGH"),
                    help="search interval (default for k: [k_di, 0] harmonic, [3 k_di, 0] nonlinear)")
-    p.add_argument("--method", choices=("auto", "exact", "mc"), default="auto",
-                   help="solver of the objective (default auto: exact for n = 2, else Monte Carlo)")
+    p.add_argument("--method", choices=("auto", *METHODS), default="auto",
+                   help="solver of the objective (default auto: the first that handles the system and gives "
+                        "an exact or a common-random-number objective: exact for n = 2, else mc)")
     p.add_argument("--tol", type=_number, default=None,
-                   help="Monte Carlo: target standard error of the optimum's position, > 0 (adds batches)")
+                   help="random objective: target standard error of the optimum's position, > 0 (adds batches)")
     p.add_argument("--batches", type=int, default=8, help="independent common-random-number batches, >= 3")
-    p.add_argument("--replicas", type=int, default=48, help="Monte Carlo replicas per point and batch, >= 2")
+    p.add_argument("--replicas", type=int, default=48, help="replicas per point and batch of a random objective, >= 2 (default 48)")
     p.add_argument("--seed", type=int, default=2017, help="base random seed, >= 0 (default 2017)")
     p.add_argument("--json", action="store_true", help="print one JSON object")
     p.add_argument("--no-progress", action="store_true", help="no progress bar")
@@ -426,7 +450,8 @@ def build_parser() -> argparse.ArgumentParser:
     q.add_argument("--json", action="store_true", help="print one JSON object")
     q.add_argument("--no-progress", action="store_true", help="no progress bar")
     q.add_argument("--workers", type=int, default=None, metavar="P",
-                   help="processes for Fokker-Planck points (default 1; Monte Carlo is threaded); "
+                   help="processes for the points of single-threaded solvers, Fokker-Planck (default 1; Monte "
+                        "Carlo runs its own threads); "
                         "with --dask local: the cluster's workers (default: one per CPU)")
     where = q.add_mutually_exclusive_group()
     where.add_argument("--scheduler", metavar="ADDRESS",
@@ -441,9 +466,10 @@ def build_parser() -> argparse.ArgumentParser:
 def main(argv: Sequence[str] | None = None) -> int:
     """Entry point of the ``harvester`` command; returns the exit code.
 
-    0 on success (``validate``: 1 if a check failed), 2 for bad input, 130 when interrupted,
-    1 for an internal error; every error is one line on stderr, never a traceback (unless the
-    environment variable ``HARVESTER_DEBUG`` is set, for bug reports).
+    0 on success (``validate``: 1 if a check failed; ``scene run``: 1 if points failed; ``stats
+    --strict``: 3 unless stable), 2 for bad input, 130 when interrupted, 1 for an internal error;
+    every error is one line on stderr, never a traceback (unless the environment variable
+    ``HARVESTER_DEBUG`` is set, for bug reports).
     """
     parser = build_parser()
     args = parser.parse_args(argv)

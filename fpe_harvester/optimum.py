@@ -49,7 +49,8 @@ from .errors import ParameterError, check_choice, check_int, check_real
 from .exact import k_di
 from .model import Harvester, Params
 from .result import QUANTITIES, Stats, Status
-from .solve import choose_method, solve
+from .solve import choose_method, get_solver, solve
+from .solvers import METHODS, Capabilities, capabilities
 
 __all__ = ["Optimum", "maximize_noisy", "optimize", "default_bounds", "OVER", "refine_grid_maximum"]
 
@@ -77,7 +78,7 @@ class Optimum:
         ``stable`` (converged), ``marginal`` (a supremum at the stability threshold) or
         ``not_converged``; ``message`` says why and what to do.
     method : str
-        ``"exact"`` or ``"mc"`` (the solver of the objective), or ``"callable"``.
+        The solver of the objective (``"exact"``, ``"mc"``), or ``"callable"``.
     info : Mapping
         Details: bracket, window, the points evaluated and their batch means, curvature,
         batches, evaluations, wall time.
@@ -102,12 +103,14 @@ class Optimum:
         object.__setattr__(self, "info", MappingProxyType(dict(self.info)))
 
     def to_dict(self) -> dict[str, Any]:
-        """JSON-ready dict; keys named after the problem, e.g. ``k_opt``, ``eta_max``."""
+        """JSON-ready dict with the attributes' names (``over``, ``maximize``, ``x_opt``,
+        ``x_opt_err``, ``value``, ``value_err``, ``x_ci``, ``value_ci``, ...)."""
         from .result import _jsonable
 
-        x, y = self.over, self.maximize
-        return {f"{x}_opt": self.x_opt, f"{x}_opt_err": self.x_opt_err, f"{y}_max": self.value,
-                f"{y}_max_err": self.value_err, f"{x}_opt_ci": self.x_ci, f"{y}_max_ci": self.value_ci,
+        return {"over": self.over, "maximize": self.maximize, "x_opt": self.x_opt, "x_opt_err": self.x_opt_err,
+                "value": self.value, "value_err": self.value_err,
+                "x_ci": None if self.x_ci is None else list(self.x_ci),
+                "value_ci": None if self.value_ci is None else list(self.value_ci),
                 "confidence": self.confidence, "method": self.method, "status": self.status.value,
                 "message": self.message, "info": _jsonable(dict(self.info))}
 
@@ -230,8 +233,51 @@ def maximize_noisy(
                        method="callable", info=info,
                        message="not converged: the objective gave no result anywhere on the search grid")
     best = int(np.nanargmax(np.where(good, coarse.mean(axis=0), -np.inf)))
-    step = grid[1] - grid[0]
-    center, shifts, nb = float(grid[best]), 0, batches
+    w = _fit_window(evaluate, float(grid[best]), grid[1] - grid[0], (lo, hi), window, batches, tol,
+                    max_batches, max_shifts)
+    if w.jack is None:
+        return Optimum("x", "f", None, None, None, None, confidence=confidence, method="callable",
+                       info={**info, "window": w.xs.tolist()},
+                       message=f"not converged: only {w.xs_ok.size} of the {window} points around "
+                               f"x = {w.center:.6g} gave a result; a quadratic needs 3")
+    info.update(window=w.xs_ok.tolist(), window_means=w.Y.mean(axis=0).tolist(), curvature=w.fit[2] / w.step ** 2,
+                batches=w.nb, shifts=w.shifts, evaluations=len(cache),
+                jackknife_curvature_max=float(np.nanmax(w.jack[:, 2])) / w.step ** 2)
+    t = _student(confidence, w.nb - 1)
+    if not w.inside:
+        return _edge_optimum(w, (lo, hi), t, confidence, info)
+    return _fitted_optimum(w, t, tol, confidence, info)
+
+
+@dataclass
+class _Window:
+    """The local fit of :func:`maximize_noisy`: the window's points (``xs``; ``xs_ok`` those with a
+    result in every batch), the batch values there (``Y``, batches x points), the fit (vertex,
+    value, curvature, cubic maximum and its value, in :func:`_fit`'s units), whether the vertex is
+    inside the window, the jackknife fits and their standard errors (``None`` with fewer than 3
+    points), the batches, the moves of the window, its centre and the grid step."""
+
+    xs: np.ndarray
+    xs_ok: np.ndarray
+    Y: np.ndarray
+    fit: tuple[float, float, float, float, float]
+    inside: bool
+    jack: np.ndarray | None
+    se: np.ndarray | None
+    nb: int
+    shifts: int
+    center: float
+    step: float
+
+
+def _fit_window(evaluate: Callable[[np.ndarray, int], np.ndarray], center: float, step: float,
+                bounds: tuple[float, float], window: int, nb: int, tol: float | None, max_batches: int,
+                max_shifts: int) -> _Window:
+    """Fit a quadratic over ``window`` points across the bracket around ``center``; move the window
+    toward a vertex outside it (at most ``max_shifts`` times) and double the batches while the
+    position's error exceeds ``tol`` (up to ``max_batches``)."""
+    lo, hi = bounds
+    shifts = 0
     while True:
         left = min(max(lo, center - step), hi - 2 * step)
         xs = np.linspace(left, left + 2 * step, window)
@@ -239,11 +285,10 @@ def maximize_noisy(
         ok = np.isfinite(Y).all(axis=0)
         xs_ok, Y = xs[ok], Y[:, ok]
         if xs_ok.size < 3:
-            return Optimum("x", "f", None, None, None, None, confidence=confidence, method="callable",
-                           info={**info, "window": xs.tolist()},
-                           message=f"not converged: only {xs_ok.size} of the {window} points around "
-                                   f"x = {center:.6g} gave a result; a quadratic needs 3")
-        x_v, y_v, curv, x_cubic, y_cubic = _fit(xs_ok, Y.mean(axis=0), center, step)
+            nan = (math.nan,) * 5
+            return _Window(xs, xs_ok, Y, nan, False, None, None, nb, shifts, center, step)
+        fit = _fit(xs_ok, Y.mean(axis=0), center, step)
+        x_v = fit[0]
         inside = math.isfinite(x_v) and xs[0] <= x_v <= xs[-1]
         if not inside and shifts < max_shifts:
             target = x_v if math.isfinite(x_v) else float(xs_ok[np.argmax(Y.mean(axis=0))])
@@ -259,32 +304,41 @@ def maximize_noisy(
         if tol is not None and inside and se[0] > tol and nb < max_batches:
             nb = min(2 * nb, max_batches)
             continue
-        break
-    means = Y.mean(axis=0)
-    info.update(window=xs_ok.tolist(), window_means=means.tolist(), curvature=curv / step ** 2,
-                batches=nb, shifts=shifts, evaluations=len(cache),
-                jackknife_curvature_max=float(np.nanmax(jack[:, 2])) / step ** 2)
-    t = _student(confidence, nb - 1)
-    at_lo, at_hi = xs[0] <= lo, xs[-1] >= hi
-    if not inside:
-        i = int(np.argmax(means))
-        x_b = float(xs_ok[i])
-        y_se = float(np.std(Y[:, i], ddof=1) / math.sqrt(nb))
-        where = ("at the low end" if at_lo and x_b == xs_ok[0] else "at the high end" if at_hi and x_b == xs_ok[-1]
-                 else None)
-        why = (f"the maximum is {where} of the search interval [{lo:.6g}, {hi:.6g}]: widen the bounds"
-               if where else "the quadratic fit has no interior maximum in its window (flat or noisy "
-                             "objective): more batches or a wider interval")
-        return Optimum("x", "f", x_b, None, float(means[i]), y_se, value_ci=(means[i] - t * y_se,
-                       means[i] + t * y_se), confidence=confidence, status=Status.NOT_CONVERGED,
-                       method="callable", info=info, message=f"not converged: {why}; reported: the best "
-                       f"point evaluated (no error on its position)")
+        return _Window(xs, xs_ok, Y, fit, inside, jack, se, nb, shifts, center, step)
+
+
+def _edge_optimum(w: _Window, bounds: tuple[float, float], t: float, confidence: float,
+                  info: dict[str, Any]) -> Optimum:
+    """No interior vertex: the best point evaluated, without an error on its position."""
+    lo, hi = bounds
+    means = w.Y.mean(axis=0)
+    i = int(np.argmax(means))
+    x_b = float(w.xs_ok[i])
+    y_se = float(np.std(w.Y[:, i], ddof=1) / math.sqrt(w.nb))
+    at_lo, at_hi = w.xs[0] <= lo, w.xs[-1] >= hi
+    where = ("at the low end" if at_lo and x_b == w.xs_ok[0] else
+             "at the high end" if at_hi and x_b == w.xs_ok[-1] else None)
+    why = (f"the maximum is {where} of the search interval [{lo:.6g}, {hi:.6g}]: widen the bounds"
+           if where else "the quadratic fit has no interior maximum in its window (flat or noisy "
+                         "objective): more batches or a wider interval")
+    return Optimum("x", "f", x_b, None, float(means[i]), y_se, value_ci=(means[i] - t * y_se,
+                   means[i] + t * y_se), confidence=confidence, status=Status.NOT_CONVERGED,
+                   method="callable", info=info, message=f"not converged: {why}; reported: the best "
+                   f"point evaluated (no error on its position)")
+
+
+def _fitted_optimum(w: _Window, t: float, tol: float | None, confidence: float, info: dict[str, Any]) -> Optimum:
+    """The interior vertex with its jackknife errors, widened by the fit's lack of fit, and a
+    status that says whether the maximum is resolved."""
+    assert w.jack is not None and w.se is not None
+    x_v, y_v, _, x_cubic, y_cubic = w.fit
+    se, nb = w.se.copy(), w.nb
     # lack of fit: the cubic's maximum off the quadratic's vertex, or its value off the
     # quadratic's, by more than twice the jackknife error of that difference adds the difference
     # to the position's or the value's error
     model_note = ""
-    for i, (name, delta, jk) in enumerate((("position", x_cubic - x_v, jack[:, 3] - jack[:, 0]),
-                                           ("value", y_cubic - y_v, jack[:, 4] - jack[:, 1]))):
+    for i, (name, delta, jk) in enumerate((("position", x_cubic - x_v, w.jack[:, 3] - w.jack[:, 0]),
+                                           ("value", y_cubic - y_v, w.jack[:, 4] - w.jack[:, 1]))):
         delta_se = float(np.sqrt((nb - 1) / nb * np.sum((jk - jk.mean()) ** 2)))
         info["model_shift" if i == 0 else "model_value_shift"] = [delta, delta_se]
         if math.isfinite(delta) and math.isfinite(delta_se) and abs(delta) > 2.0 * delta_se:
@@ -298,9 +352,9 @@ def maximize_noisy(
     if not np.isfinite(se[:3]).all() or info["jackknife_curvature_max"] >= 0.0:
         problems.append("the curvature is not negative in every jackknife fit: the maximum is not "
                         "resolved; use more batches (or more replicas per point)")
-    elif x_ci[0] < xs_ok[0] or x_ci[1] > xs_ok[-1]:
+    elif x_ci[0] < w.xs_ok[0] or x_ci[1] > w.xs_ok[-1]:
         problems.append(f"the confidence interval [{x_ci[0]:.6g}, {x_ci[1]:.6g}] is wider than the fit "
-                        f"window [{xs_ok[0]:.6g}, {xs_ok[-1]:.6g}]; use more batches")
+                        f"window [{w.xs_ok[0]:.6g}, {w.xs_ok[-1]:.6g}]; use more batches")
     if tol is not None and not se[0] <= tol:
         problems.append(f"the standard error {se[0]:.3g} of the optimum exceeds tol = {tol:g} after "
                         f"{nb} batches; raise max_batches")
@@ -311,7 +365,7 @@ def maximize_noisy(
                    confidence=confidence, status=Status.NOT_CONVERGED if problems else Status.STABLE,
                    method="callable", info=info,
                    message=("not converged: " + "; ".join(problems)) if problems else
-                   f"converged: interior maximum from a quadratic fit over {xs_ok.size} points and {nb} "
+                   f"converged: interior maximum from a quadratic fit over {w.xs_ok.size} points and {nb} "
                    f"independent batches (common random numbers inside each); {confidence:.0%} intervals "
                    "from the jackknife over batches" + model_note)
 
@@ -376,34 +430,36 @@ def refine_grid_maximum(f: Callable[[float], float], grid: np.ndarray, values: n
     return x_opt, y_opt, best
 
 
-def _optimize_exact(h: Harvester, over: str, maximize: str, lo: float, hi: float, points: int) -> Optimum:
-    """Deterministic objective (exact solver): grid, then a bounded scalar search in the best cell."""
+def _optimize_exact(h: Harvester, name: str, over: str, maximize: str, lo: float, hi: float,
+                    points: int) -> Optimum:
+    """An objective exact to round-off (solver ``name``): grid, then a bounded scalar search in the
+    best cell."""
 
     def value(x: float) -> float:
-        v = solve(h.replace(**{over: x}), "exact").value(maximize)[0]
+        v = solve(h.replace(**{over: x}), name).value(maximize)[0]
         return -math.inf if v is None else float(v)
 
     grid = np.linspace(lo, hi, max(points, 41))
     x_opt, y_opt, best = refine_grid_maximum(value, grid, np.array([value(float(x)) for x in grid]))
     info = {"bounds": [lo, hi], "grid_points": len(grid)}
     if not math.isfinite(y_opt):
-        return Optimum(over, maximize, None, None, None, None, status=Status.NOT_CONVERGED, method="exact",
+        return Optimum(over, maximize, None, None, None, None, status=Status.NOT_CONVERGED, method=name,
                        info=info, message=f"not converged: no stationary state in {over} in [{lo:.6g}, {hi:.6g}]")
     kd = k_di(h.N, h.a, h.k4) if h.N > 1 else None
-    final = solve(h.replace(**{over: x_opt}), "exact")
+    final = solve(h.replace(**{over: x_opt}), name)
     if final.status is Status.MARGINAL and over == "k":
         return Optimum(over, maximize, x_opt, 0.0, y_opt, 0.0, (x_opt, x_opt), (y_opt, y_opt),
-                       status=Status.MARGINAL, method="exact", info=info, message=(
+                       status=Status.MARGINAL, method=name, info=info, message=(
                            f"marginal: {maximize} grows monotonically toward the threshold k_di = {kd:.10g}; "
                            f"its supremum {y_opt:.10g} is the finite marginal limit at k_di, approached as "
                            "k -> k_di+ but attained by no stable ring (at k_di x of the critical mode diffuses)"))
     if best in (0, len(grid) - 1):
         end = "low" if best == 0 else "high"
-        return Optimum(over, maximize, x_opt, 0.0, y_opt, 0.0, status=Status.NOT_CONVERGED, method="exact",
+        return Optimum(over, maximize, x_opt, 0.0, y_opt, 0.0, status=Status.NOT_CONVERGED, method=name,
                        info=info, message=f"not converged: the maximum is at the {end} end of the search "
                        f"interval {over} in [{lo:.6g}, {hi:.6g}]: widen the bounds")
     return Optimum(over, maximize, x_opt, 0.0, y_opt, 0.0, (x_opt, x_opt), (y_opt, y_opt), status=Status.STABLE,
-                   method="exact", info=info, message="converged: exact objective, interior maximum (bounded "
+                   method=name, info=info, message="converged: exact objective, interior maximum (bounded "
                    "scalar search, |dx| < 1e-10 relative)")
 
 
@@ -440,13 +496,15 @@ def optimize(
         Search interval; default :func:`default_bounds` (``over = "k"`` only).
     maximize : str
         Observable, one of :data:`~fpe_harvester.result.QUANTITIES` (default ``"eta"``).
-    method : {"auto", "exact", "mc"}
-        Solver of the objective: ``"auto"`` is exact for a harmonic system (deterministic:
-        bounded scalar search), Monte Carlo otherwise (noisy: :func:`maximize_noisy` with common
-        random numbers).
+    method : {"auto", "exact", "fpe", "mc"}
+        Solver of the objective. The optimizer takes one whose objective is exact to round-off
+        (bounded scalar search) or random with common random numbers across the interval
+        (:func:`maximize_noisy`); Fokker--Planck is neither. ``"auto"``: the first solver of
+        ``method="auto"``'s order that handles the interval's middle and is of such a kind
+        (exact for a harmonic system, Monte Carlo otherwise).
     tol : float, optional
-        Monte Carlo: target standard error of the optimum's position, > 0 (batches are doubled up
-        to 32 until met). Default: the ``batches`` given.
+        Random objective: target standard error of the optimum's position, > 0 (batches are
+        doubled up to 32 until met). Default: the ``batches`` given.
     seed : int
         Base seed, >= 0: batch ``b`` uses one child seed of it at every point.
     batches : int
@@ -459,8 +517,9 @@ def optimize(
     points : int
         Bracketing grid size, >= 3 (default 9).
     mc_tol : float
-        Accuracy, in (0, 1), that plans the Monte Carlo time step, burn-in and run length (once,
-        at the middle of the interval, then frozen so that all points share their noise).
+        Random objective: the solver's tolerance, in (0, 1), that plans its runs (for Monte Carlo
+        the time step, burn-in and run length), once at the middle of the interval, then frozen so
+        that all points share their noise.
     confidence : float
         Level of the confidence intervals, in (0, 1).
     progress : bool or None
@@ -469,9 +528,9 @@ def optimize(
     Returns
     -------
     Optimum
-        ``to_dict()`` gives e.g. ``k_opt, k_opt_err, eta_max, eta_max_err, method, status``.
-        With Monte Carlo, ``eta_max_err`` also holds the time-step error at the optimum
-        (:meth:`montecarlo.Estimate.systematic`).
+        ``x_opt`` and ``value`` with their errors (``to_dict()`` has the same names). With a
+        random solver, ``value_err`` also holds the solver's systematic (time-step) error at the
+        optimum where it reports one (Monte Carlo: :meth:`montecarlo.Estimate.systematic`).
 
     Raises
     ------
@@ -488,7 +547,7 @@ def optimize(
         raise ParameterError(f"h must be a Harvester, got {h!r} (type {type(h).__name__})")
     check_choice("over", over, OVER)
     check_choice("maximize", maximize, QUANTITIES)
-    check_choice("method", method, ("auto", "exact", "mc"))
+    check_choice("method", method, ("auto", *METHODS))
     seed = check_int("seed", seed, low=0)
     replicas = check_int("replicas", replicas, low=2)
     mc_tol = check_real("mc_tol", mc_tol, low=0.0, high=1.0, low_open=True, high_open=True)
@@ -502,45 +561,67 @@ def optimize(
             raise ParameterError(f"bounds must satisfy low < high, got ({lo!r}, {hi!r})")
     mid = h.replace(**{over: 0.5 * (lo + hi)})  # validates over's values (e.g. a > 0) at both ends
     h.replace(**{over: lo}), h.replace(**{over: hi})
+    name = _objective_solver(mid, method)
+    if capabilities(name).tol is None:
+        return _optimize_exact(h, name, over, maximize, lo, hi, points)
+    return _optimize_noisy(h, name, over, maximize, lo, hi, mid, tol=tol, seed=seed, batches=batches,
+                           replicas=replicas, points=points, mc_tol=mc_tol, confidence=confidence, progress=progress)
+
+
+def _unusable(caps: Capabilities) -> str | None:
+    """Why the optimizer cannot maximize this solver's objective (None: it can): it needs an
+    objective exact to round-off or a random one with common random numbers across parameter values."""
+    if caps.tol is None or caps.common_random_numbers is not None:
+        return None
+    return ("the optimizer needs an objective exact to round-off or a random one with common random numbers; "
+            f"{caps.title} gives neither")
+
+
+def _objective_solver(mid: Harvester, method: str) -> str:
+    """The solver of the objective: ``method``, or for ``"auto"`` the first solver of
+    :func:`~fpe_harvester.solve.choose_method`'s order that handles the interval's middle and
+    whose objective the optimizer can use (:func:`_unusable`).
+
+    Raises
+    ------
+    ParameterError
+        ``method`` gives neither an exact nor a common-random-number objective, or does not
+        handle the system.
+    """
     if method == "auto":
-        method = "exact" if choose_method(mid) == "exact" else "mc"
-    if method == "exact":
-        if not h.is_linear:
-            raise ParameterError(f"method 'exact' needs a harmonic potential (n = 2), got n = {h.n!r}; "
-                                 "use method 'mc' or 'auto'")
-        return _optimize_exact(h, over, maximize, lo, hi, points)
-    return _optimize_mc(h, over, maximize, lo, hi, mid, tol=tol, seed=seed, batches=batches, replicas=replicas,
-                        points=points, mc_tol=mc_tol, confidence=confidence, progress=progress)
+        return choose_method(mid, unusable=_unusable)
+    fault = _unusable(capabilities(method))
+    if fault:
+        raise ParameterError(f"method {method!r} cannot be optimized over: {fault}; use 'auto'")
+    reason = get_solver(method).unsupported_reason(mid)
+    if reason:
+        raise ParameterError(f"method {method!r}: {reason}")
+    return method
 
 
-def _optimize_mc(h: Harvester, over: str, maximize: str, lo: float, hi: float, mid: Harvester, *,
-                 tol: float | None, seed: int, batches: int, replicas: int, points: int, mc_tol: float,
-                 confidence: float, progress: bool | None) -> Optimum:
+def _optimize_noisy(h: Harvester, name: str, over: str, maximize: str, lo: float, hi: float, mid: Harvester, *,
+                    tol: float | None, seed: int, batches: int, replicas: int, points: int, mc_tol: float,
+                    confidence: float, progress: bool | None) -> Optimum:
+    """A random objective (solver ``name``): :func:`maximize_noisy` over runs that share their random
+    numbers across ``over`` within each batch (the solver's ``common_random_numbers`` settings,
+    planned once at the interval's middle ``mid`` at accuracy ``mc_tol``)."""
     import time
 
     from tqdm import tqdm
 
-    from montecarlo import MonteCarlo
-
     start = time.perf_counter()
-    plan = MonteCarlo(tol=mc_tol, seed=seed, progress=False).plan(mid)
+    base = get_solver(name, tol=mc_tol, seed=seed, progress=False)
+    frozen = {**base.capabilities.common_random_numbers(base, mid, replicas), "progress": False}
     seeds = [int(s.generate_state(1)[0]) for s in np.random.SeedSequence(seed).spawn(64)]
     bias: dict[tuple[float, int], float] = {}
-    # frozen plan and a fixed replica count: every point runs on the same noise paths (tol = 0.999
-    # is met after the one batch of ``replicas``, so no adaptive step depends on x)
-    paths = max(2, round(plan.paths * 16 / replicas))
-    # the martingale controls without the twin: the twin needs a pilot run per point (a third of
-    # the point's cost at t_run = 400) and adds little near the optimum (variance reduction of eta
-    # 9.3 without, 10.1 with it at n = 3, N = 3, k = -0.5)
-    solver = {"dt": plan.dt, "t_burn": plan.t_burn, "t_run": plan.t_run, "paths": paths, "control": False,
-              "min_replicas": replicas, "max_replicas": replicas, "tol": 0.999, "progress": False}
 
     def f(x: float, b: int) -> float | None:
-        r: Stats = solve(h.replace(**{over: x}), "mc", seed=seeds[b], **solver)
+        r: Stats = solve(h.replace(**{over: x}), name, seed=seeds[b], **frozen)
         value = r.value(maximize)[0]
         if value is None or r.status not in (Status.STABLE, Status.NOT_CONVERGED):
             return None
         if maximize == "eta":
+            # the solver's own estimate of its systematic (time-step) error on eta, if it has one
             bias[(x, b)] = float(r.info.get("eta_systematic") or 0.0)
         return value
 
@@ -549,7 +630,7 @@ def _optimize_mc(h: Harvester, over: str, maximize: str, lo: float, hi: float, m
         core = maximize_noisy(f, (lo, hi), batches=batches, points=points, tol=tol,
                               max_batches=max(batches, 32 if tol is not None else batches),
                               confidence=confidence, progress=bar.update)
-    info = {**core.info, "mc": {**solver, "seeds": seeds[:core.info.get("batches", batches)]},
+    info = {**core.info, "runs": {"method": name, **frozen, "seeds": seeds[:core.info.get("batches", batches)]},
             "wall_time": time.perf_counter() - start}
     value_err, message = core.value_err, core.message
     if core.x_opt is not None and bias and core.value_err is not None:
@@ -557,11 +638,11 @@ def _optimize_mc(h: Harvester, over: str, maximize: str, lo: float, hi: float, m
         b = float(np.mean([v for (x, _), v in bias.items() if x == near]))
         info["time_step_error_at_optimum"] = b
         value_err = math.hypot(core.value_err, b)
-        message += (f"; {maximize}_max_err includes the time-step error estimate {b:.2g} at dt = {plan.dt:g} "
-                    "(the fine level's Richardson bias estimate: the solver's default halving policy)")
+        message += (f"; the error of the maximum includes the solver's estimate {b:.2g} of its systematic "
+                    "(time-step) error at the optimum")
     value_ci = core.value_ci
     if value_ci is not None and value_err is not None and core.value_err:
         t = (core.value - value_ci[0]) / core.value_err
         value_ci = (core.value - t * value_err, core.value + t * value_err)
     return Optimum(over, maximize, core.x_opt, core.x_opt_err, core.value, value_err, core.x_ci, value_ci,
-                   confidence, core.status, message, "mc", info)
+                   confidence, core.status, message, name, info)

@@ -10,9 +10,11 @@ from types import MappingProxyType
 from typing import Any
 
 from .errors import NotConvergedError, ParameterError, UnstableSystemError
+from .model import Harvester
 from .wide import LARGEST, Wide
 
-__all__ = ["QUANTITIES", "Stats", "Status", "propagated_eta_error"]
+__all__ = ["QUANTITIES", "Stats", "Status", "parameters", "harvester_from_dict", "to_frame",
+           "propagated_eta_error"]
 
 #: Names of the stationary observables every solver reports, each with its error ``<name>_err``
 #: (the one list of them: scenes, the point cache and the command line use it too).
@@ -68,7 +70,11 @@ class Stats:
     growth_rate : float or None
         Largest real part of the drift spectrum (> 0 when unstable), where known.
     info : Mapping
-        Solver-specific details (time step, paths, degree M, mesh size, timings, ...).
+        Solver-specific details (time step, paths, degree M, mesh size, timings, ...);
+        :func:`~fpe_harvester.solve.solve` adds ``"ignored"`` (the common settings the solver
+        had no use for) and, for ``method="auto"``, ``"auto"`` (which solvers declined, and why).
+    harvester : Harvester or None
+        The system these numbers are for (set by :func:`~fpe_harvester.solve.solve`).
 
     Numbers are never NaN or inf: what cannot be computed is ``None`` and the status says why.
     """
@@ -94,9 +100,13 @@ class Stats:
     method: str = ""
     growth_rate: float | None = None
     info: Mapping[str, Any] = field(default_factory=dict)
+    harvester: Harvester | None = None
 
     def __post_init__(self) -> None:
         object.__setattr__(self, "status", Status(self.status))
+        if self.harvester is not None and not isinstance(self.harvester, Harvester):
+            raise ParameterError(f"harvester must be a Harvester or None, got {self.harvester!r} "
+                                 f"(type {type(self.harvester).__name__})")
         for name in QUANTITIES:
             for key in (name, name + "_err"):
                 value = getattr(self, key)
@@ -199,7 +209,10 @@ class Stats:
         return self
 
     def to_dict(self) -> dict[str, Any]:
-        """JSON-ready dict (``None`` for quantities that do not exist)."""
+        """JSON-ready dict: each quantity and ``<name>_err`` (``None`` where it does not exist),
+        ``status``, ``message``, ``method``, ``growth_rate``, ``info`` and, when known, the
+        system as ``harvester`` (:meth:`Harvester.to_dict`: ``a, n, N, k``, the nonzero ``k4``
+        and ``k3``, and ``params``)."""
         out: dict[str, Any] = {}
         for f in fields(self):  # declaration order: V2, Pin, eta, Vrms, ...
             if f.name in QUANTITIES:
@@ -212,7 +225,67 @@ class Stats:
             growth_rate=self.growth_rate,
             info=_jsonable(dict(self.info)),
         )
+        if self.harvester is not None:
+            out["harvester"] = self.harvester.to_dict()
         return out
+
+    def to_record(self) -> dict[str, Any]:
+        """One flat row: the system's parameters (:func:`parameters`, when known), each quantity
+        and its error, ``status``, ``method`` and ``message``; what a table of results holds."""
+        out: dict[str, Any] = {} if self.harvester is None else parameters(self.harvester)
+        for name in QUANTITIES:
+            out[name], out[name + "_err"] = self.value(name)
+        out.update(status=self.status.value, method=self.method, message=self.message)
+        return out
+
+    def to_frame(self) -> Any:
+        """:meth:`to_record` as a one-row ``pandas.DataFrame`` (needs pandas: ``pip install
+        "fpe-harvester[pandas]"``); missing values are NaN there."""
+        return to_frame([self.to_record()])
+
+
+def parameters(h: Harvester) -> dict[str, Any]:
+    """Every parameter of ``h`` in one flat dict: ``a, n, N, k, k4, k3`` and the
+    :class:`~fpe_harvester.model.Params` fields (``m, gamma, Kv, Kc, sigma, tau, D, tau_p, R``).
+
+    Examples
+    --------
+    >>> list(parameters(Harvester.build(a=0.5, n=3)))[:6]
+    ['a', 'n', 'N', 'k', 'k4', 'k3']
+    """
+    return {"a": h.a, "n": h.n, "N": h.N, "k": h.k, "k4": h.k4, "k3": h.k3, **h.params.to_dict()}
+
+
+def harvester_from_dict(d: Mapping[str, Any]) -> Harvester:
+    """Inverse of :meth:`Harvester.to_dict` (also accepts the flat form of :func:`parameters`).
+
+    Raises
+    ------
+    ParameterError
+        A value out of range or a key that is not a parameter.
+    """
+    flat = {key: value for key, value in d.items() if key != "params"}
+    try:
+        return Harvester.build(**flat, **dict(d.get("params", {})))
+    except TypeError as exc:
+        raise ParameterError(f"not a harvester description ({exc}): {dict(d)!r}") from None
+
+
+def to_frame(records: list[dict[str, Any]]) -> Any:
+    """A ``pandas.DataFrame`` with one row per record (flat dicts; ``None`` becomes NaN in
+    numeric columns).
+
+    Raises
+    ------
+    ImportError
+        pandas is not installed (it is the optional extra ``pandas``).
+    """
+    try:
+        import pandas as pd
+    except ImportError as exc:
+        raise ImportError('to_frame() needs pandas, an optional dependency: pip install "fpe-harvester[pandas]" '
+                          f"(or pip install pandas); it failed with: {exc}") from exc
+    return pd.DataFrame.from_records(records)
 
 
 def propagated_eta_error(eta: float, V2: float, V2_err: float, Pin: float, Pin_err: float,

@@ -79,18 +79,18 @@ def test_bad_arguments_exit_2_one_line(capsys, argv, match):
         (["stats", "--param", "m=1e300"], r"m = 1e\+300 is out of range .* m <= "),
         (["stats", "--param", "tau=1e300"], r"tau = 1e\+300 is out of range"),
         (["stats", "--param", "D=1e-320"], r"D = 9.99989e-321 is out of range .* D >= "),
-        (["stats", "--tol", "0"], "--tol 0: the exact solver .* takes no tolerance"),
-        (["stats", "--tol", "2"], "--tol 2: the exact solver"),
-        (["stats", "--seed", "1"], "--seed 1: only Monte Carlo"),
-        (["stats", "--n", "3", "--seed", "1"], "--seed 1: only Monte Carlo .* the fpe solver"),
-        (["stats", "--n", "3", "--tol", "2"], r"tol must be in \(0, 0.1\]"),
+        (["stats", "--tol", "0"], r"tol must be in \(0, 1\), got 0"),
+        (["stats", "--tol", "2"], r"tol must be in \(0, 1\), got 2"),
+        (["stats", "--seed", "-1"], "seed must be an integer"),
+        (["stats", "--max-time", "0"], r"max_time must be in \(0, inf\)"),
+        (["stats", "--n", "3", "--method", "fpe", "--tol", "0.5"], r"tol must be in \(0, 0.1\]"),
         (["stats", "--n", "3", "--method", "mc", "--tol", "0"], r"tol must be in \(0, 1\)"),
         (["stats", "--n", "1e6"], r"n must be in \[1, 64\], got 1000000.0"),
         (["stats", "--n", "0.5"], r"n must be in \[1, 64\]"),
         (["stats", "--opt", "foo=1"], "invalid option for method 'exact': no option 'foo'"),
         (["stats", "--n", "3", "--opt", "foo=1"], "invalid option for method 'fpe': no option 'foo'; valid options: tol"),
         (["stats", "--N", "3", "--k", "-inf"], "k must be finite"),
-        (["stats", "--N", "5000000"], r"N must be in \[1, 4194304\]"),
+        (["stats", "--N", "5000000", "--method", "exact"], r"N must be in \[1, 4194304\]"),
         (["validate", "--out", "/dev/null/x"], "--out '/dev/null/x': cannot create the output folder"),
         (["scene", "run", "fig4_eta_vs_k_harmonic", "--out", "/dev/null/x"], "--out '/dev/null/x': cannot create"),
     ],
@@ -144,15 +144,42 @@ def test_unexpected_failures_are_one_line_internal_errors(capsys, monkeypatch):
     assert capsys.readouterr().err == "harvester stats: interrupted\n"
 
 
-def test_fokker_planck_progress_bar_counts_levels(capsys):
-    from fpe_harvester.cli import _fpe_bar
-    from fpe_harvester.model import Harvester
+def test_common_settings_are_accepted_for_every_method_and_the_ignored_ones_named(capsys):
+    code, out, err = run(capsys, "stats", "--tol", "1e-3", "--seed", "1", "--max-time", "5")
+    assert code == 0 and "method = exact" in out and err == ""
+    assert "note: the exact solver has no use for --max-time, --seed, --tol: ignored" in out
+    code, out, _ = run(capsys, "stats", "--tol", "1e-3", "--json")
+    assert code == 0 and json.loads(out)["info"]["ignored"] == ["tol"]
 
-    bar, level = _fpe_bar(Harvester.build(n=3))
-    for i in range(3):
-        level(f"M={4 + 2 * i} elements=8 dofs=100 eta=0.5")
-    assert bar.n == 3 and "M=8" in bar.postfix
-    bar.close()
+
+def test_a_parameter_typed_as_an_option_gets_a_hint(capsys):
+    def refused(*argv: str) -> str:
+        with pytest.raises(SystemExit) as exc:
+            main(list(argv))
+        assert exc.value.code == 2
+        return capsys.readouterr().err
+
+    err = refused("stats", "--tau", "-1")
+    assert "unrecognized arguments: --tau -1" in err
+    assert "--param tau=-1" in err and len(err.strip().splitlines()) == 1
+    assert "--param tau_p=3" in refused("stats", "--tau_p=3")
+    assert "--param" not in refused("stats", "--colour", "red")
+
+
+@pytest.mark.parametrize(("argv", "code"), [(["--N", "3", "--k", "-0.2"], 0), (["--N", "3", "--k", "-0.4"], 3),
+                                            (["--N", "4", "--k", "-0.25"], 3)])
+def test_strict_exits_3_unless_stable(capsys, argv, code):
+    plain, out, _ = run(capsys, "stats", *argv)
+    assert plain == 0  # without --strict the status is only printed
+    assert run(capsys, "stats", *argv, "--strict")[0] == code
+    assert run(capsys, "stats", *argv, "--strict", "--json")[0] == code
+
+
+def test_stability_messages_give_k_and_k_di_to_the_same_precision(capsys):
+    code, out, _ = run(capsys, "stats", "--N", "3", "--k", "-0.333334")
+    assert code == 0 and "unstable: k = -0.333334 is beyond k_di = -0.3333333333" in out
+    code, out, _ = run(capsys, "stats", "--N", "3", "--k", "-0.33333333334")
+    assert "k = -0.3333333333 is beyond k_di = -0.3333333333" in out
 
 
 def _number_text() -> "st.SearchStrategy[str]":

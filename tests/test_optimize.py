@@ -97,7 +97,8 @@ def test_tol_adds_batches() -> None:
 @pytest.mark.parametrize("kwargs, match", [
     ({"over": "N"}, "over must be one of"),
     ({"maximize": "power"}, "maximize must be one of"),
-    ({"method": "fpe"}, "method must be one of 'auto', 'exact', 'mc'"),
+    ({"method": "rk4"}, "method must be one of 'auto', 'exact', 'fpe', 'mc'"),
+    ({"method": "fpe"}, "method 'fpe' cannot be optimized over: the optimizer needs an objective exact"),
     ({"bounds": (0.0, -1.0)}, r"bounds must satisfy low < high, got \(0.0, -1.0\)"),
     ({"bounds": (0.0,)}, r"bounds must be \(low, high\)"),
     ({"bounds": (-1.0, float("nan"))}, "bounds must be finite"),
@@ -125,8 +126,13 @@ def test_bad_input_core_and_single_unit() -> None:
 def test_cli_json_keys(capsys: pytest.CaptureFixture[str]) -> None:
     assert main(["optimize", "--n", "2", "--a", "0.5", "--N", "3", "--over", "k", "--json"]) == 0
     out = json.loads(capsys.readouterr().out)
-    assert {"k_opt", "k_opt_err", "eta_max", "eta_max_err", "method", "status"} <= set(out)
-    assert out["status"] == "marginal" and out["k_opt"] == pytest.approx(-1 / 3)
+    # the attributes' names, as in the Optimum object
+    assert {"over", "maximize", "x_opt", "x_opt_err", "value", "value_err", "x_ci", "value_ci", "method",
+            "status", "harvester"} <= set(out)
+    assert out["status"] == "marginal" and out["x_opt"] == pytest.approx(-1 / 3) and out["over"] == "k"
+    opt = optimize(Harvester.build(a=0.5, n=2, N=3))
+    assert {k: getattr(opt, k) for k in ("x_opt", "value", "x_opt_err", "value_err")} == \
+        {k: out[k] for k in ("x_opt", "value", "x_opt_err", "value_err")}
 
 
 def test_cli_table_and_bad_input(capsys: pytest.CaptureFixture[str]) -> None:

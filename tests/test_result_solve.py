@@ -59,6 +59,8 @@ def test_solve_errors():
     with pytest.raises(ParameterError, match="h must be a Harvester"):
         solve({"a": 0.5})  # type: ignore[arg-type]
     with pytest.raises(ParameterError, match="cannot be combined with a solver object"):
+        get_solver(Exact(), dt=0.1)
+    with pytest.raises(ParameterError, match=r"tol must be in \(0, 1\), got 1"):
         get_solver(Exact(), tol=1)
     with pytest.raises(MethodNotAvailableError, match="n = 2"):
         solve(Harvester.build(n=4), Exact())
@@ -125,7 +127,62 @@ def test_growth_rate_must_be_finite():
 
 
 def test_unknown_solver_options_list_the_valid_ones():
-    with pytest.raises(ParameterError, match="invalid option for method 'exact': no option 'tol'; valid options: none"):
-        solve(Harvester.build(), "exact", tol=1e-3)
-    with pytest.raises(ParameterError, match="invalid option for method 'fpe': no option 'seed'; valid options: tol, M,"):
-        get_solver("fpe", seed=1)
+    with pytest.raises(ParameterError, match="invalid option for method 'exact': no option 'M'; valid options: none"):
+        solve(Harvester.build(), "exact", M=8)
+    with pytest.raises(ParameterError, match="invalid option for method 'fpe': no option 'dt'; valid options: tol, M,"):
+        get_solver("fpe", dt=0.1)
+
+
+def test_common_settings_for_every_method_and_what_was_ignored():
+    """tol, seed, max_time (or max_seconds) and progress are accepted whatever the method: each solver
+    uses those it has; info["ignored"] lists the rest (a loop over n does not break at n = 2)."""
+    r = solve(Harvester.build(a=0.5, n=2), tol=1e-3, seed=1, max_seconds=5.0, progress=False)
+    assert r.method == "exact" and r.eta == pytest.approx(20 / 39, rel=1e-14)
+    assert r.info["ignored"] == ["max_time", "seed", "tol"]  # progress changes no number: not listed
+    fpe = get_solver("fpe", tol=1e-3, seed=1, max_seconds=7.0, progress=False)
+    assert (fpe.tol, fpe.max_seconds, fpe.progress) == (1e-3, 7.0, False)
+    mc = get_solver("mc", tol=0.05, seed=3, max_seconds=9.0, progress=False)
+    assert (mc.tol, mc.seed, mc.max_time, mc.progress) == (0.05, 3, 9.0, False)
+    assert get_solver("mc", max_time=4.0).max_time == 4.0
+    assert get_solver("fpe", max_time=1.0, max_seconds=1.0).max_seconds == 1.0  # the same setting twice
+    with pytest.raises(ParameterError, match="max_time and max_seconds name one setting"):
+        solve(Harvester.build(), max_time=1.0, max_seconds=2.0)
+    for bad, match in (({"tol": 0}, r"tol must be in \(0, 1\)"), ({"seed": -1}, "seed must be an integer"),
+                       ({"max_time": 0}, r"max_time must be in \(0, inf\)"), ({"progress": "yes"}, "progress must be")):
+        with pytest.raises(ParameterError, match=match):
+            solve(Harvester.build(), **bad)
+    # each solver checks its own range
+    with pytest.raises(ParameterError, match=r"tol must be in \(0, 0.1\]"):
+        solve(Harvester.build(n=3), "fpe", tol=0.5)
+
+
+def test_stats_carry_their_system_and_go_into_pandas():
+    h = Harvester.build(a=0.5, n=2, N=3, k=-0.33, tau_p=3.0)
+    r = solve(h)
+    d = json.loads(json.dumps(r.to_dict()))
+    assert r.harvester == h and d["harvester"] == h.to_dict() and d["harvester"]["params"]["tau_p"] == 3.0
+    rec = r.to_record()
+    assert (rec["a"], rec["N"], rec["k"], rec["tau_p"]) == (0.5, 3, -0.33, 3.0)
+    assert rec["eta"] == r.eta and rec["x2_err"] == r.x2_err and rec["status"] == "stable"
+    pd = pytest.importorskip("pandas")
+    frame = r.to_frame()
+    assert isinstance(frame, pd.DataFrame) and frame.shape[0] == 1
+    assert frame.loc[0, "eta"] == r.eta and frame.loc[0, "k"] == -0.33
+    assert math.isnan(frame.loc[0, "d2_err"]) is False  # a ring has d2
+    assert Stats(eta=1.0).to_record()["status"] == "stable"  # no system: only the results
+    from fpe_harvester.scenes.cache import stats_from_dict
+
+    back = stats_from_dict(d)  # a result through JSON (the scene cache, a Dask worker) keeps its system
+    assert back.harvester == h and back.to_dict() == r.to_dict()
+    with pytest.raises(ParameterError, match="harvester must be a Harvester"):
+        Stats(harvester={"a": 0.5})
+
+
+def test_auto_asks_the_solvers_in_order_and_says_why():
+    ring = Harvester.build(a=0.5, n=3, N=3, k=-0.5)
+    assert choose_method(ring) == "mc"
+    assert choose_method(Harvester.build(a=0.5, n=3, N=3, k=-0.5).replace(n=2.0)) == "exact"
+    # a harmonic ring with cubic coupling: exact declines (nonlinear), Fokker-Planck too (a ring)
+    assert choose_method(Harvester.build(n=2, N=3, k3=0.1)) == "mc"
+    r = solve(Harvester.build(a=0.5, n=2, N=3, k=-0.2))
+    assert r.info["auto"] == {"chosen": "exact", "declined": {}} and "declined" not in r.message

@@ -18,7 +18,7 @@ from sphinx.application import Sphinx
 
 #: The packages whose ``__all__`` make the public API, in the order of the reference.
 PACKAGES = ("fpe_harvester", "fpe_harvester.exact", "fpe_harvester.fpe", "fpe_harvester.scenes",
-            "montecarlo")
+            "fpe_harvester.landscape", "montecarlo")
 
 #: One line under each package's title.
 _SUMMARY = {
@@ -27,6 +27,8 @@ _SUMMARY = {
     "fpe_harvester.exact": "Harmonic rings: closed-form moments, stability thresholds, the exact solver.",
     "fpe_harvester.fpe": "The Fokker-Planck solver of one nonlinear unit: stationary and transient.",
     "fpe_harvester.scenes": "Declarative studies: the paper's figures as scenes, their runs and caches.",
+    "fpe_harvester.landscape": "The coupled potential of a ring: its equilibria, their Morse index, and the "
+                               "single-site buckling of n = 1 with cubic coupling (``harvester landscape``).",
     "montecarlo": "Monte Carlo simulation of any ring, with control variates and error estimates.",
 }
 

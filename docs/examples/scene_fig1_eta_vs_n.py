@@ -3,8 +3,9 @@ Fig. 1: efficiency and Vrms of one unit against the exponent n
 ==============================================================
 
 One oscillator in U(x) = a|x|^n for three strengths a. n = 2 is exact; every other n is
-solved by Fokker-Planck; a point where it misses the scene's accuracy (n = 1 and 1.25 at a = 2)
-is tried again with Monte Carlo, and the row's message says so. The paper's best point,
+solved by Fokker-Planck, except at the strong kink (n = 1 and 1.25 at a = 2), where Monte Carlo
+answers: where Fokker-Planck declines at once, or misses the scene's accuracy and is tried
+again; the row's message says which. The paper's best point,
 n = 1 and a = 0.5 with a printed eta = 0.609, is marked: two solvers give 0.6103, a
 disagreement with the paper, not with each other.
 """

@@ -12,6 +12,7 @@ import numpy as np
 from ..errors import MethodNotAvailableError, ParameterError, check_int, check_real
 from ..model import Harvester, Params
 from ..result import Stats, Status
+from ..solvers import Capabilities
 from ..wide import LARGEST, SMALLEST_NORMAL, Float, Wide
 from .moments import wide_mode_moments
 from .stability import classify_modes, k_di, kappa_min, softest_mode, wide_growth_rate, wide_mode_stiffness
@@ -36,6 +37,9 @@ class Exact:
     """
 
     name: ClassVar[str] = "exact"
+    #: No tolerance (exact to round-off), deterministic, no budget or progress to report; a
+    #: sweep's points are evaluated together (:meth:`solve_many`).
+    capabilities: ClassVar[Capabilities] = Capabilities(title="exact", solve_many=True)
 
     def unsupported_reason(self, h: Harvester) -> str | None:
         """``None`` if this solver handles ``h``, else why not."""
@@ -53,6 +57,11 @@ class Exact:
     def solve(self, h: Harvester) -> Stats:
         """Stationary statistics of ``h``; unstable rings come back with status and growth rate."""
         return exact_stats([h])[0]
+
+    def solve_many(self, hs: Sequence[Harvester]) -> list[Stats]:
+        """:meth:`solve` for each of ``hs``, in one vectorized evaluation per ring size and
+        parameter set (:func:`exact_stats`)."""
+        return exact_stats(hs)
 
 
 #: Round-off of a computed stiffness 2a + 4k sin^2(pi q/N), relative to 2a + 4|k| sin^2(pi q/N).
@@ -151,7 +160,9 @@ def exact_sweep(
     Parameters
     ----------
     a, k : array_like
-        Potential strengths (> 0) and couplings; broadcast against each other.
+        Potential strengths (> 0) and couplings; broadcast against each other (numpy's rules:
+        for every pair of a list of ``a`` and a list of ``k``, give ``a`` as a column,
+        ``a=[[0.5], [1.0]]``).
     N : int
         Ring size, in [1, :data:`MAX_N`] (for N = 1, ``k`` must be 0).
     params : Params, optional
@@ -168,7 +179,8 @@ def exact_sweep(
         points (``k = k_di``), where it diverges, and any value outside the normal double range.
         Also plain arrays ``"stable"`` (bool, marginal included), ``"marginal"`` (bool),
         ``"in_range"`` (bool: stable, and ``V2``, ``Pin`` and ``eta`` are normal doubles) and
-        ``"kappa_min"`` (smallest mode stiffness, ``inf`` past the double range).
+        ``"kappa_min"`` (smallest mode stiffness, ``inf`` past the double range), and the swept
+        parameters ``"a"`` and ``"k"`` broadcast to the shape of the results.
 
     Notes
     -----
@@ -176,10 +188,26 @@ def exact_sweep(
     the float result where that stays in range, and no intermediate overflow anywhere else.
     Cost: N closed-form evaluations per point; 10,000 points of an N = 3 ring take a few
     milliseconds.
+
+    Raises
+    ------
+    ParameterError
+        ``a`` or ``k`` out of range, or shapes that do not broadcast.
+
+    Examples
+    --------
+    >>> r = exact_sweep(a=[[0.5], [1.0]], k=[-0.3, -0.2, 0.0], N=3)
+    >>> r["eta"].shape, r["a"][1, 0], r["k"][1, 0]
+    ((2, 3), np.float64(1.0), np.float64(-0.3))
     """
     params = params or Params()
     N = check_int("N", N, low=1, high=MAX_N)
-    a_arr, k_arr = np.broadcast_arrays(np.asarray(a, dtype=float), np.asarray(k, dtype=float))
+    try:
+        a_arr, k_arr = np.broadcast_arrays(np.asarray(a, dtype=float), np.asarray(k, dtype=float))
+    except ValueError:
+        raise ParameterError(
+            f"a and k must broadcast against each other, got shapes {np.shape(a)} and {np.shape(k)}; for every "
+            "pair of two lists give a as a column, e.g. a=[[0.5], [1.0]], k=[-0.3, -0.2, 0.0]") from None
     if not (np.all(np.isfinite(a_arr)) and np.all(a_arr > 0)):
         raise ParameterError("a must be finite and > 0 everywhere in the sweep, valid range (0, inf)")
     if not np.all(np.isfinite(k_arr)):
@@ -198,6 +226,7 @@ def exact_sweep(
         val = np.concatenate([b[key] for b in blocks]).reshape(a_arr.shape)
         plain = key in ("stable", "marginal", "in_range", "kappa_min")
         out[key] = val if plain else np.ma.masked_invalid(val)
+    out.update(a=a_arr.copy(), k=k_arr.copy())
     return out
 
 
@@ -259,7 +288,7 @@ def _point_stats(h: Harvester, point: dict[str, Any]) -> Stats:
             growth_rate=rate,
             info=info,
             message=(
-                f"unstable: k = {h.k:g} is beyond k_di = {kd:.10g}; mode q = {softest_mode(h)} has stiffness "
+                f"unstable: k = {h.k:.10g} is beyond k_di = {kd:.10g}; mode q = {softest_mode(h)} has stiffness "
                 f"{_sci(kmin_w)} < 0 and grows like {grows}. Choose k > k_di."
             ),
         )

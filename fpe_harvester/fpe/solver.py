@@ -12,6 +12,7 @@ import numpy as np
 from ..errors import HarvesterError, MethodNotAvailableError
 from ..model import Harvester
 from ..result import Stats, Status
+from ..solvers import Capabilities, Tolerance
 from .settings import Settings
 from .stationary import ring_reason, solve_settings
 
@@ -72,6 +73,11 @@ class FokkerPlanck:
     """
 
     name: ClassVar[str] = "fpe"
+    #: What the drivers read (:class:`~fpe_harvester.solvers.Capabilities`): tol in (0, 0.1],
+    #: deterministic, a wall-time budget ``max_seconds``, one progress line per refinement level,
+    #: single-threaded and slow enough for a process pool.
+    capabilities: ClassVar[Capabilities] = Capabilities(
+        title="Fokker-Planck", tol=Tolerance(0.1, 1e-4), max_time="max_seconds", progress="lines", pooled=True)
 
     tol: float = 1e-4
     M: int | None = None

@@ -46,7 +46,7 @@ from pathlib import Path
 from typing import Any
 
 from ..model import Harvester
-from ..result import QUANTITIES, Stats, Status
+from ..result import QUANTITIES, Stats, Status, harvester_from_dict
 
 try:
     import fcntl
@@ -92,7 +92,7 @@ def stats_from_dict(d: Mapping[str, Any]) -> Stats:
     ------
     ValueError, TypeError, KeyError
         ``d`` is not what :meth:`Stats.to_dict` writes (a missing status, an unknown status,
-        a number that is not a finite float).
+        a number that is not a finite float, a harvester that is not one).
     """
     kwargs: dict[str, Any] = {}
     for name in QUANTITIES:
@@ -104,8 +104,12 @@ def stats_from_dict(d: Mapping[str, Any]) -> Stats:
     message, method, info = d.get("message", ""), d.get("method", ""), d.get("info") or {}
     if not isinstance(message, str) or not isinstance(method, str) or not isinstance(info, Mapping):
         raise TypeError("message and method must be strings and info an object")
+    system = d.get("harvester")
+    if system is not None and not isinstance(system, Mapping):
+        raise TypeError("harvester must be an object")
     return Stats(status=Status(d["status"]), message=message, method=method,
-                 growth_rate=d.get("growth_rate"), info=info, **kwargs)
+                 growth_rate=d.get("growth_rate"), info=info,
+                 harvester=None if system is None else harvester_from_dict(system), **kwargs)
 
 
 #: Every line this version writes starts with its checksum: ``{"sum":"<16 hex>",`` + record.

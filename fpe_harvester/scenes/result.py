@@ -16,7 +16,7 @@ from typing import Any
 
 import numpy as np
 
-from ..result import Status
+from ..result import Status, to_frame
 from .cache import atomic_path
 from .spec import DERIVED, Scene
 
@@ -134,6 +134,16 @@ class SceneResult:
         notes = [f"points {', '.join(idx)}: " + (msg if msg.startswith(status) else f"{status}: {msg}")
                  for (status, msg), idx in by_message.items()]
         return "\n".join(out + (["", "notes:", *notes] if notes else []))
+
+    def records(self) -> list[dict[str, Any]]:
+        """One flat dict per row: ``index``, the varied fields, the observables and their errors,
+        ``status``, ``method`` and ``message`` (what the CSV holds)."""
+        return [{key: value for key, value in row.to_dict().items() if key != "info"} for row in self.rows]
+
+    def to_frame(self) -> Any:
+        """The :meth:`records` as a ``pandas.DataFrame`` (needs the optional pandas: ``pip install
+        "fpe-harvester[pandas]"``); missing values are NaN there."""
+        return to_frame(self.records())
 
     def to_dict(self) -> dict[str, Any]:
         """JSON-ready summary with every row."""

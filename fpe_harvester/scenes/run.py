@@ -1,15 +1,21 @@
-"""Running a scene: cheapest adequate solver per point, cache/resume, outputs and figures.
+"""Running a scene: the solver :func:`~fpe_harvester.solve.solve` picks per point, cache/resume,
+outputs and figures.
 
-Per point the method is ``scene.method`` or, for ``"auto"``, :func:`~fpe_harvester.solve.choose_method`
-(harmonic -> exact, single nonlinear unit -> Fokker--Planck with ``tol = rtol``, coupled
-nonlinear ring -> Monte Carlo with ``tol = rtol`` and a seed derived from the scene and the
-point). Harmonic points are computed together with :func:`~fpe_harvester.exact.exact_stats` (one
-vectorized call per ring size and parameter set); the rest one by one. Each finished point
-is appended to ``points.jsonl`` in the output folder (see :mod:`.cache`), so reruns
-reuse it and an interrupted run resumes (even one killed mid-write; two runs may share a
-folder). Outputs are replaced atomically. A point whose solver fails or is not available is
-reported with its status and message; the scene goes on. With ``scheduler`` the pointwise
-points run as tasks on a Dask cluster (:mod:`.cluster`) and give the same numbers.
+Per point the method is ``scene.method`` or, for ``"auto"``, the first solver that handles the
+point (:func:`~fpe_harvester.solve.choose_method`: harmonic -> exact, a single nonlinear unit
+-> Fokker--Planck where it can answer, else Monte Carlo). Each solver gets what its declared
+capabilities take: ``tol = rtol``, a seed derived from the scene and the point, no progress bar
+of its own, its machine-dependent defaults fixed (``portable``), then the scene's
+``options[method]``. Every point is checked before the first is computed: a point no solver
+(or not the scene's method) handles stops the run with a :class:`ParameterError`. The points of
+a solver with ``solve_many`` (exact) are computed together; the rest one by one through
+:func:`~fpe_harvester.solve.solve`, which also tries the next solver where the first stops
+short of ``rtol`` (``method = "auto"``). Each finished point is appended to ``points.jsonl`` in
+the output folder (see :mod:`.cache`), so reruns reuse it and an interrupted run resumes (even
+one killed mid-write; two runs may share a folder). Outputs are replaced atomically. A point
+whose solver fails is reported with its status and message; the scene goes on. With
+``scheduler`` the pointwise points run as tasks on a Dask cluster (:mod:`.cluster`) and give
+the same numbers.
 """
 
 from __future__ import annotations
@@ -27,11 +33,12 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 from ..errors import HarvesterError, MethodNotAvailableError, ParameterError, check_int
-from ..exact import Exact, exact_stats, k_di
+from ..exact import k_di
 from ..model import Harvester
 from ..optimum import optimize, refine_grid_maximum
 from ..result import QUANTITIES, Stats, Status
-from ..solve import choose_method, fallback_result, relative_eta_error, solve
+from ..solve import choose_method, get_solver, relative_eta_error, solve, solve_many
+from ..solvers import METHODS, capabilities
 from .cache import PointCache, atomic_path, point_key, point_seed, stats_from_dict, write_text_atomic
 from .result import ERROR, NOT_AVAILABLE, SceneResult, SceneRow, write_csv
 from .spec import Scene, load_scene
@@ -39,13 +46,13 @@ from .spec import Scene, load_scene
 if TYPE_CHECKING:
     from .cluster import Connection
 
-__all__ = ["run_scene"]
+__all__ = ["SCENE_FALLBACK_SECONDS", "run_scene"]
 
-#: Methods worth a process pool: single-threaded and slow (Monte Carlo runs its own threads,
-#: exact points cost microseconds).
-_POOLED: tuple[str, ...] = ("fpe",)
+#: Wall-time budget (s) per point of the solver that takes over where the first one stops short
+#: of ``rtol`` (``method = "auto"``), unless the scene's options give that solver one.
+SCENE_FALLBACK_SECONDS = 600.0
 #: Solver details copied onto rows (escapes decide how a metastable point is drawn; ``fallback``
-#: keeps the other solver's numbers where Monte Carlo was tried after Fokker--Planck).
+#: keeps the other solver's numbers where a second solver was tried).
 _CARRIED_INFO = ("seed", "escape_fraction", "escape_time_median", "fallback")
 
 
@@ -56,36 +63,76 @@ class _Failure:
     method: str
 
 
+#: A point to compute: its index in the batch, cache key, solver name and per-solver settings.
+_Todo = tuple[int, str, str, dict[str, dict[str, Any]]]
+
+
 class _Runner:
     """Evaluates harvesters for one scene run, through the cache."""
 
-    def __init__(self, scene: Scene, cache: PointCache, bar: Any, workers: int = 1,
+    def __init__(self, scene: Scene, cache: PointCache | None, bar: Any, workers: int = 1,
                  cluster: Connection | None = None) -> None:
         self.scene, self.cache, self.bar, self.workers, self.cluster = scene, cache, bar, workers, cluster
         self.computed = self.reused = 0
         self.needs_solver = any(o in QUANTITIES for o in scene.observables)
 
-    def method_of(self, h: Harvester, method: str | None = None) -> tuple[str, dict[str, Any]]:
-        if method is None:
-            method = choose_method(h) if self.scene.method == "auto" else self.scene.method
+    def settings(self, name: str, h: Harvester) -> dict[str, Any]:
+        """What solver ``name`` gets for point ``h``: the scene's accuracy, seed and silence where
+        its capabilities take them, its machine-dependent defaults fixed, then the scene's options."""
+        caps = capabilities(name)
         opts: dict[str, Any] = {}
-        if method in ("fpe", "mc"):
-            # the scene draws its own progress bar over points
-            opts.update(tol=self.scene.rtol, progress=False)
-        if method == "mc":
-            from fpe_harvester.parallel import default_threads
+        if caps.tol is not None:
+            opts["tol"] = self.scene.rtol
+        if caps.progress is not None:
+            opts["progress"] = False  # the scene draws its own bar over points
+        if caps.seed:
+            opts["seed"] = point_seed(self.scene.name, h)
+        opts.update(self.scene.options.get(name, {}))
+        if caps.portable is not None:
+            # e.g. the Monte Carlo replica batch, which shapes the numbers: fixed here, as in a
+            # run in this process, a point gives the same numbers on any Dask worker
+            opts.update(caps.portable(opts))
+        return opts
 
-            # the replica batch (by default the thread count) shapes the numbers: fixed here,
-            # as in a run in this process, a point gives the same numbers on any Dask worker
-            batch = self.scene.options.get("mc", {}).get("threads") or default_threads()
-            opts.update(seed=point_seed(self.scene.name, h), batch=batch)
-        opts.update(self.scene.options.get(method, {}))
-        return method, opts
+    def all_settings(self, h: Harvester) -> dict[str, dict[str, Any]]:
+        """:meth:`settings` of every registered solver the scene may use for ``h``."""
+        names = METHODS if self.scene.method == "auto" else (self.scene.method,)
+        out = {}
+        for name in names:
+            try:
+                out[name] = self.settings(name, h)
+            except MethodNotAvailableError:
+                continue
+        return out
 
-    def key(self, h: Harvester) -> tuple[str, str, dict[str, Any]]:
-        method, opts = self.method_of(h)
-        rtol = None if method == "exact" else self.scene.rtol
-        return point_key(h, method, rtol, opts), method, opts
+    def solver_of(self, h: Harvester, every: dict[str, dict[str, Any]] | None = None) -> str:
+        """The solver that answers for ``h`` (``every``: :meth:`all_settings` of ``h``, if known).
+
+        Raises
+        ------
+        ParameterError
+            No solver (or not the scene's method) handles ``h``; the message names the point.
+        """
+        every = self.all_settings(h) if every is None else every
+        try:
+            if self.scene.method == "auto":
+                return choose_method(h, solver_options=every)
+            name = self.scene.method
+            reason = get_solver(name, **every.get(name, {})).unsupported_reason(h)
+        except MethodNotAvailableError as exc:
+            reason, name = str(exc), self.scene.method
+        if reason:
+            desc = ", ".join(f"{k} = {v:g}" for k, v in (("a", h.a), ("n", h.n), ("N", h.N), ("k", h.k)))
+            raise ParameterError(f"method: {name!r} cannot handle the point ({desc}) of scene "
+                                 f"{self.scene.name!r}: {reason}")
+        return name
+
+    def key(self, h: Harvester) -> tuple[str, str, dict[str, dict[str, Any]]]:
+        """The cache key of ``h``, its solver and the settings of every solver it may use."""
+        every = self.all_settings(h)
+        name = self.solver_of(h, every)
+        rtol = None if capabilities(name).tol is None else self.scene.rtol
+        return point_key(h, name, rtol, every[name]), name, every
 
     def _cached(self, key: str) -> Stats | None:
         stats = self.cache.get(key)
@@ -101,68 +148,74 @@ class _Runner:
         if not self.needs_solver:
             self.bar.update(len(hs))
             return out
-        todo: list[tuple[int, str, str, dict[str, Any]]] = []
+        todo: list[_Todo] = []
         for i, h in enumerate(hs):
-            key, method, opts = self.key(h)
+            key, name, every = self.key(h)
             hit = self._cached(key)
             if hit is not None:
                 out[i] = hit
                 self.reused += 1
                 self.bar.update(1)
             else:
-                todo.append((i, key, method, opts))
-        batch = [t for t in todo if t[2] == "exact" and hs[t[0]].is_linear]
-        if batch:
-            for (i, key, _, opts), stats in zip(batch, exact_stats([hs[t[0]] for t in batch])):
-                out[i] = self._store(hs[i], key, opts, stats)
-        in_batch = {t[0] for t in batch}
-        rest = [t for t in todo if t[0] not in in_batch]
+                todo.append((i, key, name, every))
+        rest = self._solve_batched(hs, todo, out)
         if self.cluster is not None and rest:
             self._solve_distributed(hs, rest, out)
-        pool = [t for t in rest if t[2] in _POOLED] if self.workers > 1 else []
+        pool = [t for t in rest if capabilities(t[2]).pooled] if self.workers > 1 else []
         # the slowest points first, so that one does not start last and leave the other workers idle
-        pool.sort(key=lambda t: _fpe_cost_rank(hs[t[0]]))
+        pool.sort(key=lambda t: _cost_rank(hs[t[0]]))
         if len(pool) > 1:
             self._solve_parallel(hs, pool, out)
-        for i, key, method, opts in rest:
+        for i, key, name, every in rest:
             if out[i] is None:
-                res = _solve_point(hs[i], method, opts, self.fallback(hs[i], method))
-                out[i] = self._store(hs[i], key, opts, res)
+                out[i] = self._store(hs[i], key, every[name], _solve_point(hs[i], self.scene.method, name, every))
         return out
 
-    def fallback(self, h: Harvester, method: str) -> tuple[str, dict[str, Any]] | None:
-        """Method and settings to try when ``method`` gives no numbers (see :func:`_solve_point`)."""
-        return self.method_of(h, "mc") if self.scene.method == "auto" and method == "fpe" else None
+    def _solve_batched(self, hs: Sequence[Harvester], todo: list[_Todo],
+                       out: list[Stats | _Failure | None]) -> list[_Todo]:
+        """The points of solvers with ``solve_many``, one call per solver and settings; returns
+        the others."""
+        groups: dict[tuple[str, str], list[_Todo]] = {}
+        rest = []
+        for t in todo:
+            if capabilities(t[2]).solve_many:
+                groups.setdefault((t[2], json.dumps(t[3][t[2]], sort_keys=True, default=str)), []).append(t)
+            else:
+                rest.append(t)
+        for (name, _), members in groups.items():
+            results = solve_many([hs[t[0]] for t in members], name, **members[0][3][name])
+            for (i, key, _, every), stats in zip(members, results):
+                out[i] = self._store(hs[i], key, every[name], stats)
+        return rest
 
-    def _solve_distributed(self, hs: Sequence[Harvester], todo: list[tuple[int, str, str, dict[str, Any]]],
+    def _solve_distributed(self, hs: Sequence[Harvester], todo: list[_Todo],
                            out: list[Stats | _Failure | None]) -> None:
         from .cluster import run_tasks
 
-        def on_worker(method: str, opts: dict[str, Any]) -> dict[str, Any]:
-            # one task per worker thread: Monte Carlo runs single-threaded unless the scene says
-            return {"threads": 1, **opts} if method == "mc" else opts
+        def on_worker(every: dict[str, dict[str, Any]]) -> dict[str, dict[str, Any]]:
+            # one task per worker thread: a threaded solver runs single-threaded unless the scene says
+            return {name: ({"threads": 1, **opts} if capabilities(name).threads else opts)
+                    for name, opts in every.items()}
 
-        fallbacks = [self.fallback(hs[i], method) for i, _, method, _ in todo]
-        args = [(hs[i], method, on_worker(method, opts), None if fb is None else (fb[0], on_worker(*fb)))
-                for (i, _, method, opts), fb in zip(todo, fallbacks)]
+        args = [(hs[i], self.scene.method, name, on_worker(every)) for i, _, name, every in todo]
         for j, res in run_tasks(self.cluster.client(), _solve_portable, args,
                                 lambda j, why: _Failure(ERROR, why, todo[j][2])):
-            i, key, _, opts = todo[j]
-            out[i] = self._store(hs[i], key, opts, stats_from_dict(res) if isinstance(res, dict) else res)
+            i, key, name, every = todo[j]
+            out[i] = self._store(hs[i], key, every[name], stats_from_dict(res) if isinstance(res, dict) else res)
 
-    def _solve_parallel(self, hs: Sequence[Harvester], todo: list[tuple[int, str, str, dict[str, Any]]],
+    def _solve_parallel(self, hs: Sequence[Harvester], todo: list[_Todo],
                         out: list[Stats | _Failure | None]) -> None:
         import multiprocessing
         from concurrent.futures import ProcessPoolExecutor, as_completed
 
         # fork where available: spawn re-runs the caller's __main__ in every worker, which
-        # breaks user scripts without an ``if __name__ == "__main__"`` guard. Only
-        # Fokker--Planck points go to the pool; they use no numba threads.
+        # breaks user scripts without an ``if __name__ == "__main__"`` guard. Only pooled
+        # (single-threaded) solvers' points go to the pool.
         methods = multiprocessing.get_all_start_methods()
         ctx = multiprocessing.get_context("fork" if "fork" in methods else "spawn")
         with ProcessPoolExecutor(max_workers=self.workers, mp_context=ctx) as ex:
-            futures = {ex.submit(_solve_portable, hs[i], method, opts, self.fallback(hs[i], method)):
-                       (i, key, opts) for i, key, method, opts in todo}
+            futures = {ex.submit(_solve_portable, hs[i], self.scene.method, name, every): (i, key, every[name])
+                       for i, key, name, every in todo}
             for fut in as_completed(futures):
                 i, key, opts = futures[fut]
                 res = fut.result()
@@ -180,46 +233,35 @@ class _Runner:
         return res
 
 
-def _fpe_cost_rank(h: Harvester) -> tuple[bool, float, float]:
-    """Sort key putting the dearest Fokker--Planck points first: 1 <= n < 2 (the 2-D scheme in
-    (x, v), seconds to a minute) before n >= 2 (the expansion in x, about a second), then strong
-    walls a first, then n nearest the kink. Measured on the paper's Fig. 1 grid (39 points, tol
-    5e-3): the ten dearest points all have n < 2, and at a given n the cost grows with a (n = 1:
-    5, 12, ~80 s at a = 0.5, 1, 2, the last including the Monte Carlo fallback)."""
+def _cost_rank(h: Harvester) -> tuple[bool, float, float]:
+    """Sort key putting the dearest single-unit points first: 1 <= n < 2 (for Fokker--Planck the
+    2-D scheme in (x, v), seconds to a minute) before n >= 2 (about a second), then strong walls a
+    first, then n nearest the kink. Measured on the paper's Fig. 1 grid (39 points, tol 5e-3): the
+    ten dearest points all have n < 2, and at a given n the cost grows with a (n = 1: 5, 12 s at
+    a = 0.5, 1)."""
     return (not 1.0 <= h.n < 2.0, -h.a, h.n)
 
 
-def _attempt(h: Harvester, method: str, opts: dict[str, Any]) -> Stats | _Failure:
-    """Solve one point; a failure becomes a :class:`_Failure` carrying the reason."""
+def _solve_point(h: Harvester, method: str, name: str, every: dict[str, dict[str, Any]]) -> Stats | _Failure:
+    """Solve one point by :func:`~fpe_harvester.solve.solve` (``method``: the scene's, so that
+    ``"auto"`` falls back where its first solver stops short); a failure becomes a
+    :class:`_Failure` carrying the reason, labelled with the solver ``name`` that was to answer."""
     try:
-        return solve(h, method, **opts)
+        return solve(h, method, fallback_time=SCENE_FALLBACK_SECONDS, solver_options=every)
     except MethodNotAvailableError as exc:
-        return _Failure(NOT_AVAILABLE, str(exc), method)
+        return _Failure(NOT_AVAILABLE, str(exc), name)
     except HarvesterError as exc:
-        return _Failure(ERROR, f"method {method!r} failed: {type(exc).__name__}: {exc}", method)
+        return _Failure(ERROR, f"method {name!r} failed: {type(exc).__name__}: {exc}", name)
     except Exception as exc:  # noqa: BLE001
         # A solver bug (or a warning turned into an error) must not sink a long sweep:
         # report it on the point and go on. KeyboardInterrupt still stops the run.
-        return _Failure(ERROR, f"method {method!r} raised {type(exc).__name__}: {exc}", method)
+        return _Failure(ERROR, f"method {name!r} raised {type(exc).__name__}: {exc}", name)
 
 
-def _solve_point(h: Harvester, method: str, opts: dict[str, Any],
-                 fallback: tuple[str, dict[str, Any]] | None) -> Stats | _Failure:
-    """Solve one point; a point that did not reach its tolerance (Fokker--Planck density not
-    resolved: no numbers, or numbers whose error exceeds the tolerance) is tried again with
-    ``fallback`` (method, settings) if given, and :func:`~fpe_harvester.solve.fallback_result`
-    decides which numbers to keep and says so in the message."""
-    res = _attempt(h, method, opts)
-    if not (fallback is not None and isinstance(res, Stats) and res.status is Status.NOT_CONVERGED):
-        return res
-    second = _attempt(h, *fallback)
-    return fallback_result(res, second) if isinstance(second, Stats) else res
-
-
-def _solve_portable(h: Harvester, method: str, opts: dict[str, Any],
-                    fallback: tuple[str, dict[str, Any]] | None) -> dict[str, Any] | _Failure:
+def _solve_portable(h: Harvester, method: str, name: str,
+                    every: dict[str, dict[str, Any]]) -> dict[str, Any] | _Failure:
     """:func:`_solve_point` for a worker process: Stats travel as dicts (their info is read-only)."""
-    res = _solve_point(h, method, opts, fallback)
+    res = _solve_point(h, method, name, every)
     return res.to_dict() if isinstance(res, Stats) else res
 
 
@@ -271,8 +313,10 @@ def _optimize_rows(scene: Scene, runner: _Runner, points: list[dict[str, float]]
     for index, p in enumerate(points):
         h0 = scene.harvester(p)
         lo, hi = opt.interval(h0)
-        if hi > lo and runner.method_of(h0.replace(**{opt.over: 0.5 * (lo + hi)}))[0] == "mc":
-            rows.append(_noisy_optimum_row(scene, runner, index, p, h0, lo, hi))
+        name = runner.solver_of(h0.replace(**{opt.over: 0.5 * (lo + hi)}))
+        if hi > lo and capabilities(name).seed:
+            # a random solver: the noisy optimizer, with common random numbers across the interval
+            rows.append(_noisy_optimum_row(scene, runner, index, p, h0, lo, hi, name))
             continue
         grid = np.linspace(lo, hi, opt.points) if hi > lo else np.array([lo])
         hs = [h0.replace(**{opt.over: float(x)}) for x in grid]
@@ -292,10 +336,11 @@ def _optimize_rows(scene: Scene, runner: _Runner, points: list[dict[str, float]]
         x_opt = float(grid[best])
         bracket = [float(grid[max(best - 1, 0)]), float(grid[min(best + 1, len(grid) - 1)])]
         at_bound = "low" if best == 0 and len(grid) > 1 else "high" if best == len(grid) - 1 > 0 else None
-        exact = isinstance(res[best], Stats) and res[best].method == "exact"
-        if at_bound is None and len(grid) > 1 and exact:
+        best_by = res[best].method if isinstance(res[best], Stats) else ""
+        if at_bound is None and len(grid) > 1 and best_by in METHODS and capabilities(best_by).tol is None:
+            # exact to round-off: the best grid cell is refined by a bounded scalar search
             def value(x: float) -> float:
-                v = Exact().solve(h0.replace(**{opt.over: x})).value(opt.maximize)[0]
+                v = solve(h0.replace(**{opt.over: x}), best_by).value(opt.maximize)[0]
                 return -np.inf if v is None else v
 
             grid_vals = np.array([-np.inf if v is None else v for v in vals])
@@ -314,13 +359,13 @@ def _optimize_rows(scene: Scene, runner: _Runner, points: list[dict[str, float]]
 
 
 def _noisy_optimum_row(scene: Scene, runner: _Runner, index: int, p: Mapping[str, float], h0: Harvester,
-                       lo: float, hi: float) -> SceneRow:
-    """A Monte Carlo optimum: :func:`~fpe_harvester.optimum.optimize` (common random numbers,
-    quadratic fit, jackknife errors); the maximized observable is the fit's value at the vertex,
-    the others come from one more solve there."""
+                       lo: float, hi: float, name: str) -> SceneRow:
+    """An optimum by a random solver ``name``: :func:`~fpe_harvester.optimum.optimize` (common
+    random numbers, quadratic fit, jackknife errors); the maximized observable is the fit's value
+    at the vertex, the others come from one more solve there."""
     opt = scene.optimize
     assert opt is not None
-    found = optimize(h0, opt.over, (lo, hi), opt.maximize, method="mc", seed=point_seed(scene.name, h0),
+    found = optimize(h0, opt.over, (lo, hi), opt.maximize, method=name, seed=point_seed(scene.name, h0),
                      mc_tol=scene.rtol, progress=False)
     info: dict[str, Any] = {"optimize": {"maximize": opt.maximize, "over": opt.over, "interval": [lo, hi],
                                          **{k: v for k, v in found.to_dict().items() if k != "info"},
@@ -329,12 +374,32 @@ def _noisy_optimum_row(scene: Scene, runner: _Runner, index: int, p: Mapping[str
     runner.bar.update(opt.points)
     if found.x_opt is None:
         return _row(scene, index, {**p, opt.over: None}, h0,  # type: ignore[dict-item]
-                    _Failure(Status.NOT_CONVERGED.value, found.message, "mc"), info)
+                    _Failure(Status.NOT_CONVERGED.value, found.message, name), info)
     final = runner.evaluate([h0.replace(**{opt.over: found.x_opt})])[0]
     row = _row(scene, index, {**p, opt.over: found.x_opt}, h0, final, info)
     values = {**row.values, opt.maximize: found.value, opt.maximize + "_err": found.value_err}
     status = row.status if found.status is Status.STABLE else found.status.value
-    return SceneRow(row.index, row.point, status, "mc", f"{found.message}; {row.message}", values, row.info)
+    return SceneRow(row.index, row.point, status, found.method, f"{found.message}; {row.message}", values,
+                    row.info)
+
+
+def _check_solvers(sc: Scene, hs: Sequence[Harvester]) -> None:
+    """Every point has a solver that handles it (for an optimum: the middle of its interval),
+    before the first point is computed.
+
+    Raises
+    ------
+    ParameterError
+        Naming the first point no solver (or not the scene's method) handles, and why.
+    """
+    probe = _Runner(sc, None, bar=None)
+    if not probe.needs_solver:
+        return
+    for h in hs:
+        if sc.optimize is not None:
+            lo, hi = sc.optimize.interval(h)
+            h = h.replace(**{sc.optimize.over: 0.5 * (lo + hi)}) if hi > lo else h
+        probe.solver_of(h)
 
 
 def run_scene(
@@ -385,7 +450,8 @@ def run_scene(
     Raises
     ------
     ParameterError
-        A point is not a valid harvester, ``figures`` names an unknown figure, or the Dask
+        Before any point is computed: a point is not a valid harvester, no solver (or not the
+        scene's ``method``) handles a point, ``figures`` names an unknown figure, or the Dask
         scheduler is unusable (see :class:`.cluster.Connection`). Solver failures do not
         raise: they are reported on their points.
     """
@@ -408,6 +474,7 @@ def run_scene(
     t0 = time.perf_counter()
     points = list(sc.points())
     hs0 = [sc.harvester(p) for p in points]  # validates every point before any work
+    _check_solvers(sc, hs0)
     total = len(points)
     if sc.optimize is not None:
         total = sum(1 + (sc.optimize.points if np.ptp(sc.optimize.interval(h)) > 0 else 1) for h in hs0)

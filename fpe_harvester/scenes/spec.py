@@ -33,7 +33,8 @@ Python from the frozen dataclasses below. A minimal TOML scene::
 Optional tables: ``[options.fpe]`` / ``[options.mc]`` (solver settings), ``[optimize]``
 (``maximize = "eta"``, ``over = "k"``, ``bounds = ["k_di", 0.0]``, ``points = 41``:
 each point of the other axes becomes the optimum over ``over``), ``outputs = ["table",
-"csv", "json"]``.
+"csv", "json"]``. ``[system]`` is required and not empty. Every table, key, type and default:
+the docs page ``scene-format`` (docs/scene-format.md).
 """
 
 from __future__ import annotations
@@ -50,11 +51,12 @@ from typing import Any
 
 import numpy as np
 
-from ..errors import ParameterError, check_choice, check_int, check_real
+from ..errors import MethodNotAvailableError, ParameterError, check_choice, check_int, check_real
 from ..exact import k_di
 from ..model import Harvester, Params
 from ..result import QUANTITIES
-from ..solve import METHODS
+from ..solve import get_solver
+from ..solvers import METHODS
 
 __all__ = [
     "DERIVED",
@@ -335,7 +337,8 @@ class FigureSpec:
 
 @dataclass(frozen=True)
 class Scene:
-    """A declarative study. See the module docstring for the TOML form.
+    """A declarative study; its TOML form (every table, key, type and default) is the docs page
+    ``scene-format`` (docs/scene-format.md).
 
     Parameters
     ----------
@@ -348,16 +351,18 @@ class Scene:
     observables : tuple of str
         Subset of :data:`~fpe_harvester.result.QUANTITIES` and :data:`DERIVED` to report.
     rtol : float
-        Wanted relative accuracy on eta, in (0, 1). Passed as ``tol`` to the
-        Fokker--Planck and Monte Carlo solvers; ignored by the exact solver.
+        Wanted relative accuracy on eta, in (0, 1). Passed as ``tol`` to every solver that
+        takes a tolerance (Fokker--Planck, Monte Carlo); the exact solver has none.
     method : {"auto", "exact", "fpe", "mc"}
-        ``"auto"`` picks the cheapest adequate solver per point; a Fokker--Planck point that
-        misses ``rtol`` (no numbers, or an error above it) is tried again with Monte Carlo,
-        which is kept when it reaches ``rtol`` or has the smaller relative error on eta (the
-        Monte Carlo settings are ``options["mc"]``; its wall-time budget ``max_time`` is 600 s
-        per point unless set there).
+        ``"auto"``: per point, the first solver that handles it (as
+        :func:`~fpe_harvester.solve.solve` chooses); where it misses ``rtol`` (no numbers, or an
+        error above it) the next one is tried and kept when it reaches ``rtol`` or has the smaller
+        relative error on eta (with its settings from ``options``; its wall-time budget is
+        :data:`~fpe_harvester.scenes.run.SCENE_FALLBACK_SECONDS`, 600 s, unless set there).
+        A named method must handle every point: the run checks that before it starts.
     options : mapping of method name to mapping
-        Extra constructor settings per solver (e.g. ``{"mc": {"dt": 0.01}}``).
+        Extra constructor settings per solver (e.g. ``{"mc": {"dt": 0.01}}``), checked when
+        the scene is made: an option the solver does not have, or an invalid value, is an error.
     optimize : Optimize or None
         Turn each point into the optimum over one field.
     figures : tuple of FigureSpec
@@ -407,6 +412,7 @@ class Scene:
             check_choice("options", key, tuple(METHODS))
             if not isinstance(opts, Mapping):
                 raise _bad(f"options.{key}", opts, "expected a table of solver settings")
+            _check_solver_options(key, opts)
         object.__setattr__(self, "options", MappingProxyType({k: MappingProxyType(dict(v))
                                                               for k, v in self.options.items()}))
         outs = tuple(self.outputs)
@@ -475,6 +481,17 @@ class Scene:
         return math.prod(len(ax.values) for ax in self.axes)
 
 
+def _check_solver_options(method: str, opts: Mapping[str, Any]) -> None:
+    """``options.<method>``: settings the solver has, with valid values (it is built with them once).
+    A solver not installed here is not checked: its points say so when they run."""
+    try:
+        get_solver(method, **opts)
+    except MethodNotAvailableError:
+        return
+    except ParameterError as exc:
+        raise ParameterError(f"options.{method}: {exc}") from None
+
+
 _TOP_KEYS = ("name", "title", "description", "system", "axes", "observables", "rtol", "method",
              "options", "optimize", "figures", "outputs", "quick")
 _QUICK_KEYS = ("rtol", "axes", "options", "optimize", "method", "observables", "figures", "outputs")
@@ -497,13 +514,6 @@ def scene_from_dict(data: Mapping[str, Any], name: str | None = None) -> Scene:
             merged["optimize"] = {**dict(data.get("optimize", {})), **dict(overrides.pop("optimize"))}
         merged.update(overrides)
         quick = scene_from_dict(merged, name)
-    sys_table = _keys("system", data.get("system", {}), ("a", "n", "N", "k", "k4", "k3", "params", *_PARAMS))
-    params = dict(_keys("system.params", sys_table.pop("params", {}), _PARAMS))
-    params.update({key: sys_table.pop(key) for key in _PARAMS if key in sys_table})
-    try:
-        system = Harvester.build(**{**sys_table, **params})
-    except TypeError as exc:
-        raise ParameterError(f"system: {exc}") from None
     axes_table = data.get("axes", {})
     if not isinstance(axes_table, Mapping):
         raise _bad("axes", axes_table, "expected a table of axis name = values")
@@ -513,10 +523,35 @@ def scene_from_dict(data: Mapping[str, Any], name: str | None = None) -> Scene:
         opt = _keys("optimize", data["optimize"], ("maximize", "over", "bounds", "points"),
                     required=("over",))
         optimize = Optimize(**opt)
-    figures = []
     fig_list = data.get("figures", [])
     if not isinstance(fig_list, list):
         raise _bad("figures", fig_list, "expected an array of tables [[figures]]")
+    scene = Scene(
+        name=name,
+        title=str(data.get("title", "")),
+        description=str(data.get("description", "")),
+        system=_system(data.get("system")),
+        axes=axes,
+        observables=_as_tuple(data.get("observables", ("eta",)), "observables"),
+        rtol=data.get("rtol", 1e-3),
+        method=data.get("method", "auto"),
+        options=_keys("options", data.get("options", {}), tuple(METHODS)),
+        optimize=optimize,
+        figures=_figures(fig_list),
+        outputs=_as_tuple(data.get("outputs", OUTPUTS), "outputs"),
+        quick=quick,
+    )
+    if not data.get("system"):
+        raise ParameterError(
+            f"system: {'the table is empty' if 'system' in data else 'missing required table'}; a scene states "
+            "its base harvester, e.g. [system] with a = 0.5, n = 2, N = 3 (keys: a, n, N, k, k4, k3, params, "
+            f"{', '.join(_PARAMS)})")
+    return scene
+
+
+def _figures(fig_list: list[Any]) -> tuple[FigureSpec, ...]:
+    """The ``[[figures]]`` tables as :class:`FigureSpec` objects."""
+    figures = []
     for i, spec in enumerate(fig_list):
         where = f"figures[{i}]"
         table = _keys(where, spec, ("name", "x", "y", "series", "select", "logx", "logy",
@@ -529,21 +564,20 @@ def scene_from_dict(data: Mapping[str, Any], name: str | None = None) -> Scene:
         if "select" in table:
             table["select"] = _keys(f"{where}.select", table["select"], AXIS_NAMES)
         figures.append(FigureSpec(**table))
-    return Scene(
-        name=name,
-        title=str(data.get("title", "")),
-        description=str(data.get("description", "")),
-        system=system,
-        axes=axes,
-        observables=_as_tuple(data.get("observables", ("eta",)), "observables"),
-        rtol=data.get("rtol", 1e-3),
-        method=data.get("method", "auto"),
-        options=_keys("options", data.get("options", {}), tuple(METHODS)),
-        optimize=optimize,
-        figures=tuple(figures),
-        outputs=_as_tuple(data.get("outputs", OUTPUTS), "outputs"),
-        quick=quick,
-    )
+    return tuple(figures)
+
+
+def _system(table: Any) -> Harvester:
+    """The ``[system]`` table as the base harvester (the defaults when it is missing or empty: the
+    caller refuses those once the rest of the scene is checked)."""
+    sys_table = _keys("system", {} if table is None else table,
+                      ("a", "n", "N", "k", "k4", "k3", "params", *_PARAMS))
+    params = dict(_keys("system.params", sys_table.pop("params", {}), _PARAMS))
+    params.update({key: sys_table.pop(key) for key in _PARAMS if key in sys_table})
+    try:
+        return Harvester.build(**{**sys_table, **params})
+    except TypeError as exc:
+        raise ParameterError(f"system: {exc}") from None
 
 
 def _as_tuple(value: Any, where: str) -> tuple:

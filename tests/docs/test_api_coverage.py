@@ -11,7 +11,8 @@ import pytest
 from .conftest import anchors
 
 #: The public packages; their ``__all__`` is the public API.
-PACKAGES = ("fpe_harvester", "fpe_harvester.exact", "fpe_harvester.fpe", "fpe_harvester.scenes", "montecarlo")
+PACKAGES = ("fpe_harvester", "fpe_harvester.exact", "fpe_harvester.fpe", "fpe_harvester.scenes",
+            "fpe_harvester.landscape", "montecarlo")
 
 
 @pytest.mark.parametrize("package", PACKAGES)

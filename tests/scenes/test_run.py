@@ -6,11 +6,13 @@ import csv
 import json
 from pathlib import Path
 
+from dataclasses import replace
+
 import numpy as np
 import pytest
 
 from fpe_harvester.errors import MethodNotAvailableError, NotConvergedError
-from fpe_harvester.exact import exact_stats, exact_sweep, k_di
+from fpe_harvester.exact import Exact, exact_sweep, k_di
 from fpe_harvester.model import Harvester, Params
 from fpe_harvester.scenes import Axis, FigureSpec, Optimize, Ref, Scene, load_scene
 from fpe_harvester.scenes import run as scene_run
@@ -46,12 +48,24 @@ class Counter:
         return self.fn(*args, **kwargs)
 
 
+def count_batches(monkeypatch) -> list[int]:
+    """Record the size of every vectorized call of the exact solver."""
+    sizes: list[int] = []
+    real = Exact.solve_many
+
+    def counted(self: Exact, hs):
+        sizes.append(len(hs))
+        return real(self, hs)
+
+    monkeypatch.setattr(Exact, "solve_many", counted)
+    return sizes
+
+
 def test_vectorized_exact_matches_pointwise_solve(tmp_path: Path, monkeypatch) -> None:
-    batch = Counter(exact_stats)
-    monkeypatch.setattr(scene_run, "exact_stats", batch)
+    batches = count_batches(monkeypatch)
     sc = harmonic_scene(observables=("eta", "V2", "Vrms", "Pin", "v2", "vV", "x2"), figures=())
     res = scene_run.run_scene(sc, tmp_path, progress=False)
-    assert batch.calls == 1  # one vectorized call for the whole (N = 3) sweep
+    assert batches == [10]  # one vectorized call for the whole (N = 3) sweep
     assert len(res.rows) == 10 and res.computed == 10
     for row in res.rows:
         h = sc.harvester(row.point)
@@ -100,10 +114,9 @@ def test_cache_survives_a_partial_last_line_and_keys_on_accuracy(tmp_path: Path,
     scene_run.run_scene(sc, tmp_path, progress=False)
     with (tmp_path / CACHE_NAME).open("a") as fh:
         fh.write('{"key": "abc", "stats": {"V2": 0.1')  # run killed mid-write
-    batch = Counter(exact_stats)
-    monkeypatch.setattr(scene_run, "exact_stats", batch)
+    batches = count_batches(monkeypatch)
     res = scene_run.run_scene(sc, tmp_path, progress=False)
-    assert batch.calls == 0 and res.reused == 10
+    assert batches == [] and res.reused == 10
     # the exact solver ignores rtol, so a different accuracy still reuses exact points
     res = scene_run.run_scene(harmonic_scene(rtol=1e-2, figures=()), tmp_path, progress=False)
     assert res.reused == 10
@@ -155,8 +168,8 @@ def fake_nonlinear_scene() -> Scene:
 def test_failures_are_reported_per_point_and_retried(tmp_path: Path, monkeypatch) -> None:
     seen: list[dict] = []
 
-    def flaky(h, method, **opts):
-        seen.append({"method": method, **opts})
+    def flaky(h, method, solver_options, **opts):
+        seen.append({"method": method, **solver_options["mc"]})
         if h.k == 0.0:
             raise MethodNotAvailableError("method 'mc' is not available yet")
         if h.k == -0.5:
@@ -169,7 +182,8 @@ def test_failures_are_reported_per_point_and_retried(tmp_path: Path, monkeypatch
     assert "not available yet" in res.rows[0].message and "NotConvergedError" in res.rows[1].message
     assert res.rows[0].values["eta"] is None and res.figures["eta_vs_k"].exists()
     # coupled nonlinear ring -> Monte Carlo with tol = rtol and a seed from the scene and point
-    assert all(s["method"] == "mc" and s["tol"] == 0.05 for s in seen)
+    assert all(s["method"] == "auto" and s["tol"] == 0.05 for s in seen)
+    assert [r.method for r in res.rows] == ["mc", "mc", "exact"]
     h0 = fake_nonlinear_scene().harvester({"k": 0.0})
     assert seen[0]["seed"] == point_seed("nl", h0) != seen[1]["seed"]
     seen.clear()
@@ -218,7 +232,7 @@ def test_optimize_monte_carlo_points_use_the_noisy_optimizer(tmp_path: Path, mon
     assert asked[0]["bounds"] == (-1.0, 0.0) and asked[0]["method"] == "mc"
     assert asked[0]["seed"] == point_seed("nlopt", sc.harvester({}))
     assert row.point["k"] == -0.3 and (row.values["eta"], row.values["eta_err"]) == (0.553, 0.0006)
-    assert row.values["Vrms"] is not None and row.info["optimize"]["k_opt_err"] == 0.002
+    assert row.values["Vrms"] is not None and row.info["optimize"]["x_opt_err"] == 0.002
     assert row.status == "stable" and row.message.startswith("converged")
 
 
@@ -251,7 +265,9 @@ def test_parallel_workers_match_serial(tmp_path: Path, monkeypatch) -> None:
                axes=(Axis("a", (0.5, 1.0)), Axis("k", (0.2, 0.0, -0.2, -0.3, -0.1))))
     monkeypatch.setattr(scene_run, "solve", as_harmonic)
     serial = scene_run.run_scene(sc, tmp_path / "serial", progress=False, workers=1)
-    monkeypatch.setattr(scene_run, "_POOLED", ("mc",))
+    from montecarlo import MonteCarlo
+
+    monkeypatch.setattr(MonteCarlo, "capabilities", replace(MonteCarlo.capabilities, pooled=True))
     parallel = scene_run.run_scene(sc, tmp_path / "parallel", progress=False, workers=2)
     assert parallel.computed == 10
     assert [r.values for r in parallel.rows] == [r.values for r in serial.rows]
@@ -263,15 +279,16 @@ def test_parallel_workers_match_serial(tmp_path: Path, monkeypatch) -> None:
 def test_auto_falls_back_to_monte_carlo_when_fokker_planck_misses_the_tolerance(tmp_path, monkeypatch):
     # Fokker-Planck returns numbers whose error exceeds the scene's rtol (as at n = 1.25,
     # a = 2): Monte Carlo is tried, and kept when it reaches the tolerance or does better
-    from dataclasses import replace
-
+    from fpe_harvester.fpe import FokkerPlanck
     from fpe_harvester.result import Status
+    from montecarlo import MonteCarlo
 
     exact = solve(Harvester.build(a=2.0, n=2), "exact")
     fpe = replace(exact, method="fpe", status=Status.NOT_CONVERGED, eta_err=0.01 * exact.eta,
                   message="fpe stopped")
     outcomes = {"fpe": fpe, "mc": replace(exact, method="mc", eta_err=0.004 * exact.eta, message="mc ok")}
-    monkeypatch.setattr(scene_run, "solve", lambda h, method, **opts: outcomes[method])
+    for cls in (FokkerPlanck, MonteCarlo):  # the solvers' own settings and refusals, stand-in results
+        monkeypatch.setattr(cls, "solve", lambda self, h: outcomes[self.name])
     scene = Scene(name="miss", system=Harvester.build(a=2.0, n=1.25), observables=("eta",), rtol=5e-3,
                   outputs=())
     row = scene_run.run_scene(scene, tmp_path / "ok", progress=False, workers=1).rows[0]

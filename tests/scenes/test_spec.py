@@ -154,6 +154,10 @@ BAD = [
     ("name = 'x'\n[axes]\nk=[0]\n[quick]\naxes = { a = [1] }", "quick.axes: unknown key 'a'; valid keys: k"),
     ("name = 'x'\n[quick]\nrtol = -1", r"rtol must be in \(0, 1\)"),
     ("name = 'bad name'", "name: invalid value 'bad name'"),
+    ("", "system: missing required table; a scene states its base harvester"),
+    ("name = 'x'\n[system]\n", "system: the table is empty"),
+    ("name = 'x'\n[system]\nn = 3\n[options.mc]\nfoo = 1", "options.mc: invalid option for method 'mc': no option 'foo'"),
+    ("name = 'x'\n[system]\nn = 3\n[options.fpe]\ntol = 0.5", r"options.fpe: tol must be in \(0, 0.1\]"),
 ]
 
 
@@ -173,5 +177,5 @@ def test_missing_file_and_unknown_name(tmp_path: Path) -> None:
 
 
 def test_name_defaults_to_file_stem(tmp_path: Path) -> None:
-    sc = load_scene(write(tmp_path, "observables = ['eta']", name="my_study.toml"))
+    sc = load_scene(write(tmp_path, "observables = ['eta']\n[system]\nn = 2", name="my_study.toml"))
     assert sc.name == "my_study" and sc.n_points == 1
