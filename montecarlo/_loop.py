@@ -16,8 +16,10 @@ from typing import NamedTuple
 import numpy as np
 from numba import njit
 
-from ._kernels import KIND_LINEAR, N_MOM, ROWS, _check_escape, _clamp_start, _kick_force, _live, _measure, _start
+from ._kernels import _check_escape, _clamp_start, _kick_force, _live, _measure, _start
 from ._kink import N_TAYLOR
+from .layout import (C_RING_STEPS, CF_H, CF_XI_DECAY, KIND_LINEAR, N_COUNTERS, N_MOM, P_A, P_N, P_THRESHOLD,
+                     P_XI_VAR, ROWS)
 from .controls.martingale import MG_DIST, mg_measure, n_state
 from .controls.twin import measure_twin
 from .steps import StepScheme
@@ -32,7 +34,7 @@ class Setup(NamedTuple):
     P, N : int
         Paths (rings) of this chunk and units per ring.
     nburn, nrun : int
-        Burn-in and measured steps of size ``cf_c[12]`` if ``coupled`` else ``cf_f[12]``.
+        Burn-in and measured steps of size ``cf_c[CF_H]`` if ``coupled`` else ``cf_f[CF_H]``.
     stride : int
         Moments are accumulated every ``stride``-th step of the measured part (samples far
         closer than the correlation time add cost, not information).
@@ -48,7 +50,7 @@ class Setup(NamedTuple):
         A harmonic ring (coefficients ``cf_t`` at the fine step, physical vector ``pp_t``) is
         advanced on the fine level's noise and measured with it.
     kind : int
-        On-site treatment (:data:`montecarlo._kernels.KIND_LINEAR`, ``KIND_KICK``, ``KIND_KINK``).
+        On-site treatment (:data:`montecarlo.layout.KIND_LINEAR`, ``KIND_KICK``, ``KIND_KINK``).
     cf_f, cf_c, cf_cc, cf_t : ndarray
         Step coefficients (:mod:`montecarlo._kernels`) of the fine, coarse, coarsest and twin
         levels.
@@ -87,15 +89,15 @@ class Sums(NamedTuple):
     Attributes
     ----------
     sums : (ROWS, N_MOM) ndarray
-        Sums over measured unit-steps of the moments :data:`montecarlo._kernels.MOMENTS`: fine
+        Sums over measured unit-steps of the moments :data:`montecarlo.layout.MOMENTS`: fine
         level, coarse level, fine level over the first half of the measured steps, coarsest.
     counts : (ROWS,) ndarray
         Number of unit-steps summed per row.
     esc_time : (P,) ndarray
         Time at which path p first had some |x_j| > threshold, or -1.
-    counters : (5,) int64 ndarray
-        Kink statistics (slow-path unit steps, crossings, averaged-map entries, exhausted event
-        budgets) and, in slot 4, the number of ring steps taken (all levels).
+    counters : (N_COUNTERS,) int64 ndarray
+        Kink statistics and the number of ring steps taken, all levels (``C_*`` of
+        :mod:`montecarlo.layout`).
     mart : (2, n_mart) ndarray
         Martingale control sums of the fine level over the measured window and its first half.
     """
@@ -109,7 +111,7 @@ class Sums(NamedTuple):
     @staticmethod
     def zeros(P: int, n_mart: int) -> Sums:
         """Empty accumulators for a chunk of P paths with ``n_mart`` martingale columns."""
-        return Sums(np.zeros((ROWS, N_MOM)), np.zeros(ROWS), np.empty(P), np.zeros(5, dtype=np.int64),
+        return Sums(np.zeros((ROWS, N_MOM)), np.zeros(ROWS), np.empty(P), np.zeros(N_COUNTERS, dtype=np.int64),
                     np.zeros((2, n_mart)))
 
 
@@ -147,7 +149,7 @@ def _run(tag, gen, s, out) -> None:
     third = s.third and coupled
     cf_f, cf_c, cf_cc, cf_t, pp, pp_t = s.cf_f, s.cf_c, s.cf_cc, s.cf_t, s.pp, s.pp_t
     sums, counts, counters, mg, esc = out.sums, out.counts, out.counters, out.mart, out.esc_time
-    thr = pp[10]
+    thr = pp[P_THRESHOLD]
     # every level's arrays (x, v, V, xi, F, pvx; stuck) allocated here one by one: returned in
     # tuples by a helper, they made the loop copy about twice the array fields before every
     # kernel call (harmonic ring, 2 paths: loop body 4100-4500 perf samples per 20 runs, 2900-3600
@@ -177,8 +179,8 @@ def _run(tag, gen, s, out) -> None:
     xi0 = np.zeros((N, P))
     mg_points = 0  # martingale points taken (an int: a bool flag compiled mg_measure twice)
     n_upd = 0  # xi updates of the fine level since the last martingale point
-    h = cf_c[12] if coupled else cf_f[12]
-    _start(gen, s.chol, math.sqrt(pp[11]), xf, vf, Vf, xif)
+    h = cf_c[CF_H] if coupled else cf_f[CF_H]
+    _start(gen, s.chol, math.sqrt(pp[P_XI_VAR]), xf, vf, Vf, xif)
     _clamp_start(xf, kind, pp, h)
     _init_levels(s, (xf, vf, Vf, xif, Ff), (xc, vc, Vc, xic, Fc), (xcc, vcc, Vcc, xicc, Fcc),
                  (xt, vt, Vt, xit, Ft))
@@ -191,7 +193,7 @@ def _run(tag, gen, s, out) -> None:
         meas = it >= nburn and (it - nburn) % stride == 0
         first = it < half
         t_end = (it + 1) * h
-        counters[4] += (3 if coupled else 1) * live
+        counters[C_RING_STEPS] += (3 if coupled else 1) * live
         for j in range(N):
             for p in range(P):
                 for r in range(nz):
@@ -217,24 +219,24 @@ def _run(tag, gen, s, out) -> None:
             if meas:
                 counts[0] += _measure(xf, vf, Vf, xif, sf, Ff, w, cf_f, pp, kind, sums[0], pf)
                 if use_mg and sub == 0:
-                    dec = cf_f[13] ** n_upd
-                    mg_measure(xf, vf, Vf, xif, w, pp[7], pp[8], phi, xi0, mg, first, mg_points > 0, dec,
-                               pp[11] * (1.0 - dec * dec), g_bd, gprev_bd)
+                    dec = cf_f[CF_XI_DECAY] ** n_upd
+                    mg_measure(xf, vf, Vf, xif, w, pp[P_A], pp[P_N], phi, xi0, mg, first, mg_points > 0, dec,
+                               pp[P_XI_VAR] * (1.0 - dec * dec), g_bd, gprev_bd)
                     mg_points += 1
                     n_upd = 0
                 if twin:
-                    measure_twin(xt, vt, Vt, xit, w, cf_t, sums[0], pp[8], pt)
+                    measure_twin(xt, vt, Vt, xit, w, cf_t, sums[0], pp[P_N], pt)
                 if first:
                     counts[2] += _measure(xf, vf, Vf, xif, sf, Ff, w, cf_f, pp, kind, sums[2], pf)
                     if twin:
-                        measure_twin(xt, vt, Vt, xit, w, cf_t, sums[2], pp[8], pt)
+                        measure_twin(xt, vt, Vt, xit, w, cf_t, sums[2], pp[P_N], pt)
                 if coupled and sub == 1:
                     counts[1] += _measure(xc, vc, Vc, xic, sc, Fc, w, cf_c, pp, kind, sums[1], pc)
             advance(tag, xif, ee, cf_f)
         if coupled:
             advance(tag, xic, ec, cf_c)
         if third and it % 2 == 1:
-            counters[4] += live
+            counters[C_RING_STEPS] += live
             compose(tag, cf_c, cf_cc, ec0, ec, ecc)
             step(tag, xcc, vcc, Vcc, xicc, Fcc, scc, pcc, ecc, cf_cc, pp, kind, xm, fext, cs, rbm, rbx, w, counters,
                  gen)

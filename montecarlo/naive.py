@@ -21,7 +21,7 @@ import numpy as np
 from fpe_harvester.errors import ParameterError, check_int, check_real
 from fpe_harvester.model import Harvester
 
-from ._kernels import N_MOM
+from .layout import N_MOM
 from .simulate import Ensemble
 
 __all__ = ["simulate_naive"]

@@ -22,8 +22,9 @@ from numba import njit
 from fpe_harvester.errors import ParameterError, check_int, check_real
 from fpe_harvester.model import Harvester
 
-from ._kernels import KIND_LINEAR, _kick_force
+from ._kernels import _kick_force
 from ._kink import N_TAYLOR
+from .layout import CF_XI_DECAY, CF_XI_NOISE, KIND_LINEAR, N_COUNTERS, P_XI_VAR
 from .scheme import physical_vector, scheme_kind, step_coefficients
 from .steps.frozen import _d_step
 
@@ -47,8 +48,8 @@ def _sample(gen, P: int, N: int, nburn: int, nsamp: int, stride: int, cf: np.nda
     xm, fext = np.zeros((N, P)), np.zeros((N, P))
     w = np.ones(P)
     cs = np.zeros((3, N_TAYLOR + 1))
-    counters = np.zeros(5, dtype=np.int64)
-    sd = math.sqrt(pp[11])
+    counters = np.zeros(N_COUNTERS, dtype=np.int64)
+    sd = math.sqrt(pp[P_XI_VAR])
     for j in range(N):
         for p in range(P):
             xi[j, p] = sd * gen.standard_normal()
@@ -59,7 +60,7 @@ def _sample(gen, P: int, N: int, nburn: int, nsamp: int, stride: int, cf: np.nda
         _d_step(x, v, V, xi, F, stuck, xm, fext, w, cf, pp, kind, counters, cs)
         for j in range(N):
             for p in range(P):
-                xi[j, p] = cf[13] * xi[j, p] + cf[14] * gen.standard_normal()
+                xi[j, p] = cf[CF_XI_DECAY] * xi[j, p] + cf[CF_XI_NOISE] * gen.standard_normal()
         if step >= nburn and (step + 1 - nburn) % stride == 0:
             for p in range(P):
                 for j in range(N):

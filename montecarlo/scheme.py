@@ -31,9 +31,16 @@ import scipy.linalg
 
 from fpe_harvester.model import Harvester
 
-from ._kernels import (CF_JOINT, CF_SIZE, JOINT_BLOCK, KIND_KICK, KIND_KINK, KIND_LINEAR,
-                       MAX_SUBSTEPS)
+from ._kernels import MAX_SUBSTEPS
 from ._kink import AVERAGE, HOLD
+from .layout import (CF_E, CF_G, CF_H, CF_PVX, CF_STEP, CF_SUB_E, CF_SUB_G, CF_XI_DECAY, CF_XI_HALF, CF_XI_NOISE,
+                     J_BETA, J_COV_VXI, J_G, J_L, J_P, JOINT_BLOCK, KIND_KICK, KIND_KINK, KIND_LINEAR, P_A, P_GAMMA,
+                     P_K, P_K3, P_K4, P_KC, P_KINK_FORCE, P_KINK_RULE, P_KV, P_M, P_N, P_SIGMA, P_SIZE,
+                     P_STIFFNESS, P_TAU_P, P_THRESHOLD, P_XI_VAR)
+
+#: Length of a coefficient array: the common part and the joint step's blocks (the step and its
+#: stiff-wall substeps h/2^i, i = 1 .. log2(MAX_SUBSTEPS)).
+CF_SIZE = CF_STEP + JOINT_BLOCK * (1 + 10)
 
 __all__ = ["scheme_kind", "linear_stiffness", "step_coefficients", "physical_vector", "SCHEME_NAMES",
            "KINK_WIDTH", "KINK_RULES", "JOINT_STEPS", "uses_joint_step", "joint_step_refusal",
@@ -238,7 +245,7 @@ def noise_factor(Q: np.ndarray) -> np.ndarray:
 
 
 def step_coefficients(h: Harvester, dt: float, joint: bool = False) -> np.ndarray:
-    """Coefficient array ``cf`` of one step of size ``dt`` (layout in :mod:`montecarlo._kernels`).
+    """Coefficient array ``cf`` of one step of size ``dt`` (layout in :mod:`montecarlo.layout`).
 
     Parameters
     ----------
@@ -252,7 +259,7 @@ def step_coefficients(h: Harvester, dt: float, joint: bool = False) -> np.ndarra
     Examples
     --------
     >>> cf = step_coefficients(Harvester.build(a=0.5), 0.01)
-    >>> bool(abs(cf[13] - math.exp(-0.01)) < 1e-15)
+    >>> bool(abs(cf[CF_XI_DECAY] - math.exp(-0.01)) < 1e-15)
     True
     """
     p = h.params
@@ -268,43 +275,49 @@ def step_coefficients(h: Harvester, dt: float, joint: bool = False) -> np.ndarra
     P = scipy.linalg.expm(M * dt)
     Ps = scipy.linalg.expm(M * (dt / MAX_SUBSTEPS))
     cf = np.zeros(CF_SIZE)
-    cf[16:25] = Ps[:3, :3].ravel()
-    cf[25:28] = Ps[:3, 3]
-    cf[0:9] = P[:3, :3].ravel()
-    cf[9:12] = P[:3, 3]
-    cf[12] = dt
-    cf[13] = math.exp(-dt / p.tau)
-    cf[14] = math.sqrt(p.noise_variance * -math.expm1(-2.0 * dt / p.tau))
-    cf[15] = math.exp(-0.5 * dt / p.tau)
+    cf[CF_SUB_E:CF_SUB_E + 9] = Ps[:3, :3].ravel()
+    cf[CF_SUB_G:CF_SUB_G + 3] = Ps[:3, 3]
+    cf[CF_E:CF_E + 9] = P[:3, :3].ravel()
+    cf[CF_G:CF_G + 3] = P[:3, 3]
+    cf[CF_H] = dt
+    cf[CF_XI_DECAY] = math.exp(-dt / p.tau)
+    cf[CF_XI_NOISE] = math.sqrt(p.noise_variance * -math.expm1(-2.0 * dt / p.tau))
+    cf[CF_XI_HALF] = math.exp(-0.5 * dt / p.tau)
     if joint:
-        cf[CF_JOINT] = 1.0
+        cf[CF_PVX] = 1.0
         # block 0: the step; block i: the stiff walls' substep dt/2^i (only the kick scheme
         # with n > 2 takes substeps)
         blocks = 1 + (int(round(math.log2(MAX_SUBSTEPS))) if scheme_kind(h) == KIND_KICK and h.n > 2 else 0)
         for i, (Pj, gj, Q) in enumerate(joint_chain(h, dt, blocks)):
-            o = CF_JOINT + 1 + JOINT_BLOCK * i
-            cf[o:o + 16] = Pj.ravel()
-            cf[o + 16:o + 20] = gj
-            cf[o + 20:o + 36] = noise_factor(Q).ravel()
-            cf[o + 36] = Q[1, 3]
-            cf[o + 37] = Q[0, 3] / Q[0, 0] if Q[0, 0] > 0.0 else 0.0
+            o = CF_STEP + JOINT_BLOCK * i
+            cf[o + J_P:o + J_P + 16] = Pj.ravel()
+            cf[o + J_G:o + J_G + 4] = gj
+            cf[o + J_L:o + J_L + 16] = noise_factor(Q).ravel()
+            cf[o + J_COV_VXI] = Q[1, 3]
+            cf[o + J_BETA] = Q[0, 3] / Q[0, 0] if Q[0, 0] > 0.0 else 0.0
         # the measured xi is the one after the step: no half-step factor
-        cf[15] = 1.0
+        cf[CF_XI_HALF] = 1.0
     return cf
 
 
 def physical_vector(h: Harvester, threshold: float, rule: str = "average",
                     kind: int | None = None) -> np.ndarray:
-    """Parameter array ``pp`` of the kernels (layout in :mod:`montecarlo._kernels`).
+    """Parameter array ``pp`` of the kernels (layout in :mod:`montecarlo.layout`).
 
     ``threshold`` is the escape amplitude, ``rule`` the kink's rule for swings shorter than
     the step (a key of :data:`KINK_RULES`), ``kind`` the scheme (default :func:`scheme_kind`).
     """
     p = h.params
     kind = scheme_kind(h) if kind is None else kind
-    return np.array(
-        [p.m, p.gamma, p.Kv, p.Kc, p.tau_p, p.sigma, h.k if h.N > 1 else 0.0, h.a, h.n,
-         linear_stiffness(h), threshold, p.noise_variance, KINK_RULES[rule],
-         h.a * h.n if kind == KIND_KINK else 0.0, h.k4 if h.N > 1 else 0.0, h.k3 if h.N > 1 else 0.0],
-        dtype=float,
-    )
+    pp = np.zeros(P_SIZE)
+    pp[P_M], pp[P_GAMMA], pp[P_KV], pp[P_KC], pp[P_TAU_P], pp[P_SIGMA] = p.m, p.gamma, p.Kv, p.Kc, p.tau_p, p.sigma
+    pp[P_A], pp[P_N] = h.a, h.n
+    if h.N > 1:
+        pp[P_K], pp[P_K4], pp[P_K3] = h.k, h.k4, h.k3
+    pp[P_STIFFNESS] = linear_stiffness(h)
+    pp[P_THRESHOLD] = threshold
+    pp[P_XI_VAR] = p.noise_variance
+    pp[P_KINK_RULE] = KINK_RULES[rule]
+    if kind == KIND_KINK:
+        pp[P_KINK_FORCE] = h.a * h.n
+    return pp

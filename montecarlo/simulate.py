@@ -24,7 +24,8 @@ from fpe_harvester.errors import ParameterError, check_int, check_real
 from fpe_harvester.model import Harvester
 from fpe_harvester.parallel import default_threads
 
-from ._kernels import KIND_KICK, KIND_KINK, MOMENTS, N_MOM
+from .layout import MOMENTS, N_MOM
+from .layout import KIND_KICK, KIND_KINK
 from ._loop import Setup, Sums, run_chunk
 from .controls.martingale import basis_names
 from .controls.twin import initial_cholesky, twin_expectations, twin_harvester, twin_is_stable
@@ -41,7 +42,7 @@ class Ensemble:
     Attributes
     ----------
     sums : ndarray, shape (replicas, levels + 1, len(MOMENTS))
-        Sums over measured unit-steps of the moments :data:`montecarlo._kernels.MOMENTS`
+        Sums over measured unit-steps of the moments :data:`montecarlo.layout.MOMENTS`
         (``v xi`` already at the Strang point, or after a joint step its conditional expectation
         given the state before the step and the x reached; the twin's ``t_*`` at level 0 only),
         per level;
@@ -222,7 +223,7 @@ def simulate(
         unit then held at rest (``"hold"``, a time-step artifact kept to compare with;
         :data:`montecarlo.scheme.KINK_RULES`).
     kind : int or None
-        Scheme (:data:`montecarlo._kernels.KIND_KICK` or ``KIND_KINK``; default
+        Scheme (:data:`montecarlo.layout.KIND_KICK` or ``KIND_KINK``; default
         :func:`montecarlo.scheme.scheme_kind`), for comparing the schemes near n = 1.
     joint : bool or None
         Advance (x, v, V, xi) together by the exact Gaussian transition of the linear drift

@@ -40,7 +40,7 @@ from fpe_harvester.errors import ParameterError, check_real
 from fpe_harvester.exact.moments import closure_mismatch, mode_moments
 from fpe_harvester.model import Harvester, mode_sin2
 
-from .._kernels import CF_JOINT
+from ..layout import CF_E, CF_G, CF_PVX, CF_XI_DECAY, CF_XI_HALF, CF_XI_NOISE, M_TWIN
 from ..scheme import joint_matrices, step_coefficients
 
 __all__ = [
@@ -56,7 +56,7 @@ __all__ = [
     "poisson_controls",
 ]
 
-#: The twin's measured moments (the ``t_`` entries of :data:`montecarlo._kernels.MOMENTS`):
+#: The twin's measured moments (the ``t_`` entries of :data:`montecarlo.layout.MOMENTS`):
 #: second moments, then fourth moments and :math:`|x|^n` (n the system's exponent).
 TWIN_MOMENTS = ("V2", "vV", "v2", "x2", "vxi", "x4", "x2V2", "x2v2", "absxn", "V2v2", "vxiV2")
 
@@ -122,8 +122,8 @@ def scheme_matrices(lin: Harvester, dt: float,
         M[:, :, 1] += (0.5 * dt * k * cq)[:, None] * g
         return M, np.repeat(np.eye(4)[None], lin.N, axis=0), Q
     cf = step_coefficients(lin, dt)
-    E = cf[0:9].reshape(3, 3)
-    g = cf[9:12]
+    E = cf[CF_E:CF_E + 9].reshape(3, 3)
+    g = cf[CF_G:CF_G + 3]
     T = np.zeros((lin.N, 4, 4))
     T[:, :3, :3] = E
     T[:, :3, 0] += (k * cq)[:, None] * g
@@ -131,9 +131,9 @@ def scheme_matrices(lin: Harvester, dt: float,
     T[:, :3, 3] = lin.params.sigma * g
     T[:, 3, 3] = 1.0
     M = T.copy()
-    M[:, 3, 3] = cf[13]
+    M[:, 3, 3] = cf[CF_XI_DECAY]
     Q = np.zeros((4, 4))
-    Q[3, 3] = cf[14] ** 2
+    Q[3, 3] = cf[CF_XI_NOISE] ** 2
     return M, T, Q
 
 
@@ -385,14 +385,15 @@ def natural_amplitude(h: Harvester) -> float | None:
 
 @njit(cache=True, nogil=True)
 def measure_twin(x, v, V, xi, w, cf, acc, nn, pvx) -> None:
-    """Add the twin's moments (``t_*`` of :data:`MOMENTS`, ``nn`` the system's n) to acc[7:18].
+    """Add the twin's moments (:data:`TWIN_MOMENTS`, ``nn`` the system's n) to their slots of
+    ``acc`` (``t_*`` of :data:`montecarlo.layout.MOMENTS`).
 
     Second moments and a few fourth moments and :math:`|x|^n`: the twin is Gaussian, so
     each has an exactly known mean (:func:`montecarlo.controls.twin.twin_expectations`), and the
     higher ones follow the nonlinear system's amplitude-dependent response better.
     """
     N, P = x.shape
-    half = cf[15]
+    half = cf[CF_XI_HALF]
     s = np.zeros(11)
     for j in range(N):
         for p in range(P):
@@ -411,7 +412,7 @@ def measure_twin(x, v, V, xi, w, cf, acc, nn, pvx) -> None:
             s[8] += wp * (ax if nn == 1.0 else ax**nn)
             s[9] += wp * VV * vv
             s[10] += wp * VV * vxi
-    if cf[CF_JOINT] == 1.0:
+    if cf[CF_PVX] == 1.0:
         s[4] = 0.0
         for j in range(N):
             for p in range(P):
@@ -419,4 +420,4 @@ def measure_twin(x, v, V, xi, w, cf, acc, nn, pvx) -> None:
     s[4] *= half
     s[10] *= half
     for i in range(11):
-        acc[7 + i] += s[i]
+        acc[M_TWIN + i] += s[i]

@@ -53,7 +53,7 @@ class StepScheme:
             Advance one level (x, v, V, xi; ``F`` the kicked on-site force at x, ``stuck`` the
             kink's held units, ``pvx`` the joint step's estimate of v xi) over one step with
             noise ``eps``. ``kind`` is the on-site treatment
-            (:data:`montecarlo._kernels.KIND_LINEAR`, ``KIND_KICK``, ``KIND_KINK``), ``xm``,
+            (:data:`montecarlo.layout.KIND_LINEAR`, ``KIND_KICK``, ``KIND_KINK``), ``xm``,
             ``fext``, ``cs``, ``rbm``, ``rbx`` shared scratch, ``w`` the live paths,
             ``counters`` the kink statistics, ``gen`` for steps that draw extra normals. The
             kernel takes the subset of these it needs, by parameter name, in any order (the
@@ -97,7 +97,7 @@ class StepScheme:
     kernels: Kernels
 
     def coefficients(self, h: Harvester, dt: float) -> np.ndarray:
-        """Coefficient array ``cf`` of one step ``dt`` (layout in :mod:`montecarlo._kernels`)."""
+        """Coefficient array ``cf`` of one step ``dt`` (layout in :mod:`montecarlo.layout`)."""
         raise NotImplementedError
 
     def refusal(self, h: Harvester, kind: int) -> str | None:

@@ -3,7 +3,7 @@
 The generator splits into the exact Ornstein--Uhlenbeck flow ``O`` of xi and the deterministic
 flow ``D`` of (x, v, V) with xi frozen; consecutive half steps of ``O`` merge, so the loop runs
 ``D(h) O(h)`` and measures after ``D`` (xi-dependent observables get the exact half-step factor
-``e^{-h/2tau}``, ``cf[15]``). Inside ``D`` the neighbours' positions enter as a constant force
+``e^{-h/2tau}``, ``cf[CF_XI_HALF]``). Inside ``D`` the neighbours' positions enter as a constant force
 evaluated at the predicted midpoint; the on-site force is either part of the exact linear flow
 (n = 2), a Strang kick around it (smooth n; where a steep wall makes :math:`h^2U''/m` large the
 step of that path is split into substeps, :data:`montecarlo._kernels.STIFF_LIMIT`), or, for the
@@ -25,9 +25,11 @@ from numba import njit
 
 from fpe_harvester.model import Harvester
 
-from .._kernels import (KIND_KICK, KIND_KINK, MAX_SUBSTEPS, _kick, _kick_force, _kick_inline, _near_wall,
-                        _neighbour_force, _reach, _ring_coupling, _stiff_amplitude, _substeps)
+from .._kernels import (MAX_SUBSTEPS, _kick, _kick_force, _kick_inline, _near_wall, _neighbour_force, _reach,
+                        _ring_coupling, _stiff_amplitude, _substeps)
 from .._kink import _kink_flow
+from ..layout import (CF_E, CF_G, CF_H, CF_SUB_E, CF_SUB_G, CF_XI_DECAY, CF_XI_NOISE, KIND_KICK, KIND_KINK, P_M,
+                      P_N, P_SIGMA, P_THRESHOLD)
 from ..scheme import step_coefficients
 from .base import Kernels, StepScheme
 
@@ -45,9 +47,9 @@ def _linear_flow_inline(x, v, V, f, cf) -> None:
     for j in range(N):
         for p in range(P):
             x0, v0, V0, fp = x[j, p], v[j, p], V[j, p], f[j, p]
-            x[j, p] = cf[0] * x0 + cf[1] * v0 + cf[2] * V0 + cf[9] * fp
-            v[j, p] = cf[3] * x0 + cf[4] * v0 + cf[5] * V0 + cf[10] * fp
-            V[j, p] = cf[6] * x0 + cf[7] * v0 + cf[8] * V0 + cf[11] * fp
+            x[j, p] = cf[CF_E] * x0 + cf[CF_E + 1] * v0 + cf[CF_E + 2] * V0 + cf[CF_G] * fp
+            v[j, p] = cf[CF_E + 3] * x0 + cf[CF_E + 4] * v0 + cf[CF_E + 5] * V0 + cf[CF_G + 1] * fp
+            V[j, p] = cf[CF_E + 6] * x0 + cf[CF_E + 7] * v0 + cf[CF_E + 8] * V0 + cf[CF_G + 2] * fp
 
 
 #: :func:`_linear_flow_inline` as an ordinary call, for :func:`_d_step`.
@@ -58,8 +60,8 @@ _linear_flow = njit(cache=True, nogil=True)(_linear_flow_inline.py_func)
 def _substep_path(x, v, V, F, fext, p: int, K: int, cf: np.ndarray, pp: np.ndarray) -> None:
     """Kick-drift-kick of path p as K substeps h/K (neighbours' force fext held)."""
     N = x.shape[0]
-    E = cf[16:25].copy()
-    g = cf[25:28].copy()
+    E = cf[CF_SUB_E:CF_SUB_E + 9].copy()
+    g = cf[CF_SUB_G:CF_SUB_G + 3].copy()
     s = MAX_SUBSTEPS // K
     while s > 1:                      # e^{A 2t} = (e^{At})^2, g_2t = e^{At} g_t + g_t
         E2 = np.empty(9)
@@ -70,7 +72,7 @@ def _substep_path(x, v, V, F, fext, p: int, K: int, cf: np.ndarray, pp: np.ndarr
                 E2[3 * r + c] = E[3 * r] * E[c] + E[3 * r + 1] * E[3 + c] + E[3 * r + 2] * E[6 + c]
         E, g = E2, g2
         s //= 2
-    hk = 0.5 * cf[12] / K / pp[0]
+    hk = 0.5 * cf[CF_H] / K / pp[P_M]
     for j in range(N):
         xx, vv, VV, FF, fp = x[j, p], v[j, p], V[j, p], F[j, p], fext[j, p]
         for _ in range(K):
@@ -93,15 +95,15 @@ def _d_step(x, v, V, xi, F, stuck, xm, fext, w, cf, pp, kind, counters, cs) -> N
     tested once per call, outside the loops (inside them it cost a factor ten).
     """
     N, P = x.shape
-    h = cf[12]
+    h = cf[CF_H]
     # the kink scheme kicks only the smooth remainder of a near-kink potential (n > 1)
-    kicks = kind == KIND_KICK or (kind == KIND_KINK and pp[8] != 1.0)
+    kicks = kind == KIND_KICK or (kind == KIND_KINK and pp[P_N] != 1.0)
     # stiff walls: paths to redo as substeps, with their state at the start of the step
     n_stiff = 0
     xstar = math.inf
-    if kind == KIND_KICK and pp[8] > 2.0:
+    if kind == KIND_KICK and pp[P_N] > 2.0:
         xstar = _stiff_amplitude(pp, h)
-    if xstar < pp[10]:  # stiffness reachable before the escape amplitude: scan the paths
+    if xstar < pp[P_THRESHOLD]:  # stiffness reachable before the escape amplitude: scan the paths
         for p in range(P):
             for j in range(N):
                 if _reach(x[j, p], v[j, p], h) > xstar:
@@ -140,7 +142,7 @@ def _d_step(x, v, V, xi, F, stuck, xm, fext, w, cf, pp, kind, counters, cs) -> N
         if N > 1:  # neighbours at their midpoints predicted from the start of the step
             for j in range(N):
                 xm[j, p] = x[j, p] + 0.5 * h * v[j, p]
-            _ring_coupling(xm, fext, pp, p, p + 1, xi, pp[5])
+            _ring_coupling(xm, fext, pp, p, p + 1, xi, pp[P_SIGMA])
         _substep_path(x, v, V, F, fext, p, sk[i], cf, pp)
 
 
@@ -157,10 +159,10 @@ def _d_step_fast(x, v, V, xi, F, xm, fext, cf, pp, kind) -> bool:
     kink paths; inlining those calls into :func:`_d_step` alone gained nothing, 1.10-1.12x).
     """
     N, P = x.shape
-    h = cf[12]
+    h = cf[CF_H]
     kicks = kind == KIND_KICK
-    fast = kind != KIND_KINK and not (kicks and pp[8] > 2.0 and _near_wall(x, v, h, _stiff_amplitude(pp, h),
-                                                                          pp[10]))
+    fast = kind != KIND_KINK and not (kicks and pp[P_N] > 2.0 and _near_wall(x, v, h, _stiff_amplitude(pp, h),
+                                                                            pp[P_THRESHOLD]))
     if fast:
         if kicks:
             _kick_inline(x, v, F, h, pp, not kicks)
@@ -184,8 +186,8 @@ def noise(cf: np.ndarray, z: np.ndarray, buf: np.ndarray) -> None:
 def compose(cf_a: np.ndarray, cf_b: np.ndarray, e1: np.ndarray, e2: np.ndarray, out: np.ndarray) -> None:
     """Normal of one step ``cf_b`` (= 2 h) from those of two steps ``cf_a`` (h) in a row, exact:
     out = w1 e1 + w2 e2 with the OU update's weights."""
-    w1 = cf_a[13] * cf_a[14] / cf_b[14]
-    w2 = cf_a[14] / cf_b[14]
+    w1 = cf_a[CF_XI_DECAY] * cf_a[CF_XI_NOISE] / cf_b[CF_XI_NOISE]
+    w2 = cf_a[CF_XI_NOISE] / cf_b[CF_XI_NOISE]
     _, N, P = e1.shape
     for j in range(N):
         for p in range(P):
@@ -198,7 +200,7 @@ def advance(xi: np.ndarray, eps: np.ndarray, cf: np.ndarray) -> None:
     N, P = xi.shape
     for j in range(N):
         for p in range(P):
-            xi[j, p] = cf[13] * xi[j, p] + cf[14] * eps[0, j, p]
+            xi[j, p] = cf[CF_XI_DECAY] * xi[j, p] + cf[CF_XI_NOISE] * eps[0, j, p]
 
 
 @njit(cache=True, nogil=True, inline="always")

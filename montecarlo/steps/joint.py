@@ -22,8 +22,9 @@ from numba import njit
 
 from fpe_harvester.model import Harvester
 
-from .._kernels import (CF_JOINT, JOINT_BLOCK, KIND_KICK, _kick, _kick_force, _reach,
-                        _ring_coupling, _stiff_amplitude, _substeps)
+from .._kernels import _kick, _kick_force, _reach, _ring_coupling, _stiff_amplitude, _substeps
+from ..layout import (CF_H, CF_STEP, J_BETA, J_COV_VXI, J_G, J_L, J_P, JOINT_BLOCK, KIND_KICK, P_M, P_N,
+                      P_THRESHOLD)
 from ..scheme import joint_step_refusal, step_coefficients
 from .base import Kernels, StepScheme
 
@@ -38,7 +39,7 @@ class JointTag(NamedTuple):
 def _noise(cf, z, eps) -> None:
     """Joint step's noise increments eps = L z per unit; z, eps (4, N, P)."""
     _, N, P = z.shape
-    o = CF_JOINT + 21
+    o = CF_STEP + J_L
     for r in range(4):
         l0, l1, l2, l3 = cf[o + 4 * r], cf[o + 4 * r + 1], cf[o + 4 * r + 2], cf[o + 4 * r + 3]
         for j in range(N):
@@ -51,7 +52,7 @@ def _compose(cf, e1, e2, out) -> None:
     """Noise increment of two joint steps ``cf`` in a row, out = P e1 + e2: the coarse level's
     increment from the fine level's two (exact for the linear flow)."""
     _, N, P = e1.shape
-    o = CF_JOINT + 1
+    o = CF_STEP + J_P
     for r in range(4):
         p0, p1, p2, p3 = cf[o + 4 * r], cf[o + 4 * r + 1], cf[o + 4 * r + 2], cf[o + 4 * r + 3]
         for j in range(N):
@@ -62,15 +63,16 @@ def _compose(cf, e1, e2, out) -> None:
 
 @njit(cache=True, nogil=True, inline="always")
 def _joint_unit(y0, y1, y2, y3, fp, e0, e1, e2, e3, c: np.ndarray, o: int) -> tuple:
-    """One unit through the joint transition whose propagator starts at ``c[o]`` (layout of
-    :data:`CF_JOINT`'s entries): returns x, v, V, xi, the conditional mean of v xi given the
+    """One unit through the joint transition whose block starts at ``c[o]`` (layout of
+    :data:`montecarlo.layout.JOINT_BLOCK`): returns x, v, V, xi, the conditional mean of v xi given the
     state before (mean v times mean xi plus their noise covariance) and the mean of xi minus
     the regression coefficient times the mean of x."""
-    mx = c[o] * y0 + c[o + 1] * y1 + c[o + 2] * y2 + c[o + 3] * y3 + c[o + 16] * fp
-    mv = c[o + 4] * y0 + c[o + 5] * y1 + c[o + 6] * y2 + c[o + 7] * y3 + c[o + 17] * fp
-    mV = c[o + 8] * y0 + c[o + 9] * y1 + c[o + 10] * y2 + c[o + 11] * y3 + c[o + 18] * fp
-    ms = c[o + 15] * y3
-    return (mx + e0, mv + e1, mV + e2, ms + e3, mv * ms + c[o + 36], ms - c[o + 37] * mx)
+    ip, ig = o + J_P, o + J_G
+    mx = c[ip] * y0 + c[ip + 1] * y1 + c[ip + 2] * y2 + c[ip + 3] * y3 + c[ig] * fp
+    mv = c[ip + 4] * y0 + c[ip + 5] * y1 + c[ip + 6] * y2 + c[ip + 7] * y3 + c[ig + 1] * fp
+    mV = c[ip + 8] * y0 + c[ip + 9] * y1 + c[ip + 10] * y2 + c[ip + 11] * y3 + c[ig + 2] * fp
+    ms = c[ip + 15] * y3
+    return (mx + e0, mv + e1, mV + e2, ms + e3, mv * ms + c[o + J_COV_VXI], ms - c[o + J_BETA] * mx)
 
 
 @njit(cache=True, nogil=True)
@@ -78,7 +80,7 @@ def _joint_flow(x, v, V, xi, f, eps, cf, rbm, rbx) -> None:
     """Exact Gaussian transition of (x, v, V, xi) under the linear drift, constant force f;
     ``rbm``, ``rbx`` as returned by :func:`_joint_unit`."""
     N, P = x.shape
-    o = CF_JOINT + 1
+    o = CF_STEP
     for j in range(N):
         for p in range(P):
             x[j, p], v[j, p], V[j, p], xi[j, p], rbm[j, p], rbx[j, p] = _joint_unit(
@@ -93,9 +95,9 @@ def _joint_substeps(x, v, V, xi, F, fext, pvx, p: int, K: int, cf: np.ndarray, p
     with fresh normals: the step's own increment is not split, so this path leaves the common
     noise of the other level and of the twin for this step (their laws stay exact)."""
     N = x.shape[0]
-    o = CF_JOINT + 1 + JOINT_BLOCK * int(round(math.log2(K)))
-    hk = 0.5 * cf[12] / K / pp[0]
-    beta = cf[o + 37]
+    o = CF_STEP + JOINT_BLOCK * int(round(math.log2(K)))
+    hk = 0.5 * cf[CF_H] / K / pp[P_M]
+    beta = cf[o + J_BETA]
     e = np.empty(4)
     for j in range(N):
         xx, vv, VV, ss, FF, fp = x[j, p], v[j, p], V[j, p], xi[j, p], F[j, p], fext[j, p]
@@ -104,7 +106,7 @@ def _joint_substeps(x, v, V, xi, F, fext, pvx, p: int, K: int, cf: np.ndarray, p
             z0, z1, z2, z3 = gen.standard_normal(), gen.standard_normal(), gen.standard_normal(), \
                 gen.standard_normal()
             for r in range(4):
-                lo = o + 20 + 4 * r
+                lo = o + J_L + 4 * r
                 e[r] = cf[lo] * z0 + cf[lo + 1] * z1 + cf[lo + 2] * z2 + cf[lo + 3] * z3
             vv += hk * FF
             xx, vv, VV, ss, rm, rx = _joint_unit(xx, vv, VV, ss, fp, e[0], e[1], e[2], e[3], cf, o)
@@ -126,13 +128,13 @@ def _d_step_joint(x, v, V, xi, F, xm, fext, eps, cf, pp, kind, rbm, rbx, pvx, w,
     tau << 1).
     """
     N, P = x.shape
-    h = cf[12]
+    h = cf[CF_H]
     kicks = kind == KIND_KICK
     n_stiff = 0
     xstar = math.inf
-    if kicks and pp[8] > 2.0:
+    if kicks and pp[P_N] > 2.0:
         xstar = _stiff_amplitude(pp, h)
-    if xstar < pp[10]:
+    if xstar < pp[P_THRESHOLD]:
         for p in range(P):
             for j in range(N):
                 if w[p] > 0.0 and _reach(x[j, p], v[j, p], h) > xstar:
@@ -170,8 +172,8 @@ def _d_step_joint(x, v, V, xi, F, xm, fext, eps, cf, pp, kind, rbm, rbx, pvx, w,
     _joint_flow(x, v, V, xi, fext, eps, cf, rbm, rbx)
     if kicks:
         _kick(x, v, F, h, pp, kicks)
-        hk = 0.5 * h / pp[0]
-        beta = cf[CF_JOINT + 38]
+        hk = 0.5 * h / pp[P_M]
+        beta = cf[CF_STEP + J_BETA]
         for j in range(N):
             for p in range(P):
                 pvx[j, p] = rbm[j, p] + hk * F[j, p] * (rbx[j, p] + beta * x[j, p])

@@ -114,7 +114,7 @@ def test_simulate_is_deterministic_and_counts_steps() -> None:
 
 
 def test_near_kink_potentials_use_the_kink_scheme() -> None:
-    from montecarlo._kernels import KIND_KICK, KIND_KINK
+    from montecarlo.layout import KIND_KICK, KIND_KINK
     from montecarlo.scheme import KINK_WIDTH, scheme_kind
 
     assert scheme_kind(Harvester.build(n=1.0)) == KIND_KINK
@@ -134,7 +134,7 @@ def test_near_kink_potentials_use_the_kink_scheme() -> None:
 def test_smooth_scheme_is_biased_just_above_the_kink() -> None:
     # a = 2, n = 1.0001: the kick scheme chatters across x = 0 (eta ~5 % low at dt = 0.01),
     # the kink scheme agrees with n = 1 (docs/model.md §3; montecarlo.scheme.scheme_kind)
-    from montecarlo._kernels import KIND_KICK
+    from montecarlo.layout import KIND_KICK
 
     h = Harvester.build(a=2.0, n=1.0001)
     kw = dict(dt=0.02, paths=32, replicas=12, t_burn=30.0, t_run=100.0, seed=41)

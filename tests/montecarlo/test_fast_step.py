@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 
 from fpe_harvester import Harvester
-from montecarlo._kernels import KIND_KICK, KIND_KINK, KIND_LINEAR
+from montecarlo.layout import KIND_KICK, KIND_KINK, KIND_LINEAR
 from montecarlo._kink import N_TAYLOR
 from montecarlo.scheme import physical_vector, step_coefficients
 from montecarlo.steps import STEPS

@@ -36,7 +36,7 @@ from numba import njit
 from fpe_harvester import Harvester
 from fpe_harvester.errors import ParameterError, check_real
 from fpe_harvester.parallel import default_threads
-from montecarlo._kernels import KIND_KINK
+from montecarlo.layout import KIND_KINK
 from montecarlo._kink import N_TAYLOR
 from montecarlo.estimate import student_factor
 from montecarlo.scheme import physical_vector, step_coefficients
