@@ -57,7 +57,7 @@ def _kick_inline(x, v, F, h, pp, update) -> None:
 
 
 #: :func:`_kick_inline` as an ordinary call, for the steps' general kernels (their fast kernels
-#: inline it: :class:`~montecarlo.steps.base.StepScheme`).
+#: inline it: :class:`~montecarlo.steps.base.Stepper`).
 _kick = njit(cache=True, nogil=True)(_kick_inline.py_func)
 
 
@@ -259,7 +259,7 @@ def _coupling_force(x2m: float, xm: float, x: float, xp: float, x2p: float, k: f
 
     The force is :math:`-\\partial E/\\partial x_j` of :math:`E = (k/2)\\sum d^2 +
     (k_4/2)\\sum (Lx)^2 + (k_3/4)\\sum d^4` (bonds :math:`d = x_{j+1} - x_j`) minus the part
-    :math:`-(2k + 6k_4)x_j` kept in the exact linear flow (:func:`montecarlo.scheme.linear_stiffness`):
+    :math:`-(2k + 6k_4)x_j` kept in the exact linear flow (:func:`montecarlo.coefficients.linear_stiffness`):
     :math:`k(x_{j-1} + x_{j+1}) + k_4[4(x_{j-1} + x_{j+1}) - x_{j-2} - x_{j+2}]
     + k_3[(x_{j+1} - x_j)^3 - (x_j - x_{j-1})^3]`, indices modulo N (so that N = 2 is a ring
     of two bonds). ``k4`` and ``k3`` are tested for 0 so that a ring without them computes

@@ -1,7 +1,7 @@
 """numba kernels of the kink: the exact piecewise-linear flow of :math:`-an\\,\\mathrm{sign}(x)`.
 
 Private module of the frozen-xi step (:mod:`montecarlo.steps.frozen`). For the kink
-(1 <= n <= 1 + KINK_WIDTH of :mod:`montecarlo.scheme`) the part :math:`-an\\,\\mathrm{sign}(x)`
+(1 <= n <= 1 + KINK_WIDTH of :mod:`montecarlo.coefficients`) the part :math:`-an\\,\\mathrm{sign}(x)`
 of the on-site force is integrated by an exact piecewise-linear flow with located zero
 crossings (the remainder by Strang kicks). Toward rest the kink's swings shrink exponentially
 in time and never stop (docs/model.md §3); once they are much shorter than the step the scheme

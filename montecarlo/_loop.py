@@ -1,8 +1,8 @@
 """The path loop of one chunk: every level of P rings through burn-in and measured window.
 
-Private module. One loop serves every step scheme (:mod:`montecarlo.steps`): the scheme's tag
+Private module. One loop serves every stepper (:mod:`montecarlo.steps`): the stepper's tag
 selects its kernels at compile time (:mod:`montecarlo.steps.dispatch`), so numba compiles one
-specialised loop per scheme. The levels: fine (``dt/2`` with Richardson coupling, else ``dt``),
+specialised loop per stepper. The levels: fine (``dt/2`` with Richardson coupling, else ``dt``),
 coarse (``dt``, on the fine level's noise), coarsest (``2 dt``, optional) and the harmonic twin
 (on the fine level's noise, measured with it, :mod:`montecarlo.controls.twin`); the martingale
 sums ride on the fine level (:mod:`montecarlo.controls.martingale`).
@@ -22,7 +22,7 @@ from .layout import (C_RING_STEPS, CF_H, CF_XI_DECAY, KIND_LINEAR, N_COUNTERS, N
                      P_XI_VAR, ROWS)
 from .controls.martingale import MG_DIST, mg_measure, n_state
 from .controls.twin import measure_twin
-from .steps import StepScheme
+from .steps import Stepper
 from .steps.dispatch import advance, compose, noise, normals, step, twin_xi
 
 
@@ -115,12 +115,12 @@ class Sums(NamedTuple):
                     np.zeros((2, n_mart)))
 
 
-def run_chunk(gen: np.random.Generator, scheme: StepScheme, s: Setup, out: Sums) -> None:
-    """Simulate one chunk of paths with ``scheme`` and add its time averages to ``out``.
+def run_chunk(gen: np.random.Generator, stepper: Stepper, s: Setup, out: Sums) -> None:
+    """Simulate one chunk of paths with ``stepper`` and add its time averages to ``out``.
 
     ``gen`` is this chunk's own stream (deterministic for a given seed, whatever the thread
     count)."""
-    _run(scheme.tag, gen, s, out)
+    _run(stepper.tag, gen, s, out)
 
 
 @njit(cache=True, nogil=True)
@@ -142,7 +142,7 @@ def _init_levels(s, f, c, cc, t) -> None:
 
 @njit(cache=True, nogil=True)
 def _run(tag, gen, s, out) -> None:
-    """The loop of :func:`run_chunk`, compiled once per scheme ``tag``."""
+    """The loop of :func:`run_chunk`, compiled once per stepper ``tag``."""
     # every array is a local of its own: reading them out of tuples inside the loop cost 5-20 %
     # in reference counting at the solver's small chunks
     N, P, coupled, twin, kind, stride, nburn = s.N, s.P, s.coupled, s.twin, s.kind, s.stride, s.nburn

@@ -39,7 +39,8 @@ from fpe_harvester.model import Harvester
 
 from .controls.regression import regression_estimate
 from .controls.sets import CONTROL_SETS, choose_controls, control_columns
-from .scheme import KIND_KINK, scheme_kind
+from .coefficients import onsite_kind
+from .layout import KIND_KINK
 from .simulate import Ensemble
 
 __all__ = ["Estimate", "estimate", "BIAS_ORDER", "bias_order", "student_factor", "RESIDUAL_RULE"]
@@ -80,8 +81,9 @@ _SECOND = ("V2", "Pin", "d2")
 
 
 def bias_order(h: Harvester, kind: int | None = None) -> float:
-    """Weak order of the time-step bias assumed for a scheme (default ``h``'s, see :data:`BIAS_ORDER`)."""
-    kind = scheme_kind(h) if kind is None else kind
+    """Weak order of the time-step bias assumed for the on-site treatment ``kind`` (default
+    ``h``'s, see :data:`BIAS_ORDER`)."""
+    kind = onsite_kind(h) if kind is None else kind
     return BIAS_ORDER["nonsmooth" if kind == KIND_KINK else "smooth"]
 
 
@@ -213,7 +215,7 @@ def estimate(e: Ensemble, h: Harvester, order: float | None = None, control: boo
         raise ParameterError(f"controls must be None or one of {tuple(CONTROL_SETS)}, got {controls!r} "
                              f"(type {type(controls).__name__})")
     if order is None:
-        order = bias_order(h, e.notes.get("scheme_kind"))
+        order = bias_order(h, e.notes.get("onsite_kind"))
     if extrapolate and e.levels < 3:
         raise ParameterError(f"extrapolate=True needs three levels (simulate(..., richardson=True, "
                              f"third_level=True)), got dts {e.dts}")

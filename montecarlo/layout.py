@@ -38,7 +38,6 @@ __all__ = [
     "CF_STEP",
     "C_SLOW", "C_CROSSINGS", "C_AVERAGED", "C_EXHAUSTED", "C_RING_STEPS", "N_COUNTERS",
     "MOMENTS", "N_MOM", "ROWS", "M_V2", "M_vV", "M_v2", "M_x2", "M_vxi", "M_stuck", "M_xdU", "M_TWIN", "M_d2",
-    "J_P", "J_G", "J_L", "J_COV_VXI", "J_BETA", "JOINT_BLOCK",
 ]
 
 #: On-site treatment of -U'(x) (:func:`montecarlo.coefficients.onsite_kind`): inside the exact
@@ -116,16 +115,3 @@ M_xdU = MOMENTS.index("xdU")
 M_TWIN = MOMENTS.index("t_V2")
 M_d2 = MOMENTS.index("d2")
 
-# the joint step's entries (:mod:`montecarlo.steps.joint`), from CF_STEP: a block of JOINT_BLOCK for
-# the step, then one per stiff-wall substep h/2^i, i = 1 .. log2(MAX_SUBSTEPS)
-#: 4x4 propagator of (x, v, V, xi), row-major
-J_P = 0
-#: its response to a unit constant force on v (4)
-J_G = 16
-#: noise factor L (increment = L z, z four standard normals), row-major (16)
-J_L = 20
-#: noise covariance of (v, xi)
-J_COV_VXI = 36
-#: regression coefficient of the xi increment on the x increment
-J_BETA = 37
-JOINT_BLOCK = 38

@@ -17,7 +17,9 @@ from fpe_harvester.result import Stats, Status
 
 from .estimate import Estimate, bias_order
 from .plan import burn_in
-from .scheme import KIND_KINK, SCHEME_NAMES, scheme_kind
+from .coefficients import ONSITE_NAMES, onsite_kind
+from .layout import KIND_KINK
+from .steps import STEPPERS
 from .simulate import Ensemble
 
 if TYPE_CHECKING:
@@ -158,10 +160,8 @@ def _info(h: Harvester, ens: Ensemble, est: Estimate, plan: Plan, wall: float, t
         "seed": ens.seed_entropy,
         "threads": ens.notes.get("threads"),
         "batch": batch,
-        "scheme": SCHEME_NAMES[scheme_kind(h)] + (
-            "; joint step: (x, v, V, xi) by the exact Gaussian transition of the linear drift, "
-            "kicks around it" if ens.notes.get("joint_step") else ""),
-        "joint_step": bool(ens.notes.get("joint_step")),
+        "step": ens.notes["step"],
+        "integrator": f"{STEPPERS[ens.notes['step']].description}; on-site force: {ONSITE_NAMES[onsite_kind(h)]}",
         "rng": _RNG,
         "bias_eta": est.bias["eta"],
         "bias_eta_se": est.bias_se["eta"],
@@ -182,7 +182,7 @@ def _info(h: Harvester, ens: Ensemble, est: Estimate, plan: Plan, wall: float, t
         "identity_Pin_minus_mgamma_v2_minus_Kv_vV": list(est.identity_power),
         "confinement": h.confinement,
     }
-    if scheme_kind(h) == KIND_KINK:
+    if onsite_kind(h) == KIND_KINK:
         slow, crossings, averaged, exhausted = ens.kink_counters
         info.update(stuck_fraction=est.mean["stuck"], kink_slow_steps=slow, kink_crossings=crossings,
                     kink_averaged=averaged, kink_event_budget_exhausted=exhausted)

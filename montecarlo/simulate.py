@@ -29,8 +29,8 @@ from .layout import KIND_KICK, KIND_KINK
 from ._loop import Setup, Sums, run_chunk
 from .controls.martingale import basis_names
 from .controls.twin import initial_cholesky, twin_expectations, twin_harvester, twin_is_stable
-from .scheme import KINK_RULES, physical_vector, scheme_kind, uses_joint_step
-from .steps import STEPS, StepScheme
+from .coefficients import KINK_RULES, onsite_kind, physical_vector
+from .steps import STEPPERS, Stepper, resolve_step
 
 __all__ = ["Ensemble", "simulate"]
 
@@ -62,7 +62,7 @@ class Ensemble:
     start : str
         ``"rest"`` or ``"twin"`` (the paths start from the twin's stationary law).
     kink_counters : tuple of int
-        Kink scheme: unit-steps on the slow path (near x = 0), located zero crossings, entries
+        Kink treatment: unit-steps on the slow path (near x = 0), located zero crossings, entries
         into the averaged swing map, steps that exhausted the event budget (all levels).
     mart : ndarray, shape (replicas, 2, len(mart_names))
         Martingale control sums of level 0 (:mod:`montecarlo.controls.martingale`) over the measured
@@ -171,7 +171,7 @@ def simulate(
     start: str = "rest",
     kink_rule: str = "average",
     kind: int | None = None,
-    joint: bool | None = None,
+    step: str = "auto",
     martingale: bool = False,
     third_level: bool = False,
 ) -> Ensemble:
@@ -218,21 +218,20 @@ def simulate(
         with ``start="rest"`` a twin starts at rest too, and its expectations are then not
         those of :attr:`Ensemble.twin_mean` during the transient.
     kink_rule : {"average", "hold"}
-        Kink scheme only: swings much shorter than the step are advanced by the averaged map
+        Kink treatment only: swings much shorter than the step are advanced by the averaged map
         of their amplitude (``"average"``), or followed until 64 crossings in one step and the
         unit then held at rest (``"hold"``, a time-step artifact kept to compare with;
-        :data:`montecarlo.scheme.KINK_RULES`).
+        :data:`montecarlo.coefficients.KINK_RULES`).
     kind : int or None
-        Scheme (:data:`montecarlo.layout.KIND_KICK` or ``KIND_KINK``; default
-        :func:`montecarlo.scheme.scheme_kind`), for comparing the schemes near n = 1.
-    joint : bool or None
-        Advance (x, v, V, xi) together by the exact Gaussian transition of the linear drift
-        (True) or with xi frozen over each step (False). None (default): joint when
-        tau < :data:`montecarlo.scheme.JOINT_STEPS` dt, where freezing xi is wrong
-        (:func:`montecarlo.scheme.uses_joint_step`). The kink scheme's short-tau step is the
-        averaged-noise step instead (:mod:`montecarlo.steps.averaged`; default when tau < dt),
-        which runs without a twin. True raises where the scheme has no such step
-        (:func:`montecarlo.scheme.joint_step_refusal`).
+        On-site treatment (:data:`montecarlo.layout.KIND_KICK` or ``KIND_KINK``; default
+        :func:`montecarlo.coefficients.onsite_kind`), for comparing the treatments near n = 1.
+    step : str
+        The stepper (:data:`montecarlo.steps.STEP_NAMES`): ``"frozen"`` (xi held over each step),
+        ``"joint"`` ((x, v, V, xi) together by the exact Gaussian transition of the linear drift;
+        not the kink), ``"averaged"`` (the kink at tau <= 1e-4, without a twin), or ``"auto"``
+        (default): the one :func:`montecarlo.steps.resolve_step` picks at ``dt`` (joint where
+        tau < 10 dt, averaged for the kink where tau < dt, else frozen). Raises where the named
+        stepper refuses ``h``, or ``"auto"`` finds none (the kink between tau = 1e-4 and dt).
     martingale : bool
         Also accumulate level 0's martingale control sums (:mod:`montecarlo.controls.martingale`,
         :attr:`Ensemble.mart`): sums of basis functions of the state times the noise drawn
@@ -259,13 +258,13 @@ def simulate(
     c = _check(h, dt=dt, paths=paths, replicas=replicas, t_burn=t_burn, t_run=t_run, seed=seed,
                richardson=richardson, threshold=threshold, chunk=chunk, threads=threads,
                first_replica=first_replica, sample_every=sample_every, twin=twin, start=start,
-               kink_rule=kink_rule, kind=kind, joint=joint, martingale=martingale, third_level=third_level)
-    scheme, setup, twin_mean = _coefficients(h, c)
+               kink_rule=kink_rule, kind=kind, step=step, martingale=martingale, third_level=third_level)
+    stepper, setup, twin_mean = _coefficients(h, c)
     ss = np.random.SeedSequence(c.seed)
     sizes = _chunks(c.paths, c.chunk)
     tasks = [(r, k) for r in range(c.replicas) for k in range(len(sizes))]
     t0 = time.perf_counter()
-    results = _run_tasks(scheme, setup, ss, c.first_replica, sizes, tasks, c.threads)
+    results = _run_tasks(stepper, setup, ss, c.first_replica, sizes, tasks, c.threads)
     wall = time.perf_counter() - t0
     sums, counts, esc_times, counters, mart = _merge(results, tasks, sizes, c)
     levels = 3 if c.third_level else 2 if c.richardson else 1
@@ -284,8 +283,8 @@ def simulate(
         kink_counters=tuple(int(v) for v in counters[:4]),
         seed_entropy=int(ss.entropy) if c.seed is None else c.seed,
         first_replica=c.first_replica,
-        notes={"threads": c.threads, "chunk": c.chunk, "scheme_kind": setup.kind, "sample_stride": setup.stride,
-               "kink_rule": c.kink_rule, "joint_step": scheme.name == "joint", "step": scheme.name},
+        notes={"threads": c.threads, "chunk": c.chunk, "onsite_kind": setup.kind, "sample_stride": setup.stride,
+               "kink_rule": c.kink_rule, "step": stepper.name},
         twin_kappa=c.twin,
         twin_mean=twin_mean,
         start=c.start,
@@ -296,7 +295,7 @@ def simulate(
 
 class _Checked(NamedTuple):
     """The arguments of :func:`simulate`, checked (``third_level`` only with ``richardson``,
-    ``kind`` and ``joint`` resolved)."""
+    ``kind`` and ``step`` resolved)."""
 
     dt: float
     paths: int
@@ -314,7 +313,7 @@ class _Checked(NamedTuple):
     start: str
     kink_rule: str
     kind: int
-    joint: bool
+    step: str
     martingale: bool
     third_level: bool
 
@@ -322,7 +321,7 @@ class _Checked(NamedTuple):
 def _check(h: Harvester, *, dt: float, paths: int, replicas: int, t_burn: float, t_run: float,
            seed: int | None, richardson: bool, threshold: float, chunk: int, threads: int | None,
            first_replica: int, sample_every: float, twin: float | None, start: str, kink_rule: str,
-           kind: int | None, joint: bool | None, martingale: bool, third_level: bool) -> _Checked:
+           kind: int | None, step: str, martingale: bool, third_level: bool) -> _Checked:
     """Validate :func:`simulate`'s arguments (raises :class:`ParameterError`)."""
     if not isinstance(h, Harvester):
         raise ParameterError(f"h must be a Harvester, got {h!r} (type {type(h).__name__})")
@@ -359,47 +358,37 @@ def _check(h: Harvester, *, dt: float, paths: int, replicas: int, t_burn: float,
     if kind is not None and (h.is_linear or kind not in (KIND_KICK, KIND_KINK)):
         raise ParameterError(f"kind must be None, or {KIND_KICK} (kick) or {KIND_KINK} (kink) for a "
                              f"nonlinear potential, got {kind!r} with n = {h.n:g}")
-    kind = scheme_kind(h) if kind is None else kind
-    # both levels take the same step, chosen at the coarse one
-    if joint is None:
-        joint = uses_joint_step(h, dt, kind)
-    elif joint:
-        why = STEPS[_short_tau_step(kind)].refusal(h, kind)
-        if why is not None:
-            raise ParameterError(f"joint=True is not available here: {why}")
-    if joint and kind == KIND_KINK and twin is not None:
-        raise ParameterError("twin: the kink's averaged-noise step (tau < dt) has no harmonic twin; use twin=None")
+    kind = onsite_kind(h) if kind is None else kind
+    # every level takes the same stepper, chosen at the coarse step
+    stepper, _ = resolve_step(h, step, dt, kind)
+    if twin is not None and not stepper.twin:
+        raise ParameterError(f"twin: the {stepper.name} step has no harmonic twin; use twin=None")
     return _Checked(dt, paths, replicas, t_burn, t_run, seed, bool(richardson), threshold, chunk, threads,
-                    first_replica, sample_every, twin, start, kink_rule, kind, bool(joint), martingale,
+                    first_replica, sample_every, twin, start, kink_rule, kind, stepper.name, martingale,
                     third_level and bool(richardson))
 
 
-def _short_tau_step(kind: int) -> str:
-    """The step taken at short tau (``joint``): the averaged-noise step for the kink, else the joint step."""
-    return "averaged" if kind == KIND_KINK else "joint"
-
-
-def _coefficients(h: Harvester, c: _Checked) -> tuple[StepScheme, Setup, dict[str, float]]:
-    """The step scheme, the kernels' setup (all but the chunk's path count) and the twin's
+def _coefficients(h: Harvester, c: _Checked) -> tuple[Stepper, Setup, dict[str, float]]:
+    """The stepper, the kernels' setup (all but the chunk's path count) and the twin's
     exact expectations (empty without a twin)."""
-    scheme = STEPS[_short_tau_step(c.kind) if c.joint else "frozen"]
+    stepper = STEPPERS[c.step]
     dt_f = 0.5 * c.dt if c.richardson else c.dt
     pp = physical_vector(h, c.threshold, c.kink_rule, c.kind)
-    cf_f = scheme.coefficients(h, dt_f)
-    cf_c = scheme.coefficients(h, c.dt)
-    cf_cc = scheme.coefficients(h, 2.0 * c.dt) if c.third_level else cf_c
+    cf_f = stepper.coefficients(h, dt_f)
+    cf_c = stepper.coefficients(h, c.dt)
+    cf_cc = stepper.coefficients(h, 2.0 * c.dt) if c.third_level else cf_c
     lin = twin_harvester(h, c.twin) if c.twin is not None else (h if h.is_linear else None)
     if c.twin is not None:
-        cf_t, pp_t = scheme.coefficients(lin, dt_f), physical_vector(lin, c.threshold)
-        twin_mean = twin_expectations(lin, dt_f, h.n, c.joint)
+        cf_t, pp_t = stepper.coefficients(lin, dt_f), physical_vector(lin, c.threshold)
+        twin_mean = twin_expectations(lin, dt_f, h.n, c.step)
     else:
         cf_t, pp_t, twin_mean = cf_f, pp, {}
-    chol = initial_cholesky(lin, dt_f, c.joint) if c.start == "twin" else np.zeros((0, 0))
+    chol = initial_cholesky(lin, dt_f, c.step) if c.start == "twin" else np.zeros((0, 0))
     setup = Setup(P=0, N=h.N, nburn=int(round(c.t_burn / c.dt)), nrun=max(1, int(round(c.t_run / c.dt))),
                   stride=max(1, int(round(c.sample_every / c.dt))), coupled=c.richardson,
                   third=c.third_level, twin=c.twin is not None, kind=c.kind, cf_f=cf_f, cf_c=cf_c, cf_cc=cf_cc,
                   cf_t=cf_t, pp=pp, pp_t=pp_t, chol=chol, n_mart=len(basis_names(h.N)) if c.martingale else 0)
-    return scheme, setup, twin_mean
+    return stepper, setup, twin_mean
 
 
 def _chunks(paths: int, chunk: int) -> list[int]:
@@ -407,7 +396,7 @@ def _chunks(paths: int, chunk: int) -> list[int]:
     return [chunk] * full + ([rest] if rest else [])
 
 
-def _run_tasks(scheme: StepScheme, setup: Setup, ss: np.random.SeedSequence, first_replica: int,
+def _run_tasks(stepper: Stepper, setup: Setup, ss: np.random.SeedSequence, first_replica: int,
                sizes: list[int], tasks: list[tuple[int, int]], threads: int) -> list[Sums]:
     """Run every (replica, chunk) task on a thread pool, each on its own random stream
     ``SeedSequence(seed, spawn_key=(replica, chunk))``."""
@@ -417,7 +406,7 @@ def _run_tasks(scheme: StepScheme, setup: Setup, ss: np.random.SeedSequence, fir
         child = np.random.SeedSequence(ss.entropy, spawn_key=(first_replica + r, k))
         gen = np.random.Generator(np.random.PCG64(child))
         out = Sums.zeros(sizes[k], setup.n_mart)
-        run_chunk(gen, scheme, setup._replace(P=sizes[k]), out)
+        run_chunk(gen, stepper, setup._replace(P=sizes[k]), out)
         return out
 
     if threads == 1 or len(tasks) == 1:

@@ -15,7 +15,7 @@ kernel's splitting, as
     \\xi' = e^{-h/\\tau}\\xi + \\sqrt{(D/\\tau)(1 - e^{-2h/\\tau})}\\,Z,
 
 with :math:`y = (x, v, V)`, :math:`(E, g)` the exact flow of the linear part with stiffness
-:math:`\\kappa + 2k` (:func:`montecarlo.scheme.step_coefficients`). The moments are measured
+:math:`\\kappa + 2k` (:func:`montecarlo.coefficients.step_coefficients`). The moments are measured
 after the y update, with :math:`v\\xi` times :math:`e^{-h/2\\tau}`. The stationary covariance
 of this recursion solves a discrete Lyapunov equation per mode, and ring averages are means
 over modes (Parseval). The paths start from that stationary law (:func:`initial_cholesky`),
@@ -40,8 +40,8 @@ from fpe_harvester.errors import ParameterError, check_real
 from fpe_harvester.exact.moments import closure_mismatch, mode_moments
 from fpe_harvester.model import Harvester, mode_sin2
 
-from ..layout import CF_E, CF_G, CF_PVX, CF_XI_DECAY, CF_XI_HALF, CF_XI_NOISE, M_TWIN
-from ..scheme import joint_matrices, step_coefficients
+from ..layout import CF_PVX, CF_XI_HALF, M_TWIN
+from ..steps import STEPPERS
 
 __all__ = [
     "TWIN_MOMENTS",
@@ -86,9 +86,11 @@ def twin_is_stable(h: Harvester, kappa: float) -> bool:
     return bool(np.all(twin_harvester(h, kappa).mode_stiffness() > 0.0)) if kappa > 0 else False
 
 
-def scheme_matrices(lin: Harvester, dt: float,
-                    joint: bool = False) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Per-mode one-step matrices of the kernel's harmonic scheme.
+def scheme_matrices(lin: Harvester, dt: float, step: str = "frozen"
+                    ) -> tuple[np.ndarray, np.ndarray, np.ndarray, float]:
+    """Per-mode one-step matrices of the stepper ``step`` on the harmonic ring ``lin``
+    (:meth:`~montecarlo.steps.base.Stepper.twin_matrices`: M, T, Q and the factor on the measured
+    v xi).
 
     Parameters
     ----------
@@ -96,48 +98,20 @@ def scheme_matrices(lin: Harvester, dt: float,
         A harmonic ring (n = 2).
     dt : float
         Time step, > 0.
-    joint : bool
-        The joint step (:func:`montecarlo.scheme.joint_matrices`): (x, v, V, xi) advance
-        together, M is its propagator plus the neighbours' force at the predicted midpoint,
-        Q its full noise covariance, and the state is measured after the step (T = I).
-
-    Returns
-    -------
-    M : ndarray (N, 4, 4)
-        State (x, v, V, xi) before one step -> before the next.
-    T : ndarray (N, 4, 4)
-        State before a step -> the measured state (y after the step, xi before its update).
-    Q : ndarray (4, 4)
-        Covariance of the noise added per step (on xi only).
+    step : str
+        A stepper that can run the twin (a name of :data:`montecarlo.steps.STEPPERS`).
     """
     if not lin.is_linear:
         raise ParameterError(f"scheme_matrices needs a harmonic ring (n = 2), got n = {lin.n!r}")
     dt = check_real("dt", dt, low=0.0, low_open=True)
-    k = lin.k if lin.N > 1 else 0.0
-    cq = 2.0 - 4.0 * mode_sin2(lin.N)
-    if joint:
-        P, g, Q = joint_matrices(lin, dt)
-        M = np.repeat(P[None], lin.N, axis=0)
-        M[:, :, 0] += (k * cq)[:, None] * g
-        M[:, :, 1] += (0.5 * dt * k * cq)[:, None] * g
-        return M, np.repeat(np.eye(4)[None], lin.N, axis=0), Q
-    cf = step_coefficients(lin, dt)
-    E = cf[CF_E:CF_E + 9].reshape(3, 3)
-    g = cf[CF_G:CF_G + 3]
-    T = np.zeros((lin.N, 4, 4))
-    T[:, :3, :3] = E
-    T[:, :3, 0] += (k * cq)[:, None] * g
-    T[:, :3, 1] += (0.5 * dt * k * cq)[:, None] * g
-    T[:, :3, 3] = lin.params.sigma * g
-    T[:, 3, 3] = 1.0
-    M = T.copy()
-    M[:, 3, 3] = cf[CF_XI_DECAY]
-    Q = np.zeros((4, 4))
-    Q[3, 3] = cf[CF_XI_NOISE] ** 2
-    return M, T, Q
+    stepper = STEPPERS.get(step)
+    if stepper is None or not stepper.twin:
+        raise ParameterError(f"step must be one of {tuple(k for k, s in STEPPERS.items() if s.twin)} (a step "
+                             f"with a harmonic twin), got {step!r}")
+    return stepper.twin_matrices(lin, dt)
 
 
-def stationary_covariances(lin: Harvester, dt: float, joint: bool = False) -> np.ndarray:
+def stationary_covariances(lin: Harvester, dt: float, step: str = "frozen") -> np.ndarray:
     """Stationary covariance (N, 4, 4) of each mode's state before a step (discrete Lyapunov).
 
     Raises :class:`ParameterError` when some mode of the discrete scheme is not stable
@@ -145,7 +119,7 @@ def stationary_covariances(lin: Harvester, dt: float, joint: bool = False) -> np
     """
     import scipy.linalg
 
-    M, _, Q = scheme_matrices(lin, dt, joint)
+    M, _, Q, _ = scheme_matrices(lin, dt, step)
     out = np.empty_like(M)
     for q in range(lin.N):
         rho = float(np.max(np.abs(np.linalg.eigvals(M[q]))))
@@ -157,7 +131,7 @@ def stationary_covariances(lin: Harvester, dt: float, joint: bool = False) -> np
     return out
 
 
-def twin_expectations(lin: Harvester, dt: float, n: float = 2.0, joint: bool = False) -> dict[str, float]:
+def twin_expectations(lin: Harvester, dt: float, n: float = 2.0, step: str = "frozen") -> dict[str, float]:
     """Exact expected values of the twin's measured moments (:data:`TWIN_MOMENTS`) at step dt.
 
     The second moments differ from the continuous-time values of
@@ -175,9 +149,9 @@ def twin_expectations(lin: Harvester, dt: float, n: float = 2.0, joint: bool = F
         Its time step, > 0.
     n : float
         Exponent of the ``absxn`` moment (the system's n), >= 1.
-    joint : bool
-        The twin runs the joint step (:func:`scheme_matrices`). Its transition is then exact
-        for a single unit, so the second moments are the continuous-time ones; in a ring the
+    step : str
+        The stepper the twin runs (:func:`scheme_matrices`). The joint step's transition is exact
+        for a single unit, so its second moments are the continuous-time ones; in a ring the
         neighbours' force at the predicted midpoint leaves an O(dt^2) bias.
 
     Examples
@@ -187,10 +161,9 @@ def twin_expectations(lin: Harvester, dt: float, n: float = 2.0, joint: bool = F
     >>> abs(e["V2"] * 143 / 20 - 1) < 1e-5
     True
     """
-    P = stationary_covariances(lin, dt, joint)
-    _, T, _ = scheme_matrices(lin, dt, joint)
+    P = stationary_covariances(lin, dt, step)
+    _, T, _, half = scheme_matrices(lin, dt, step)
     S = np.einsum("qij,qjk,qlk->qil", T, P, T).mean(axis=0)
-    half = 1.0 if joint else math.exp(-0.5 * dt / lin.params.tau)
     n = check_real("n", n, low=1.0)
     absxn = S[0, 0] ** (0.5 * n) * 2.0 ** (0.5 * n) * math.gamma(0.5 * (n + 1)) / math.sqrt(math.pi)
     out = {
@@ -205,13 +178,13 @@ def twin_expectations(lin: Harvester, dt: float, n: float = 2.0, joint: bool = F
     return {key: float(val) for key, val in out.items()}
 
 
-def initial_cholesky(lin: Harvester, dt: float, joint: bool = False) -> np.ndarray:
+def initial_cholesky(lin: Harvester, dt: float, step: str = "frozen") -> np.ndarray:
     """Lower Cholesky factor (4N x 4N) of the twin ring's stationary law before a step.
 
     State ordered unit by unit, (x_j, v_j, V_j, xi_j). The unit-space covariance is the
     block-circulant :math:`C_{jl} = N^{-1}\\sum_q P_q \\cos(2\\pi q (j - l)/N)`.
     """
-    P = stationary_covariances(lin, dt, joint)
+    P = stationary_covariances(lin, dt, step)
     N = lin.N
     q = np.arange(N)
     lag = np.arange(N)
@@ -323,7 +296,7 @@ def poisson_controls(lin: Harvester, dt: float, names: tuple[str, ...]) -> dict[
     """
     import scipy.linalg
 
-    M, T, _ = scheme_matrices(lin, dt)
+    M, T, _, _ = scheme_matrices(lin, dt)
     N = lin.N
     p = lin.params
     lag = np.arange(N)

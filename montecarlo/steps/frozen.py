@@ -1,4 +1,4 @@
-"""The frozen-xi step: Strang splitting ``O(h/2) D(h) O(h/2)`` (the default when tau >= 10 dt).
+"""The frozen-xi step: Strang splitting ``O(h/2) D(h) O(h/2)`` (``step="frozen"``).
 
 The generator splits into the exact Ornstein--Uhlenbeck flow ``O`` of xi and the deterministic
 flow ``D`` of (x, v, V) with xi frozen; consecutive half steps of ``O`` merge, so the loop runs
@@ -11,8 +11,10 @@ kink, its part :math:`-an\\,\\mathrm{sign}(x)` is handled by the exact piecewise
 :mod:`montecarlo._kink` and the remainder by Strang kicks. One normal per unit and step; the
 coarse level of a Richardson pair takes the exact composition of the fine level's two.
 
-This module implements the step protocol of :mod:`montecarlo.steps` (``noise``, ``compose``,
-``step``, ``advance``, ``twin_xi`` and the scheme object :data:`FROZEN`).
+This module implements the stepper protocol of :mod:`montecarlo.steps` (``noise``, ``compose``,
+``step``, ``advance``, ``twin_xi`` and the stepper :data:`FROZEN`). It serves every on-site
+treatment at any tau; ``step="auto"`` takes it where the joint step (smooth forces, short tau) or
+the averaged step (the kink, short tau) is not preferred.
 """
 
 from __future__ import annotations
@@ -23,15 +25,18 @@ from typing import NamedTuple
 import numpy as np
 from numba import njit
 
-from fpe_harvester.model import Harvester
+from fpe_harvester.model import Harvester, mode_sin2
 
 from .._kernels import (MAX_SUBSTEPS, _kick, _kick_force, _kick_inline, _near_wall, _neighbour_force, _reach,
                         _ring_coupling, _stiff_amplitude, _substeps)
-from .._kink import _kink_flow
-from ..layout import (CF_E, CF_G, CF_H, CF_SUB_E, CF_SUB_G, CF_XI_DECAY, CF_XI_NOISE, KIND_KICK, KIND_KINK, P_M,
-                      P_N, P_SIGMA, P_THRESHOLD)
-from ..scheme import step_coefficients
-from .base import Kernels, StepScheme
+from .._kink import N_TAYLOR, _kink_flow
+from ..coefficients import step_coefficients
+from ..layout import (CF_E, CF_G, CF_H, CF_SUB_E, CF_SUB_G, CF_XI_DECAY, CF_XI_HALF, CF_XI_NOISE, KIND_KICK,
+                      KIND_KINK, P_M, P_N, P_SIGMA, P_THRESHOLD)
+from .base import Kernels, Stepper
+
+
+__all__ = ["FROZEN", "FrozenStep", "d_step", "N_TAYLOR"]
 
 
 class FrozenTag(NamedTuple):
@@ -52,7 +57,7 @@ def _linear_flow_inline(x, v, V, f, cf) -> None:
             V[j, p] = cf[CF_E + 6] * x0 + cf[CF_E + 7] * v0 + cf[CF_E + 8] * V0 + cf[CF_G + 2] * fp
 
 
-#: :func:`_linear_flow_inline` as an ordinary call, for :func:`_d_step`.
+#: :func:`_linear_flow_inline` as an ordinary call, for :func:`d_step`.
 _linear_flow = njit(cache=True, nogil=True)(_linear_flow_inline.py_func)
 
 
@@ -87,8 +92,15 @@ def _substep_path(x, v, V, F, fext, p: int, K: int, cf: np.ndarray, pp: np.ndarr
 
 
 @njit(cache=True, nogil=True)
-def _d_step(x, v, V, xi, F, stuck, xm, fext, w, cf, pp, kind, counters, cs) -> None:
+def d_step(x, v, V, xi, F, stuck, xm, fext, w, cf, pp, kind, counters, cs) -> None:
     """Deterministic flow D(h) of P rings of N units with xi frozen; arrays (N, P), in place.
+
+    x, v, V, xi the state; F the kicked on-site force at x (:func:`montecarlo._kernels._kick_force`
+    at the start); ``stuck`` the kink's held units (HOLD rule); ``xm``, ``fext`` scratch; ``w`` the
+    live paths (1) and escaped ones (0); ``cf``, ``pp`` the coefficient and parameter arrays
+    (:mod:`montecarlo.layout`) with ``cf[CF_H]`` the step h; ``kind`` the on-site treatment;
+    ``counters`` (:data:`~montecarlo.layout.N_COUNTERS`,) int64 the kink's statistics; ``cs``
+    scratch of shape (3, N_TAYLOR + 1).
 
     Paths are the inner loops: one path's steps form a serial dependency chain, so only
     independent paths side by side keep the floating-point pipelines busy. ``kind`` is
@@ -149,14 +161,14 @@ def _d_step(x, v, V, xi, F, stuck, xm, fext, w, cf, pp, kind, counters, cs) -> N
 # error_model numpy: no zero test on the kicks' division by m (> 0, checked by the model)
 @njit(cache=True, nogil=True, error_model="numpy")
 def _d_step_fast(x, v, V, xi, F, xm, fext, cf, pp, kind) -> bool:
-    """:func:`_d_step` where the on-site force is smooth (not the kink) and no path is near a
+    """:func:`d_step` where the on-site force is smooth (not the kink) and no path is near a
     stiff wall: the same operations in the same order (bit-identical results), in a kernel of
     its own with the coupling, the kicks and the linear flow inlined.
 
-    Returns False, with nothing changed, when :func:`_d_step` must take the step. At two paths
-    per chunk a harmonic ring's loop is 0.88x 940829b's with it and 1.07-1.21x without (the
-    general kernel's calls of the coupling and the flow, each with 7-9 arrays, and its stiff and
-    kink paths; inlining those calls into :func:`_d_step` alone gained nothing, 1.10-1.12x).
+    Returns False, with nothing changed, when :func:`d_step` must take the step. It exists
+    because the general kernel's calls of the coupling and the flow, each with 7-9 arrays, and
+    its stiff and kink branches cost a harmonic ring's loop about a fifth at the solver's small
+    chunks (docs/methods.md, "Monte Carlo kernels").
     """
     N, P = x.shape
     h = cf[CF_H]
@@ -209,16 +221,52 @@ def twin_xi(xi: np.ndarray) -> np.ndarray:
     return xi
 
 
-class FrozenStep(StepScheme):
-    """The frozen-xi step (Python side)."""
+class FrozenStep(Stepper):
+    """The frozen-xi step (Python side): every on-site treatment; the kink's piecewise flow needs
+    the force held over the step, so there it is preferred only for dt <= tau."""
 
     name = "frozen"
+    priority = 0
+    description = ("Strang splitting O(h/2) D(h) O(h/2): exact Ornstein-Uhlenbeck update O of xi, "
+                   "D the flow of (x, v, V) with xi frozen")
+    preference = "xi held over the step: any tau, but for the kink only dt <= tau"
+    dt_start = 0.02
     tag = FrozenTag(1)
-    kernels = Kernels(1, noise, compose, _d_step, advance, twin_xi, _d_step_fast, KIND_KINK)
+    kernels = Kernels(1, noise, compose, d_step, advance, twin_xi, _d_step_fast, KIND_KINK)
 
     def coefficients(self, h: Harvester, dt: float) -> np.ndarray:
-        return step_coefficients(h, dt, joint=False)
+        return step_coefficients(h, dt)
+
+    def preferred(self, h: Harvester, kind: int, dt: float) -> bool:
+        return kind != KIND_KINK or h.params.tau >= dt
+
+    def start_dt(self, h: Harvester, kind: int, scale: float) -> float:
+        """``scale`` times :attr:`dt_start`, and for the kink at most tau."""
+        dt = scale * self.dt_start
+        return min(dt, h.params.tau) if kind == KIND_KINK else dt
+
+    def twin_matrices(self, lin: Harvester, dt: float) -> tuple[np.ndarray, np.ndarray, np.ndarray, float]:
+        """Mode q of the harmonic ring (:math:`s_q = \\sin^2(\\pi q/N)`) advances as
+        :math:`y' = E y + g(\\sigma\\xi + k(2 - 4s_q)(x + \\tfrac h2 v))`, measured there, then
+        :math:`\\xi' = e^{-h/\\tau}\\xi + \\sqrt{(D/\\tau)(1 - e^{-2h/\\tau})}\\,Z` (T maps to y after
+        the flow with xi before its update; the noise acts on xi only)."""
+        k = lin.k if lin.N > 1 else 0.0
+        cq = 2.0 - 4.0 * mode_sin2(lin.N)
+        cf = step_coefficients(lin, dt)
+        E = cf[CF_E:CF_E + 9].reshape(3, 3)
+        g = cf[CF_G:CF_G + 3]
+        T = np.zeros((lin.N, 4, 4))
+        T[:, :3, :3] = E
+        T[:, :3, 0] += (k * cq)[:, None] * g
+        T[:, :3, 1] += (0.5 * dt * k * cq)[:, None] * g
+        T[:, :3, 3] = lin.params.sigma * g
+        T[:, 3, 3] = 1.0
+        M = T.copy()
+        M[:, 3, 3] = cf[CF_XI_DECAY]
+        Q = np.zeros((4, 4))
+        Q[3, 3] = cf[CF_XI_NOISE] ** 2
+        return M, T, Q, float(cf[CF_XI_HALF])
 
 
-#: The frozen-xi step scheme.
+#: The frozen-xi stepper.
 FROZEN = FrozenStep()

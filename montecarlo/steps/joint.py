@@ -1,32 +1,56 @@
-"""The joint step: ``K(h/2) L(h) K(h/2)`` (the default when tau < 10 dt; harmonic and kick schemes).
+"""The joint step: ``K(h/2) L(h) K(h/2)`` (``step="joint"``; the harmonic and kick treatments).
 
 L is the exact Gaussian transition of the linear part of (x, v, V, xi) including the
-Ornstein--Uhlenbeck noise (mean map and noise factor from :func:`montecarlo.scheme.joint_chain`,
-four normals per unit), K the kicks of -U'(x); the neighbours' force is a constant at their
-predicted midpoints, stiff walls split a path's step into joint substeps with fresh normals
-(:func:`_joint_substeps`), and v xi is measured by its conditional expectation. The coarse level
-of a Richardson pair gets the exact composition of the fine level's two noise increments, and
-the twin its own factor applied to the same normals (its xi increment is the system's).
+Ornstein--Uhlenbeck noise (mean map and noise factor from :func:`joint_chain`, four normals per
+unit), K the kicks of -U'(x); the neighbours' force is a constant at their predicted midpoints,
+stiff walls split a path's step into joint substeps with fresh normals (:func:`_joint_substeps`),
+and v xi is measured by its conditional expectation. The coarse level of a Richardson pair gets
+the exact composition of the fine level's two noise increments, and the twin its own factor
+applied to the same normals (its xi increment is the system's).
 
-This module implements the step protocol of :mod:`montecarlo.steps` (``noise``, ``compose``,
-``step``, ``advance``, ``twin_xi`` and the scheme object :data:`JOINT`).
+Valid at any tau relative to the step and tending to the white-noise model as tau -> 0, but it
+draws four normals per unit-step instead of the frozen step's one: ``step="auto"`` takes it where
+tau < :data:`JOINT_STEPS` dt, where freezing xi over a step is wrong.
+
+Coefficients, from :data:`~montecarlo.layout.CF_STEP`: a block of :data:`JOINT_BLOCK` entries for
+the step (``J_*`` offsets: the 4x4 propagator of (x, v, V, xi), row-major; its response to a unit
+constant force on v; the noise factor L, increment = L z, row-major; the noise covariance of
+(v, xi); the regression coefficient of the xi increment on the x increment), then one block per
+stiff-wall substep h/2^i, i = 1 .. log2(MAX_SUBSTEPS).
+
+This module implements the stepper protocol of :mod:`montecarlo.steps` (``noise``, ``compose``,
+``step``, ``advance``, ``twin_xi`` and the stepper :data:`JOINT`).
 """
 
 from __future__ import annotations
 
+import functools
 import math
 from typing import NamedTuple
 
 import numpy as np
+import scipy.linalg
 from numba import njit
 
-from fpe_harvester.model import Harvester
+from fpe_harvester.model import Harvester, mode_sin2
 
-from .._kernels import _kick, _kick_force, _reach, _ring_coupling, _stiff_amplitude, _substeps
-from ..layout import (CF_H, CF_STEP, J_BETA, J_COV_VXI, J_G, J_L, J_P, JOINT_BLOCK, KIND_KICK, P_M, P_N,
-                      P_THRESHOLD)
-from ..scheme import joint_step_refusal, step_coefficients
-from .base import Kernels, StepScheme
+from .._kernels import MAX_SUBSTEPS, _kick, _kick_force, _reach, _ring_coupling, _stiff_amplitude, _substeps
+from ..coefficients import linear_stiffness, onsite_kind, step_coefficients
+from ..layout import CF_H, CF_PVX, CF_STEP, CF_XI_HALF, KIND_KICK, KIND_KINK, P_M, P_N, P_THRESHOLD
+from .base import Kernels, Stepper
+
+#: ``step="auto"`` takes the joint step where tau < JOINT_STEPS dt (dt the coarse step).
+JOINT_STEPS = 10.0
+
+# the entries of one block (module docstring)
+J_P = 0
+J_G = 16
+J_L = 20
+J_COV_VXI = 36
+J_BETA = 37
+JOINT_BLOCK = 38
+#: Blocks: the step and its stiff-wall substeps.
+J_BLOCKS = 1 + int(round(math.log2(MAX_SUBSTEPS)))
 
 
 class JointTag(NamedTuple):
@@ -120,7 +144,7 @@ def _joint_substeps(x, v, V, xi, F, fext, pvx, p: int, K: int, cf: np.ndarray, p
 def _d_step_joint(x, v, V, xi, F, xm, fext, eps, cf, pp, kind, rbm, rbx, pvx, w, gen) -> None:
     """One whole step of the joint scheme: kick(h/2), exact linear flow of (x, v, V, xi) with
     noise increment ``eps``, kick(h/2); the neighbours' force enters as a constant at their
-    predicted midpoints, and stiff walls split a path's step, as in :func:`montecarlo.steps.frozen._d_step`.
+    predicted midpoints, and stiff walls split a path's step, as in :func:`montecarlo.steps.frozen.d_step`.
 
     ``pvx`` receives each unit's estimate of v xi for the measurement: its conditional
     expectation given the state before the flow and the x reached (the same mean as v xi,
@@ -217,19 +241,169 @@ def twin_xi(xi: np.ndarray) -> np.ndarray:
     return np.zeros_like(xi)
 
 
-class JointStep(StepScheme):
+def _drift_matrix(h: Harvester) -> np.ndarray:
+    """Linear drift of one unit's (x, v, V, xi), with the stiffness :func:`linear_stiffness`."""
+    p = h.params
+    A = np.zeros((4, 4))
+    A[0, 1] = 1.0
+    A[1, 0] = -linear_stiffness(h) / p.m
+    A[1, 1] = -p.gamma
+    A[1, 2] = -p.Kv / p.m
+    A[1, 3] = p.sigma / p.m
+    A[2, 1] = p.Kc
+    A[2, 2] = -1.0 / p.tau_p
+    A[3, 3] = -1.0 / p.tau
+    return A
+
+
+def joint_matrices(h: Harvester, dt: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Exact Gaussian transition of one unit's linear part over a step ``dt``.
+
+    For :math:`y = (x, v, V, \\xi)` with :math:`dy = (Ay + b f)\\,dt + B\\,dW` (A of
+    :func:`_drift_matrix`, :math:`b = e_v/m` the response to a constant force f,
+    :math:`B = e_\\xi\\sqrt{2D}/\\tau`):
+
+    .. math::
+
+        y(t + h) = e^{Ah} y(t) + g f + \\varepsilon,\\qquad g = \\int_0^h e^{As}b\\,ds,\\qquad
+        \\varepsilon \\sim \\mathcal N\\Big(0,\\ Q = \\int_0^h e^{As}BB^Te^{A^Ts}ds\\Big).
+
+    Q is built by doubling, :math:`Q(2t) = Q(t) + e^{At}Q(t)e^{A^Tt}`, from a step so short
+    that Van Loan's exponential is exact to round-off (his formula over the whole step
+    overflows for tau << h, where :math:`e^{-Ah}` holds :math:`e^{h/\\tau}`).
+
+    Returns
+    -------
+    P : ndarray (4, 4)
+        :math:`e^{Ah}`.
+    g : ndarray (4,)
+        Response to a unit constant force on v.
+    Q : ndarray (4, 4)
+        Covariance of the noise increment.
+    """
+    return joint_chain(h, dt, 1)[0]
+
+
+@functools.lru_cache(maxsize=64)
+def joint_chain(h: Harvester, dt: float, count: int) -> tuple[tuple[np.ndarray, np.ndarray, np.ndarray], ...]:
+    """:func:`joint_matrices` at the steps ``dt / 2^i``, i = 0 .. count - 1, in one doubling pass.
+
+    From a step t0 with :math:`\\|A\\|t_0 \\le 10^{-3}` (Van Loan's exponential of the
+    augmented drift, exact to round-off there), each doubling is
+    :math:`P(2t) = P(t)^2`, :math:`g(2t) = P(t)g(t) + g(t)`,
+    :math:`Q(2t) = Q(t) + P(t)Q(t)P(t)^T`: scaling and squaring, which keeps every term a sum
+    of positive parts (Q) at any tau. Cached (a solve asks for the same steps several times;
+    the arrays are read-only).
+    """
+    p = h.params
+    A = _drift_matrix(h)
+    norm = float(np.abs(A).sum(axis=1).max())
+    levels = max(count - 1, math.ceil(math.log2(max(norm * dt, 1e-300) / 1e-3)))
+    t = dt / 2.0**levels
+    aug = np.zeros((5, 5))
+    aug[:4, :4] = A * t
+    aug[1, 4] = t / p.m
+    E = scipy.linalg.expm(aug)
+    F = scipy.linalg.expm(_van_loan_block(A, 2.0 * p.D / p.tau**2, t))
+    P, g = E[:4, :4], E[:4, 4]
+    Q = F[4:, 4:].T @ F[:4, 4:]
+    out = []
+    for i in range(levels, -1, -1):
+        if i == 0:
+            # the step itself from one exponential: each squaring adds a relative error of
+            # order 1e-16 (2^30 of them at tau = 1e-8 made the twin's V2 3e-6 off)
+            aug[:4, :4] = A * dt
+            aug[1, 4] = dt / p.m
+            E = scipy.linalg.expm(aug)
+            P, g = E[:4, :4], E[:4, 4]
+        if i < count:
+            entry = (P.copy(), g.copy(), 0.5 * (Q + Q.T))
+            for arr in entry:
+                arr.flags.writeable = False
+            out.append(entry)
+        if i > 0:
+            Q = Q + P @ Q @ P.T
+            g = P @ g + g
+            P = P @ P
+    return tuple(out[::-1])
+
+
+def _van_loan_block(A: np.ndarray, q: float, t: float) -> np.ndarray:
+    """Van Loan's 8x8 matrix :math:`[[-A, BB^T], [0, A^T]]\\,t` with :math:`BB^T = q\\,e_\\xi e_\\xi^T`."""
+    C = np.zeros((8, 8))
+    C[:4, :4] = -A * t
+    C[3, 7] = q * t
+    C[4:, 4:] = A.T * t
+    return C
+
+
+def noise_factor(Q: np.ndarray) -> np.ndarray:
+    """Factor L with :math:`LL^T = Q` whose first column alone drives xi (row 3).
+
+    Column 0 is :math:`Q_{\\cdot\\xi}/\\sqrt{Q_{\\xi\\xi}}`, so the xi increment is the same
+    multiple of the first normal for every unit with the same tau and D (the harmonic twin
+    shares it); columns 1-3 factor the conditional covariance of (x, v, V) given the xi
+    increment by its symmetric square root (it is near-singular at short steps, where a
+    Cholesky factorization breaks down; its round-off negative eigenvalues are cut to 0).
+    """
+    L = np.zeros((4, 4))
+    L[:, 0] = Q[:, 3] / math.sqrt(Q[3, 3])
+    S = Q[:3, :3] - np.outer(L[:3, 0], L[:3, 0])
+    w, U = np.linalg.eigh(0.5 * (S + S.T))
+    L[:3, 1:] = U @ np.diag(np.sqrt(np.maximum(w, 0.0))) @ U.T
+    return L
+
+
+class JointStep(Stepper):
     """The joint step (Python side)."""
 
     name = "joint"
+    priority = 10
+    description = "(x, v, V, xi) by the exact Gaussian transition of the linear drift, kicks around it"
+    preference = f"tau < {JOINT_STEPS:g} dt"
+    dt_start = 0.04
     tag = JointTag(4)
     kernels = Kernels(4, noise, compose, _d_step_joint, advance, twin_xi)
 
     def coefficients(self, h: Harvester, dt: float) -> np.ndarray:
-        return step_coefficients(h, dt, joint=True)
+        """The common part (:func:`montecarlo.coefficients.step_coefficients`), ``v xi`` from the
+        step's conditional expectation, xi measured after the step, and the step's blocks."""
+        cf = np.concatenate([step_coefficients(h, dt), np.zeros(JOINT_BLOCK * J_BLOCKS)])
+        cf[CF_PVX] = 1.0
+        # block 0: the step; block i: the stiff walls' substep dt/2^i (only the kick treatment
+        # with n > 2 takes substeps)
+        blocks = J_BLOCKS if onsite_kind(h) == KIND_KICK and h.n > 2 else 1
+        for i, (Pj, gj, Q) in enumerate(joint_chain(h, dt, blocks)):
+            o = CF_STEP + JOINT_BLOCK * i
+            cf[o + J_P:o + J_P + 16] = Pj.ravel()
+            cf[o + J_G:o + J_G + 4] = gj
+            cf[o + J_L:o + J_L + 16] = noise_factor(Q).ravel()
+            cf[o + J_COV_VXI] = Q[1, 3]
+            cf[o + J_BETA] = Q[0, 3] / Q[0, 0] if Q[0, 0] > 0.0 else 0.0
+        cf[CF_XI_HALF] = 1.0
+        return cf
 
     def refusal(self, h: Harvester, kind: int) -> str | None:
-        return joint_step_refusal(h, kind)
+        if kind == KIND_KINK:
+            return ("the kink treatment (n near 1) needs the force held over the step, which this step's "
+                    "Gaussian transition does not; the kink's short-tau step is 'averaged'")
+        return None
+
+    def preferred(self, h: Harvester, kind: int, dt: float) -> bool:
+        return h.params.tau < JOINT_STEPS * dt
+
+    def twin_matrices(self, lin: Harvester, dt: float) -> tuple[np.ndarray, np.ndarray, np.ndarray, float]:
+        """(x, v, V, xi) advance together: M is the propagator plus the neighbours' force at the
+        predicted midpoint, Q the full noise covariance, and the state is measured after the step
+        (T = I, no half-step factor)."""
+        k = lin.k if lin.N > 1 else 0.0
+        cq = 2.0 - 4.0 * mode_sin2(lin.N)
+        P, g, Q = joint_matrices(lin, dt)
+        M = np.repeat(P[None], lin.N, axis=0)
+        M[:, :, 0] += (k * cq)[:, None] * g
+        M[:, :, 1] += (0.5 * dt * k * cq)[:, None] * g
+        return M, np.repeat(np.eye(4)[None], lin.N, axis=0), Q, 1.0
 
 
-#: The joint step scheme.
+#: The joint stepper.
 JOINT = JointStep()

@@ -43,13 +43,13 @@ def test_initial_law_is_the_ring_covariance() -> None:
     assert np.allclose(C, dense, rtol=2e-3, atol=2e-4 * np.abs(dense).max())
 
 
-@pytest.mark.parametrize("joint", [False, True])
-def test_simulated_twin_matches_its_discrete_expectations_not_the_continuous_ones(joint: bool) -> None:
+@pytest.mark.parametrize("step", ["frozen", "joint"])
+def test_simulated_twin_matches_its_discrete_expectations_not_the_continuous_ones(step: str) -> None:
     # dt = 0.4: the scheme's bias (~5 %) is far larger than the standard errors
     h = Harvester.build(a=0.5, n=3, N=3, k=-0.2)
     kappa = 1.3
     e = simulate(h, dt=0.4, paths=64, replicas=24, t_burn=0.0, t_run=200.0, seed=6, twin=kappa,
-                 start="twin", sample_every=0.0, joint=joint)
+                 start="twin", sample_every=0.0, step=step)
     m = e.moments(0)
     lin = twin_harvester(h, kappa)
     cont = {key: float(np.mean(val)) for key, val in mode_moments(lin.mode_stiffness(), lin.params).items()}
@@ -58,7 +58,7 @@ def test_simulated_twin_matches_its_discrete_expectations_not_the_continuous_one
         se = x.std(ddof=1) / math.sqrt(x.size)
         assert abs(x.mean() - e.twin_mean[name]) < 4 * se, name
     se = m["t_vxi"].std(ddof=1) / math.sqrt(24)
-    if joint:
+    if step == "joint":
         # the joint step's only bias in a harmonic ring is the neighbours' force held at its
         # predicted midpoint: far smaller, within the standard error here
         assert abs(e.twin_mean["vxi"] - cont["vxi"]) < 1e-3 * cont["vxi"]
@@ -66,16 +66,16 @@ def test_simulated_twin_matches_its_discrete_expectations_not_the_continuous_one
         assert abs(m["t_vxi"].mean() - cont["vxi"]) > 10 * se
 
 
-@pytest.mark.parametrize("joint", [False, True])
-def test_control_variates_are_unbiased_on_a_harmonic_system(joint: bool) -> None:
+@pytest.mark.parametrize("step", ["frozen", "joint"])
+def test_control_variates_are_unbiased_on_a_harmonic_system(step: str) -> None:
     # the system is harmonic, so its discrete-time expectation is known exactly; a twin of
     # another stiffness must not bias the estimate, and must reduce its variance
     h = Harvester.build(a=0.5, N=3, k=-0.2)
     dt = 0.4
     e = simulate(h, dt=dt, paths=32, replicas=48, t_burn=40.0, t_run=100.0, seed=9, twin=1.4,
-                 start="twin", joint=joint)
+                 start="twin", step=step)
     est = estimate(e, h, control=True)
-    ref = twin_expectations(h, dt, joint=joint)
+    ref = twin_expectations(h, dt, step=step)
     assert est.control and est.reduction["eta"] > 2.0
     assert abs(est.mean["V2"] - ref["V2"]) < 4 * est.se["V2"]
     assert abs(est.mean["Pin"] - ref["vxi"]) < 4 * est.se["Pin"]

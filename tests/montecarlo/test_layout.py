@@ -12,7 +12,7 @@ from fpe_harvester import Harvester
 from montecarlo import layout
 from montecarlo._kernels import MAX_SUBSTEPS
 from montecarlo._kink import HOLD
-from montecarlo.scheme import linear_stiffness, physical_vector, step_coefficients
+from montecarlo.coefficients import linear_stiffness, physical_vector, step_coefficients
 from montecarlo.layout import (CF_E, CF_G, CF_H, CF_PVX, CF_STEP, CF_SUB_E, CF_SUB_G, CF_XI_DECAY, CF_XI_HALF,
                                CF_XI_NOISE, KIND_KINK, MOMENTS, P_A, P_GAMMA, P_K, P_K3, P_K4, P_KC, P_KINK_FORCE,
                                P_KINK_RULE, P_KV, P_M, P_N, P_SIGMA, P_SIZE, P_STIFFNESS, P_TAU_P, P_THRESHOLD,

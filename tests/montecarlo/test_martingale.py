@@ -15,14 +15,14 @@ from montecarlo.controls.regression import enough_dof, regression_estimate
 from montecarlo.controls.twin import poisson_controls, twin_expectations
 
 
-@pytest.mark.parametrize("joint", [False, True])
-def test_martingale_sums_have_mean_zero_and_leave_the_paths_unchanged(joint: bool) -> None:
+@pytest.mark.parametrize("step", ["frozen", "joint"])
+def test_martingale_sums_have_mean_zero_and_leave_the_paths_unchanged(step: str) -> None:
     # a nonlinear ring at a coarse step: every martingale control's mean must be 0 whatever the
     # bias of the scheme (chi^2 of the z-scores of all controls against its 0.1 % tail); the
     # end-of-window terms bd_* are not martingales (mean 0 only for a stationary window) and are
     # left out
     h = Harvester.build(a=0.5, n=3, N=3, k=-0.5)
-    kw = dict(dt=0.1, paths=4, replicas=200, t_burn=5.0, t_run=40.0, seed=8, joint=joint, richardson=True)
+    kw = dict(dt=0.1, paths=4, replicas=200, t_burn=5.0, t_run=40.0, seed=8, step=step, richardson=True)
     e = simulate(h, martingale=True, **kw)
     off = simulate(h, martingale=False, **kw)
     assert np.array_equal(e.sums, off.sums) and np.array_equal(e.counts, off.counts)
@@ -62,7 +62,7 @@ def test_martingale_estimate_is_unbiased_at_a_coarse_step() -> None:
     h = Harvester.build(a=0.5, N=3, k=-0.2)
     dt = 0.2
     e = simulate(h, dt=dt, paths=4, replicas=64, t_burn=30.0, t_run=400.0, seed=12, martingale=True,
-                 richardson=True, joint=False)
+                 richardson=True, step="frozen")
     est = estimate(e, h, controls="martingale")
     disc = twin_expectations(h, dt / 2)
     assert est.controls == "martingale" and est.reduction["eta"] > 5.0

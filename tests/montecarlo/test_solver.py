@@ -211,10 +211,10 @@ def test_confined_system_blowing_up_is_not_converged() -> None:
     # n = 8 at dt = 0.5: the stiff-wall substeps keep every path (the bias of the frozen-xi
     # step is large, and said)
     h = Harvester.build(a=2.0, n=8)
-    r = solve(h, "mc", seed=2, dt=0.5, t_run=50.0, progress=False, joint=False)
+    r = solve(h, "mc", seed=2, dt=0.5, t_run=50.0, progress=False, step="frozen")
     assert r.info["escaped_paths"] == 0 and r.eta is not None and "lower dt" in r.message
     # every path leaves |x| < 0.3 during burn-in: reported as a blow-up, with no numbers
-    r = solve(h, "mc", seed=2, dt=0.5, t_run=50.0, escape=0.3, progress=False, joint=False)
+    r = solve(h, "mc", seed=2, dt=0.5, t_run=50.0, escape=0.3, progress=False, step="frozen")
     assert r.status is Status.NOT_CONVERGED
     assert "blew up" in r.message and "Lower dt" in r.message
     assert r.eta is None
