@@ -9,7 +9,7 @@ Public API:
 * :func:`switching_times` and :class:`Switching` -- residence times between buckled states;
 * :func:`simulate_naive` -- the plain vectorized numpy Euler--Maruyama reference;
 * :func:`regression_estimate` -- control variates over replicas (:mod:`.controls.regression`);
-* :func:`twin_expectations` and :func:`linearized_stiffness` -- the harmonic twin (:mod:`.controls.twin`).
+* :func:`twin_expectations` and :func:`linearized_stiffness` -- the harmonic twin (:mod:`.harmonic`).
 
 Scheme: Strang splitting of the exact Ornstein--Uhlenbeck flow of xi with the flow of
 (x, v, V) at frozen xi (exact linear part; Strang kick for smooth nonlinear forces;
@@ -25,9 +25,10 @@ from __future__ import annotations
 
 # first: it drops stale cached kernels before any kernel module loads them
 from . import _cache  # noqa: F401
-from .controls import Regression, linearized_stiffness, regression_estimate, twin_expectations
+from .controls import Regression, regression_estimate
 from .escape import EscapeCurve, escape_study
 from .estimate import Estimate, estimate
+from .harmonic import linearized_stiffness, twin_expectations
 from .naive import simulate_naive
 from .simulate import Ensemble, simulate
 from .solver import MonteCarlo, Plan

@@ -59,9 +59,12 @@ class Setup(NamedTuple):
     chol : (4N, 4N) or (0, 0) ndarray
         Initial law: every level (and the twin) starts from one draw of ``chol @ z`` per path,
         or from rest with stationary xi when empty.
-    n_mart : int
-        Martingale control columns (:func:`montecarlo.controls.martingale.basis_names`), 0 for
-        none.
+    n_ctl : int
+        Columns of the control accumulator ``Sums.ctl`` (the sums of every accumulated control,
+        :class:`montecarlo.controls.base.Control`; 0 for none).
+    mg_at, n_mg : int
+        The martingale sums' first column in it and their number
+        (:func:`montecarlo.controls.martingale.basis_names`; 0 without them).
     """
 
     P: int
@@ -80,7 +83,9 @@ class Setup(NamedTuple):
     pp: np.ndarray
     pp_t: np.ndarray
     chol: np.ndarray
-    n_mart: int
+    n_ctl: int = 0
+    mg_at: int = 0
+    n_mg: int = 0
 
 
 class Sums(NamedTuple):
@@ -98,21 +103,22 @@ class Sums(NamedTuple):
     counters : (N_COUNTERS,) int64 ndarray
         Kink statistics and the number of ring steps taken, all levels (``C_*`` of
         :mod:`montecarlo.layout`).
-    mart : (2, n_mart) ndarray
-        Martingale control sums of the fine level over the measured window and its first half.
+    ctl : (2, n_ctl) ndarray
+        The accumulated controls' sums on the fine level over the measured window and its first
+        half (:attr:`Setup.n_ctl`).
     """
 
     sums: np.ndarray
     counts: np.ndarray
     esc_time: np.ndarray
     counters: np.ndarray
-    mart: np.ndarray
+    ctl: np.ndarray
 
     @staticmethod
-    def zeros(P: int, n_mart: int) -> Sums:
-        """Empty accumulators for a chunk of P paths with ``n_mart`` martingale columns."""
+    def zeros(P: int, n_ctl: int) -> Sums:
+        """Empty accumulators for a chunk of P paths with ``n_ctl`` control columns."""
         return Sums(np.zeros((ROWS, N_MOM)), np.zeros(ROWS), np.empty(P), np.zeros(N_COUNTERS, dtype=np.int64),
-                    np.zeros((2, n_mart)))
+                    np.zeros((2, n_ctl)))
 
 
 def run_chunk(gen: np.random.Generator, stepper: Stepper, s: Setup, out: Sums) -> None:
@@ -148,7 +154,8 @@ def _run(tag, gen, s, out) -> None:
     N, P, coupled, twin, kind, stride, nburn = s.N, s.P, s.coupled, s.twin, s.kind, s.stride, s.nburn
     third = s.third and coupled
     cf_f, cf_c, cf_cc, cf_t, pp, pp_t = s.cf_f, s.cf_c, s.cf_cc, s.cf_t, s.pp, s.pp_t
-    sums, counts, counters, mg, esc = out.sums, out.counts, out.counters, out.mart, out.esc_time
+    sums, counts, counters, esc = out.sums, out.counts, out.counters, out.esc_time
+    mg = out.ctl[:, s.mg_at:s.mg_at + s.n_mg]
     thr = pp[P_THRESHOLD]
     # every level's arrays (x, v, V, xi, F, pvx; stuck) allocated here one by one: returned in
     # tuples by a helper, they made the loop copy about twice the array fields before every
@@ -172,9 +179,9 @@ def _run(tag, gen, s, out) -> None:
     ec, ec0, ecc = np.zeros((nz, N, P)), np.zeros((nz, N, P)), np.zeros((nz, N, P))
     w = np.ones(P)
     esc[:] = -1.0
-    use_mg = s.n_mart > 0
+    use_mg = s.n_mg > 0
     phi = np.zeros((n_state(N) if use_mg else 0, N, P))
-    n_bd = s.n_mart - n_state(N) - min(N // 2, MG_DIST) - 1 if use_mg else 0
+    n_bd = s.n_mg - n_state(N) - min(N // 2, MG_DIST) - 1 if use_mg else 0
     g_bd, gprev_bd = np.zeros(max(n_bd, 0)), np.zeros(max(n_bd, 0))
     xi0 = np.zeros((N, P))
     mg_points = 0  # martingale points taken (an int: a bool flag compiled mg_measure twice)

@@ -7,7 +7,7 @@ of freedom :math:`\\nu` at the one-sigma level (0.8413), so that the reported on
 covers 68 % also for few replicas (the factor is 1.84 for 2 replicas, 1.08 for 8, 1.02 for 32).
 With control variates in the ensemble, the means are the regression (control-variate)
 estimates of :mod:`.controls.regression`; without, plain means. Two kinds exist, both with an exactly known
-mean: the harmonic twin's moments (:mod:`.controls.twin`; the paths must start from its stationary law)
+mean: the harmonic twin's moments (:mod:`.controls.twin`, :mod:`.harmonic`; the paths must start from its stationary law)
 and the martingale sums of :mod:`montecarlo.controls.martingale` (mean 0 for any start). The set used
 is the richest candidate (:data:`montecarlo.controls.sets.CONTROL_SETS`, most controls) among those whose residual degrees
 of freedom meet :func:`montecarlo.controls.regression.enough_dof`: a rule that does not look at the estimated
@@ -236,9 +236,9 @@ def estimate(e: Ensemble, h: Harvester, order: float | None = None, control: boo
     if (control or controls is not None) and not sets:
         raise ParameterError(
             f"control=True needs an ensemble with control variates ({controls or 'any set'}): a twin "
-            f"started from its stationary law (start='twin') or martingale sums (martingale=True), no "
-            f"escaped path and enough replicas; got twin {e.twin_kappa}, start {e.start!r}, martingale "
-            f"{bool(e.mart_names)}, escaped fraction {e.escaped_fraction():g}, {n} replicas")
+            f"started from its stationary law (start='twin') or accumulated controls (controls=('martingale',)), "
+            f"no escaped path and enough replicas; got twin {e.twin_kappa}, start {e.start!r}, accumulated "
+            f"{tuple(e.ctl_names)}, escaped fraction {e.escaped_fraction():g}, {n} replicas")
     use = bool(sets)
     if n < 2:
         nan = dict.fromkeys(_NAMES + ("eta", "d2"), math.nan)

@@ -4,7 +4,7 @@ The burn-in must outlast the slowest relaxation of the second moments. For a har
 it is exact: mode q relaxes at the rate :math:`r_q = -\\max\\mathrm{Re}\\,\\lambda(\\kappa_q)`
 (:func:`fpe_harvester.exact.mode_eigenvalues`), and the slowest time is
 :math:`\\tau_r = 1/\\min_q r_q`. For a nonlinear ring the same formula is applied to its
-harmonic twin (statistical linearization, :mod:`.controls.twin`), an estimate that the solver then
+harmonic twin (statistical linearization, :mod:`.harmonic`), an estimate that the solver then
 checks on the data (the first half of the measured window against the whole). A transient
 :math:`\\delta_0 e^{-t/\\tau_r}` (relative, :math:`\\delta_0 \\le 1` from rest) biases the mean
 over :math:`[t_b, t_b + T]` by at most :math:`\\delta_0\\tau_r e^{-t_b/\\tau_r}/T`; the burn-in
@@ -24,7 +24,7 @@ import numpy as np
 from fpe_harvester.exact import mode_eigenvalues
 from fpe_harvester.model import Harvester
 
-from .controls.twin import twin_harvester
+from .harmonic import twin_harvester
 
 __all__ = ["relaxation_time", "burn_in", "MIN_BURN", "FALLBACK_NOTE"]
 

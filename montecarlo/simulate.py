@@ -24,11 +24,11 @@ from fpe_harvester.errors import ParameterError, check_int, check_real
 from fpe_harvester.model import Harvester
 from fpe_harvester.parallel import default_threads
 
-from .layout import MOMENTS, N_MOM
+from .layout import C_AVERAGED, C_CROSSINGS, C_EXHAUSTED, C_RING_STEPS, C_SLOW, MOMENTS, N_COUNTERS, N_MOM
 from .layout import KIND_KICK, KIND_KINK
 from ._loop import Setup, Sums, run_chunk
-from .controls.martingale import basis_names
-from .controls.twin import initial_cholesky, twin_expectations, twin_harvester, twin_is_stable
+from .controls.sets import CONTROLS
+from .harmonic import initial_cholesky, twin_expectations, twin_harvester, twin_is_stable
 from .coefficients import KINK_RULES, onsite_kind, physical_vector
 from .steps import STEPPERS, Stepper, resolve_step
 
@@ -58,17 +58,18 @@ class Ensemble:
         On-site stiffness of the harmonic twin run on level 0's noise (None: no twin).
     twin_mean : dict of float
         Exact expectations of the twin's moments at level 0's step
-        (:func:`montecarlo.controls.twin.twin_expectations`); empty without a twin.
+        (:func:`montecarlo.harmonic.twin_expectations`); empty without a twin.
     start : str
         ``"rest"`` or ``"twin"`` (the paths start from the twin's stationary law).
     kink_counters : tuple of int
         Kink treatment: unit-steps on the slow path (near x = 0), located zero crossings, entries
         into the averaged swing map, steps that exhausted the event budget (all levels).
-    mart : ndarray, shape (replicas, 2, len(mart_names))
-        Martingale control sums of level 0 (:mod:`montecarlo.controls.martingale`) over the measured
-        window and over its first half; no columns without ``martingale``.
-    mart_names : tuple of str
-        Their names (:func:`montecarlo.controls.martingale.basis_names`).
+    ctl : ndarray, shape (replicas, 2, columns) or None
+        The sums of level 0 that the path loop accumulated for the controls named in
+        ``simulate(..., controls=...)`` (:mod:`montecarlo.controls`), over the measured window and
+        over its first half; None without such controls.
+    ctl_names : dict of str to tuple of str
+        Control name -> the names of its sums, which occupy the columns of ``ctl`` in this order.
     """
 
     sums: np.ndarray
@@ -88,8 +89,8 @@ class Ensemble:
     twin_kappa: float | None = None
     twin_mean: dict[str, float] = field(default_factory=dict)
     start: str = "rest"
-    mart: np.ndarray | None = None
-    mart_names: tuple[str, ...] = ()
+    ctl: np.ndarray | None = None
+    ctl_names: dict[str, tuple[str, ...]] = field(default_factory=dict)
 
     @property
     def replicas(self) -> int:
@@ -110,16 +111,22 @@ class Ensemble:
         out = {name: np.where(cnt > 0, self.sums[:, level, i] / safe, np.nan) for i, name in enumerate(MOMENTS)}
         return out
 
-    def martingale(self, first_half: bool = False) -> dict[str, np.ndarray]:
-        """Per-replica martingale controls ``{name: array(replicas)}``, each sum divided by the
-        unit-steps counted in its window (NaN where nothing counted); every one has mean 0
-        exactly when no path escaped. Empty without ``martingale``."""
-        if self.mart is None or not self.mart_names:
+    def control_sums(self, control: str, first_half: bool = False) -> dict[str, np.ndarray]:
+        """Per-replica sums of the control ``control`` ``{name: array(replicas)}``, each divided by
+        the unit-steps counted in its window (NaN where nothing counted). Empty when the loop did
+        not accumulate that control."""
+        names = self.ctl_names.get(control, ())
+        if self.ctl is None or not names:
             return {}
+        first = 0
+        for name, cols in self.ctl_names.items():
+            if name == control:
+                break
+            first += len(cols)
         cnt = self.counts[:, -1 if first_half else 0]
         safe = np.where(cnt > 0, cnt, 1.0)
-        row = self.mart[:, 1 if first_half else 0]
-        return {name: np.where(cnt > 0, row[:, i] / safe, np.nan) for i, name in enumerate(self.mart_names)}
+        row = self.ctl[:, 1 if first_half else 0, first:first + len(names)]
+        return {name: np.where(cnt > 0, row[:, i] / safe, np.nan) for i, name in enumerate(names)}
 
     def escaped_fraction(self) -> float:
         """Fraction of all paths that crossed the escape threshold."""
@@ -128,10 +135,10 @@ class Ensemble:
     def merge(self, other: Ensemble) -> Ensemble:
         """Concatenate the replicas of two runs with identical settings."""
         if (other.dts, other.paths, other.t_run, other.t_burn, other.twin_kappa, other.start,
-                other.mart_names) != (self.dts, self.paths, self.t_run, self.t_burn, self.twin_kappa,
-                                      self.start, self.mart_names):
+                other.ctl_names) != (self.dts, self.paths, self.t_run, self.t_burn, self.twin_kappa,
+                                     self.start, self.ctl_names):
             raise ParameterError("can only merge ensembles with the same dt, paths, t_run, t_burn, "
-                                 "twin, start and martingale controls")
+                                 "twin, start and accumulated controls")
         return Ensemble(
             sums=np.concatenate([self.sums, other.sums]),
             counts=np.concatenate([self.counts, other.counts]),
@@ -147,8 +154,8 @@ class Ensemble:
             twin_kappa=self.twin_kappa,
             twin_mean=dict(self.twin_mean),
             start=self.start,
-            mart=None if self.mart is None else np.concatenate([self.mart, other.mart]),
-            mart_names=self.mart_names,
+            ctl=None if self.ctl is None else np.concatenate([self.ctl, other.ctl]),
+            ctl_names=dict(self.ctl_names),
         )
 
 
@@ -172,7 +179,7 @@ def simulate(
     kink_rule: str = "average",
     kind: int | None = None,
     step: str = "auto",
-    martingale: bool = False,
+    controls: tuple[str, ...] = (),
     third_level: bool = False,
 ) -> Ensemble:
     """Simulate independent replicas of ``h`` and return their raw moment sums.
@@ -209,7 +216,7 @@ def simulate(
         error is unchanged while the accumulation cost drops.
     twin : float or None
         On-site stiffness :math:`\\kappa > 0` of a harmonic twin ring (same k) advanced on the
-        fine level's noise and measured with it (:mod:`montecarlo.controls.twin`); its modes
+        fine level's noise and measured with it (:mod:`montecarlo.harmonic`); its modes
         :math:`\\kappa + 4k\\sin^2(\\pi q/N)` must all be positive. None: no twin.
     start : {"rest", "twin"}
         Initial state of every path: rest (x = v = V = 0, xi stationary), or a draw from the
@@ -232,10 +239,12 @@ def simulate(
         (default): the one :func:`montecarlo.steps.resolve_step` picks at ``dt`` (joint where
         tau < 10 dt, averaged for the kink where tau < dt, else frozen). Raises where the named
         stepper refuses ``h``, or ``"auto"`` finds none (the kink between tau = 1e-4 and dt).
-    martingale : bool
-        Also accumulate level 0's martingale control sums (:mod:`montecarlo.controls.martingale`,
-        :attr:`Ensemble.mart`): sums of basis functions of the state times the noise drawn
-        after it, with mean exactly 0. The simulated paths are the same with or without them.
+    controls : tuple of str
+        Controls whose sums the path loop accumulates on level 0 (names of
+        :data:`montecarlo.controls.CONTROLS` that are ``accumulated``; :attr:`Ensemble.ctl`), e.g.
+        ``("martingale",)``: sums of basis functions of the state times the noise drawn after it,
+        with mean exactly 0 (:mod:`montecarlo.controls.martingale`). The simulated paths are the
+        same with or without them. The twin is asked for by ``twin``.
     third_level : bool
         With ``richardson``, also run level 2 at ``2 dt`` on the same noise (two coarse
         increments composed exactly), so that two Richardson extrapolations, from
@@ -258,7 +267,7 @@ def simulate(
     c = _check(h, dt=dt, paths=paths, replicas=replicas, t_burn=t_burn, t_run=t_run, seed=seed,
                richardson=richardson, threshold=threshold, chunk=chunk, threads=threads,
                first_replica=first_replica, sample_every=sample_every, twin=twin, start=start,
-               kink_rule=kink_rule, kind=kind, step=step, martingale=martingale, third_level=third_level)
+               kink_rule=kink_rule, kind=kind, step=step, controls=controls, third_level=third_level)
     stepper, setup, twin_mean = _coefficients(h, c)
     ss = np.random.SeedSequence(c.seed)
     sizes = _chunks(c.paths, c.chunk)
@@ -266,7 +275,7 @@ def simulate(
     t0 = time.perf_counter()
     results = _run_tasks(stepper, setup, ss, c.first_replica, sizes, tasks, c.threads)
     wall = time.perf_counter() - t0
-    sums, counts, esc_times, counters, mart = _merge(results, tasks, sizes, c)
+    sums, counts, esc_times, counters, ctl = _merge(results, tasks, sizes, c)
     levels = 3 if c.third_level else 2 if c.richardson else 1
     dt = c.dt
     return Ensemble(
@@ -278,9 +287,9 @@ def simulate(
         t_burn=setup.nburn * dt,
         t_run=setup.nrun * dt,
         threshold=c.threshold,
-        path_steps=int(counters[4]),
+        path_steps=int(counters[C_RING_STEPS]),
         wall_time=wall,
-        kink_counters=tuple(int(v) for v in counters[:4]),
+        kink_counters=tuple(int(counters[i]) for i in (C_SLOW, C_CROSSINGS, C_AVERAGED, C_EXHAUSTED)),
         seed_entropy=int(ss.entropy) if c.seed is None else c.seed,
         first_replica=c.first_replica,
         notes={"threads": c.threads, "chunk": c.chunk, "onsite_kind": setup.kind, "sample_stride": setup.stride,
@@ -288,8 +297,8 @@ def simulate(
         twin_kappa=c.twin,
         twin_mean=twin_mean,
         start=c.start,
-        mart=mart if c.martingale else None,
-        mart_names=basis_names(h.N) if c.martingale else (),
+        ctl=ctl if c.controls else None,
+        ctl_names={name: CONTROLS[name].sums(h) for name in c.controls},
     )
 
 
@@ -314,14 +323,14 @@ class _Checked(NamedTuple):
     kink_rule: str
     kind: int
     step: str
-    martingale: bool
+    controls: tuple[str, ...]
     third_level: bool
 
 
 def _check(h: Harvester, *, dt: float, paths: int, replicas: int, t_burn: float, t_run: float,
            seed: int | None, richardson: bool, threshold: float, chunk: int, threads: int | None,
            first_replica: int, sample_every: float, twin: float | None, start: str, kink_rule: str,
-           kind: int | None, step: str, martingale: bool, third_level: bool) -> _Checked:
+           kind: int | None, step: str, controls: tuple[str, ...], third_level: bool) -> _Checked:
     """Validate :func:`simulate`'s arguments (raises :class:`ParameterError`)."""
     if not isinstance(h, Harvester):
         raise ParameterError(f"h must be a Harvester, got {h!r} (type {type(h).__name__})")
@@ -348,10 +357,14 @@ def _check(h: Harvester, *, dt: float, paths: int, replicas: int, t_burn: float,
             raise ParameterError(
                 f"twin must give every twin mode a positive stiffness twin + 4k sin^2(pi q/N) "
                 f"(k = {h.k:g}, N = {h.N}), got {twin!r}")
-    for flag, value in (("martingale", martingale), ("third_level", third_level)):
-        if not isinstance(value, bool):
-            raise ParameterError(f"{flag} must be True or False, got {value!r} "
-                                 f"(type {type(value).__name__})")
+    if not isinstance(third_level, bool):
+        raise ParameterError(f"third_level must be True or False, got {third_level!r} "
+                             f"(type {type(third_level).__name__})")
+    loop_controls = tuple(name for name, control in CONTROLS.items() if control.accumulated)
+    if isinstance(controls, str) or not all(name in loop_controls for name in controls) \
+            or len(set(controls)) != len(controls):
+        raise ParameterError(f"controls must be a tuple of distinct names among {loop_controls}, got "
+                             f"{controls!r} (type {type(controls).__name__})")
     if start == "twin" and twin is None:
         if not h.is_linear:
             raise ParameterError("start='twin' needs a twin stiffness for a nonlinear potential")
@@ -364,7 +377,7 @@ def _check(h: Harvester, *, dt: float, paths: int, replicas: int, t_burn: float,
     if twin is not None and not stepper.twin:
         raise ParameterError(f"twin: the {stepper.name} step has no harmonic twin; use twin=None")
     return _Checked(dt, paths, replicas, t_burn, t_run, seed, bool(richardson), threshold, chunk, threads,
-                    first_replica, sample_every, twin, start, kink_rule, kind, stepper.name, martingale,
+                    first_replica, sample_every, twin, start, kink_rule, kind, stepper.name, tuple(controls),
                     third_level and bool(richardson))
 
 
@@ -387,7 +400,13 @@ def _coefficients(h: Harvester, c: _Checked) -> tuple[Stepper, Setup, dict[str, 
     setup = Setup(P=0, N=h.N, nburn=int(round(c.t_burn / c.dt)), nrun=max(1, int(round(c.t_run / c.dt))),
                   stride=max(1, int(round(c.sample_every / c.dt))), coupled=c.richardson,
                   third=c.third_level, twin=c.twin is not None, kind=c.kind, cf_f=cf_f, cf_c=cf_c, cf_cc=cf_cc,
-                  cf_t=cf_t, pp=pp, pp_t=pp_t, chol=chol, n_mart=len(basis_names(h.N)) if c.martingale else 0)
+                  cf_t=cf_t, pp=pp, pp_t=pp_t, chol=chol)
+    # each accumulated control's sums at its columns of the loop's control accumulator
+    n_ctl = 0
+    for name in c.controls:
+        setup = setup._replace(**CONTROLS[name].loop_fields(h, n_ctl))
+        n_ctl += len(CONTROLS[name].sums(h))
+    setup = setup._replace(n_ctl=n_ctl)
     return stepper, setup, twin_mean
 
 
@@ -405,7 +424,7 @@ def _run_tasks(stepper: Stepper, setup: Setup, ss: np.random.SeedSequence, first
         r, k = task
         child = np.random.SeedSequence(ss.entropy, spawn_key=(first_replica + r, k))
         gen = np.random.Generator(np.random.PCG64(child))
-        out = Sums.zeros(sizes[k], setup.n_mart)
+        out = Sums.zeros(sizes[k], setup.n_ctl)
         run_chunk(gen, stepper, setup._replace(P=sizes[k]), out)
         return out
 
@@ -417,20 +436,20 @@ def _run_tasks(stepper: Stepper, setup: Setup, ss: np.random.SeedSequence, first
 
 def _merge(results: list[Sums], tasks: list[tuple[int, int]], sizes: list[int],
            c: _Checked) -> tuple[np.ndarray, ...]:
-    """Per-replica sums, counts, escape times (inf: none), summed counters and martingale sums
+    """Per-replica sums, counts, escape times (inf: none), summed counters and control sums
     from the chunks' outputs (rows of the levels in :attr:`Ensemble.sums`'s order)."""
     levels = 3 if c.third_level else 2 if c.richardson else 1
     rows = [0, 1, 3][:levels] + [2]
     sums = np.zeros((c.replicas, levels + 1, N_MOM))
     counts = np.zeros((c.replicas, levels + 1))
     esc_times = np.full((c.replicas, c.paths), np.inf)
-    counters = np.zeros(5, dtype=np.int64)
-    mart = np.zeros((c.replicas, 2, results[0].mart.shape[1]))
+    counters = np.zeros(N_COUNTERS, dtype=np.int64)
+    ctl = np.zeros((c.replicas, 2, results[0].ctl.shape[1]))
     offsets = np.concatenate([[0], np.cumsum(sizes)])
     for (r, k), out in zip(tasks, results):
-        mart[r] += out.mart
+        ctl[r] += out.ctl
         sums[r] += out.sums[rows]
         counts[r] += out.counts[rows]
         esc_times[r, offsets[k]:offsets[k + 1]] = np.where(out.esc_time >= 0.0, out.esc_time, np.inf)
         counters += out.counters
-    return sums, counts, esc_times, counters, mart
+    return sums, counts, esc_times, counters, ctl

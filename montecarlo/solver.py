@@ -42,8 +42,9 @@ from fpe_harvester.parallel import default_threads
 from fpe_harvester.result import Stats, Status
 
 from .coefficients import onsite_kind
-from .controls.twin import linearized_stiffness, natural_amplitude
+from .controls.martingale import MARTINGALE
 from .estimate import Estimate, estimate
+from .harmonic import linearized_stiffness, natural_amplitude
 from .plan import FALLBACK_NOTE, burn_in, relaxation_time
 from .report import DRIFT_SHARE, DRIFT_SIGMAS, result
 from .simulate import Ensemble, simulate
@@ -98,7 +99,7 @@ _T_RUN_MART_TOL = 1e-3
 
 
 #: A confined system's escape threshold is at least this many natural amplitudes
-#: (:func:`~montecarlo.controls.twin.natural_amplitude`), and at least 100.
+#: (:func:`~montecarlo.harmonic.natural_amplitude`), and at least 100.
 ESCAPE_AMPLITUDES = 30.0
 
 @dataclass(frozen=True)
@@ -178,7 +179,7 @@ class MonteCarlo:
         anti-phase coupling force :math:`4|k| s x` (:math:`s = \\max_q \\sin^2(\\pi q/N)`)
         overtakes the on-site force, if that is larger; for a confined system
         ``ESCAPE_AMPLITUDES`` (30) times the root-mean-square x of the equivalent harmonic
-        unit (:func:`~montecarlo.controls.twin.natural_amplitude`), if that is larger (strong noise on
+        unit (:func:`~montecarlo.harmonic.natural_amplitude`), if that is larger (strong noise on
         a weak wall: n = 1, D = 100 has sd(x) ~ 94, threshold ~2500).
     progress : bool or None
         tqdm bar on stderr; None shows it only for runs longer than 2 s.
@@ -323,7 +324,7 @@ class MonteCarlo:
 
         A nonlinear ring gets a short pilot run from rest (no twin) that measures
         :math:`\\kappa = \\langle xU'(x)\\rangle/\\langle x^2\\rangle`
-        (:func:`montecarlo.controls.twin.linearized_stiffness`); failing a stable twin there, the
+        (:func:`montecarlo.harmonic.linearized_stiffness`); failing a stable twin there, the
         Gaussian closure; failing that, no twin and a rest start.
         """
         if not math.isfinite(2.0 * h.a):
@@ -430,7 +431,8 @@ class MonteCarlo:
         return simulate(h, dt=plan.dt, paths=plan.paths, replicas=replicas, t_burn=plan.t_burn,
                         t_run=plan.t_run, seed=self.seed, richardson=self.richardson,
                         threshold=self.threshold(h), threads=self.threads, first_replica=first,
-                        twin=plan.twin, start=plan.start, step=self.step, martingale=self.martingale,
+                        twin=plan.twin, start=plan.start, step=self.step,
+                        controls=(MARTINGALE.name,) if self.martingale else (),
                         third_level=self.extrapolate)
 
     def _restart_reason(self, h: Harvester, plan: Plan, est: Estimate) -> tuple[str, Plan] | None:

@@ -12,13 +12,8 @@ from fpe_harvester.errors import ParameterError
 from fpe_harvester.exact import dense_covariance, mode_moments
 from montecarlo import estimate, simulate
 from montecarlo.controls.regression import regression_estimate
-from montecarlo.controls.twin import (
-    TWIN_MOMENTS,
-    initial_cholesky,
-    linearized_stiffness,
-    twin_expectations,
-    twin_harvester,
-)
+from montecarlo.controls.twin import TWIN_MOMENTS
+from montecarlo.harmonic import initial_cholesky, linearized_stiffness, twin_expectations, twin_harvester
 
 
 def test_twin_expectations_tend_to_the_closed_form_as_dt_shrinks() -> None:

@@ -11,7 +11,7 @@ import pytest
 from fpe_harvester import Harvester, solve
 from fpe_harvester.errors import ParameterError
 from montecarlo import MonteCarlo, estimate, simulate
-from montecarlo.controls.twin import twin_expectations
+from montecarlo.harmonic import twin_expectations
 from montecarlo.estimate import RESIDUAL_RULE
 
 
@@ -104,7 +104,7 @@ def test_end_of_window_terms_make_a_harmonic_ring_nearly_exact() -> None:
     # agree with the exact solver to its (small) error bar
     h = Harvester.build(a=0.5, N=3, k=-0.2)
     e = simulate(h, dt=0.04, paths=2, replicas=120, t_burn=20.0, t_run=100.0, seed=8, start="twin",
-                 martingale=True, richardson=True, third_level=True)
+                 controls=("martingale",), richardson=True, third_level=True)
     est = estimate(e, h, controls="martingale+boundary")
     without = estimate(e, h, controls="martingale")
     assert est.reduction["eta"] > 1e3 > 10 * without.reduction["eta"]
@@ -116,14 +116,15 @@ def test_end_of_window_terms_make_a_harmonic_ring_nearly_exact() -> None:
 def test_end_of_window_terms_are_refused_for_a_window_with_a_transient() -> None:
     # they have mean 0 only for a stationary window: a ring started at rest with a short burn-in
     # must not get them, the same ring with a long one must
-    from montecarlo.controls.sets import stationary_window
+    from montecarlo.controls.martingale import stationary_window
 
     h = Harvester.build(a=0.5, n=3, N=3, k=-0.5)
     ok = []
     for t_burn in (5.0, 50.0):
         e = simulate(h, dt=0.1, paths=4, replicas=200, t_burn=t_burn, t_run=40.0, seed=8, richardson=True,
-                     martingale=True)
-        ok.append(stationary_window(e.martingale(), np.ones(e.replicas, dtype=bool), e.mart_names))
+                     controls=("martingale",))
+        ok.append(stationary_window(e.control_sums("martingale"), np.ones(e.replicas, dtype=bool),
+                                    e.ctl_names["martingale"]))
     assert ok == [False, True]
 
 

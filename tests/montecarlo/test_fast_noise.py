@@ -12,7 +12,8 @@ from fpe_harvester import Harvester, Status, solve
 from fpe_harvester.errors import MethodNotAvailableError, ParameterError
 from fpe_harvester.exact import mode_moments
 from montecarlo import MonteCarlo, simulate
-from montecarlo.controls.twin import TWIN_MOMENTS, twin_expectations
+from montecarlo.controls.twin import TWIN_MOMENTS
+from montecarlo.harmonic import twin_expectations
 from montecarlo.steps import resolve_step
 from montecarlo.steps.joint import joint_matrices, noise_factor
 

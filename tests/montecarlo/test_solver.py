@@ -295,7 +295,7 @@ def test_escape_threshold_follows_the_natural_amplitude_of_a_confined_system() -
     """Strong noise on the kink (n = 1, D = 100) has sd(x) ~ 94: its ordinary paths must not
     count as blown up at |x| = 100; a weakly driven unit keeps the floor 100."""
     from montecarlo.solver import ESCAPE_AMPLITUDES
-    from montecarlo.controls.twin import natural_amplitude
+    from montecarlo.harmonic import natural_amplitude
 
     strong = Harvester.build(a=0.5, n=1.0, D=100.0)
     amp = natural_amplitude(strong)
