@@ -18,13 +18,12 @@ from ._force import _onsite_force
 from .layout import (CF_PVX, CF_XI_HALF, KIND_KICK, KIND_KINK, M_V2, M_d2, M_stuck, M_v2, M_vV, M_vxi, M_x2,
                      M_xdU, P_A, P_K, P_K3, P_K4, P_KINK_FORCE, P_M, P_N, P_SIGMA)
 
-#: Stiff walls (smooth scheme, n > 2): a path whose stiffest unit has
+#: Stiff walls (kick treatment, n > 2): a path whose stiffest unit has
 #: :math:`h^2 U''(x_e)/m > ` STIFF_LIMIT (x_e the farther of x and x + h v at the start of a
-#: step) takes that step as K equal
-#: substeps (K the smallest power of 2 that brings it below, at most MAX_SUBSTEPS), the
-#: neighbours' force held at its value for the whole step. The kick-drift-kick step is
-#: unstable for :math:`h^2 U''/m > 4`; with n = 12, 16 the tails of the law (and the first
-#: steps from a Gaussian start) reach it at dt = 0.01 and paths blew up (0.5 %, 2.6 %).
+#: step) takes that step as K equal substeps (K the smallest power of 2 that brings it below, at
+#: most MAX_SUBSTEPS), the neighbours' force held at its value for the whole step. The
+#: kick-drift-kick step is unstable for :math:`h^2 U''/m > 4`, which the tails of the law of a
+#: steep wall (n = 12, 16) and the first steps from a Gaussian start reach at dt = 0.01.
 STIFF_LIMIT = 1.0
 MAX_SUBSTEPS = 1024
 
@@ -307,9 +306,8 @@ _ring_coupling = njit(cache=True, nogil=True)(_ring_coupling_inline.py_func)
 def _neighbour_force(x, v, xi, xm, fext, pp, h: float) -> None:
     """The frozen step's external force: ``fext`` = sigma xi plus the ring's coupling force
     (:func:`_ring_coupling`) at the units' predicted midpoints ``xm`` = x + (h/2) v; inlined
-    into both frozen kernels. The joint step keeps its own loop: inlined into its general
-    kernel, this made the n = 3 unit at tau = 1e-4 about 4 % slower (medians of four
-    processes, 1.057x against 1.02x of 940829b)."""
+    into both frozen kernels. The joint step keeps its own loop, which measured faster there
+    (docs/methods.md, "Monte Carlo kernels")."""
     N, P = x.shape
     if N > 1:
         for j in range(N):

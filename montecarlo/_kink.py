@@ -4,7 +4,7 @@ Private module of the frozen-xi step (:mod:`montecarlo.steps.frozen`). For the k
 (1 <= n <= 1 + KINK_WIDTH of :mod:`montecarlo.coefficients`) the part :math:`-an\\,\\mathrm{sign}(x)`
 of the on-site force is integrated by an exact piecewise-linear flow with located zero
 crossings (the remainder by Strang kicks). Toward rest the kink's swings shrink exponentially
-in time and never stop (docs/model.md §3); once they are much shorter than the step the scheme
+in time and never stop (docs/model.md §3); once they are much shorter than the step the flow
 advances them by the averaged map of their amplitude (:data:`AVERAGE`). ``pp[P_KINK_FORCE]`` is
 the strength :math:`an` of the kink part and ``pp[P_KINK_RULE]`` its rule (:data:`AVERAGE` or
 :data:`HOLD`); :mod:`montecarlo.layout` has the layout of ``cf`` and ``pp``.

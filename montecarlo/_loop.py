@@ -18,10 +18,10 @@ from numba import njit
 
 from ._kernels import _check_escape, _clamp_start, _kick_force, _live, _measure, _start
 from ._kink import N_TAYLOR
-from .layout import (C_RING_STEPS, CF_H, CF_XI_DECAY, KIND_LINEAR, N_COUNTERS, N_MOM, P_A, P_N, P_THRESHOLD,
-                     P_XI_VAR, ROWS)
 from .controls.martingale import MG_DIST, mg_measure, n_state
 from .controls.twin import measure_twin
+from .layout import (C_RING_STEPS, CF_H, CF_XI_DECAY, KIND_LINEAR, N_COUNTERS, N_MOM, P_A, P_N, P_THRESHOLD,
+                     P_XI_VAR, ROWS)
 from .steps import Stepper
 from .steps.dispatch import advance, compose, noise, normals, step, twin_xi
 
@@ -117,7 +117,8 @@ class Sums(NamedTuple):
     @staticmethod
     def zeros(P: int, n_ctl: int) -> Sums:
         """Empty accumulators for a chunk of P paths with ``n_ctl`` control columns."""
-        return Sums(np.zeros((ROWS, N_MOM)), np.zeros(ROWS), np.empty(P), np.zeros(N_COUNTERS, dtype=np.int64),
+        return Sums(np.zeros((ROWS, N_MOM)), np.zeros(ROWS), np.empty(P),
+                    np.zeros(N_COUNTERS, dtype=np.int64),
                     np.zeros((2, n_ctl)))
 
 
@@ -159,8 +160,7 @@ def _run(tag, gen, s, out) -> None:
     thr = pp[P_THRESHOLD]
     # every level's arrays (x, v, V, xi, F, pvx; stuck) allocated here one by one: returned in
     # tuples by a helper, they made the loop copy about twice the array fields before every
-    # kernel call (harmonic ring, 2 paths: loop body 4100-4500 perf samples per 20 runs, 2900-3600
-    # with these)
+    # kernel call
     xf, vf, Vf, xif, Ff, pf = (np.zeros((N, P)), np.zeros((N, P)), np.zeros((N, P)), np.zeros((N, P)),
                                np.zeros((N, P)), np.zeros((N, P)))
     xc, vc, Vc, xic, Fc, pc = (np.zeros((N, P)), np.zeros((N, P)), np.zeros((N, P)), np.zeros((N, P)),

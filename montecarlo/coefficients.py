@@ -31,7 +31,8 @@ from ._kernels import MAX_SUBSTEPS
 from ._kink import AVERAGE, HOLD
 from .layout import (CF_E, CF_G, CF_H, CF_STEP, CF_SUB_E, CF_SUB_G, CF_XI_DECAY, CF_XI_HALF, CF_XI_NOISE,
                      KIND_KICK, KIND_KINK, KIND_LINEAR, P_A, P_GAMMA, P_K, P_K3, P_K4, P_KC, P_KINK_FORCE,
-                     P_KINK_RULE, P_KV, P_M, P_N, P_SIGMA, P_SIZE, P_STIFFNESS, P_TAU_P, P_THRESHOLD, P_XI_VAR)
+                     P_KINK_RULE, P_KV, P_M, P_N, P_SIGMA, P_SIZE, P_STIFFNESS, P_TAU_P, P_THRESHOLD,
+                     P_XI_VAR)
 
 __all__ = ["onsite_kind", "ONSITE_NAMES", "KINK_WIDTH", "KINK_RULES", "linear_stiffness", "step_coefficients",
            "physical_vector"]
@@ -141,7 +142,8 @@ def physical_vector(h: Harvester, threshold: float, rule: str = "average",
     p = h.params
     kind = onsite_kind(h) if kind is None else kind
     pp = np.zeros(P_SIZE)
-    pp[P_M], pp[P_GAMMA], pp[P_KV], pp[P_KC], pp[P_TAU_P], pp[P_SIGMA] = p.m, p.gamma, p.Kv, p.Kc, p.tau_p, p.sigma
+    pp[P_M], pp[P_GAMMA], pp[P_KV], pp[P_KC] = p.m, p.gamma, p.Kv, p.Kc
+    pp[P_TAU_P], pp[P_SIGMA] = p.tau_p, p.sigma
     pp[P_A], pp[P_N] = h.a, h.n
     if h.N > 1:
         pp[P_K], pp[P_K4], pp[P_K3] = h.k, h.k4, h.k3

@@ -98,7 +98,7 @@ def step_matrices(lin: Harvester, dt: float, step: str = "frozen"
 def stationary_covariances(lin: Harvester, dt: float, step: str = "frozen") -> np.ndarray:
     """Stationary covariance (N, 4, 4) of each mode's state before a step (discrete Lyapunov).
 
-    Raises :class:`ParameterError` when some mode of the discrete scheme is not stable
+    Raises :class:`ParameterError` when some mode of the discrete recursion is not stable
     (spectral radius >= 1).
     """
     import scipy.linalg
@@ -119,7 +119,7 @@ def twin_expectations(lin: Harvester, dt: float, n: float = 2.0, step: str = "fr
     """Exact expected values of the twin's measured moments (:data:`TWIN_MOMENTS`) at step dt.
 
     The second moments differ from the continuous-time values of
-    :func:`fpe_harvester.exact.mode_moments` by the scheme's O(dt^2) bias, which is what the
+    :func:`fpe_harvester.exact.mode_moments` by the integrator's O(dt^2) bias, which is what the
     simulated twin carries. A unit's measured state (x, v, V, xi) is Gaussian with covariance
     S, the mean over modes of :math:`T P_q T^T`, so the higher moments follow from Isserlis'
     theorem, e.g. :math:`\\langle x^2V^2\\rangle = S_{xx}S_{VV} + 2S_{xV}^2`, and

@@ -18,6 +18,8 @@ keeps that below a tenth of the tolerance:
 from __future__ import annotations
 
 import math
+from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 
@@ -26,7 +28,7 @@ from fpe_harvester.model import Harvester
 
 from .harmonic import twin_harvester
 
-__all__ = ["relaxation_time", "burn_in", "MIN_BURN", "FALLBACK_NOTE"]
+__all__ = ["RunPlan", "relaxation_time", "burn_in", "MIN_BURN", "FALLBACK_NOTE"]
 
 #: Shortest burn-in (model time units): a few correlation times of the noise and the load.
 MIN_BURN = 20.0
@@ -94,3 +96,35 @@ def burn_in(tau_r: float, tol: float, t_run: float) -> float:
     if not math.isfinite(tau_r):
         return math.inf
     return max(MIN_BURN, tau_r * math.log(max(10.0 * tau_r / (tol * t_run), 1.0)))
+
+
+@dataclass(frozen=True)
+class RunPlan:
+    """What the solver runs for one harvester (see :meth:`MonteCarlo.plan`).
+
+    Attributes
+    ----------
+    dt : float
+        Coarse time step (the reported level is ``dt/2`` with Richardson).
+    t_burn, t_run : float
+        Burn-in and measured time per path.
+    paths : int
+        Paths per replica.
+    twin : float or None
+        On-site stiffness of the harmonic twin (None: no twin).
+    start : str
+        ``"twin"`` (stationary law of the twin, or of a harmonic ring itself) or ``"rest"``.
+    relaxation_time : float
+        Slowest relaxation time behind ``t_burn`` (:func:`montecarlo.plan.relaxation_time`).
+    notes : dict
+        How each choice was made.
+    """
+
+    dt: float
+    t_burn: float
+    t_run: float
+    paths: int
+    twin: float | None
+    start: str
+    relaxation_time: float
+    notes: dict[str, Any]

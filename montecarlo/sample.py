@@ -1,4 +1,4 @@
-"""Samples of the stationary state (x, v, V, xi) from the Monte Carlo scheme.
+"""Samples of the stationary state (x, v, V, xi) from the Monte Carlo integrator.
 
 The estimators of :mod:`montecarlo.simulate` keep only time averages of moments; densities
 (histograms of the state, its law near the kink's trap at (x, v) = (0, 0)) need the states
@@ -24,8 +24,8 @@ from fpe_harvester.model import Harvester
 
 from ._kernels import _kick_force
 from ._kink import N_TAYLOR
-from .layout import CF_XI_DECAY, CF_XI_NOISE, KIND_LINEAR, N_COUNTERS, P_XI_VAR
 from .coefficients import onsite_kind, physical_vector, step_coefficients
+from .layout import CF_XI_DECAY, CF_XI_NOISE, KIND_LINEAR, N_COUNTERS, P_XI_VAR
 from .steps.frozen import d_step
 
 __all__ = ["sample_states"]
@@ -89,7 +89,7 @@ def sample_states(h: Harvester, *, samples: int = 1000, paths: int = 1000, every
     t_burn : float
         Time from rest (xi drawn from its stationary law) to the first sample, >= 0.
     dt : float
-        Time step, > 0. The scheme's bias is O(dt^2) on smooth observables (measured order 2
+        Time step, > 0. The integrator's bias is O(dt^2) on smooth observables (measured order 2
         at the kink too); densities on scales below the distance travelled in a step are not
         resolved.
     seed : int

@@ -16,12 +16,11 @@ adds the bound of :data:`montecarlo.estimate.RESIDUAL_RULE` on the remaining bia
 (automatic: twice the old start) is halved only when that bound, resolved, takes more than a
 third of ``tol``. By default (``extrapolate=False``) the fine level is reported with its
 Richardson bias estimate in the error, and an automatic ``dt`` is halved whenever that bias takes
-more than a third of ``tol``. Extrapolation is 1.8-3x faster at tol 1e-4 (n = 3 ring, n = 3
-and n = 1.5 units) but not the default: outside its asymptotic range its error bars do not hold
-(stiff m = 1e-3, n = 3: V2 off by 4.5 % with a 0.9 % error, first-order bias 17 %; tau = 1e-4,
-n = 3: Pin off by 5.9 errors). After each batch the burn-in is doubled when the first half of the measured
-window differs significantly from the whole (a transient left over); a halving or a doubling
-restarts the ensemble.
+more than a third of ``tol``. Extrapolation is faster at tight tolerances but not the default:
+outside its asymptotic range its error bars do not hold (docs/methods.md, "Error estimate").
+After each batch the burn-in is doubled when the first half of the measured window differs
+significantly from the whole (a transient left over); a halving or a doubling restarts the
+ensemble.
 """
 
 from __future__ import annotations
@@ -43,16 +42,15 @@ from fpe_harvester.result import Stats, Status
 
 from .coefficients import onsite_kind
 from .controls.martingale import MARTINGALE
+from .ensemble import Ensemble
 from .estimate import Estimate, estimate
 from .harmonic import linearized_stiffness, natural_amplitude
-from .plan import FALLBACK_NOTE, burn_in, relaxation_time
+from .plan import FALLBACK_NOTE, RunPlan, burn_in, relaxation_time
 from .report import DRIFT_SHARE, DRIFT_SIGMAS, result
-from .simulate import Ensemble, simulate
+from .simulate import simulate
 from .steps import STEP_NAMES, STEPPERS, resolve_step
 
-__all__ = ["MonteCarlo", "Plan"]
-
-
+__all__ = ["MonteCarlo"]
 
 #: Replica index where the pilot run's streams start (far from the measured replicas').
 _PILOT_FIRST = 2**40
@@ -66,10 +64,8 @@ _DT_MIN, _BIAS_SHARE = 0.02 / 32, 1.0 / 3.0
 #: is lower for the kink's frozen step at short tau).
 _START_ABOVE_MIN = 10.0
 #: With ``extrapolate`` the automatic steps start twice as coarse (levels dt/2, dt, 2 dt): the
-#: reported extrapolation's remaining error is of higher order. Measured (coupled three-level
-#: runs, a = 0.5, coarse dt 0.04): its estimate (R(2dt) - R(dt))/7 was -1.5e-5 +- 0.9e-5 (ring
-#: n = 3, N = 3, k = -0.5), 0.4e-5 +- 0.7e-5 (n = 3), 1.1e-5 +- 0.8e-5 (n = 1.5), against Richardson
-#: biases of the fine level 1.9e-4, 1.5e-4, 1.5e-4.
+#: reported extrapolation's remaining error is of higher order (docs/methods.md, "Why the
+#: settings are what they are").
 _EXTRAPOLATE_COARSER = 2.0
 #: Restarts allowed for a longer burn-in (the drift that triggers one: :data:`montecarlo.report.DRIFT_SIGMAS`).
 _BURN_RESTARTS = 3
@@ -77,23 +73,17 @@ _BURN_RESTARTS = 3
 _LOOSE_TOL = 5e-3
 #: An upper bound on the path loop's speed, in unit-steps (one unit of one path advanced by one
 #: ``dt``) per second and thread, used to refuse a first batch that ``max_time`` cannot cover
-#: (a batch is not interrupted). Eight times the fastest rate measured, 6.2e7 per CPU-second for
-#: a harmonic unit at the fine level alone (``python -m validation.studies.mc_throughput``; the
-#: solver's own runs, with the Richardson level: 1.0-2.8e7), so that no run the budget could
-#: cover is refused on a faster machine.
+#: (a batch is not interrupted): eight times the fastest rate measured
+#: (``python -m validation.studies.mc_throughput``), so that no run the budget could cover is
+#: refused on a faster machine.
 FASTEST_UNIT_STEPS = 5e8
 #: Automatic measured time per path, in burn-ins (when longer than the default below).
 _RUN_PER_BURN = 3.0
 #: Default measured time per path without and with the martingale controls. The martingale
 #: sums cancel the time average's fluctuation up to the boundary term of the Poisson solution,
-#: g(Y_start) - g(Y_end), whose share of the variance falls like 1/t_run: measured at n = 3,
-#: N = 3, a = 0.5, k = -0.5 (same basis and twin), variance reduction of eta 5.7, 10.6, 12.9 at
-#: t_run = 100, 400, 1000; harmonic unit (a = 0.5, linear basis) 8.0 at 100, 34 at 400.
-#: The longer run pays only when many replicas are needed anyway: at a loose tolerance the
-#: minimum of replicas at t_run = 100 already meets it and 400 would cost 4x (the test suite's
-#: Monte Carlo solves took ~1.5x longer in all with 400 at every tolerance), so 400 applies at
-#: tol <= _T_RUN_MART_TOL. Rejected: t_run = 1000 at tol = 1e-4 (ring above, extrapolation,
-#: seed 8100, one run each): 90.5 CPU-s (512 replicas of 8 paths) against 86.6 with 400.
+#: g(Y_start) - g(Y_end), whose share of the variance falls like 1/t_run; the longer run pays
+#: only when many replicas are needed anyway, so it applies at tol <= _T_RUN_MART_TOL (the
+#: measurements: docs/methods.md, "Why the settings are what they are").
 _T_RUN, _T_RUN_MART = 100.0, 400.0
 _T_RUN_MART_TOL = 1e-3
 
@@ -101,38 +91,6 @@ _T_RUN_MART_TOL = 1e-3
 #: A confined system's escape threshold is at least this many natural amplitudes
 #: (:func:`~montecarlo.harmonic.natural_amplitude`), and at least 100.
 ESCAPE_AMPLITUDES = 30.0
-
-@dataclass(frozen=True)
-class Plan:
-    """What the solver runs for one harvester (see :meth:`MonteCarlo.plan`).
-
-    Attributes
-    ----------
-    dt : float
-        Coarse time step (the reported level is ``dt/2`` with Richardson).
-    t_burn, t_run : float
-        Burn-in and measured time per path.
-    paths : int
-        Paths per replica.
-    twin : float or None
-        On-site stiffness of the harmonic twin (None: no twin).
-    start : str
-        ``"twin"`` (stationary law of the twin, or of a harmonic ring itself) or ``"rest"``.
-    relaxation_time : float
-        Slowest relaxation time behind ``t_burn`` (:func:`montecarlo.plan.relaxation_time`).
-    notes : dict
-        How each choice was made.
-    """
-
-    dt: float
-    t_burn: float
-    t_run: float
-    paths: int
-    twin: float | None
-    start: str
-    relaxation_time: float
-    notes: dict[str, Any]
-
 
 @dataclass(frozen=True)
 class MonteCarlo:
@@ -297,12 +255,12 @@ class MonteCarlo:
         except ParameterError as err:
             return str(err)
         if self.dt is None and dt < _START_ABOVE_MIN * _DT_MIN:
-            return (f"tau = {h.params.tau:g} is too short for the automatic time step: the {stepper.name} step "
-                    f"({stepper.preference}) would start at dt = {dt:g}, within {_START_ABOVE_MIN:g} x the "
-                    f"finest automatic step {_DT_MIN:g}, too few halvings to resolve its bias; "
-                    + "; ".join(f"{s.name}: {why}" for s in STEPPERS.values()
-                                if (why := s.refusal(h, onsite_kind(h))) is not None)
-                    + ". Give an explicit dt")
+            others = "; ".join(f"{s.name}: {why}" for s in STEPPERS.values()
+                               if (why := s.refusal(h, onsite_kind(h))) is not None)
+            return (f"tau = {h.params.tau:g} is too short for the automatic time step: the {stepper.name} "
+                    f"step ({stepper.preference}) would start at dt = {dt:g}, within {_START_ABOVE_MIN:g} x "
+                    f"the finest automatic step {_DT_MIN:g}, too few halvings to resolve its bias; {others}. "
+                    f"Give an explicit dt")
         return None
 
     def threshold(self, h: Harvester) -> float:
@@ -319,7 +277,7 @@ class MonteCarlo:
 
     # -- planning ----------------------------------------------------------------------------
 
-    def plan(self, h: Harvester) -> Plan:
+    def plan(self, h: Harvester) -> RunPlan:
         """Time step, burn-in, paths and twin for ``h`` from the settings (None = automatic).
 
         A nonlinear ring gets a short pilot run from rest (no twin) that measures
@@ -372,7 +330,7 @@ class MonteCarlo:
         paths = self.paths or self._auto_paths(t_burn, t_run)
         if self.t_run is None and dt > t_run:
             t_run = dt
-        return Plan(dt=dt, t_burn=t_burn, t_run=t_run, paths=paths, twin=twin, start=start,
+        return RunPlan(dt=dt, t_burn=t_burn, t_run=t_run, paths=paths, twin=twin, start=start,
                     relaxation_time=tau_r, notes=notes)
 
     def _pilot_stiffness(self, h: Harvester, dt: float, t_burn: float, t_run: float,
@@ -395,7 +353,7 @@ class MonteCarlo:
         threads = self.threads or default_threads()
         return h.N * paths * replicas * (t_path / dt) / (FASTEST_UNIT_STEPS * threads)
 
-    def _beyond_budget(self, h: Harvester, plan: Plan, wall: float) -> Stats | None:
+    def _beyond_budget(self, h: Harvester, plan: RunPlan, wall: float) -> Stats | None:
         """The ``NOT_CONVERGED`` result, without numbers, when ``max_time`` cannot cover the
         first batch of ``min_replicas`` (``wall``: seconds spent planning, reported); else None."""
         need = self.least_seconds(h, plan.dt, plan.paths, self.min_replicas, plan.t_burn + plan.t_run)
@@ -427,7 +385,7 @@ class MonteCarlo:
     def _batch(self) -> int:
         return self.batch or self.threads or default_threads()
 
-    def _run(self, h: Harvester, plan: Plan, replicas: int, first: int) -> Ensemble:
+    def _run(self, h: Harvester, plan: RunPlan, replicas: int, first: int) -> Ensemble:
         return simulate(h, dt=plan.dt, paths=plan.paths, replicas=replicas, t_burn=plan.t_burn,
                         t_run=plan.t_run, seed=self.seed, richardson=self.richardson,
                         threshold=self.threshold(h), threads=self.threads, first_replica=first,
@@ -435,7 +393,7 @@ class MonteCarlo:
                         controls=(MARTINGALE.name,) if self.martingale else (),
                         third_level=self.extrapolate)
 
-    def _restart_reason(self, h: Harvester, plan: Plan, est: Estimate) -> tuple[str, Plan] | None:
+    def _restart_reason(self, h: Harvester, plan: RunPlan, est: Estimate) -> tuple[str, RunPlan] | None:
         """After a batch: a finer step or a longer burn-in, if the data ask for one.
 
         Both tests need three standard errors (they are repeated after every batch) and a
@@ -462,7 +420,7 @@ class MonteCarlo:
             return "t_burn", dataclasses.replace(plan, t_burn=t_burn, t_run=t_run, paths=paths)
         return None
 
-    def run(self, h: Harvester, plan: Plan | None = None) -> tuple[Ensemble, Estimate, bool, Plan]:
+    def run(self, h: Harvester, plan: RunPlan | None = None) -> tuple[Ensemble, Estimate, bool, RunPlan]:
         """Adaptive replica loop; returns the ensemble, its estimate, whether tol was met, the plan."""
         from tqdm import tqdm
 

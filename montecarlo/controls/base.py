@@ -9,7 +9,7 @@ import numpy as np
 from fpe_harvester.model import Harvester
 
 if TYPE_CHECKING:
-    from ..simulate import Ensemble
+    from ..ensemble import Ensemble
 
 __all__ = ["Control", "Columns"]
 

@@ -12,7 +12,7 @@ Ornstein--Uhlenbeck normal :math:`Z_j` of each unit (frozen-xi step, xi incremen
     \\eta_{j,m} = \\xi_j(t_{m+1}) - e^{-(t_{m+1} - t_m)/\\tau}\\xi_j(t_m)
     = \\sum_{t_m \\le s < t_{m+1}} e^{-(t_{m+1} - s - h)/\\tau} s Z_{j,s},\\qquad E[M_\\phi] = 0
 
-exactly, for any dt, scheme, start and coefficient (each normal is independent of everything
+exactly, for any dt, step, start and coefficient (each normal is independent of everything
 before it), so these sums are control variates with known mean 0 whose regression
 (:mod:`montecarlo.controls.regression`) adds no bias and leaves the Richardson pair untouched. The
 :math:`t_m` are the measured steps (the fine level's first substep with Richardson); the
@@ -31,13 +31,8 @@ Basis, per unit j (sums over units; the ring's symmetry makes one coefficient pe
 ``lin``  (x, v, V, xi) of the unit (d = 0) and the sums over its two neighbours at lag d,
          d = 1 .. D, :math:`D = \\min(\\lfloor N/2\\rfloor,` :data:`MG_DIST`);
 ``nl``   odd nonlinear terms of the unit: :data:`NL_NAMES` (``dU`` is :math:`-U'(x_j)`, ``r2``
-         the neighbours' :math:`x_{j-1}^2 + x_{j+1}^2`). Measured at n = 3, N = 3, a = 0.5,
-         k = -0.5 (300 replicas of 2 paths, t_run = 400; variance reduction of eta): lin 4.7,
-         lin + he 4.7, lin + he + nl 9.4, with the twin 10.3. Rejected: the ring's angular
-         momentum :math:`\\ell = \\sum_l x_l(v_{l+1} - v_{l-1})` times the tangents
-         :math:`x_{j+1} - x_{j-1}` (and of v, xi): 9.2; cubic neighbour terms
-         :math:`x_j^2 s_j, x_j s_j^2, s_j^3, x_jv_js_j` (:math:`s_j = x_{j-1} + x_{j+1}`): 9.6
-         for four more controls;
+         the neighbours' :math:`x_{j-1}^2 + x_{j+1}^2`; the terms measured against others:
+         docs/methods.md, "Why the settings are what they are");
 ``he``   noise only: :math:`\\sum_j (\\eta_j^2/\\mathrm{var} - 1)` and
          :math:`\\sum_j \\eta_j\\eta_{j+d}/\\mathrm{var}`, d = 1 .. D (var the innovation's variance).
 
@@ -65,10 +60,11 @@ from ..harmonic import step_matrices
 from .base import Columns, Control
 
 if TYPE_CHECKING:
-    from ..simulate import Ensemble
+    from ..ensemble import Ensemble
 
 __all__ = ["MARTINGALE", "BOUNDARY", "MartingaleControl", "BoundaryControl", "BOUNDARY_TAIL", "MG_DIST",
-           "NL_NAMES", "basis_names", "lags", "n_state", "mg_measure", "stationary_window", "poisson_controls"]
+           "NL_NAMES", "basis_names", "lags", "n_state", "mg_measure", "stationary_window",
+           "poisson_controls"]
 
 #: Tail probability of the test (Hotelling's T^2 against chi^2) that the end-of-window terms
 #: have mean 0; where it fails the candidate sets with them are left out (:func:`stationary_window`).
@@ -266,9 +262,8 @@ BOUNDARY = BoundaryControl()
 def stationary_window(mg: dict[str, np.ndarray], valid: np.ndarray, names: tuple[str, ...]) -> bool:
     """Whether the end-of-window terms are usable: present, and their means consistent with 0
     (Hotelling's T^2 below the chi^2 quantile at :data:`BOUNDARY_TAIL`). They have mean 0 only
-    for a stationary window; a transient left by the burn-in shows here first (ring n = 3, N = 3,
-    k = -0.5 from rest, dt = 0.1, 200 replicas of 4 paths, t_run = 40: refused at t_burn = 5,
-    accepted at t_burn = 50)."""
+    for a stationary window; a transient left by the burn-in shows here first
+    (tests/montecarlo/test_extrapolate.py)."""
     from scipy.stats import chi2
 
     cols = [mg[name][valid] for name in names if name.startswith("bd_")]
@@ -294,7 +289,8 @@ def poisson_controls(lin: Harvester, dt: float, names: tuple[str, ...]) -> dict[
     For the harmonic ring ``lin`` at the frozen-xi step dt, the measured state
     :math:`Y_t` (x, v, V after the step's flow, xi before its update, unit by unit) is the linear
     chain :math:`Y_{t+1} = A Y_t + \\sum_j b_j Z_j` with :math:`A = T D_\\xi` (T of
-    :func:`montecarlo.harmonic.step_matrices` in unit space, :math:`D_\\xi` the xi decay :math:`e^{-h/\\tau}`) and
+    :func:`montecarlo.harmonic.step_matrices` in unit space, :math:`D_\\xi` the xi decay
+    :math:`e^{-h/\\tau}`) and
     :math:`b_j = s\\,T e_{\\xi_j}`. For a quadratic observable :math:`f = Y^TFY` (the ring mean of
     :math:`V^2`, or of :math:`\\sigma e^{-h/2\\tau} v\\xi`) the Poisson equation
     :math:`g - E[g(Y')|Y] = f - \\pi(f)` has the quadratic solution :math:`g = Y^TGY`,

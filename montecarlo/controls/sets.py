@@ -25,7 +25,7 @@ from .regression import enough_dof
 from .twin import TWIN
 
 if TYPE_CHECKING:
-    from ..simulate import Ensemble
+    from ..ensemble import Ensemble
 
 __all__ = ["CONTROLS", "CONTROL_SETS", "control_columns", "choose_controls"]
 
@@ -72,11 +72,9 @@ def choose_controls(sizes: dict[str, int]) -> str:
 
     The rule does not look at the data. Choosing the set whose *estimated* variance of eta is
     least picks, among sets of similar merit, the one whose variance happens to be
-    underestimated, and its error bar is then too small. Measured (tol 1e-2, 32 replicas,
-    400 seeds each, z against Fokker--Planck at 1e-4): n = 3, a = 0.5, rms z of eta 1.137 with
-    the least-variance choice (twin 361 times, martingale 39), 1.083 with the twin always, 0.986
-    with the martingale set always (its error 1.4x the chosen one's); n = 8, a = 0.5: 1.009, 1.024
-    and 0.948. Each set is contained in the richer ones that add to it (martingale within
+    underestimated, and its error bar is then too small (docs/methods.md, "Why the settings are
+    what they are").
+    Each set is contained in the richer ones that add to it (martingale within
     martingale+twin and martingale+boundary, all within martingale+boundary+twin; twin within
     martingale+twin), and a set that contains another never has a larger residual variance in the
     population: the extra controls cost degrees of freedom only, which

@@ -19,7 +19,7 @@ from ..layout import CF_PVX, CF_XI_HALF, M_TWIN
 from .base import Columns, Control
 
 if TYPE_CHECKING:
-    from ..simulate import Ensemble
+    from ..ensemble import Ensemble
 
 __all__ = ["TWIN_MOMENTS", "TWIN", "TwinControl", "measure_twin"]
 

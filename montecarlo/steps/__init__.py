@@ -82,6 +82,7 @@ def resolve_step(h: Harvester, step: str = "auto", dt: float | None = None, kind
         reasons.append(f"{s.name}: {why or s.preference}")
     where = f"dt = {dt:g}" if dt is not None else "its automatic time step"
     if step != "auto":
-        raise ParameterError(f"step = {step!r} cannot serve n = {h.n:g}, tau = {h.params.tau:g}: {reasons[0]}")
+        raise ParameterError(f"step = {step!r} cannot serve n = {h.n:g}, tau = {h.params.tau:g}: "
+                             f"{reasons[0]}")
     raise ParameterError(f"no Monte Carlo step serves n = {h.n:g}, tau = {h.params.tau:g} at {where}: "
                          + "; ".join(reasons))

@@ -108,7 +108,7 @@ def d_step(x, v, V, xi, F, stuck, xm, fext, w, cf, pp, kind, counters, cs) -> No
     """
     N, P = x.shape
     h = cf[CF_H]
-    # the kink scheme kicks only the smooth remainder of a near-kink potential (n > 1)
+    # the kink treatment kicks only the smooth remainder of a near-kink potential (n > 1)
     kicks = kind == KIND_KICK or (kind == KIND_KINK and pp[P_N] != 1.0)
     # stiff walls: paths to redo as substeps, with their state at the start of the step
     n_stiff = 0

@@ -142,7 +142,7 @@ def _joint_substeps(x, v, V, xi, F, fext, pvx, p: int, K: int, cf: np.ndarray, p
 
 @njit(cache=True, nogil=True)
 def _d_step_joint(x, v, V, xi, F, xm, fext, eps, cf, pp, kind, rbm, rbx, pvx, w, gen) -> None:
-    """One whole step of the joint scheme: kick(h/2), exact linear flow of (x, v, V, xi) with
+    """One whole joint step: kick(h/2), exact linear flow of (x, v, V, xi) with
     noise increment ``eps``, kick(h/2); the neighbours' force enters as a constant at their
     predicted midpoints, and stiff walls split a path's step, as in :func:`montecarlo.steps.frozen.d_step`.
 

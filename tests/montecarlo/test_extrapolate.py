@@ -57,7 +57,8 @@ def test_coarsest_level_has_the_law_of_its_own_step(step: str) -> None:
             se = d.std(ddof=1) / math.sqrt(d.size)
             want = ex[level][name] - ex[0][name]
             assert abs(d.mean() - want) < 4 * se, (level, name, d.mean(), want, se)
-            if level == 2 and name != "x2" and step == "frozen":  # x moves slowly: its differences are not resolved
+            # x moves slowly: its differences are not resolved
+            if level == 2 and name != "x2" and step == "frozen":
                 assert abs(want) > 8 * se, (level, name)
 
 

@@ -98,7 +98,7 @@ def test_refusals_name_the_step_and_the_reason() -> None:
     with pytest.raises(ParameterError, match="step = 'joint' cannot serve.*kink"):
         resolve_step(kink, "joint", 0.02)
     # the averaged step is measured only for tau <= 1e-4: asked for at tau = 1 it refuses
-    with pytest.raises(ParameterError, match=r"step = 'averaged' cannot serve.*measured only for tau <= 0.0001"):
+    with pytest.raises(ParameterError, match=r"'averaged' cannot serve.*measured only for tau <= 0.0001"):
         resolve_step(kink, "averaged", 0.02)
     with pytest.raises(ParameterError, match="averaged-noise step serves the kink"):
         resolve_step(Harvester.build(a=0.5, n=3, tau=1e-4), "averaged", 0.02)
@@ -156,7 +156,7 @@ def test_kink_refuses_a_tau_shorter_than_its_step() -> None:
     h = Harvester.build(a=0.5, n=1, tau=1e-3)
     with pytest.raises(MethodNotAvailableError, match="tau = 0.001 is too short for the automatic time step"):
         solve(h, "mc", progress=False)
-    with pytest.raises(MethodNotAvailableError, match="no Monte Carlo step serves n = 1, tau = 0.001 at dt = 0.01"):
+    with pytest.raises(MethodNotAvailableError, match="no Monte Carlo step serves n = 1, tau = 0.001 at dt"):
         solve(h, "mc", dt=1e-2, progress=False)
     with pytest.raises(ParameterError, match="no Monte Carlo step serves"):
         simulate(h, dt=1e-2, paths=2, replicas=1, t_run=1.0)

@@ -13,10 +13,10 @@ from montecarlo import layout
 from montecarlo._kernels import MAX_SUBSTEPS
 from montecarlo._kink import HOLD
 from montecarlo.coefficients import linear_stiffness, physical_vector, step_coefficients
-from montecarlo.layout import (CF_E, CF_G, CF_H, CF_PVX, CF_STEP, CF_SUB_E, CF_SUB_G, CF_XI_DECAY, CF_XI_HALF,
-                               CF_XI_NOISE, KIND_KINK, MOMENTS, P_A, P_GAMMA, P_K, P_K3, P_K4, P_KC, P_KINK_FORCE,
-                               P_KINK_RULE, P_KV, P_M, P_N, P_SIGMA, P_SIZE, P_STIFFNESS, P_TAU_P, P_THRESHOLD,
-                               P_XI_VAR)
+from montecarlo.layout import (CF_E, CF_G, CF_H, CF_PVX, CF_STEP, CF_SUB_E, CF_SUB_G, CF_XI_DECAY,
+                               CF_XI_HALF, CF_XI_NOISE, KIND_KINK, MOMENTS, P_A, P_GAMMA, P_K, P_K3, P_K4,
+                               P_KC, P_KINK_FORCE, P_KINK_RULE, P_KV, P_M, P_N, P_SIGMA, P_SIZE, P_STIFFNESS,
+                               P_TAU_P, P_THRESHOLD, P_XI_VAR)
 
 # every parameter different, so that a swapped slot shows
 H = Harvester.build(a=0.7, n=1.02, N=3, k=-0.11, k4=0.013, k3=0.17, m=1.3, gamma=0.9, Kv=1.1, Kc=0.8,
@@ -45,8 +45,8 @@ def test_physical_vector_fills_each_named_slot() -> None:
 
 
 def test_coefficient_slots_do_not_overlap() -> None:
-    widths = {CF_E: 9, CF_G: 3, CF_H: 1, CF_XI_DECAY: 1, CF_XI_NOISE: 1, CF_XI_HALF: 1, CF_SUB_E: 9, CF_SUB_G: 3,
-              CF_PVX: 1}
+    widths = {CF_E: 9, CF_G: 3, CF_H: 1, CF_XI_DECAY: 1, CF_XI_NOISE: 1, CF_XI_HALF: 1, CF_SUB_E: 9,
+              CF_SUB_G: 3, CF_PVX: 1}
     assert set(widths) == set(v for k, v in _names("CF_").items() if k != "CF_STEP")
     covered = sorted(i for start, width in widths.items() for i in range(start, start + width))
     assert covered == list(range(CF_STEP))
@@ -65,7 +65,8 @@ def test_step_coefficients_fill_each_named_slot() -> None:
         np.testing.assert_allclose(cf[g0:g0 + 3], E[:3, 3], rtol=1e-13, atol=1e-18)
     assert cf[CF_H] == dt
     assert cf[CF_XI_DECAY] == pytest.approx(math.exp(-dt / p.tau), rel=1e-15)
-    assert cf[CF_XI_NOISE] == pytest.approx(math.sqrt(p.D / p.tau * (1 - math.exp(-2 * dt / p.tau))), rel=1e-14)
+    noise = math.sqrt(p.D / p.tau * (1 - math.exp(-2 * dt / p.tau)))
+    assert cf[CF_XI_NOISE] == pytest.approx(noise, rel=1e-14)
     assert cf[CF_XI_HALF] == pytest.approx(math.exp(-dt / (2 * p.tau)), rel=1e-15)
     assert cf[CF_PVX] == 0.0
 
