@@ -315,7 +315,7 @@ def poisson_controls(lin: Harvester, dt: float, names: tuple[str, ...]) -> dict[
     dt : float
         The fine step of the ensemble, > 0 (frozen-xi step).
     names : tuple of str
-        :attr:`montecarlo.Ensemble.mart_names` of the ensemble.
+        The martingale sums' names, ``ctl_names["martingale"]`` of the ensemble.
 
     Returns
     -------

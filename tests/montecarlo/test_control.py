@@ -11,6 +11,8 @@ from fpe_harvester import Harvester, Status, solve
 from fpe_harvester.errors import ParameterError
 from fpe_harvester.exact import dense_covariance, mode_moments
 from montecarlo import estimate, simulate
+from montecarlo.controls import sets
+from montecarlo.controls.base import Control
 from montecarlo.controls.regression import regression_estimate
 from montecarlo.controls.twin import TWIN_MOMENTS
 from montecarlo.harmonic import initial_cholesky, linearized_stiffness, twin_expectations, twin_harvester
@@ -153,3 +155,28 @@ def test_regression_leaves_out_a_control_constant_to_round_off(rng) -> None:
     r = regression_estimate(y, np.hstack([c, flat]), np.array([0.0, 0.5 + 1e-14]))
     assert r.mean[0] == pytest.approx(ref.mean[0], rel=1e-12)
     assert r.cov[0, 0] == pytest.approx(ref.cov[0, 0] * (64 - 2) / (64 - 3), rel=1e-9)
+
+
+class _NoiseOnly(Control):
+    """The martingale's noise-only sums (``he_*``, mean 0 exactly) as a control of their own."""
+
+    name = "noise"
+
+    def columns(self, e, valid):
+        names = [n for n in e.ctl_names.get("martingale", ()) if n.startswith("he_")]
+        if not names:
+            return None
+        mg, first = e.control_sums("martingale"), e.control_sums("martingale", first_half=True)
+        return [mg[n][valid] for n in names], [first[n][valid] for n in names], [0.0] * len(names)
+
+
+def test_a_registered_control_reaches_the_estimate(monkeypatch) -> None:
+    # a new control is its object in CONTROLS and a set that names it: nothing else changes
+    monkeypatch.setitem(sets.CONTROLS, "noise", _NoiseOnly())
+    monkeypatch.setitem(sets.CONTROL_SETS, "noise", ("noise",))
+    h = Harvester.build(a=0.5, n=3)
+    e = simulate(h, dt=0.05, paths=4, replicas=40, t_burn=5.0, t_run=20.0, seed=2, controls=("martingale",))
+    est = estimate(e, h, controls="noise")
+    assert est.control and est.controls == "noise"
+    with pytest.raises(ParameterError, match="needs an ensemble with control variates"):
+        estimate(simulate(h, dt=0.05, paths=4, replicas=40, t_burn=5.0, t_run=20.0, seed=2), h, controls="noise")
