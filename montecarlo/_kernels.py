@@ -1,93 +1,44 @@
-"""numba kernels shared by the step schemes: coefficient layout, kicks, measurement, escapes.
+"""numba kernels shared by the steps: kicks, stiff walls, coupling, measurement, escapes.
 
-Private module. The step schemes (:mod:`montecarlo.steps`) and the path loop
-(:mod:`montecarlo._loop`) use these; the Python side (:mod:`montecarlo.scheme`) builds the
-coefficient arrays:
-
-``cf`` (per step size h)
-    ``cf[0:9]`` the 3x3 propagator :math:`E = e^{Ah}` of the linear part of (x, v, V),
-    row-major; ``cf[9:12]`` its response :math:`g = \\int_0^h e^{As}b\\,ds` to a unit
-    constant force; ``cf[12] = h``; ``cf[13] = e^{-h/\\tau}``;
-    ``cf[14] = \\sqrt{(D/\\tau)(1 - e^{-2h/\\tau})}``; ``cf[15] = e^{-h/2\\tau}``;
-    ``cf[16:25]``, ``cf[25:28]``: E and g of the substep ``h /`` :data:`MAX_SUBSTEPS` (the
-    stiff-wall substeps build ``h/K`` from it by squaring,
-    :func:`montecarlo.steps.frozen._substep_path`).
-``pp`` (physical)
-    ``m, gamma, Kv, Kc, tau_p, sigma, k, a, n, c, threshold, D/tau, rule, a_kink, k4, k3``
-    where ``c`` is the stiffness kept inside the linear flow (``2k + 6k4``, plus ``2a`` for the
-    harmonic potential), ``threshold`` the escape amplitude, ``rule`` the kink's rule for swings
-    shorter than the step (:data:`montecarlo._kink.AVERAGE` or ``HOLD``) and ``a_kink`` the strength
-    :math:`an` of the kink part :math:`-an\\,\\mathrm{sign}(x)` integrated exactly by the kink
-    scheme (0 for the others).
-``cf_t`` (harmonic twin, optional)
-    ``cf`` of the harmonic ring with on-site stiffness ``kappa_t`` and the same ``k``, run on
-    the fine level's noise; its moments are control variates (:mod:`montecarlo.controls.twin`).
-
-The steps themselves are :mod:`montecarlo.steps.frozen` (frozen-xi Strang splitting) and
-:mod:`montecarlo.steps.joint` (the joint Gaussian step of (x, v, V, xi), ``cf[CF_JOINT] = 1``),
-the kink's exact piecewise flow :mod:`montecarlo._kink`. The ring's coupling force is computed in
-one place, :func:`_ring_coupling` (:func:`_coupling_force` per unit). It and :func:`_kick` exist
-twice, as an ordinary call and inlined (``..._inline``), from one body: the general step kernels
-call them, the fast ones inline them (:class:`montecarlo.steps.base.StepScheme`).
+Private module. The steps (:mod:`montecarlo.steps`) and the path loop (:mod:`montecarlo._loop`)
+use these; the arrays they read are laid out in :mod:`montecarlo.layout`. The ring's coupling
+force is computed in one place, :func:`_ring_coupling` (:func:`_coupling_force` per unit). It and
+:func:`_kick` exist twice, as an ordinary call and inlined (``..._inline``), from one body: the
+steps' general kernels call them, their fast kernels inline them
+(:class:`montecarlo.steps.base.Stepper`).
 """
 
 from __future__ import annotations
 
-import math
 
 import numpy as np
 from numba import njit
 
 from ._force import _onsite_force
+from .layout import (CF_PVX, CF_XI_HALF, KIND_KICK, KIND_KINK, M_V2, M_d2, M_stuck, M_v2, M_vV, M_vxi, M_x2,
+                     M_xdU, P_A, P_K, P_K3, P_K4, P_KINK_FORCE, P_M, P_N, P_SIGMA)
 
-KIND_LINEAR = 0
-KIND_KICK = 1
-KIND_KINK = 2
-
-#: Stiff walls (smooth scheme, n > 2): a path whose stiffest unit has
+#: Stiff walls (kick treatment, n > 2): a path whose stiffest unit has
 #: :math:`h^2 U''(x_e)/m > ` STIFF_LIMIT (x_e the farther of x and x + h v at the start of a
-#: step) takes that step as K equal
-#: substeps (K the smallest power of 2 that brings it below, at most MAX_SUBSTEPS), the
-#: neighbours' force held at its value for the whole step. The kick-drift-kick step is
-#: unstable for :math:`h^2 U''/m > 4`; with n = 12, 16 the tails of the law (and the first
-#: steps from a Gaussian start) reach it at dt = 0.01 and paths blew up (0.5 %, 2.6 %).
+#: step) takes that step as K equal substeps (K the smallest power of 2 that brings it below, at
+#: most MAX_SUBSTEPS), the neighbours' force held at its value for the whole step. The
+#: kick-drift-kick step is unstable for :math:`h^2 U''/m > 4`, which the tails of the law of a
+#: steep wall (n = 12, 16) and the first steps from a Gaussian start reach at dt = 0.01.
 STIFF_LIMIT = 1.0
 MAX_SUBSTEPS = 1024
 
-#: Joint step (``cf[CF_JOINT] = 1``): from ``o = CF_JOINT + 1``, ``cf[o:o+16]`` the 4x4
-#: propagator of (x, v, V, xi), ``[o+16:o+20]`` its response to a unit constant force on v,
-#: ``[o+20:o+36]`` the noise factor L (increment = L z, z four standard normals), ``[o+36]``
-#: the noise covariance of (v, xi), ``[o+37]`` the regression coefficient of the xi increment
-#: on the x increment (:func:`montecarlo.scheme.step_coefficients`).
-#: Block ``i = 1 ..`` log2(MAX_SUBSTEPS) after it holds the same entries (from the propagator
-#: on) for the substep ``h / 2^i`` of the stiff walls.
-CF_JOINT = 28
-JOINT_BLOCK = 38
-CF_SIZE = CF_JOINT + 1 + JOINT_BLOCK * (1 + 10)
-
-#: Moments accumulated per level, in this order: the system's (``xdU`` is
-#: :math:`x\\,U'(x)`, for the statistical linearization), prefixed ``t_`` the harmonic
-#: twin's (fine level only; zero without a twin), and the bond's :math:`(x_{j+1} - x_j)^2`
-#: (``d2``, 0 for a single unit; last so that the twin's slots keep their place).
-MOMENTS = ("V2", "vV", "v2", "x2", "vxi", "stuck", "xdU",
-           "t_V2", "t_vV", "t_v2", "t_x2", "t_vxi",
-           "t_x4", "t_x2V2", "t_x2v2", "t_absxn", "t_V2v2", "t_vxiV2", "d2")
-N_MOM = len(MOMENTS)
-#: Rows of the ``sums`` accumulator: fine level, coarse level, fine level over the first half
-#: of the measured window (the burn-in drift check compares it with the whole), and the
-#: coarsest level (twice the coarse step, only with ``third``).
-ROWS = 4
 
 
 @njit(cache=True, nogil=True, inline="always")
 def _kick_force(x: float, pp: np.ndarray) -> float:
-    """The on-site force left to the kicks: -U'(x), minus the kink part -pp[13] sign(x) that
-    the kink flow integrates exactly (pp[13] = 0 for the smooth scheme)."""
-    F = _onsite_force(x, pp[7], pp[8])
+    """The on-site force left to the kicks: -U'(x), minus the kink part
+    :math:`-an\\,\\mathrm{sign}(x)` that the kink's flow integrates exactly (``pp[P_KINK_FORCE]``,
+    0 for the other on-site kinds)."""
+    F = _onsite_force(x, pp[P_A], pp[P_N])
     if x > 0.0:
-        F += pp[13]
+        F += pp[P_KINK_FORCE]
     elif x < 0.0:
-        F -= pp[13]
+        F -= pp[P_KINK_FORCE]
     return F
 
 
@@ -95,7 +46,7 @@ def _kick_force(x: float, pp: np.ndarray) -> float:
 def _kick_inline(x, v, F, h, pp, update) -> None:
     """Half kick v += (h/2) F/m; with ``update`` first recompute F (:func:`_kick_force`)."""
     N, P = x.shape
-    m = pp[0]
+    m = pp[P_M]
     hk = 0.5 * h / m
     for j in range(N):
         for p in range(P):
@@ -105,7 +56,7 @@ def _kick_inline(x, v, F, h, pp, update) -> None:
 
 
 #: :func:`_kick_inline` as an ordinary call, for the steps' general kernels (their fast kernels
-#: inline it: :class:`~montecarlo.steps.base.StepScheme`).
+#: inline it: :class:`~montecarlo.steps.base.Stepper`).
 _kick = njit(cache=True, nogil=True)(_kick_inline.py_func)
 
 
@@ -113,7 +64,7 @@ _kick = njit(cache=True, nogil=True)(_kick_inline.py_func)
 @njit(cache=True, nogil=True, inline="always")
 def _stiff_amplitude(pp: np.ndarray, h: float) -> float:
     """The |x| beyond which a step h sees h^2 U''(x)/m > STIFF_LIMIT (n > 2)."""
-    return (STIFF_LIMIT * pp[0] / (h * h * pp[7] * pp[8] * (pp[8] - 1.0))) ** (1.0 / (pp[8] - 2.0))
+    return (STIFF_LIMIT * pp[P_M] / (h * h * pp[P_A] * pp[P_N] * (pp[P_N] - 1.0))) ** (1.0 / (pp[P_N] - 2.0))
 
 
 @njit(cache=True, nogil=True, inline="always")
@@ -146,8 +97,8 @@ def _substeps(x: float, v: float, h: float, xstar: float, pp: np.ndarray) -> int
     xe = _reach(x, v, h)
     if xe <= xstar:
         return 1
-    a, n = pp[7], pp[8]
-    stiff = h * h * a * n * (n - 1.0) * xe ** (n - 2.0) / pp[0]
+    a, n = pp[P_A], pp[P_N]
+    stiff = h * h * a * n * (n - 1.0) * xe ** (n - 2.0) / pp[P_M]
     K = 1
     while stiff > STIFF_LIMIT * K * K and K < MAX_SUBSTEPS:
         K *= 2
@@ -157,16 +108,17 @@ def _substeps(x: float, v: float, h: float, xstar: float, pp: np.ndarray) -> int
 
 @njit(cache=True, nogil=True)
 def _measure(x, v, V, xi, stuck, F, w, cf, pp, kind, acc, pvx) -> float:
-    """Add the moments of the live paths (weight w = 1) to acc[0:7] and the bonds' d^2 to
-    acc[18] (N bonds per ring of N >= 2); return unit-steps counted.
+    """Add the system's moments of the live paths (weight w = 1) to their slots of ``acc``
+    (:data:`montecarlo.layout.MOMENTS`; the bonds' d^2: N bonds per ring of N >= 2); return
+    unit-steps counted.
 
     ``F`` holds -U'(x) at the current x for the smooth kind (the last kick computed it).
     After a joint step, v xi is replaced by the estimate ``pvx`` of :func:`_d_step_joint` (and
     after the kink's averaged-noise step by its own, :mod:`montecarlo.steps.averaged`).
     """
     N, P = x.shape
-    half = cf[15]
-    a, n = pp[7], pp[8]
+    half = cf[CF_XI_HALF]
+    a, n = pp[P_A], pp[P_N]
     s0 = s1 = s2 = s3 = s4 = s5 = s6 = s7 = 0.0
     # the bonds' d^2 in the same pass: a pass of its own cost 15 % of this function at small P
     for j in range(N):
@@ -182,7 +134,7 @@ def _measure(x, v, V, xi, stuck, F, w, cf, pp, kind, acc, pvx) -> float:
             if N > 1:
                 d = x[jp, p] - x[j, p]
                 s7 += wp * d * d
-    if cf[CF_JOINT] == 1.0:
+    if cf[CF_PVX] == 1.0:
         s4 = 0.0
         for j in range(N):
             for p in range(P):
@@ -198,15 +150,15 @@ def _measure(x, v, V, xi, stuck, F, w, cf, pp, kind, acc, pvx) -> float:
                 s6 += w[p] * a * (ax if n == 1.0 else n * ax**n)
     else:
         s6 = 2.0 * a * s3
-    acc[0] += s0
-    acc[1] += s1
-    acc[2] += s2
-    acc[3] += s3
-    acc[4] += s4 * half
-    acc[5] += s5
-    acc[6] += s6
+    acc[M_V2] += s0
+    acc[M_vV] += s1
+    acc[M_v2] += s2
+    acc[M_x2] += s3
+    acc[M_vxi] += s4 * half
+    acc[M_stuck] += s5
+    acc[M_xdU] += s6
     if N > 1:
-        acc[18] += s7
+        acc[M_d2] += s7
     live = 0.0
     for p in range(P):
         live += w[p]
@@ -278,7 +230,7 @@ def _start(gen, chol, sd, x, v, V, xi) -> None:
 def _clamp_start(x: np.ndarray, kind: int, pp: np.ndarray, h: float) -> None:
     """A Gaussian start can land deep in a steep wall, where even MAX_SUBSTEPS substeps of a
     step h are unstable: such draws start at the deepest resolvable |x| (the burn-in forgets it)."""
-    if kind == KIND_KICK and pp[8] > 2.0:
+    if kind == KIND_KICK and pp[P_N] > 2.0:
         xcap = _stiff_amplitude(pp, h / MAX_SUBSTEPS)
         for j in range(x.shape[0]):
             for p in range(x.shape[1]):
@@ -306,7 +258,7 @@ def _coupling_force(x2m: float, xm: float, x: float, xp: float, x2p: float, k: f
 
     The force is :math:`-\\partial E/\\partial x_j` of :math:`E = (k/2)\\sum d^2 +
     (k_4/2)\\sum (Lx)^2 + (k_3/4)\\sum d^4` (bonds :math:`d = x_{j+1} - x_j`) minus the part
-    :math:`-(2k + 6k_4)x_j` kept in the exact linear flow (:func:`montecarlo.scheme.linear_stiffness`):
+    :math:`-(2k + 6k_4)x_j` kept in the exact linear flow (:func:`montecarlo.coefficients.linear_stiffness`):
     :math:`k(x_{j-1} + x_{j+1}) + k_4[4(x_{j-1} + x_{j+1}) - x_{j-2} - x_{j+2}]
     + k_3[(x_{j+1} - x_j)^3 - (x_j - x_{j-1})^3]`, indices modulo N (so that N = 2 is a ring
     of two bonds). ``k4`` and ``k3`` are tested for 0 so that a ring without them computes
@@ -332,7 +284,7 @@ def _ring_coupling_inline(xm: np.ndarray, f: np.ndarray, pp: np.ndarray, p0: int
     (base xi, scale sigma) in the same pass: a second pass over f made a harmonic ring's step
     slower; the joint step passes scale 0."""
     N = xm.shape[0]
-    k, k4, k3 = pp[6], pp[14], pp[15]
+    k, k4, k3 = pp[P_K], pp[P_K4], pp[P_K3]
     # the diffusive coupling alone reads two neighbours, not four: at two paths per chunk the
     # general force's loads and tests cost 10-20 % of a harmonic ring's step
     plain = k4 == 0.0 and k3 == 0.0
@@ -354,18 +306,17 @@ _ring_coupling = njit(cache=True, nogil=True)(_ring_coupling_inline.py_func)
 def _neighbour_force(x, v, xi, xm, fext, pp, h: float) -> None:
     """The frozen step's external force: ``fext`` = sigma xi plus the ring's coupling force
     (:func:`_ring_coupling`) at the units' predicted midpoints ``xm`` = x + (h/2) v; inlined
-    into both frozen kernels. The joint step keeps its own loop: inlined into its general
-    kernel, this made the n = 3 unit at tau = 1e-4 about 4 % slower (medians of four
-    processes, 1.057x against 1.02x of 940829b)."""
+    into both frozen kernels. The joint step keeps its own loop, which measured faster there
+    (docs/methods.md, "Monte Carlo kernels")."""
     N, P = x.shape
     if N > 1:
         for j in range(N):
             for p in range(P):
                 xm[j, p] = x[j, p] + 0.5 * h * v[j, p]
-        _ring_coupling_inline(xm, fext, pp, 0, P, xi, pp[5])
+        _ring_coupling_inline(xm, fext, pp, 0, P, xi, pp[P_SIGMA])
     else:
         for p in range(P):
-            fext[0, p] = pp[5] * xi[0, p]
+            fext[0, p] = pp[P_SIGMA] * xi[0, p]
 
 
 @njit(cache=True, nogil=True, inline="always")

@@ -1,13 +1,13 @@
 """numba kernels of the kink: the exact piecewise-linear flow of :math:`-an\\,\\mathrm{sign}(x)`.
 
 Private module of the frozen-xi step (:mod:`montecarlo.steps.frozen`). For the kink
-(1 <= n <= 1 + KINK_WIDTH of :mod:`montecarlo.scheme`) the part :math:`-an\\,\\mathrm{sign}(x)`
+(1 <= n <= 1 + KINK_WIDTH of :mod:`montecarlo.coefficients`) the part :math:`-an\\,\\mathrm{sign}(x)`
 of the on-site force is integrated by an exact piecewise-linear flow with located zero
 crossings (the remainder by Strang kicks). Toward rest the kink's swings shrink exponentially
-in time and never stop (docs/model.md §3); once they are much shorter than the step the scheme
-advances them by the averaged map of their amplitude (:data:`AVERAGE`). ``pp[13]`` is the
-strength :math:`an` of the kink part and ``pp[12]`` its rule (:data:`AVERAGE` or
-:data:`HOLD`), see :mod:`montecarlo._kernels` for the layout of ``cf`` and ``pp``.
+in time and never stop (docs/model.md §3); once they are much shorter than the step the flow
+advances them by the averaged map of their amplitude (:data:`AVERAGE`). ``pp[P_KINK_FORCE]`` is
+the strength :math:`an` of the kink part and ``pp[P_KINK_RULE]`` its rule (:data:`AVERAGE` or
+:data:`HOLD`); :mod:`montecarlo.layout` has the layout of ``cf`` and ``pp``.
 """
 
 from __future__ import annotations
@@ -17,7 +17,10 @@ import math
 import numpy as np
 from numba import njit
 
-#: Kink rule for swings shorter than the step (``pp[12]``). The model's swings never stop
+from .layout import (C_AVERAGED, C_CROSSINGS, C_EXHAUSTED, C_SLOW, CF_E, CF_G, CF_H, P_GAMMA, P_KC,
+                     P_KINK_FORCE, P_KINK_RULE, P_KV, P_M, P_STIFFNESS, P_TAU_P)
+
+#: Kink rule for swings shorter than the step (``pp[P_KINK_RULE]``). The model's swings never stop
 #: (docs/model.md §3). AVERAGE (default) advances them with the averaged map of their crossing
 #: speed, w -> w exp(-gamma r/3) (:func:`_average_swing`), once AVG_SWINGS full swings fit in
 #: the time left of a step; HOLD follows them until MAX_EVENTS crossings in one step and then
@@ -36,7 +39,7 @@ def _series(x: float, v: float, V: float, F: float, pp: np.ndarray, cs: np.ndarr
 
     Within one step (|A| h << 1) degree N_TAYLOR leaves a relative error below 1e-13.
     """
-    m, gamma, Kv, Kc, tau_p, c = pp[0], pp[1], pp[2], pp[3], pp[4], pp[9]
+    m, gamma, Kv, Kc, tau_p, c = pp[P_M], pp[P_GAMMA], pp[P_KV], pp[P_KC], pp[P_TAU_P], pp[P_STIFFNESS]
     cs[0, 0], cs[1, 0], cs[2, 0] = x, v, V
     # the first derivative carries the constant force; later ones are powers of A
     dx, dv, dV = v, (F - c * x - Kv * V) / m - gamma * v, Kc * v - V / tau_p
@@ -109,7 +112,7 @@ def _net_exit_time(f: float, V: float, rem: float, pp: np.ndarray) -> float:
     """Time within ``rem`` at which the net force f - Kv V(t) leaves [-a, a] as V decays
     (V(t) = V e^(-t/tau_p); the net force relaxes monotonically toward f), or ``rem``
     (0 if it is outside already)."""
-    Kv, tau_p, a = pp[2], pp[4], pp[13]
+    Kv, tau_p, a = pp[P_KV], pp[P_TAU_P], pp[P_KINK_FORCE]
     if abs(f - Kv * V) > a:
         return 0.0
     net_end = f - Kv * V * math.exp(-rem / tau_p)
@@ -134,9 +137,9 @@ def _average_swing(v: float, V: float, f: float, rem: float, pp: np.ndarray) -> 
     Neglected: the damping within one swing and the swing's feedback through Kv V, relative
     O(gamma P) and O(Kv Kc P^2) for a swing period P below a quarter of the step.
     """
-    m, gamma, Kc, tau_p, a = pp[0], pp[1], pp[3], pp[4], pp[13]
+    m, gamma, Kc, tau_p, a = pp[P_M], pp[P_GAMMA], pp[P_KC], pp[P_TAU_P], pp[P_KINK_FORCE]
     u = _net_exit_time(f, V, rem, pp)
-    net = f - pp[2] * V
+    net = f - pp[P_KV] * V
     V = V * math.exp(-u / tau_p)
     w = abs(v)
     if w == 0.0:
@@ -153,7 +156,7 @@ def _average_swing(v: float, V: float, f: float, rem: float, pp: np.ndarray) -> 
     # beyond 2^52 (or overflowed) the count has no fractional digits left: phase 0
     phase = cycles - math.floor(cycles) if cycles < 4.5e15 else 0.0
     w *= math.exp(-gamma * u / 3.0)
-    net = f - pp[2] * V
+    net = f - pp[P_KV] * V
     k1, k2 = (a - s * net) / m, (a + s * net) / m
     if u < rem or k1 <= 0.0 or k2 <= 0.0:
         # the net force has reached +-a: one arc is unbounded, so the unit is left at the
@@ -175,18 +178,18 @@ def _kink_unit(x: float, v: float, V: float, stuck: bool, f: float, cf: np.ndarr
     """Advance one unit of the n = 1 potential over one D step with external force f.
 
     The slow path of :func:`_kink_flow`, for units at or near x = 0. Exact piecewise flow:
-    each side of x = 0 is linear with constant force f - a s (a = ``pp[13]``); zero crossings
+    each side of x = 0 is linear with constant force f - a s (a = ``pp[P_KINK_FORCE]``); zero crossings
     are located on the flow's Taylor series (bracketing + safeguarded Newton). Swings shorter
-    than the step never stop (docs/model.md §3): with the rule ``pp[12]`` = :data:`AVERAGE`,
+    than the step never stop (docs/model.md §3): with the rule ``pp[P_KINK_RULE]`` = :data:`AVERAGE`,
     once AVG_SWINGS full swings fit in the time left, the rest of the step is the averaged
     map :func:`_average_swing`; with :data:`HOLD` they are followed until MAX_EVENTS
     crossings in one step and the unit is then held at x = v = 0 (``stuck``) while the net
     force |f - Kv V| <= a, a time-step artifact kept for comparison.
     """
-    m, Kv, a = pp[0], pp[2], pp[13]
-    hold = pp[12] == HOLD
-    h = cf[12]
-    counters[0] += 1
+    m, Kv, a = pp[P_M], pp[P_KV], pp[P_KINK_FORCE]
+    hold = pp[P_KINK_RULE] == HOLD
+    h = cf[CF_H]
+    counters[C_SLOW] += 1
     t = 0.0
     for _ in range(MAX_EVENTS):
         rem = h - t
@@ -217,14 +220,14 @@ def _kink_unit(x: float, v: float, V: float, stuck: bool, f: float, cf: np.ndarr
         v, V = _horner(cs, 1, tc, 0), _horner(cs, 2, tc, 0)
         x = 0.0
         t += tc
-        counters[1] += 1
+        counters[C_CROSSINGS] += 1
         net = f - Kv * V
         if not hold and AVG_SWINGS * 4.0 * a * m * abs(v) < (h - t) * (a * a - net * net):
-            counters[2] += 1
+            counters[C_AVERAGED] += 1
             x, v, V, u = _average_swing(v, V, f, h - t, pp)
             t += u
     # event budget exhausted (long chatter, HOLD only): the unit is at or next to x = 0
-    counters[3] += 1
+    counters[C_EXHAUSTED] += 1
     if hold and abs(f - Kv * V) <= a:
         return 0.0, 0.0, V, True
     return x, v, V, stuck
@@ -235,8 +238,8 @@ def _kink_unit(x: float, v: float, V: float, stuck: bool, f: float, cf: np.ndarr
 def _kink_flow(x, v, V, stuck, f, w, cf, pp, counters, cs) -> None:
     """D step of the kink potential: one exact affine step away from x = 0, events near it."""
     N, P = x.shape
-    m, gamma, Kv, a, c = pp[0], pp[1], pp[2], pp[13], pp[9]
-    h = cf[12]
+    m, gamma, Kv, a, c = pp[P_M], pp[P_GAMMA], pp[P_KV], pp[P_KINK_FORCE], pp[P_STIFFNESS]
+    h = cf[CF_H]
     for j in range(N):
         for p in range(P):
             if w[p] == 0.0:
@@ -245,14 +248,14 @@ def _kink_flow(x, v, V, stuck, f, w, cf, pp, counters, cs) -> None:
             if not stuck[j, p] and x0 != 0.0:
                 s = 1.0 if x0 > 0.0 else -1.0
                 Fs = f[j, p] - a * s
-                xn = cf[0] * x0 + cf[1] * v0 + cf[2] * V0 + cf[9] * Fs
+                xn = cf[CF_E] * x0 + cf[CF_E + 1] * v0 + cf[CF_E + 2] * V0 + cf[CF_G] * Fs
                 # no crossing possible within the step: |x| exceeds the distance reachable
                 # with the current speed and a generous bound on the acceleration
                 acc = (abs(Fs) + abs(c * x0) + m * gamma * abs(v0) + Kv * abs(V0)) / m
                 if s * xn > 0.0 and s * x0 > h * (abs(v0) + 2.0 * h * acc):
                     x[j, p] = xn
-                    v[j, p] = cf[3] * x0 + cf[4] * v0 + cf[5] * V0 + cf[10] * Fs
-                    V[j, p] = cf[6] * x0 + cf[7] * v0 + cf[8] * V0 + cf[11] * Fs
+                    v[j, p] = cf[CF_E + 3] * x0 + cf[CF_E + 4] * v0 + cf[CF_E + 5] * V0 + cf[CF_G + 1] * Fs
+                    V[j, p] = cf[CF_E + 6] * x0 + cf[CF_E + 7] * v0 + cf[CF_E + 8] * V0 + cf[CF_G + 2] * Fs
                     continue
             x[j, p], v[j, p], V[j, p], stuck[j, p] = _kink_unit(
                 x0, v0, V0, stuck[j, p], f[j, p], cf, pp, counters, cs)

@@ -1,8 +1,8 @@
 """The path loop of one chunk: every level of P rings through burn-in and measured window.
 
-Private module. One loop serves every step scheme (:mod:`montecarlo.steps`): the scheme's tag
+Private module. One loop serves every stepper (:mod:`montecarlo.steps`): the stepper's tag
 selects its kernels at compile time (:mod:`montecarlo.steps.dispatch`), so numba compiles one
-specialised loop per scheme. The levels: fine (``dt/2`` with Richardson coupling, else ``dt``),
+specialised loop per stepper. The levels: fine (``dt/2`` with Richardson coupling, else ``dt``),
 coarse (``dt``, on the fine level's noise), coarsest (``2 dt``, optional) and the harmonic twin
 (on the fine level's noise, measured with it, :mod:`montecarlo.controls.twin`); the martingale
 sums ride on the fine level (:mod:`montecarlo.controls.martingale`).
@@ -16,11 +16,13 @@ from typing import NamedTuple
 import numpy as np
 from numba import njit
 
-from ._kernels import KIND_LINEAR, N_MOM, ROWS, _check_escape, _clamp_start, _kick_force, _live, _measure, _start
+from ._kernels import _check_escape, _clamp_start, _kick_force, _live, _measure, _start
 from ._kink import N_TAYLOR
 from .controls.martingale import MG_DIST, mg_measure, n_state
 from .controls.twin import measure_twin
-from .steps import StepScheme
+from .layout import (C_RING_STEPS, CF_H, CF_XI_DECAY, KIND_LINEAR, N_COUNTERS, N_MOM, P_A, P_N, P_THRESHOLD,
+                     P_XI_VAR, ROWS)
+from .steps import Stepper
 from .steps.dispatch import advance, compose, noise, normals, step, twin_xi
 
 
@@ -32,7 +34,7 @@ class Setup(NamedTuple):
     P, N : int
         Paths (rings) of this chunk and units per ring.
     nburn, nrun : int
-        Burn-in and measured steps of size ``cf_c[12]`` if ``coupled`` else ``cf_f[12]``.
+        Burn-in and measured steps of size ``cf_c[CF_H]`` if ``coupled`` else ``cf_f[CF_H]``.
     stride : int
         Moments are accumulated every ``stride``-th step of the measured part (samples far
         closer than the correlation time add cost, not information).
@@ -48,7 +50,7 @@ class Setup(NamedTuple):
         A harmonic ring (coefficients ``cf_t`` at the fine step, physical vector ``pp_t``) is
         advanced on the fine level's noise and measured with it.
     kind : int
-        On-site treatment (:data:`montecarlo._kernels.KIND_LINEAR`, ``KIND_KICK``, ``KIND_KINK``).
+        On-site treatment (:data:`montecarlo.layout.KIND_LINEAR`, ``KIND_KICK``, ``KIND_KINK``).
     cf_f, cf_c, cf_cc, cf_t : ndarray
         Step coefficients (:mod:`montecarlo._kernels`) of the fine, coarse, coarsest and twin
         levels.
@@ -57,9 +59,12 @@ class Setup(NamedTuple):
     chol : (4N, 4N) or (0, 0) ndarray
         Initial law: every level (and the twin) starts from one draw of ``chol @ z`` per path,
         or from rest with stationary xi when empty.
-    n_mart : int
-        Martingale control columns (:func:`montecarlo.controls.martingale.basis_names`), 0 for
-        none.
+    n_ctl : int
+        Columns of the control accumulator ``Sums.ctl`` (the sums of every accumulated control,
+        :class:`montecarlo.controls.base.Control`; 0 for none).
+    mg_at, n_mg : int
+        The martingale sums' first column in it and their number
+        (:func:`montecarlo.controls.martingale.basis_names`; 0 without them).
     """
 
     P: int
@@ -78,7 +83,9 @@ class Setup(NamedTuple):
     pp: np.ndarray
     pp_t: np.ndarray
     chol: np.ndarray
-    n_mart: int
+    n_ctl: int = 0
+    mg_at: int = 0
+    n_mg: int = 0
 
 
 class Sums(NamedTuple):
@@ -87,38 +94,40 @@ class Sums(NamedTuple):
     Attributes
     ----------
     sums : (ROWS, N_MOM) ndarray
-        Sums over measured unit-steps of the moments :data:`montecarlo._kernels.MOMENTS`: fine
+        Sums over measured unit-steps of the moments :data:`montecarlo.layout.MOMENTS`: fine
         level, coarse level, fine level over the first half of the measured steps, coarsest.
     counts : (ROWS,) ndarray
         Number of unit-steps summed per row.
     esc_time : (P,) ndarray
         Time at which path p first had some |x_j| > threshold, or -1.
-    counters : (5,) int64 ndarray
-        Kink statistics (slow-path unit steps, crossings, averaged-map entries, exhausted event
-        budgets) and, in slot 4, the number of ring steps taken (all levels).
-    mart : (2, n_mart) ndarray
-        Martingale control sums of the fine level over the measured window and its first half.
+    counters : (N_COUNTERS,) int64 ndarray
+        Kink statistics and the number of ring steps taken, all levels (``C_*`` of
+        :mod:`montecarlo.layout`).
+    ctl : (2, n_ctl) ndarray
+        The accumulated controls' sums on the fine level over the measured window and its first
+        half (:attr:`Setup.n_ctl`).
     """
 
     sums: np.ndarray
     counts: np.ndarray
     esc_time: np.ndarray
     counters: np.ndarray
-    mart: np.ndarray
+    ctl: np.ndarray
 
     @staticmethod
-    def zeros(P: int, n_mart: int) -> Sums:
-        """Empty accumulators for a chunk of P paths with ``n_mart`` martingale columns."""
-        return Sums(np.zeros((ROWS, N_MOM)), np.zeros(ROWS), np.empty(P), np.zeros(5, dtype=np.int64),
-                    np.zeros((2, n_mart)))
+    def zeros(P: int, n_ctl: int) -> Sums:
+        """Empty accumulators for a chunk of P paths with ``n_ctl`` control columns."""
+        return Sums(np.zeros((ROWS, N_MOM)), np.zeros(ROWS), np.empty(P),
+                    np.zeros(N_COUNTERS, dtype=np.int64),
+                    np.zeros((2, n_ctl)))
 
 
-def run_chunk(gen: np.random.Generator, scheme: StepScheme, s: Setup, out: Sums) -> None:
-    """Simulate one chunk of paths with ``scheme`` and add its time averages to ``out``.
+def run_chunk(gen: np.random.Generator, stepper: Stepper, s: Setup, out: Sums) -> None:
+    """Simulate one chunk of paths with ``stepper`` and add its time averages to ``out``.
 
     ``gen`` is this chunk's own stream (deterministic for a given seed, whatever the thread
     count)."""
-    _run(scheme.tag, gen, s, out)
+    _run(stepper.tag, gen, s, out)
 
 
 @njit(cache=True, nogil=True)
@@ -140,18 +149,18 @@ def _init_levels(s, f, c, cc, t) -> None:
 
 @njit(cache=True, nogil=True)
 def _run(tag, gen, s, out) -> None:
-    """The loop of :func:`run_chunk`, compiled once per scheme ``tag``."""
+    """The loop of :func:`run_chunk`, compiled once per stepper ``tag``."""
     # every array is a local of its own: reading them out of tuples inside the loop cost 5-20 %
     # in reference counting at the solver's small chunks
     N, P, coupled, twin, kind, stride, nburn = s.N, s.P, s.coupled, s.twin, s.kind, s.stride, s.nburn
     third = s.third and coupled
     cf_f, cf_c, cf_cc, cf_t, pp, pp_t = s.cf_f, s.cf_c, s.cf_cc, s.cf_t, s.pp, s.pp_t
-    sums, counts, counters, mg, esc = out.sums, out.counts, out.counters, out.mart, out.esc_time
-    thr = pp[10]
+    sums, counts, counters, esc = out.sums, out.counts, out.counters, out.esc_time
+    mg = out.ctl[:, s.mg_at:s.mg_at + s.n_mg]
+    thr = pp[P_THRESHOLD]
     # every level's arrays (x, v, V, xi, F, pvx; stuck) allocated here one by one: returned in
     # tuples by a helper, they made the loop copy about twice the array fields before every
-    # kernel call (harmonic ring, 2 paths: loop body 4100-4500 perf samples per 20 runs, 2900-3600
-    # with these)
+    # kernel call
     xf, vf, Vf, xif, Ff, pf = (np.zeros((N, P)), np.zeros((N, P)), np.zeros((N, P)), np.zeros((N, P)),
                                np.zeros((N, P)), np.zeros((N, P)))
     xc, vc, Vc, xic, Fc, pc = (np.zeros((N, P)), np.zeros((N, P)), np.zeros((N, P)), np.zeros((N, P)),
@@ -170,15 +179,15 @@ def _run(tag, gen, s, out) -> None:
     ec, ec0, ecc = np.zeros((nz, N, P)), np.zeros((nz, N, P)), np.zeros((nz, N, P))
     w = np.ones(P)
     esc[:] = -1.0
-    use_mg = s.n_mart > 0
+    use_mg = s.n_mg > 0
     phi = np.zeros((n_state(N) if use_mg else 0, N, P))
-    n_bd = s.n_mart - n_state(N) - min(N // 2, MG_DIST) - 1 if use_mg else 0
+    n_bd = s.n_mg - n_state(N) - min(N // 2, MG_DIST) - 1 if use_mg else 0
     g_bd, gprev_bd = np.zeros(max(n_bd, 0)), np.zeros(max(n_bd, 0))
     xi0 = np.zeros((N, P))
     mg_points = 0  # martingale points taken (an int: a bool flag compiled mg_measure twice)
     n_upd = 0  # xi updates of the fine level since the last martingale point
-    h = cf_c[12] if coupled else cf_f[12]
-    _start(gen, s.chol, math.sqrt(pp[11]), xf, vf, Vf, xif)
+    h = cf_c[CF_H] if coupled else cf_f[CF_H]
+    _start(gen, s.chol, math.sqrt(pp[P_XI_VAR]), xf, vf, Vf, xif)
     _clamp_start(xf, kind, pp, h)
     _init_levels(s, (xf, vf, Vf, xif, Ff), (xc, vc, Vc, xic, Fc), (xcc, vcc, Vcc, xicc, Fcc),
                  (xt, vt, Vt, xit, Ft))
@@ -191,7 +200,7 @@ def _run(tag, gen, s, out) -> None:
         meas = it >= nburn and (it - nburn) % stride == 0
         first = it < half
         t_end = (it + 1) * h
-        counters[4] += (3 if coupled else 1) * live
+        counters[C_RING_STEPS] += (3 if coupled else 1) * live
         for j in range(N):
             for p in range(P):
                 for r in range(nz):
@@ -217,24 +226,24 @@ def _run(tag, gen, s, out) -> None:
             if meas:
                 counts[0] += _measure(xf, vf, Vf, xif, sf, Ff, w, cf_f, pp, kind, sums[0], pf)
                 if use_mg and sub == 0:
-                    dec = cf_f[13] ** n_upd
-                    mg_measure(xf, vf, Vf, xif, w, pp[7], pp[8], phi, xi0, mg, first, mg_points > 0, dec,
-                               pp[11] * (1.0 - dec * dec), g_bd, gprev_bd)
+                    dec = cf_f[CF_XI_DECAY] ** n_upd
+                    mg_measure(xf, vf, Vf, xif, w, pp[P_A], pp[P_N], phi, xi0, mg, first, mg_points > 0, dec,
+                               pp[P_XI_VAR] * (1.0 - dec * dec), g_bd, gprev_bd)
                     mg_points += 1
                     n_upd = 0
                 if twin:
-                    measure_twin(xt, vt, Vt, xit, w, cf_t, sums[0], pp[8], pt)
+                    measure_twin(xt, vt, Vt, xit, w, cf_t, sums[0], pp[P_N], pt)
                 if first:
                     counts[2] += _measure(xf, vf, Vf, xif, sf, Ff, w, cf_f, pp, kind, sums[2], pf)
                     if twin:
-                        measure_twin(xt, vt, Vt, xit, w, cf_t, sums[2], pp[8], pt)
+                        measure_twin(xt, vt, Vt, xit, w, cf_t, sums[2], pp[P_N], pt)
                 if coupled and sub == 1:
                     counts[1] += _measure(xc, vc, Vc, xic, sc, Fc, w, cf_c, pp, kind, sums[1], pc)
             advance(tag, xif, ee, cf_f)
         if coupled:
             advance(tag, xic, ec, cf_c)
         if third and it % 2 == 1:
-            counters[4] += live
+            counters[C_RING_STEPS] += live
             compose(tag, cf_c, cf_cc, ec0, ec, ecc)
             step(tag, xcc, vcc, Vcc, xicc, Fcc, scc, pcc, ecc, cf_cc, pp, kind, xm, fext, cs, rbm, rbx, w, counters,
                  gen)

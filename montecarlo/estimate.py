@@ -37,38 +37,27 @@ import numpy as np
 from fpe_harvester.errors import ParameterError
 from fpe_harvester.model import Harvester
 
+from .coefficients import onsite_kind
 from .controls.regression import regression_estimate
 from .controls.sets import CONTROL_SETS, choose_controls, control_columns
-from .scheme import KIND_KINK, scheme_kind
-from .simulate import Ensemble
+from .ensemble import Ensemble
+from .layout import KIND_KINK
 
 __all__ = ["Estimate", "estimate", "BIAS_ORDER", "bias_order", "student_factor", "RESIDUAL_RULE"]
 
 #: Weak order assumed when the coarse/fine difference is turned into a bias estimate of the
 #: fine level, bias = (coarse - fine) / (2^p - 1) (so fine - bias is the extrapolation), i.e.
-#: the time-step law eta(dt) = eta0 + c dt^p. p = 2 is measured (validation/studies/montecarlo.py)
-#: for the harmonic scheme (2.03), the steep n = 1.1 potential (1.94) and rings (n = 4, N = 3
-#: test), and for the kink scheme (n = 1, validation/studies/kinkstudy.py, data in
-#: validation/data/kink_dt_new.json): fitted to coupled differences eta(dt) - eta(dt/2) for
-#: dt = 0.08 ... 0.005, p = 1.99 [1.97, 2.02] at a = 0.5, 2.05 [2.00, 2.10] at a = 1, 2.19
-#: [1.99, 2.42] at a = 2 (chi^2 + 1 intervals); independent runs per dt resolve only the coarsest
-#: differences (p = 1.3 [0.6, 2.5], 2.4 [1.5, >4], 0.3 [<0.2, 1.7]). The extrapolation from the
-#: pair (0.02, 0.01) agrees with independent runs at dt = 0.0025 (differences 0.7, 0.1 and 1.1
-#: combined standard errors), and the scheme at dt = 0.04 ... 0.01 agrees with the independent
-#: reference of validation/studies/kinkref.py on common noise.
+#: the time-step law eta(dt) = eta0 + c dt^p, per on-site treatment: smooth forces and the kink
+#: (the fitted orders: docs/methods.md, "Why the settings are what they are").
 BIAS_ORDER = {"smooth": 2.0, "nonsmooth": 2.0}
 
 #: Systematic error of the extrapolated value, from the difference D = R(2 dt) - R(dt) of the
 #: extrapolations from the pairs (2 dt, dt) and (dt, dt/2) and its standard error D_se: with a
 #: remaining error c dt^q, R(dt) is off by D / (2^q - 1). The rule is
 #: ``(|D| + RESIDUAL_RULE[1] * D_se) / (2^RESIDUAL_RULE[0] - 1)``, i.e. q = 3 (the next order after
-#: p = 2) plus one standard error of D. Measured on the exact discrete values of the harmonic
-#: schemes (discrete Lyapunov, no sampling noise; harmonic unit and rings N = 3 at k = -0.2,
-#: -0.3, coarse dt 0.04 ... 0.32; tests/montecarlo/test_extrapolate.py): the extrapolation's true
-#: error is 0.29-0.47 of |D|/7 for the frozen-xi step (whose next term is dt^4: 7/15 = 0.47) and
-#: 0.87-0.99 for the joint step on a ring (dt^3), never above it; with q = 4 (|D|/15) the joint
-#: ring's bound would fail by 2x. For nonlinear units at coarse dt 0.04 the D are ~1e-5 and
-#: unresolved (validation.studies.mc_policy.policy_coverage checks the error bars' coverage).
+#: p = 2) plus one standard error of D; on the exact discrete values of the harmonic steps it
+#: bounds the true remaining error (tests/montecarlo/test_extrapolate.py; docs/methods.md, "Why
+#: the settings are what they are").
 RESIDUAL_RULE = (3.0, 1.0)
 
 #: Observables estimated from the replica moments (``eta`` is derived from V2 and Pin).
@@ -80,8 +69,9 @@ _SECOND = ("V2", "Pin", "d2")
 
 
 def bias_order(h: Harvester, kind: int | None = None) -> float:
-    """Weak order of the time-step bias assumed for a scheme (default ``h``'s, see :data:`BIAS_ORDER`)."""
-    kind = scheme_kind(h) if kind is None else kind
+    """Weak order of the time-step bias assumed for the on-site treatment ``kind`` (default
+    ``h``'s, see :data:`BIAS_ORDER`)."""
+    kind = onsite_kind(h) if kind is None else kind
     return BIAS_ORDER["nonsmooth" if kind == KIND_KINK else "smooth"]
 
 
@@ -213,7 +203,7 @@ def estimate(e: Ensemble, h: Harvester, order: float | None = None, control: boo
         raise ParameterError(f"controls must be None or one of {tuple(CONTROL_SETS)}, got {controls!r} "
                              f"(type {type(controls).__name__})")
     if order is None:
-        order = bias_order(h, e.notes.get("scheme_kind"))
+        order = bias_order(h, e.notes.get("onsite_kind"))
     if extrapolate and e.levels < 3:
         raise ParameterError(f"extrapolate=True needs three levels (simulate(..., richardson=True, "
                              f"third_level=True)), got dts {e.dts}")
@@ -234,9 +224,10 @@ def estimate(e: Ensemble, h: Harvester, order: float | None = None, control: boo
     if (control or controls is not None) and not sets:
         raise ParameterError(
             f"control=True needs an ensemble with control variates ({controls or 'any set'}): a twin "
-            f"started from its stationary law (start='twin') or martingale sums (martingale=True), no "
-            f"escaped path and enough replicas; got twin {e.twin_kappa}, start {e.start!r}, martingale "
-            f"{bool(e.mart_names)}, escaped fraction {e.escaped_fraction():g}, {n} replicas")
+            f"started from its stationary law (start='twin') or accumulated controls "
+            f"(controls=('martingale',)), no escaped path and enough replicas; got twin {e.twin_kappa}, "
+            f"start {e.start!r}, accumulated {tuple(e.ctl_names)}, escaped fraction "
+            f"{e.escaped_fraction():g}, {n} replicas")
     use = bool(sets)
     if n < 2:
         nan = dict.fromkeys(_NAMES + ("eta", "d2"), math.nan)
@@ -360,11 +351,7 @@ def _scaled_difference(D: np.ndarray, C: np.ndarray | None, mu: np.ndarray | Non
     ``C`` (expectation ``mu``) when given, the plain mean otherwise.
 
     No choice between the two by their estimated variances: that choice favours whichever
-    variance happens to be underestimated. Measured (tol 1e-2, 32 replicas, 400 seeds each of
-    harmonic, n = 3 and n = 8 at a = 0.5; z against the mean over seeds of the plain estimate):
-    rms z of eta's time-step difference 0.93 / 0.94 / 0.87 with regression, 1.04 / 1.03 / 0.98
-    plain, 1.06 / 1.07 / 1.00 choosing; of the burn-in drift 0.90 / 0.91 / 0.94 with regression
-    (whose actual spread is 1.5x smaller than plain's), 0.94 / 0.95 / 0.98 choosing.
+    variance happens to be underestimated (docs/methods.md, "Why the settings are what they are").
     """
     if C is None:
         d_mean, d_cov = _plain(D)

@@ -21,8 +21,8 @@ import numpy as np
 from fpe_harvester.errors import ParameterError, check_int, check_real
 from fpe_harvester.model import Harvester
 
-from ._kernels import N_MOM
-from .simulate import Ensemble
+from .ensemble import Ensemble
+from .layout import N_MOM
 
 __all__ = ["simulate_naive"]
 
@@ -96,5 +96,5 @@ def simulate_naive(
         path_steps=replicas * paths * (nburn + nrun),
         wall_time=wall,
         seed_entropy=seed,
-        notes={"scheme": "numpy Euler-Maruyama"},
+        notes={"integrator": "numpy Euler-Maruyama"},
     )

@@ -4,7 +4,7 @@ The burn-in must outlast the slowest relaxation of the second moments. For a har
 it is exact: mode q relaxes at the rate :math:`r_q = -\\max\\mathrm{Re}\\,\\lambda(\\kappa_q)`
 (:func:`fpe_harvester.exact.mode_eigenvalues`), and the slowest time is
 :math:`\\tau_r = 1/\\min_q r_q`. For a nonlinear ring the same formula is applied to its
-harmonic twin (statistical linearization, :mod:`.controls.twin`), an estimate that the solver then
+harmonic twin (statistical linearization, :mod:`.harmonic`), an estimate that the solver then
 checks on the data (the first half of the measured window against the whole). A transient
 :math:`\\delta_0 e^{-t/\\tau_r}` (relative, :math:`\\delta_0 \\le 1` from rest) biases the mean
 over :math:`[t_b, t_b + T]` by at most :math:`\\delta_0\\tau_r e^{-t_b/\\tau_r}/T`; the burn-in
@@ -18,15 +18,17 @@ keeps that below a tenth of the tolerance:
 from __future__ import annotations
 
 import math
+from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 
 from fpe_harvester.exact import mode_eigenvalues
 from fpe_harvester.model import Harvester
 
-from .controls.twin import twin_harvester
+from .harmonic import twin_harvester
 
-__all__ = ["relaxation_time", "burn_in", "MIN_BURN", "FALLBACK_NOTE"]
+__all__ = ["RunPlan", "relaxation_time", "burn_in", "MIN_BURN", "FALLBACK_NOTE"]
 
 #: Shortest burn-in (model time units): a few correlation times of the noise and the load.
 MIN_BURN = 20.0
@@ -94,3 +96,35 @@ def burn_in(tau_r: float, tol: float, t_run: float) -> float:
     if not math.isfinite(tau_r):
         return math.inf
     return max(MIN_BURN, tau_r * math.log(max(10.0 * tau_r / (tol * t_run), 1.0)))
+
+
+@dataclass(frozen=True)
+class RunPlan:
+    """What the solver runs for one harvester (see :meth:`MonteCarlo.plan`).
+
+    Attributes
+    ----------
+    dt : float
+        Coarse time step (the reported level is ``dt/2`` with Richardson).
+    t_burn, t_run : float
+        Burn-in and measured time per path.
+    paths : int
+        Paths per replica.
+    twin : float or None
+        On-site stiffness of the harmonic twin (None: no twin).
+    start : str
+        ``"twin"`` (stationary law of the twin, or of a harmonic ring itself) or ``"rest"``.
+    relaxation_time : float
+        Slowest relaxation time behind ``t_burn`` (:func:`montecarlo.plan.relaxation_time`).
+    notes : dict
+        How each choice was made.
+    """
+
+    dt: float
+    t_burn: float
+    t_run: float
+    paths: int
+    twin: float | None
+    start: str
+    relaxation_time: float
+    notes: dict[str, Any]

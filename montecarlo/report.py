@@ -7,7 +7,7 @@ Private module of :mod:`montecarlo.solver`: everything :meth:`MonteCarlo.solve
 from __future__ import annotations
 
 import math
-from typing import TYPE_CHECKING, Any
+from typing import Any
 
 import numpy as np
 
@@ -15,13 +15,12 @@ from fpe_harvester.exact import growth_rate, k_di
 from fpe_harvester.model import Harvester
 from fpe_harvester.result import Stats, Status
 
+from .coefficients import ONSITE_NAMES, onsite_kind
+from .ensemble import Ensemble
 from .estimate import Estimate, bias_order
-from .plan import burn_in
-from .scheme import KIND_KINK, SCHEME_NAMES, scheme_kind
-from .simulate import Ensemble
-
-if TYPE_CHECKING:
-    from .solver import Plan
+from .layout import KIND_KINK
+from .plan import RunPlan, burn_in
+from .steps import STEPPERS
 
 __all__ = ["result", "DRIFT_SIGMAS", "DRIFT_SHARE"]
 
@@ -31,7 +30,7 @@ _RNG = "numpy Generator(PCG64) drawn inside numba, one SeedSequence child per (r
 DRIFT_SIGMAS, DRIFT_SHARE = 3.0, 1.0 / 3.0
 
 
-def result(h: Harvester, ens: Ensemble, est: Estimate, met: bool, plan: Plan, wall: float,
+def result(h: Harvester, ens: Ensemble, est: Estimate, met: bool, plan: RunPlan, wall: float,
            harmonic_status: str | None, *, name: str, tol: float, threshold: float, batch: int) -> Stats:
     """The :class:`~fpe_harvester.Stats` of a finished run of ``h``.
 
@@ -57,7 +56,7 @@ def result(h: Harvester, ens: Ensemble, est: Estimate, met: bool, plan: Plan, wa
                 f"bar: the paths escaped {where}. No statistics."))
         return Stats(status=Status.NOT_CONVERGED, method=name, info=info, message=(
             f"not converged: this system is {h.confinement} (it has a stationary state), but "
-            f"the simulated paths blew up {where}: a numerical instability of the scheme at "
+            f"the simulated paths blew up {where}: a numerical instability of the integrator at "
             f"dt = {plan.dt:g}. Lower dt. No statistics."))
     stats = _stats(h, est, info, name)
     return _label(h, stats, est, esc, met, kd, harmonic_status, tol, threshold)
@@ -127,7 +126,7 @@ def _label(h: Harvester, s: Stats, est: Estimate, esc: float, met: bool, kd: flo
     fields.update(status=status, message=(head + " " + note).strip())
     return Stats(**fields)
 
-def _info(h: Harvester, ens: Ensemble, est: Estimate, plan: Plan, wall: float, tol: float,
+def _info(h: Harvester, ens: Ensemble, est: Estimate, plan: RunPlan, wall: float, tol: float,
           batch: int) -> dict[str, Any]:
     """The run's details for :attr:`fpe_harvester.Stats.info` (non-finite numbers as None)."""
     esc = ens.escape_times[np.isfinite(ens.escape_times)]
@@ -158,10 +157,9 @@ def _info(h: Harvester, ens: Ensemble, est: Estimate, plan: Plan, wall: float, t
         "seed": ens.seed_entropy,
         "threads": ens.notes.get("threads"),
         "batch": batch,
-        "scheme": SCHEME_NAMES[scheme_kind(h)] + (
-            "; joint step: (x, v, V, xi) by the exact Gaussian transition of the linear drift, "
-            "kicks around it" if ens.notes.get("joint_step") else ""),
-        "joint_step": bool(ens.notes.get("joint_step")),
+        "step": ens.notes["step"],
+        "integrator": (f"{STEPPERS[ens.notes['step']].description}; "
+                       f"on-site force: {ONSITE_NAMES[onsite_kind(h)]}"),
         "rng": _RNG,
         "bias_eta": est.bias["eta"],
         "bias_eta_se": est.bias_se["eta"],
@@ -182,7 +180,7 @@ def _info(h: Harvester, ens: Ensemble, est: Estimate, plan: Plan, wall: float, t
         "identity_Pin_minus_mgamma_v2_minus_Kv_vV": list(est.identity_power),
         "confinement": h.confinement,
     }
-    if scheme_kind(h) == KIND_KINK:
+    if onsite_kind(h) == KIND_KINK:
         slow, crossings, averaged, exhausted = ens.kink_counters
         info.update(stuck_fraction=est.mean["stuck"], kink_slow_steps=slow, kink_crossings=crossings,
                     kink_averaged=averaged, kink_event_budget_exhausted=exhausted)

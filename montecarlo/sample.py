@@ -1,9 +1,9 @@
-"""Samples of the stationary state (x, v, V, xi) from the Monte Carlo scheme.
+"""Samples of the stationary state (x, v, V, xi) from the Monte Carlo integrator.
 
 The estimators of :mod:`montecarlo.simulate` keep only time averages of moments; densities
 (histograms of the state, its law near the kink's trap at (x, v) = (0, 0)) need the states
 themselves. :func:`sample_states` runs the same splitting step as the solver (the same
-kernel, :func:`montecarlo.steps.frozen._d_step`, and the exact Ornstein--Uhlenbeck update of xi)
+kernel, :func:`montecarlo.steps.frozen.d_step`, and the exact Ornstein--Uhlenbeck update of xi)
 and records every unit's state at a fixed interval after a burn-in.
 
 Samples along one path are correlated (correlation time ~ max(1/gamma, tau, tau_p)); use
@@ -22,10 +22,11 @@ from numba import njit
 from fpe_harvester.errors import ParameterError, check_int, check_real
 from fpe_harvester.model import Harvester
 
-from ._kernels import KIND_LINEAR, _kick_force
+from ._kernels import _kick_force
 from ._kink import N_TAYLOR
-from .scheme import physical_vector, scheme_kind, step_coefficients
-from .steps.frozen import _d_step
+from .coefficients import onsite_kind, physical_vector, step_coefficients
+from .layout import CF_XI_DECAY, CF_XI_NOISE, KIND_LINEAR, N_COUNTERS, P_XI_VAR
+from .steps.frozen import d_step
 
 __all__ = ["sample_states"]
 
@@ -47,8 +48,8 @@ def _sample(gen, P: int, N: int, nburn: int, nsamp: int, stride: int, cf: np.nda
     xm, fext = np.zeros((N, P)), np.zeros((N, P))
     w = np.ones(P)
     cs = np.zeros((3, N_TAYLOR + 1))
-    counters = np.zeros(5, dtype=np.int64)
-    sd = math.sqrt(pp[11])
+    counters = np.zeros(N_COUNTERS, dtype=np.int64)
+    sd = math.sqrt(pp[P_XI_VAR])
     for j in range(N):
         for p in range(P):
             xi[j, p] = sd * gen.standard_normal()
@@ -56,10 +57,10 @@ def _sample(gen, P: int, N: int, nburn: int, nsamp: int, stride: int, cf: np.nda
                 F[j, p] = _kick_force(x[j, p], pp)
     s = 0
     for step in range(nburn + nsamp * stride):
-        _d_step(x, v, V, xi, F, stuck, xm, fext, w, cf, pp, kind, counters, cs)
+        d_step(x, v, V, xi, F, stuck, xm, fext, w, cf, pp, kind, counters, cs)
         for j in range(N):
             for p in range(P):
-                xi[j, p] = cf[13] * xi[j, p] + cf[14] * gen.standard_normal()
+                xi[j, p] = cf[CF_XI_DECAY] * xi[j, p] + cf[CF_XI_NOISE] * gen.standard_normal()
         if step >= nburn and (step + 1 - nburn) % stride == 0:
             for p in range(P):
                 for j in range(N):
@@ -88,7 +89,7 @@ def sample_states(h: Harvester, *, samples: int = 1000, paths: int = 1000, every
     t_burn : float
         Time from rest (xi drawn from its stationary law) to the first sample, >= 0.
     dt : float
-        Time step, > 0. The scheme's bias is O(dt^2) on smooth observables (measured order 2
+        Time step, > 0. The integrator's bias is O(dt^2) on smooth observables (measured order 2
         at the kink too); densities on scales below the distance travelled in a step are not
         resolved.
     seed : int
@@ -119,7 +120,7 @@ def sample_states(h: Harvester, *, samples: int = 1000, paths: int = 1000, every
                              f"{samples} * {paths} * {h.N}")
     threads = max(1, threads or len(os.sched_getaffinity(0)))
     cf = step_coefficients(h, dt)
-    kind = scheme_kind(h)
+    kind = onsite_kind(h)
     pp = physical_vector(h, _THRESHOLD, kind=kind)
     stride = max(1, int(round(every / dt)))
     nburn = int(round(t_burn / dt))

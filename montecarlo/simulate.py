@@ -15,7 +15,6 @@ from __future__ import annotations
 
 import time
 from concurrent.futures import ThreadPoolExecutor
-from dataclasses import dataclass, field
 from typing import NamedTuple
 
 import numpy as np
@@ -24,131 +23,16 @@ from fpe_harvester.errors import ParameterError, check_int, check_real
 from fpe_harvester.model import Harvester
 from fpe_harvester.parallel import default_threads
 
-from ._kernels import KIND_KICK, KIND_KINK, MOMENTS, N_MOM
 from ._loop import Setup, Sums, run_chunk
-from .controls.martingale import basis_names
-from .controls.twin import initial_cholesky, twin_expectations, twin_harvester, twin_is_stable
-from .scheme import KINK_RULES, physical_vector, scheme_kind, uses_joint_step
-from .steps import STEPS, StepScheme
+from .coefficients import KINK_RULES, onsite_kind, physical_vector
+from .controls.sets import CONTROLS
+from .ensemble import Ensemble
+from .harmonic import initial_cholesky, twin_expectations, twin_harvester, twin_is_stable
+from .layout import (C_AVERAGED, C_CROSSINGS, C_EXHAUSTED, C_RING_STEPS, C_SLOW, KIND_KICK, KIND_KINK,
+                     N_COUNTERS, N_MOM)
+from .steps import STEPPERS, Stepper, resolve_step
 
 __all__ = ["Ensemble", "simulate"]
-
-
-@dataclass(frozen=True)
-class Ensemble:
-    """Raw result of :func:`simulate`: per-replica sums, counts and escape times.
-
-    Attributes
-    ----------
-    sums : ndarray, shape (replicas, levels + 1, len(MOMENTS))
-        Sums over measured unit-steps of the moments :data:`montecarlo._kernels.MOMENTS`
-        (``v xi`` already at the Strang point, or after a joint step its conditional expectation
-        given the state before the step and the x reached; the twin's ``t_*`` at level 0 only),
-        per level;
-        the last row is level 0 over the first half of the measured window.
-    counts : ndarray, shape (replicas, levels + 1)
-        Number of unit-steps summed (fewer than ``paths * N * t_run/dt`` when paths escaped).
-    escape_times : ndarray, shape (replicas, paths)
-        Time of the first ``|x_j| > threshold`` of each path (burn-in included), ``inf`` if none.
-    dts : tuple of float
-        Time step of each level: ``(dt,)``, or ``(dt/2, dt)`` with Richardson coupling, or
-        ``(dt/2, dt, 2 dt)`` with its third level.
-    twin_kappa : float or None
-        On-site stiffness of the harmonic twin run on level 0's noise (None: no twin).
-    twin_mean : dict of float
-        Exact expectations of the twin's moments at level 0's step
-        (:func:`montecarlo.controls.twin.twin_expectations`); empty without a twin.
-    start : str
-        ``"rest"`` or ``"twin"`` (the paths start from the twin's stationary law).
-    kink_counters : tuple of int
-        Kink scheme: unit-steps on the slow path (near x = 0), located zero crossings, entries
-        into the averaged swing map, steps that exhausted the event budget (all levels).
-    mart : ndarray, shape (replicas, 2, len(mart_names))
-        Martingale control sums of level 0 (:mod:`montecarlo.controls.martingale`) over the measured
-        window and over its first half; no columns without ``martingale``.
-    mart_names : tuple of str
-        Their names (:func:`montecarlo.controls.martingale.basis_names`).
-    """
-
-    sums: np.ndarray
-    counts: np.ndarray
-    escape_times: np.ndarray
-    dts: tuple[float, ...]
-    paths: int
-    t_burn: float
-    t_run: float
-    threshold: float
-    path_steps: int
-    wall_time: float
-    kink_counters: tuple[int, int, int, int] = (0, 0, 0, 0)
-    seed_entropy: int | None = None
-    first_replica: int = 0
-    notes: dict[str, object] = field(default_factory=dict)
-    twin_kappa: float | None = None
-    twin_mean: dict[str, float] = field(default_factory=dict)
-    start: str = "rest"
-    mart: np.ndarray | None = None
-    mart_names: tuple[str, ...] = ()
-
-    @property
-    def replicas(self) -> int:
-        return int(self.sums.shape[0])
-
-    @property
-    def levels(self) -> int:
-        """Number of time-step levels (1, or 2 or 3 with Richardson coupling)."""
-        return len(self.dts)
-
-    def moments(self, level: int = 0) -> dict[str, np.ndarray]:
-        """Per-replica averages ``{name: array(replicas)}`` of one level (NaN where nothing counted).
-
-        ``level = -1`` gives level 0 over the first half of the measured window.
-        """
-        cnt = self.counts[:, level]
-        safe = np.where(cnt > 0, cnt, 1.0)
-        out = {name: np.where(cnt > 0, self.sums[:, level, i] / safe, np.nan) for i, name in enumerate(MOMENTS)}
-        return out
-
-    def martingale(self, first_half: bool = False) -> dict[str, np.ndarray]:
-        """Per-replica martingale controls ``{name: array(replicas)}``, each sum divided by the
-        unit-steps counted in its window (NaN where nothing counted); every one has mean 0
-        exactly when no path escaped. Empty without ``martingale``."""
-        if self.mart is None or not self.mart_names:
-            return {}
-        cnt = self.counts[:, -1 if first_half else 0]
-        safe = np.where(cnt > 0, cnt, 1.0)
-        row = self.mart[:, 1 if first_half else 0]
-        return {name: np.where(cnt > 0, row[:, i] / safe, np.nan) for i, name in enumerate(self.mart_names)}
-
-    def escaped_fraction(self) -> float:
-        """Fraction of all paths that crossed the escape threshold."""
-        return float(np.isfinite(self.escape_times).mean())
-
-    def merge(self, other: Ensemble) -> Ensemble:
-        """Concatenate the replicas of two runs with identical settings."""
-        if (other.dts, other.paths, other.t_run, other.t_burn, other.twin_kappa, other.start,
-                other.mart_names) != (self.dts, self.paths, self.t_run, self.t_burn, self.twin_kappa,
-                                      self.start, self.mart_names):
-            raise ParameterError("can only merge ensembles with the same dt, paths, t_run, t_burn, "
-                                 "twin, start and martingale controls")
-        return Ensemble(
-            sums=np.concatenate([self.sums, other.sums]),
-            counts=np.concatenate([self.counts, other.counts]),
-            escape_times=np.concatenate([self.escape_times, other.escape_times]),
-            dts=self.dts, paths=self.paths, t_burn=self.t_burn, t_run=self.t_run,
-            threshold=self.threshold,
-            path_steps=self.path_steps + other.path_steps,
-            wall_time=self.wall_time + other.wall_time,
-            kink_counters=tuple(a + b for a, b in zip(self.kink_counters, other.kink_counters)),
-            seed_entropy=self.seed_entropy,
-            first_replica=min(self.first_replica, other.first_replica),
-            notes=dict(self.notes),
-            twin_kappa=self.twin_kappa,
-            twin_mean=dict(self.twin_mean),
-            start=self.start,
-            mart=None if self.mart is None else np.concatenate([self.mart, other.mart]),
-            mart_names=self.mart_names,
-        )
 
 
 def simulate(
@@ -170,8 +54,8 @@ def simulate(
     start: str = "rest",
     kink_rule: str = "average",
     kind: int | None = None,
-    joint: bool | None = None,
-    martingale: bool = False,
+    step: str = "auto",
+    controls: tuple[str, ...] = (),
     third_level: bool = False,
 ) -> Ensemble:
     """Simulate independent replicas of ``h`` and return their raw moment sums.
@@ -208,7 +92,7 @@ def simulate(
         error is unchanged while the accumulation cost drops.
     twin : float or None
         On-site stiffness :math:`\\kappa > 0` of a harmonic twin ring (same k) advanced on the
-        fine level's noise and measured with it (:mod:`montecarlo.controls.twin`); its modes
+        fine level's noise and measured with it (:mod:`montecarlo.harmonic`); its modes
         :math:`\\kappa + 4k\\sin^2(\\pi q/N)` must all be positive. None: no twin.
     start : {"rest", "twin"}
         Initial state of every path: rest (x = v = V = 0, xi stationary), or a draw from the
@@ -217,32 +101,31 @@ def simulate(
         with ``start="rest"`` a twin starts at rest too, and its expectations are then not
         those of :attr:`Ensemble.twin_mean` during the transient.
     kink_rule : {"average", "hold"}
-        Kink scheme only: swings much shorter than the step are advanced by the averaged map
+        Kink treatment only: swings much shorter than the step are advanced by the averaged map
         of their amplitude (``"average"``), or followed until 64 crossings in one step and the
         unit then held at rest (``"hold"``, a time-step artifact kept to compare with;
-        :data:`montecarlo.scheme.KINK_RULES`).
+        :data:`montecarlo.coefficients.KINK_RULES`).
     kind : int or None
-        Scheme (:data:`montecarlo._kernels.KIND_KICK` or ``KIND_KINK``; default
-        :func:`montecarlo.scheme.scheme_kind`), for comparing the schemes near n = 1.
-    joint : bool or None
-        Advance (x, v, V, xi) together by the exact Gaussian transition of the linear drift
-        (True) or with xi frozen over each step (False). None (default): joint when
-        tau < :data:`montecarlo.scheme.JOINT_STEPS` dt, where freezing xi is wrong
-        (:func:`montecarlo.scheme.uses_joint_step`). The kink scheme's short-tau step is the
-        averaged-noise step instead (:mod:`montecarlo.steps.averaged`; default when tau < dt),
-        which runs without a twin. True raises where the scheme has no such step
-        (:func:`montecarlo.scheme.joint_step_refusal`).
-    martingale : bool
-        Also accumulate level 0's martingale control sums (:mod:`montecarlo.controls.martingale`,
-        :attr:`Ensemble.mart`): sums of basis functions of the state times the noise drawn
-        after it, with mean exactly 0. The simulated paths are the same with or without them.
+        On-site treatment (:data:`montecarlo.layout.KIND_KICK` or ``KIND_KINK``; default
+        :func:`montecarlo.coefficients.onsite_kind`), for comparing the treatments near n = 1.
+    step : str
+        The stepper (:data:`montecarlo.steps.STEP_NAMES`): ``"frozen"`` (xi held over each step),
+        ``"joint"`` ((x, v, V, xi) together by the exact Gaussian transition of the linear drift;
+        not the kink), ``"averaged"`` (the kink at tau <= 1e-4, without a twin), or ``"auto"``
+        (default): the one :func:`montecarlo.steps.resolve_step` picks at ``dt`` (joint where
+        tau < 10 dt, averaged for the kink where tau < dt, else frozen). Raises where the named
+        stepper refuses ``h``, or ``"auto"`` finds none (the kink between tau = 1e-4 and dt).
+    controls : tuple of str
+        Controls whose sums the path loop accumulates on level 0 (names of
+        :data:`montecarlo.controls.CONTROLS` that are ``accumulated``; :attr:`Ensemble.ctl`), e.g.
+        ``("martingale",)``: sums of basis functions of the state times the noise drawn after it,
+        with mean exactly 0 (:mod:`montecarlo.controls.martingale`). The simulated paths are the
+        same with or without them. The twin is asked for by ``twin``.
     third_level : bool
         With ``richardson``, also run level 2 at ``2 dt`` on the same noise (two coarse
         increments composed exactly), so that two Richardson extrapolations, from
         ``(dt, dt/2)`` and from ``(2 dt, dt)``, can be compared (:func:`montecarlo.estimate`);
-        it adds a quarter of level 0's steps (measured on the ring n = 3, N = 3, k = -0.5 with
-        twin and martingale sums, one thread, median of 3: 1.24x and 1.31x the CPU of level 0
-        alone for two and three levels). Ignored without ``richardson``.
+        it adds a quarter of level 0's steps. Ignored without ``richardson``.
 
     Returns
     -------
@@ -258,15 +141,15 @@ def simulate(
     c = _check(h, dt=dt, paths=paths, replicas=replicas, t_burn=t_burn, t_run=t_run, seed=seed,
                richardson=richardson, threshold=threshold, chunk=chunk, threads=threads,
                first_replica=first_replica, sample_every=sample_every, twin=twin, start=start,
-               kink_rule=kink_rule, kind=kind, joint=joint, martingale=martingale, third_level=third_level)
-    scheme, setup, twin_mean = _coefficients(h, c)
+               kink_rule=kink_rule, kind=kind, step=step, controls=controls, third_level=third_level)
+    stepper, setup, twin_mean = _coefficients(h, c)
     ss = np.random.SeedSequence(c.seed)
     sizes = _chunks(c.paths, c.chunk)
     tasks = [(r, k) for r in range(c.replicas) for k in range(len(sizes))]
     t0 = time.perf_counter()
-    results = _run_tasks(scheme, setup, ss, c.first_replica, sizes, tasks, c.threads)
+    results = _run_tasks(stepper, setup, ss, c.first_replica, sizes, tasks, c.threads)
     wall = time.perf_counter() - t0
-    sums, counts, esc_times, counters, mart = _merge(results, tasks, sizes, c)
+    sums, counts, esc_times, counters, ctl = _merge(results, tasks, sizes, c)
     levels = 3 if c.third_level else 2 if c.richardson else 1
     dt = c.dt
     return Ensemble(
@@ -278,24 +161,24 @@ def simulate(
         t_burn=setup.nburn * dt,
         t_run=setup.nrun * dt,
         threshold=c.threshold,
-        path_steps=int(counters[4]),
+        path_steps=int(counters[C_RING_STEPS]),
         wall_time=wall,
-        kink_counters=tuple(int(v) for v in counters[:4]),
+        kink_counters=tuple(int(counters[i]) for i in (C_SLOW, C_CROSSINGS, C_AVERAGED, C_EXHAUSTED)),
         seed_entropy=int(ss.entropy) if c.seed is None else c.seed,
         first_replica=c.first_replica,
-        notes={"threads": c.threads, "chunk": c.chunk, "scheme_kind": setup.kind, "sample_stride": setup.stride,
-               "kink_rule": c.kink_rule, "joint_step": scheme.name == "joint", "step": scheme.name},
+        notes={"threads": c.threads, "chunk": c.chunk, "onsite_kind": setup.kind,
+               "sample_stride": setup.stride, "kink_rule": c.kink_rule, "step": stepper.name},
         twin_kappa=c.twin,
         twin_mean=twin_mean,
         start=c.start,
-        mart=mart if c.martingale else None,
-        mart_names=basis_names(h.N) if c.martingale else (),
+        ctl=ctl if c.controls else None,
+        ctl_names={name: CONTROLS[name].sums(h) for name in c.controls},
     )
 
 
 class _Checked(NamedTuple):
     """The arguments of :func:`simulate`, checked (``third_level`` only with ``richardson``,
-    ``kind`` and ``joint`` resolved)."""
+    ``kind`` and ``step`` resolved)."""
 
     dt: float
     paths: int
@@ -313,15 +196,15 @@ class _Checked(NamedTuple):
     start: str
     kink_rule: str
     kind: int
-    joint: bool
-    martingale: bool
+    step: str
+    controls: tuple[str, ...]
     third_level: bool
 
 
 def _check(h: Harvester, *, dt: float, paths: int, replicas: int, t_burn: float, t_run: float,
            seed: int | None, richardson: bool, threshold: float, chunk: int, threads: int | None,
            first_replica: int, sample_every: float, twin: float | None, start: str, kink_rule: str,
-           kind: int | None, joint: bool | None, martingale: bool, third_level: bool) -> _Checked:
+           kind: int | None, step: str, controls: tuple[str, ...], third_level: bool) -> _Checked:
     """Validate :func:`simulate`'s arguments (raises :class:`ParameterError`)."""
     if not isinstance(h, Harvester):
         raise ParameterError(f"h must be a Harvester, got {h!r} (type {type(h).__name__})")
@@ -348,57 +231,57 @@ def _check(h: Harvester, *, dt: float, paths: int, replicas: int, t_burn: float,
             raise ParameterError(
                 f"twin must give every twin mode a positive stiffness twin + 4k sin^2(pi q/N) "
                 f"(k = {h.k:g}, N = {h.N}), got {twin!r}")
-    for flag, value in (("martingale", martingale), ("third_level", third_level)):
-        if not isinstance(value, bool):
-            raise ParameterError(f"{flag} must be True or False, got {value!r} "
-                                 f"(type {type(value).__name__})")
+    if not isinstance(third_level, bool):
+        raise ParameterError(f"third_level must be True or False, got {third_level!r} "
+                             f"(type {type(third_level).__name__})")
+    loop_controls = tuple(name for name, control in CONTROLS.items() if control.accumulated)
+    if isinstance(controls, str) or not all(name in loop_controls for name in controls) \
+            or len(set(controls)) != len(controls):
+        raise ParameterError(f"controls must be a tuple of distinct names among {loop_controls}, got "
+                             f"{controls!r} (type {type(controls).__name__})")
     if start == "twin" and twin is None:
         if not h.is_linear:
             raise ParameterError("start='twin' needs a twin stiffness for a nonlinear potential")
     if kind is not None and (h.is_linear or kind not in (KIND_KICK, KIND_KINK)):
         raise ParameterError(f"kind must be None, or {KIND_KICK} (kick) or {KIND_KINK} (kink) for a "
                              f"nonlinear potential, got {kind!r} with n = {h.n:g}")
-    kind = scheme_kind(h) if kind is None else kind
-    # both levels take the same step, chosen at the coarse one
-    if joint is None:
-        joint = uses_joint_step(h, dt, kind)
-    elif joint:
-        why = STEPS[_short_tau_step(kind)].refusal(h, kind)
-        if why is not None:
-            raise ParameterError(f"joint=True is not available here: {why}")
-    if joint and kind == KIND_KINK and twin is not None:
-        raise ParameterError("twin: the kink's averaged-noise step (tau < dt) has no harmonic twin; use twin=None")
+    kind = onsite_kind(h) if kind is None else kind
+    # every level takes the same stepper, chosen at the coarse step
+    stepper, _ = resolve_step(h, step, dt, kind)
+    if twin is not None and not stepper.twin:
+        raise ParameterError(f"twin: the {stepper.name} step has no harmonic twin; use twin=None")
     return _Checked(dt, paths, replicas, t_burn, t_run, seed, bool(richardson), threshold, chunk, threads,
-                    first_replica, sample_every, twin, start, kink_rule, kind, bool(joint), martingale,
+                    first_replica, sample_every, twin, start, kink_rule, kind, stepper.name, tuple(controls),
                     third_level and bool(richardson))
 
 
-def _short_tau_step(kind: int) -> str:
-    """The step taken at short tau (``joint``): the averaged-noise step for the kink, else the joint step."""
-    return "averaged" if kind == KIND_KINK else "joint"
-
-
-def _coefficients(h: Harvester, c: _Checked) -> tuple[StepScheme, Setup, dict[str, float]]:
-    """The step scheme, the kernels' setup (all but the chunk's path count) and the twin's
+def _coefficients(h: Harvester, c: _Checked) -> tuple[Stepper, Setup, dict[str, float]]:
+    """The stepper, the kernels' setup (all but the chunk's path count) and the twin's
     exact expectations (empty without a twin)."""
-    scheme = STEPS[_short_tau_step(c.kind) if c.joint else "frozen"]
+    stepper = STEPPERS[c.step]
     dt_f = 0.5 * c.dt if c.richardson else c.dt
     pp = physical_vector(h, c.threshold, c.kink_rule, c.kind)
-    cf_f = scheme.coefficients(h, dt_f)
-    cf_c = scheme.coefficients(h, c.dt)
-    cf_cc = scheme.coefficients(h, 2.0 * c.dt) if c.third_level else cf_c
+    cf_f = stepper.coefficients(h, dt_f)
+    cf_c = stepper.coefficients(h, c.dt)
+    cf_cc = stepper.coefficients(h, 2.0 * c.dt) if c.third_level else cf_c
     lin = twin_harvester(h, c.twin) if c.twin is not None else (h if h.is_linear else None)
     if c.twin is not None:
-        cf_t, pp_t = scheme.coefficients(lin, dt_f), physical_vector(lin, c.threshold)
-        twin_mean = twin_expectations(lin, dt_f, h.n, c.joint)
+        cf_t, pp_t = stepper.coefficients(lin, dt_f), physical_vector(lin, c.threshold)
+        twin_mean = twin_expectations(lin, dt_f, h.n, c.step)
     else:
         cf_t, pp_t, twin_mean = cf_f, pp, {}
-    chol = initial_cholesky(lin, dt_f, c.joint) if c.start == "twin" else np.zeros((0, 0))
+    chol = initial_cholesky(lin, dt_f, c.step) if c.start == "twin" else np.zeros((0, 0))
     setup = Setup(P=0, N=h.N, nburn=int(round(c.t_burn / c.dt)), nrun=max(1, int(round(c.t_run / c.dt))),
                   stride=max(1, int(round(c.sample_every / c.dt))), coupled=c.richardson,
                   third=c.third_level, twin=c.twin is not None, kind=c.kind, cf_f=cf_f, cf_c=cf_c, cf_cc=cf_cc,
-                  cf_t=cf_t, pp=pp, pp_t=pp_t, chol=chol, n_mart=len(basis_names(h.N)) if c.martingale else 0)
-    return scheme, setup, twin_mean
+                  cf_t=cf_t, pp=pp, pp_t=pp_t, chol=chol)
+    # each accumulated control's sums at its columns of the loop's control accumulator
+    n_ctl = 0
+    for name in c.controls:
+        setup = setup._replace(**CONTROLS[name].loop_fields(h, n_ctl))
+        n_ctl += len(CONTROLS[name].sums(h))
+    setup = setup._replace(n_ctl=n_ctl)
+    return stepper, setup, twin_mean
 
 
 def _chunks(paths: int, chunk: int) -> list[int]:
@@ -406,7 +289,7 @@ def _chunks(paths: int, chunk: int) -> list[int]:
     return [chunk] * full + ([rest] if rest else [])
 
 
-def _run_tasks(scheme: StepScheme, setup: Setup, ss: np.random.SeedSequence, first_replica: int,
+def _run_tasks(stepper: Stepper, setup: Setup, ss: np.random.SeedSequence, first_replica: int,
                sizes: list[int], tasks: list[tuple[int, int]], threads: int) -> list[Sums]:
     """Run every (replica, chunk) task on a thread pool, each on its own random stream
     ``SeedSequence(seed, spawn_key=(replica, chunk))``."""
@@ -415,8 +298,8 @@ def _run_tasks(scheme: StepScheme, setup: Setup, ss: np.random.SeedSequence, fir
         r, k = task
         child = np.random.SeedSequence(ss.entropy, spawn_key=(first_replica + r, k))
         gen = np.random.Generator(np.random.PCG64(child))
-        out = Sums.zeros(sizes[k], setup.n_mart)
-        run_chunk(gen, scheme, setup._replace(P=sizes[k]), out)
+        out = Sums.zeros(sizes[k], setup.n_ctl)
+        run_chunk(gen, stepper, setup._replace(P=sizes[k]), out)
         return out
 
     if threads == 1 or len(tasks) == 1:
@@ -427,20 +310,20 @@ def _run_tasks(scheme: StepScheme, setup: Setup, ss: np.random.SeedSequence, fir
 
 def _merge(results: list[Sums], tasks: list[tuple[int, int]], sizes: list[int],
            c: _Checked) -> tuple[np.ndarray, ...]:
-    """Per-replica sums, counts, escape times (inf: none), summed counters and martingale sums
+    """Per-replica sums, counts, escape times (inf: none), summed counters and control sums
     from the chunks' outputs (rows of the levels in :attr:`Ensemble.sums`'s order)."""
     levels = 3 if c.third_level else 2 if c.richardson else 1
     rows = [0, 1, 3][:levels] + [2]
     sums = np.zeros((c.replicas, levels + 1, N_MOM))
     counts = np.zeros((c.replicas, levels + 1))
     esc_times = np.full((c.replicas, c.paths), np.inf)
-    counters = np.zeros(5, dtype=np.int64)
-    mart = np.zeros((c.replicas, 2, results[0].mart.shape[1]))
+    counters = np.zeros(N_COUNTERS, dtype=np.int64)
+    ctl = np.zeros((c.replicas, 2, results[0].ctl.shape[1]))
     offsets = np.concatenate([[0], np.cumsum(sizes)])
     for (r, k), out in zip(tasks, results):
-        mart[r] += out.mart
+        ctl[r] += out.ctl
         sums[r] += out.sums[rows]
         counts[r] += out.counts[rows]
         esc_times[r, offsets[k]:offsets[k + 1]] = np.where(out.esc_time >= 0.0, out.esc_time, np.inf)
         counters += out.counters
-    return sums, counts, esc_times, counters, mart
+    return sums, counts, esc_times, counters, ctl

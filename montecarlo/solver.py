@@ -16,12 +16,11 @@ adds the bound of :data:`montecarlo.estimate.RESIDUAL_RULE` on the remaining bia
 (automatic: twice the old start) is halved only when that bound, resolved, takes more than a
 third of ``tol``. By default (``extrapolate=False``) the fine level is reported with its
 Richardson bias estimate in the error, and an automatic ``dt`` is halved whenever that bias takes
-more than a third of ``tol``. Extrapolation is 1.8-3x faster at tol 1e-4 (n = 3 ring, n = 3
-and n = 1.5 units) but not the default: outside its asymptotic range its error bars do not hold
-(stiff m = 1e-3, n = 3: V2 off by 4.5 % with a 0.9 % error, first-order bias 17 %; tau = 1e-4,
-n = 3: Pin off by 5.9 errors). After each batch the burn-in is doubled when the first half of the measured
-window differs significantly from the whole (a transient left over); a halving or a doubling
-restarts the ensemble.
+more than a third of ``tol``. Extrapolation is faster at tight tolerances but not the default:
+outside its asymptotic range its error bars do not hold (docs/methods.md, "Error estimate").
+After each batch the burn-in is doubled when the first half of the measured window differs
+significantly from the whole (a transient left over); a halving or a doubling restarts the
+ensemble.
 """
 
 from __future__ import annotations
@@ -42,38 +41,32 @@ from fpe_harvester.parallel import default_threads
 from fpe_harvester.result import Stats, Status
 from fpe_harvester.solvers import Capabilities, Tolerance
 
-from .controls.twin import linearized_stiffness, natural_amplitude
+from .coefficients import onsite_kind
+from .controls.martingale import MARTINGALE
+from .ensemble import Ensemble
 from .estimate import Estimate, estimate
-from .plan import FALLBACK_NOTE, burn_in, relaxation_time
+from .harmonic import linearized_stiffness, natural_amplitude
+from .plan import FALLBACK_NOTE, RunPlan, burn_in, relaxation_time
 from .report import DRIFT_SHARE, DRIFT_SIGMAS, result
-from .scheme import JOINT_STEPS, KIND_KINK, KINK_WIDTH, joint_step_refusal, scheme_kind, uses_joint_step
-from .simulate import Ensemble, simulate
+from .simulate import simulate
+from .steps import STEP_NAMES, STEPPERS, resolve_step
 
-__all__ = ["MonteCarlo", "Plan"]
-
-
+__all__ = ["MonteCarlo"]
 
 #: Replica index where the pilot run's streams start (far from the measured replicas').
 _PILOT_FIRST = 2**40
 #: Path time (burn-in + measured) per replica at which ``paths`` = 64 is kept; longer paths get
 #: proportionally fewer per replica, so that the first batch costs about the same.
 _PATH_TIME = 140.0
-#: Coarsest and finest automatic time step, and the share of tol the bias may take.
-_DT_START, _DT_MIN, _BIAS_SHARE = 0.02, 0.02 / 32, 1.0 / 3.0
-#: Largest tau at which the kink scheme's averaged-noise step (:mod:`montecarlo.steps.averaged`)
-#: is measured correct: the Boltzmann bond law of n = 1 rings of two at K_v = 0, tau = 1e-4
-#: (tests/montecarlo/test_coupling.py); between it and JOINT_STEPS x _DT_MIN the kink refuses.
-KINK_AVERAGED_TAU = 1e-4
-#: Coarsest automatic time step where the joint step runs: its linear part is exact, so only
-#: the kicks of -U'(x) leave a bias. Measured for n = 3, a = 0.5 (coupled Richardson estimate
-#: at dt/2): 1.7e-5, 6.7e-5, 2.7e-4 relative at dt = 0.02, 0.04, 0.08 and tau = 1e-4, against
-#: 9e-5 for the frozen-xi step at tau = 1, dt = 0.02. The usual halving follows if it is larger.
-_DT_START_JOINT = 0.04
+#: Finest automatic time step, and the share of tol the bias may take.
+_DT_MIN, _BIAS_SHARE = 0.02 / 32, 1.0 / 3.0
+#: An automatic time step starts at least this far above the finest, so that its halvings can
+#: resolve the bias (the stepper's starting step, :meth:`~montecarlo.steps.base.Stepper.start_dt`,
+#: is lower for the kink's frozen step at short tau).
+_START_ABOVE_MIN = 10.0
 #: With ``extrapolate`` the automatic steps start twice as coarse (levels dt/2, dt, 2 dt): the
-#: reported extrapolation's remaining error is of higher order. Measured (coupled three-level
-#: runs, a = 0.5, coarse dt 0.04): its estimate (R(2dt) - R(dt))/7 was -1.5e-5 +- 0.9e-5 (ring
-#: n = 3, N = 3, k = -0.5), 0.4e-5 +- 0.7e-5 (n = 3), 1.1e-5 +- 0.8e-5 (n = 1.5), against Richardson
-#: biases of the fine level 1.9e-4, 1.5e-4, 1.5e-4.
+#: reported extrapolation's remaining error is of higher order (docs/methods.md, "Why the
+#: settings are what they are").
 _EXTRAPOLATE_COARSER = 2.0
 #: Restarts allowed for a longer burn-in (the drift that triggers one: :data:`montecarlo.report.DRIFT_SIGMAS`).
 _BURN_RESTARTS = 3
@@ -81,62 +74,24 @@ _BURN_RESTARTS = 3
 _LOOSE_TOL = 5e-3
 #: An upper bound on the path loop's speed, in unit-steps (one unit of one path advanced by one
 #: ``dt``) per second and thread, used to refuse a first batch that ``max_time`` cannot cover
-#: (a batch is not interrupted). Eight times the fastest rate measured, 6.2e7 per CPU-second for
-#: a harmonic unit at the fine level alone (``python -m validation.studies.mc_throughput``; the
-#: solver's own runs, with the Richardson level: 1.0-2.8e7), so that no run the budget could
-#: cover is refused on a faster machine.
+#: (a batch is not interrupted): eight times the fastest rate measured
+#: (``python -m validation.studies.mc_throughput``), so that no run the budget could cover is
+#: refused on a faster machine.
 FASTEST_UNIT_STEPS = 5e8
 #: Automatic measured time per path, in burn-ins (when longer than the default below).
 _RUN_PER_BURN = 3.0
 #: Default measured time per path without and with the martingale controls. The martingale
 #: sums cancel the time average's fluctuation up to the boundary term of the Poisson solution,
-#: g(Y_start) - g(Y_end), whose share of the variance falls like 1/t_run: measured at n = 3,
-#: N = 3, a = 0.5, k = -0.5 (same basis and twin), variance reduction of eta 5.7, 10.6, 12.9 at
-#: t_run = 100, 400, 1000; harmonic unit (a = 0.5, linear basis) 8.0 at 100, 34 at 400.
-#: The longer run pays only when many replicas are needed anyway: at a loose tolerance the
-#: minimum of replicas at t_run = 100 already meets it and 400 would cost 4x (the test suite's
-#: Monte Carlo solves took ~1.5x longer in all with 400 at every tolerance), so 400 applies at
-#: tol <= _T_RUN_MART_TOL. Rejected: t_run = 1000 at tol = 1e-4 (ring above, extrapolation,
-#: seed 8100, one run each): 90.5 CPU-s (512 replicas of 8 paths) against 86.6 with 400.
+#: g(Y_start) - g(Y_end), whose share of the variance falls like 1/t_run; the longer run pays
+#: only when many replicas are needed anyway, so it applies at tol <= _T_RUN_MART_TOL (the
+#: measurements: docs/methods.md, "Why the settings are what they are").
 _T_RUN, _T_RUN_MART = 100.0, 400.0
 _T_RUN_MART_TOL = 1e-3
 
 
 #: A confined system's escape threshold is at least this many natural amplitudes
-#: (:func:`~montecarlo.controls.twin.natural_amplitude`), and at least 100.
+#: (:func:`~montecarlo.harmonic.natural_amplitude`), and at least 100.
 ESCAPE_AMPLITUDES = 30.0
-
-@dataclass(frozen=True)
-class Plan:
-    """What the solver runs for one harvester (see :meth:`MonteCarlo.plan`).
-
-    Attributes
-    ----------
-    dt : float
-        Coarse time step (the reported level is ``dt/2`` with Richardson).
-    t_burn, t_run : float
-        Burn-in and measured time per path.
-    paths : int
-        Paths per replica.
-    twin : float or None
-        On-site stiffness of the harmonic twin (None: no twin).
-    start : str
-        ``"twin"`` (stationary law of the twin, or of a harmonic ring itself) or ``"rest"``.
-    relaxation_time : float
-        Slowest relaxation time behind ``t_burn`` (:func:`montecarlo.plan.relaxation_time`).
-    notes : dict
-        How each choice was made.
-    """
-
-    dt: float
-    t_burn: float
-    t_run: float
-    paths: int
-    twin: float | None
-    start: str
-    relaxation_time: float
-    notes: dict[str, Any]
-
 
 def _common_random_numbers(solver: MonteCarlo, h: Harvester, replicas: int) -> dict[str, Any]:
     """Settings under which runs at every parameter value near ``h`` share their noise paths:
@@ -170,10 +125,11 @@ class MonteCarlo:
     dt : float or None
         Time step, > 0 (model time units). With ``richardson`` the reported numbers come
         from ``dt/2`` and ``dt`` (and ``2 dt`` with ``extrapolate``) gives the bias estimate.
-        None (default): 0.02 (0.04 where the joint step runs, see ``joint``), twice that with
-        ``extrapolate``, halved after a batch (down to 0.02/32) while the time-step error
-        (the bias estimate, or with ``extrapolate`` the bound on the extrapolation's remaining
-        bias) exceeds a third of ``tol`` by three of its standard errors.
+        None (default): the stepper's starting step (``step``; 0.02 for the frozen step, at most
+        tau at the kink, 0.04 for the joint and averaged steps), twice that with ``extrapolate``,
+        halved after a batch (down to 0.02/32) while the time-step error (the bias estimate, or
+        with ``extrapolate`` the bound on the extrapolation's remaining bias) exceeds a third of
+        ``tol`` by three of its standard errors.
     paths : int or None
         Paths (rings) per replica, >= 2. None: 64 for ``tol`` < 5e-3, else 16 (the first
         batch of ``min_replicas`` then usually meets ``tol`` already); fewer when a path's
@@ -195,7 +151,7 @@ class MonteCarlo:
         anti-phase coupling force :math:`4|k| s x` (:math:`s = \\max_q \\sin^2(\\pi q/N)`)
         overtakes the on-site force, if that is larger; for a confined system
         ``ESCAPE_AMPLITUDES`` (30) times the root-mean-square x of the equivalent harmonic
-        unit (:func:`~montecarlo.controls.twin.natural_amplitude`), if that is larger (strong noise on
+        unit (:func:`~montecarlo.harmonic.natural_amplitude`), if that is larger (strong noise on
         a weak wall: n = 1, D = 100 has sd(x) ~ 94, threshold ~2500).
     progress : bool or None
         tqdm bar on stderr; None shows it only for runs longer than 2 s.
@@ -215,11 +171,13 @@ class MonteCarlo:
         exactly known moments as control variates (:mod:`montecarlo.controls.regression`); the paths then
         start from the twin's stationary law. Used whenever a stable twin exists and no path
         escaped; ``info["variance_reduction"]`` gives the factor. Default True.
-    joint : bool or None
-        Step of the linear part (:func:`montecarlo.simulate`): True advances (x, v, V, xi)
-        together by their exact Gaussian transition, False holds xi frozen over a step. None
-        (default): joint when tau < 10 dt, where freezing xi is wrong
-        (:data:`montecarlo.scheme.JOINT_STEPS`). The kink scheme (n near 1) has no joint step.
+    step : str
+        The stepper (:func:`montecarlo.simulate`, :data:`montecarlo.steps.STEP_NAMES`):
+        ``"frozen"`` holds xi over a step, ``"joint"`` advances (x, v, V, xi) together by their
+        exact Gaussian transition (not the kink), ``"averaged"`` is the kink's short-tau step
+        (tau <= 1e-4). ``"auto"`` (default): the one :func:`montecarlo.steps.resolve_step` picks
+        at each time step (joint where tau < 10 dt, averaged for the kink where tau < dt, else
+        frozen).
     martingale : bool
         Accumulate the martingale control sums (:mod:`montecarlo.controls.martingale`: basis functions
         of the state times the noise drawn after it, mean 0 exactly, for any potential and
@@ -270,7 +228,7 @@ class MonteCarlo:
     threads: int | None = None
     batch: int | None = None
     control: bool = True
-    joint: bool | None = None
+    step: str = "auto"
     martingale: bool = True
     extrapolate: bool = False
 
@@ -295,9 +253,12 @@ class MonteCarlo:
         object.__setattr__(self, "max_time", check_real("max_time", self.max_time, low=0.0, low_open=True))
         if self.escape is not None:
             object.__setattr__(self, "escape", check_real("escape", self.escape, low=0.0, low_open=True))
-        for flag in ("progress", "richardson", "control", "joint", "martingale", "extrapolate"):
+        if self.step not in STEP_NAMES:
+            raise ParameterError(f"step must be one of {STEP_NAMES}, got {self.step!r} "
+                                 f"(type {type(self.step).__name__})")
+        for flag in ("progress", "richardson", "control", "martingale", "extrapolate"):
             value = getattr(self, flag)
-            optional = flag in ("progress", "joint")
+            optional = flag == "progress"
             if not isinstance(value, bool) and not (optional and value is None):
                 choices = "True, False or None" if optional else "True or False"
                 raise ParameterError(f"{flag} must be {choices}, got {value!r} "
@@ -308,23 +269,21 @@ class MonteCarlo:
             object.__setattr__(self, "batch", check_int("batch", self.batch, low=1))
 
     def unsupported_reason(self, h: Harvester) -> str | None:
-        """None, or why this solver refuses ``h``: ``joint=True`` where there is no joint step,
-        and the kink scheme (xi held over a step) where tau is shorter than the step can be made
-        (below ``JOINT_STEPS`` times the finest automatic step, or below an explicit ``dt``),
-        unless tau <= :data:`KINK_AVERAGED_TAU`, where its averaged-noise step serves it."""
-        if scheme_kind(h) != KIND_KINK:
-            return joint_step_refusal(h) if self.joint else None
-        tau = h.params.tau
-        if tau <= KINK_AVERAGED_TAU and (self.dt is None or tau < self.dt):
-            return None
-        if self.dt is None and tau < JOINT_STEPS * _DT_MIN:
-            return (f"tau = {tau:g} is too short for the kink scheme (n = {h.n:g} <= 1 + {KINK_WIDTH:g}), "
-                    f"which holds xi over a step: it needs tau >= {JOINT_STEPS * _DT_MIN:g} "
-                    f"({JOINT_STEPS:g} x the finest automatic step {_DT_MIN:g}), or an explicit dt <= tau; "
-                    f"its averaged-noise step serves tau <= {KINK_AVERAGED_TAU:g} (measured)")
-        if self.dt is not None and tau < self.dt:
-            return (f"tau = {tau:g} is shorter than dt = {self.dt:g}: the kink scheme (n = {h.n:g}) holds xi "
-                    f"over a step; use dt <= tau")
+        """None, or why this solver refuses ``h``: no stepper serves it (:func:`resolve_step`: a
+        named ``step`` that refuses ``h``, or none preferred at ``dt``, as the kink between the
+        averaged step's tau <= 1e-4 and the frozen step's dt <= tau), or the automatic ``dt`` would
+        have to start within ``_START_ABOVE_MIN`` of its finest step."""
+        try:
+            stepper, dt = resolve_step(h, self.step, self.dt, scale=self._dt_scale())
+        except ParameterError as err:
+            return str(err)
+        if self.dt is None and dt < _START_ABOVE_MIN * _DT_MIN:
+            others = "; ".join(f"{s.name}: {why}" for s in STEPPERS.values()
+                               if (why := s.refusal(h, onsite_kind(h))) is not None)
+            return (f"tau = {h.params.tau:g} is too short for the automatic time step: the {stepper.name} "
+                    f"step ({stepper.preference}) would start at dt = {dt:g}, within {_START_ABOVE_MIN:g} x "
+                    f"the finest automatic step {_DT_MIN:g}, too few halvings to resolve its bias; {others}. "
+                    f"Give an explicit dt")
         return None
 
     def threshold(self, h: Harvester) -> float:
@@ -341,23 +300,19 @@ class MonteCarlo:
 
     # -- planning ----------------------------------------------------------------------------
 
-    def plan(self, h: Harvester) -> Plan:
+    def plan(self, h: Harvester) -> RunPlan:
         """Time step, burn-in, paths and twin for ``h`` from the settings (None = automatic).
 
         A nonlinear ring gets a short pilot run from rest (no twin) that measures
         :math:`\\kappa = \\langle xU'(x)\\rangle/\\langle x^2\\rangle`
-        (:func:`montecarlo.controls.twin.linearized_stiffness`); failing a stable twin there, the
+        (:func:`montecarlo.harmonic.linearized_stiffness`); failing a stable twin there, the
         Gaussian closure; failing that, no twin and a rest start.
         """
         if not math.isfinite(2.0 * h.a):
             raise ParameterError(f"a = {h.a!r}: Monte Carlo needs the unit stiffness 2a in the double "
                                  f"range, a <= {0.5 * sys.float_info.max:.6g}")
         seed = 0 if self.seed is None else self.seed
-        dt = self.dt
-        if dt is None:
-            coarser = _EXTRAPOLATE_COARSER if self.extrapolate and self.richardson else 1.0
-            joint = uses_joint_step(h, coarser * _DT_START_JOINT) if self.joint is None else self.joint
-            dt = coarser * (_DT_START_JOINT if joint else _DT_START)
+        stepper, dt = resolve_step(h, self.step, self.dt, scale=self._dt_scale())
         notes: dict[str, Any] = {}
         harmonic = classify(h)[0] if h.is_linear else None
         twin = None
@@ -379,9 +334,7 @@ class MonteCarlo:
                 elif (kp := self._pilot_stiffness(h, dt, pil_burn, t_run0, seed)) is not None:
                     kappa = kp
                     notes["twin"] = "pilot <x U'(x)>/<x^2>"
-            # the kink's averaged-noise step (tau < dt) has no twin
-            averaged = scheme_kind(h) == KIND_KINK and uses_joint_step(h, dt)
-            twin = kappa if self.control and not averaged else None
+            twin = kappa if self.control and stepper.twin else None
             start = "twin" if twin is not None else "rest"
         tau_r = relaxation_time(h, kappa)
         if kappa is None and harmonic is None:
@@ -400,7 +353,7 @@ class MonteCarlo:
         paths = self.paths or self._auto_paths(t_burn, t_run)
         if self.t_run is None and dt > t_run:
             t_run = dt
-        return Plan(dt=dt, t_burn=t_burn, t_run=t_run, paths=paths, twin=twin, start=start,
+        return RunPlan(dt=dt, t_burn=t_burn, t_run=t_run, paths=paths, twin=twin, start=start,
                     relaxation_time=tau_r, notes=notes)
 
     def _pilot_stiffness(self, h: Harvester, dt: float, t_burn: float, t_run: float,
@@ -409,7 +362,7 @@ class MonteCarlo:
         moments give none)."""
         pilot = simulate(h, dt=dt, paths=16, replicas=max(2, self._batch()), t_burn=t_burn, t_run=t_run,
                          seed=seed, threshold=self.threshold(h), threads=self.threads,
-                         first_replica=_PILOT_FIRST, joint=self.joint)
+                         first_replica=_PILOT_FIRST, step=self.step)
         m = pilot.moments(0)
         ok = np.isfinite(m["xdU"]) & np.isfinite(m["x2"])
         if not (ok.any() and m["x2"][ok].mean() > 0 and m["xdU"][ok].mean() > 0):
@@ -423,7 +376,7 @@ class MonteCarlo:
         threads = self.threads or default_threads()
         return h.N * paths * replicas * (t_path / dt) / (FASTEST_UNIT_STEPS * threads)
 
-    def _beyond_budget(self, h: Harvester, plan: Plan, wall: float) -> Stats | None:
+    def _beyond_budget(self, h: Harvester, plan: RunPlan, wall: float) -> Stats | None:
         """The ``NOT_CONVERGED`` result, without numbers, when ``max_time`` cannot cover the
         first batch of ``min_replicas`` (``wall``: seconds spent planning, reported); else None."""
         need = self.least_seconds(h, plan.dt, plan.paths, self.min_replicas, plan.t_burn + plan.t_run)
@@ -439,6 +392,10 @@ class MonteCarlo:
             f"{plan.relaxation_time:.3g}), which needs at least {need:.3g} s: raise max_time above "
             f"that, or give t_burn. No statistics."))
 
+    def _dt_scale(self) -> float:
+        """Factor on the steppers' automatic starting steps: coarser with extrapolation."""
+        return _EXTRAPOLATE_COARSER if self.extrapolate and self.richardson else 1.0
+
     def _default_run(self) -> float:
         return _T_RUN_MART if self.martingale and self.tol <= _T_RUN_MART_TOL else _T_RUN
 
@@ -451,14 +408,15 @@ class MonteCarlo:
     def _batch(self) -> int:
         return self.batch or self.threads or default_threads()
 
-    def _run(self, h: Harvester, plan: Plan, replicas: int, first: int) -> Ensemble:
+    def _run(self, h: Harvester, plan: RunPlan, replicas: int, first: int) -> Ensemble:
         return simulate(h, dt=plan.dt, paths=plan.paths, replicas=replicas, t_burn=plan.t_burn,
                         t_run=plan.t_run, seed=self.seed, richardson=self.richardson,
                         threshold=self.threshold(h), threads=self.threads, first_replica=first,
-                        twin=plan.twin, start=plan.start, joint=self.joint, martingale=self.martingale,
+                        twin=plan.twin, start=plan.start, step=self.step,
+                        controls=(MARTINGALE.name,) if self.martingale else (),
                         third_level=self.extrapolate)
 
-    def _restart_reason(self, h: Harvester, plan: Plan, est: Estimate) -> tuple[str, Plan] | None:
+    def _restart_reason(self, h: Harvester, plan: RunPlan, est: Estimate) -> tuple[str, RunPlan] | None:
         """After a batch: a finer step or a longer burn-in, if the data ask for one.
 
         Both tests need three standard errors (they are repeated after every batch) and a
@@ -485,7 +443,7 @@ class MonteCarlo:
             return "t_burn", dataclasses.replace(plan, t_burn=t_burn, t_run=t_run, paths=paths)
         return None
 
-    def run(self, h: Harvester, plan: Plan | None = None) -> tuple[Ensemble, Estimate, bool, Plan]:
+    def run(self, h: Harvester, plan: RunPlan | None = None) -> tuple[Ensemble, Estimate, bool, RunPlan]:
         """Adaptive replica loop; returns the ensemble, its estimate, whether tol was met, the plan."""
         from tqdm import tqdm
 

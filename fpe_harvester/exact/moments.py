@@ -200,7 +200,7 @@ def closure_mismatch(h: Harvester, log_kappa: float) -> float:
     one unit for N = 1), from the closed form (a numerical Lyapunov solve loses positivity at
     extreme :math:`\\kappa`). Its root is the equivalent stiffness; the Fokker--Planck frame
     (:func:`fpe_harvester.fpe.hermite.equivalent_harmonic`) and the Monte Carlo twin
-    (:func:`montecarlo.controls.twin.linearized_stiffness`) both solve it.
+    (:func:`montecarlo.harmonic.linearized_stiffness`) both solve it.
     """
     kappa = math.exp(log_kappa)
     kap = kappa + h.coupling_stiffness() if h.N > 1 else np.array([kappa])

@@ -1,4 +1,4 @@
-"""numba helpers of the martingale control variates (private; used by :mod:`montecarlo._kernels`).
+"""The martingale controls: sums of functions of the state times the noise drawn after it.
 
 In every step of the kernel the only randomness is a fresh Gaussian draw: the
 Ornstein--Uhlenbeck normal :math:`Z_j` of each unit (frozen-xi step, xi increment
@@ -12,7 +12,7 @@ Ornstein--Uhlenbeck normal :math:`Z_j` of each unit (frozen-xi step, xi incremen
     \\eta_{j,m} = \\xi_j(t_{m+1}) - e^{-(t_{m+1} - t_m)/\\tau}\\xi_j(t_m)
     = \\sum_{t_m \\le s < t_{m+1}} e^{-(t_{m+1} - s - h)/\\tau} s Z_{j,s},\\qquad E[M_\\phi] = 0
 
-exactly, for any dt, scheme, start and coefficient (each normal is independent of everything
+exactly, for any dt, step, start and coefficient (each normal is independent of everything
 before it), so these sums are control variates with known mean 0 whose regression
 (:mod:`montecarlo.controls.regression`) adds no bias and leaves the Richardson pair untouched. The
 :math:`t_m` are the measured steps (the fine level's first substep with Richardson); the
@@ -24,20 +24,15 @@ the solution g of the Poisson equation of the measured observable,
 boundary term :math:`g(Y_{t_0}) - g(Y_{t_1})`; for a harmonic ring g is quadratic, so its
 first-order part is linear in the state (the ``lin`` basis) and its second-order part is
 :math:`\\sum_d G_d \\sum_j (\\eta_j\\eta_{j+d} - \\delta_{d0}\\,\\mathrm{var})` (the ``he`` sums;
-exact with a martingale point at every step, :func:`montecarlo.controls.twin.poisson_controls`).
+exact with a martingale point at every step, :func:`poisson_controls`).
 
 Basis, per unit j (sums over units; the ring's symmetry makes one coefficient per lag d):
 
 ``lin``  (x, v, V, xi) of the unit (d = 0) and the sums over its two neighbours at lag d,
          d = 1 .. D, :math:`D = \\min(\\lfloor N/2\\rfloor,` :data:`MG_DIST`);
 ``nl``   odd nonlinear terms of the unit: :data:`NL_NAMES` (``dU`` is :math:`-U'(x_j)`, ``r2``
-         the neighbours' :math:`x_{j-1}^2 + x_{j+1}^2`). Measured at n = 3, N = 3, a = 0.5,
-         k = -0.5 (300 replicas of 2 paths, t_run = 400; variance reduction of eta): lin 4.7,
-         lin + he 4.7, lin + he + nl 9.4, with the twin 10.3. Rejected: the ring's angular
-         momentum :math:`\\ell = \\sum_l x_l(v_{l+1} - v_{l-1})` times the tangents
-         :math:`x_{j+1} - x_{j-1}` (and of v, xi): 9.2; cubic neighbour terms
-         :math:`x_j^2 s_j, x_j s_j^2, s_j^3, x_jv_js_j` (:math:`s_j = x_{j-1} + x_{j+1}`): 9.6
-         for four more controls;
+         the neighbours' :math:`x_{j-1}^2 + x_{j+1}^2`; the terms measured against others:
+         docs/methods.md, "Why the settings are what they are");
 ``he``   noise only: :math:`\\sum_j (\\eta_j^2/\\mathrm{var} - 1)` and
          :math:`\\sum_j \\eta_j\\eta_{j+d}/\\mathrm{var}`, d = 1 .. D (var the innovation's variance).
 
@@ -52,10 +47,28 @@ only as a separate candidate set (:data:`montecarlo.controls.CONTROL_SETS`).
 
 from __future__ import annotations
 
+import math
+from typing import TYPE_CHECKING
+
 import numpy as np
 from numba import njit
 
+from fpe_harvester.model import Harvester
+
 from .._force import _onsite_force
+from ..harmonic import step_matrices
+from .base import Columns, Control
+
+if TYPE_CHECKING:
+    from ..ensemble import Ensemble
+
+__all__ = ["MARTINGALE", "BOUNDARY", "MartingaleControl", "BoundaryControl", "BOUNDARY_TAIL", "MG_DIST",
+           "NL_NAMES", "basis_names", "lags", "n_state", "mg_measure", "stationary_window",
+           "poisson_controls"]
+
+#: Tail probability of the test (Hotelling's T^2 against chi^2) that the end-of-window terms
+#: have mean 0; where it fails the candidate sets with them are left out (:func:`stationary_window`).
+BOUNDARY_TAIL = 1e-3
 
 #: Largest neighbour lag of the linear basis (the Poisson solution's weight on farther units is
 #: small; the count of controls grows with it).
@@ -200,3 +213,155 @@ def mg_measure(x, v, V, xi, w, a, n, phi, xi0, acc, first: bool, started: bool, 
     for j in range(N):
         for p in range(P):
             xi0[j, p] = xi[j, p]
+
+
+class MartingaleControl(Control):
+    """The martingale sums ``lin``, ``nl`` and ``he`` (mean 0 exactly, any start), accumulated by
+    the path loop (:func:`mg_measure`, with the end-of-window terms read by :data:`BOUNDARY`)."""
+
+    name = "martingale"
+    accumulated = True
+
+    def sums(self, h: Harvester) -> tuple[str, ...]:
+        return basis_names(h.N)
+
+    def loop_fields(self, h: Harvester, offset: int) -> dict[str, int]:
+        return {"mg_at": offset, "n_mg": len(basis_names(h.N))}
+
+    def columns(self, e: Ensemble, valid: np.ndarray) -> Columns | None:
+        return _part(e, valid, False) if self.name in e.ctl_names else None
+
+
+class BoundaryControl(Control):
+    """The martingale sums' end-of-window terms (``bd_*``): mean 0 only for a stationary window,
+    so only where :func:`stationary_window` admits them."""
+
+    name = "boundary"
+
+    def columns(self, e: Ensemble, valid: np.ndarray) -> Columns | None:
+        if MARTINGALE.name not in e.ctl_names:
+            return None
+        if not stationary_window(e.control_sums(MARTINGALE.name), valid, e.ctl_names[MARTINGALE.name]):
+            return None
+        return _part(e, valid, True)
+
+
+def _part(e: Ensemble, valid: np.ndarray, boundary: bool) -> Columns:
+    """The martingale accumulator's columns without (or only) the end-of-window terms."""
+    mg, mg_first = e.control_sums(MARTINGALE.name), e.control_sums(MARTINGALE.name, first_half=True)
+    names = [name for name in e.ctl_names[MARTINGALE.name] if name.startswith("bd_") == boundary]
+    return [mg[name][valid] for name in names], [mg_first[name][valid] for name in names], [0.0] * len(names)
+
+
+#: The martingale control.
+MARTINGALE = MartingaleControl()
+#: The martingale's end-of-window terms as a control of their own.
+BOUNDARY = BoundaryControl()
+
+
+def stationary_window(mg: dict[str, np.ndarray], valid: np.ndarray, names: tuple[str, ...]) -> bool:
+    """Whether the end-of-window terms are usable: present, and their means consistent with 0
+    (Hotelling's T^2 below the chi^2 quantile at :data:`BOUNDARY_TAIL`). They have mean 0 only
+    for a stationary window; a transient left by the burn-in shows here first
+    (tests/montecarlo/test_extrapolate.py)."""
+    from scipy.stats import chi2
+
+    cols = [mg[name][valid] for name in names if name.startswith("bd_")]
+    n = int(valid.sum())
+    if not cols or n < 3:
+        return False
+    C = np.column_stack(cols)
+    sd = C.std(axis=0, ddof=1)
+    C = C[:, sd > 0] / sd[sd > 0]
+    # Hotelling's T^2 of the means (the terms are strongly correlated), on the resolved rank
+    m = C.mean(axis=0)
+    Cc = C - m
+    _, sv, vt = np.linalg.svd(Cc / math.sqrt(n - 1), full_matrices=False)
+    keep = sv > 1e-8 * sv[0] if sv.size else sv > 0
+    proj = vt[keep] @ m / sv[keep]
+    t2 = n * float(proj @ proj)
+    return bool(t2 < chi2.ppf(1.0 - BOUNDARY_TAIL, max(int(keep.sum()), 1)))
+
+
+def poisson_controls(lin: Harvester, dt: float, names: tuple[str, ...]) -> dict[str, np.ndarray]:
+    """Weights over the martingale sums that make the Poisson-solution controls of V2 and Pin.
+
+    For the harmonic ring ``lin`` at the frozen-xi step dt, the measured state
+    :math:`Y_t` (x, v, V after the step's flow, xi before its update, unit by unit) is the linear
+    chain :math:`Y_{t+1} = A Y_t + \\sum_j b_j Z_j` with :math:`A = T D_\\xi` (T of
+    :func:`montecarlo.harmonic.step_matrices` in unit space, :math:`D_\\xi` the xi decay
+    :math:`e^{-h/\\tau}`) and
+    :math:`b_j = s\\,T e_{\\xi_j}`. For a quadratic observable :math:`f = Y^TFY` (the ring mean of
+    :math:`V^2`, or of :math:`\\sigma e^{-h/2\\tau} v\\xi`) the Poisson equation
+    :math:`g - E[g(Y')|Y] = f - \\pi(f)` has the quadratic solution :math:`g = Y^TGY`,
+    :math:`G - A^TGA = F` (one discrete Lyapunov solve), and its martingale increment is
+
+    .. math::
+
+        g(Y') - E[g(Y')|Y] = \\sum_j 2\\,e_{\\xi_j}^T T^T G A Y\\; sZ_j
+        + s^2 \\sum_{j,l} (T^TGT)_{\\xi_j\\xi_l}(Z_jZ_l - \\delta_{jl}),
+
+    linear in the state times the noise plus Hermite terms: a fixed combination of the ``lin`` and
+    ``he`` sums of :mod:`montecarlo.controls.martingale` (the ring's symmetry makes the weights depend on
+    the lag only; lags beyond :data:`montecarlo.controls.martingale.MG_DIST` are not in the basis, so the
+    weights are exact for N <= 9). With a sample at every step the time average's fluctuation is
+    this martingale up to the boundary term :math:`g(Y_{t_0}) - g(Y_{t_1})`.
+
+    Parameters
+    ----------
+    lin : Harvester
+        A stable harmonic ring (the system itself, or a nonlinear system's twin: the weights then
+        define a control evaluated on the real state, still of mean 0).
+    dt : float
+        The fine step of the ensemble, > 0 (frozen-xi step).
+    names : tuple of str
+        The martingale sums' names, ``ctl_names["martingale"]`` of the ensemble.
+
+    Returns
+    -------
+    dict
+        ``{"V2": w, "Pin": w}``, weight vectors over ``names``.
+    """
+    import scipy.linalg
+
+    M, T, _, _ = step_matrices(lin, dt)
+    N = lin.N
+    p = lin.params
+    lag = np.arange(N)
+    cosw = np.cos(2.0 * math.pi * np.outer(lag, np.arange(N)) / N) / N
+    Tb = np.einsum("lq,qab->lab", cosw, T)
+    Tu = np.zeros((4 * N, 4 * N))
+    for j in range(N):
+        for l in range(N):
+            Tu[4 * j:4 * j + 4, 4 * l:4 * l + 4] = Tb[(j - l) % N]
+    Dxi = np.eye(4 * N)
+    Dxi[3::4, 3::4] *= math.exp(-dt / p.tau)
+    A = Tu @ Dxi
+    s = math.sqrt(p.noise_variance * -math.expm1(-2.0 * dt / p.tau))
+    half = math.exp(-0.5 * dt / p.tau)
+    out = {}
+    for key in ("V2", "Pin"):
+        F = np.zeros((4 * N, 4 * N))
+        for j in range(N):
+            if key == "V2":
+                F[4 * j + 2, 4 * j + 2] = 1.0 / N
+            else:
+                F[4 * j + 1, 4 * j + 3] = F[4 * j + 3, 4 * j + 1] = 0.5 * p.sigma * half / N
+        G = scipy.linalg.solve_discrete_lyapunov(A.T, F)
+        lin_w = 2.0 * Tu[:, 3].T @ G @ A  # unit 0's phi = lin_w . Y
+        K = s * s * Tu.T @ G @ Tu
+        w = np.zeros(len(names))
+        for i, name in enumerate(names):
+            kind, *rest = name.split("_")
+            if kind == "lin":
+                var, d = "x v V xi".split().index(rest[0]), int(rest[1])
+                if d == 0:
+                    w[i] = lin_w[var]
+                else:
+                    # the basis holds y_{j-d} + y_{j+d}: equal weights on a reflection-symmetric ring
+                    w[i] = lin_w[4 * d + var] if 2 * d != N else 0.5 * lin_w[4 * d + var]
+            elif kind == "he":
+                d = int(rest[0])
+                w[i] = K[3, 3] if d == 0 else (K[3, 4 * d + 3] * (1.0 if 2 * d == N else 2.0))
+        out[key] = w
+    return out

@@ -1,4 +1,4 @@
-"""The step-scheme protocol: what the path loop and :func:`montecarlo.simulate` use of a step."""
+"""The stepper protocol: what the path loop, :func:`montecarlo.simulate` and the solver use of a step."""
 
 from __future__ import annotations
 
@@ -8,11 +8,11 @@ import numpy as np
 
 from fpe_harvester.model import Harvester
 
-__all__ = ["StepScheme", "Kernels"]
+__all__ = ["Stepper", "Kernels"]
 
 
 class Kernels(NamedTuple):
-    """A step scheme's numba kernels (signatures in :class:`StepScheme`)."""
+    """A stepper's numba kernels (signatures in :class:`Stepper`)."""
 
     normals: int
     noise: Callable
@@ -24,23 +24,37 @@ class Kernels(NamedTuple):
     slow_kind: int = -1
 
 
-class StepScheme:
+class Stepper:
     """One way of advancing the ring over a time step, with its noise (Python side).
 
-    A scheme lives in its own module of :mod:`montecarlo.steps` and has one entry in
-    :data:`montecarlo.steps.STEPS`; nothing else names it. Members used by the driver:
+    A stepper lives in its own module of :mod:`montecarlo.steps` and has one entry in
+    :data:`montecarlo.steps.STEPPERS`; nothing else names it. Which one runs is decided in one
+    place, :func:`montecarlo.steps.resolve_step`, from the members below.
 
     Attributes
     ----------
     name : str
-        Its key in :data:`montecarlo.steps.STEPS`.
+        Its key in :data:`montecarlo.steps.STEPPERS`, the value of the ``step`` option.
+    priority : int
+        ``step="auto"`` takes the stepper of highest priority that does not refuse the problem
+        and prefers the time step (:meth:`refusal`, :meth:`preferred`).
+    description : str
+        What it does, for the solver's ``info["integrator"]``.
+    preference : str
+        When :meth:`preferred` holds, in words (for the message when no stepper serves).
+    dt_start : float
+        The coarse time step, in model time units, at which the solver's automatic ``dt`` starts
+        with this stepper (:meth:`start_dt`).
+    twin : bool
+        Whether it can run the harmonic twin, whose exact law at this step is
+        :meth:`twin_matrices`.
     tag : NamedTuple
-        An instance of the scheme's own NamedTuple class with the field ``normals`` (standard
-        normals drawn per unit and step). Its numba type selects the scheme's kernels when the
+        An instance of the stepper's own NamedTuple class with the field ``normals`` (standard
+        normals drawn per unit and step). Its numba type selects the stepper's kernels when the
         path loop (:func:`montecarlo._loop.run_chunk`) is compiled: one specialised loop per
-        scheme, no branch on the scheme at run time.
+        stepper, no branch on the stepper at run time.
     kernels : Kernels
-        The scheme's numba kernels (arrays (N, P); noise arrays (normals, N, P)):
+        The stepper's numba kernels (arrays (N, P); noise arrays (normals, N, P)):
 
         ``normals`` : int
             Standard normals drawn per unit and step.
@@ -51,14 +65,13 @@ class StepScheme:
             coarse levels run on the fine level's noise).
         ``step(x, v, V, xi, F, stuck, pvx, eps, cf, pp, kind, xm, fext, cs, rbm, rbx, w, counters, gen)``
             Advance one level (x, v, V, xi; ``F`` the kicked on-site force at x, ``stuck`` the
-            kink's held units, ``pvx`` the joint step's estimate of v xi) over one step with
-            noise ``eps``. ``kind`` is the on-site treatment
-            (:data:`montecarlo._kernels.KIND_LINEAR`, ``KIND_KICK``, ``KIND_KINK``), ``xm``,
-            ``fext``, ``cs``, ``rbm``, ``rbx`` shared scratch, ``w`` the live paths,
-            ``counters`` the kink statistics, ``gen`` for steps that draw extra normals. The
-            kernel takes the subset of these it needs, by parameter name, in any order (the
-            frozen step's is ``_d_step(x, v, V, xi, F, stuck, xm, fext, w, cf, pp, kind,
-            counters, cs)``).
+            kink's held units, ``pvx`` the step's estimate of v xi) over one step with noise
+            ``eps``. ``kind`` is the on-site treatment (:data:`montecarlo.layout.KIND_LINEAR`,
+            ``KIND_KICK``, ``KIND_KINK``), ``xm``, ``fext``, ``cs``, ``rbm``, ``rbx`` shared
+            scratch, ``w`` the live paths, ``counters`` the kink statistics, ``gen`` for steps
+            that draw extra normals. The kernel takes the subset of these it needs, by parameter
+            name, in any order (the frozen step's is ``d_step(x, v, V, xi, F, stuck, xm, fext, w,
+            cf, pp, kind, counters, cs)``).
         ``advance(xi, eps, cf)``
             After the level was measured: whatever of its noise the step left (the OU update of
             xi), or nothing.
@@ -70,36 +83,57 @@ class StepScheme:
             arguments by name: the same operations (bit-identical), its small kernels inlined;
             it returns False, with nothing changed, where ``step`` must take the step (a stiff
             wall, the kink's flow). The loop calls it first, except for the on-site treatment
-            ``slow_kind``, which it never takes. The frozen step's made a harmonic
-            ring's loop at two paths per chunk 0.88x of 940829b's instead of 1.07-1.21x; the
-            joint step has none (one built like it measured no gain, 1.06-1.09x against
-            1.05-1.07x).
+            ``slow_kind``, which it never takes.
 
-    Arrays are passed one by one, not in tuples: reading arrays out of tuples in the loop cost
-    up to 20 % in reference counting at small chunks. ``step`` is called directly (an
-    intrinsic, :func:`montecarlo.steps.dispatch.step`); the small kernels are inlined into the
-    loop (``inline="always"``) and ``noise`` fills a fixed buffer instead of returning an
-    array. Measured at the solver's chunks (2-16 paths): every numba call with array
-    arguments costs tens of ns, so a compiled wrapper layer or a call per small kernel made
-    the loop 1.2-1.5x slower than the two loops it replaced, and an inlined wrapper of the
-    step 1.15-1.3x (its parameters became reference-counted copies of the loop's arrays).
-
-    The joint step's ``noise`` and ``compose`` are inlined wrappers of compiled kernels, which
-    leaves 20 reference-count calls per ring step in the loop: a harmonic ring at tau = 1e-4,
-    two paths per chunk, takes 1.04-1.09x the kernel time of the joint loop this one replaced
-    (940829b). Measured alternatives: the loop calling those kernels directly, 1.04x, but the
-    same convention for the frozen step cost its ring 5 %; their loops inlined, 1.11x; a
-    non-inlined overload, 1.13x; arrays without reference counts, no gain.
+    Arrays are passed one by one, not in tuples, and ``step`` is called directly (an intrinsic,
+    :func:`montecarlo.steps.dispatch.step`) while the small kernels are inlined into the loop
+    (``inline="always"``; ``noise`` fills a fixed buffer instead of returning an array): at the
+    solver's chunks of 2-16 paths every numba call with array arguments costs tens of
+    nanoseconds, and reading arrays out of tuples is reference-counted at every step (the
+    measurements behind these choices: docs/methods.md, "Monte Carlo kernels").
     """
 
     name: str = ""
+    priority: int = 0
+    description: str = ""
+    preference: str = ""
+    dt_start: float = 0.02
+    twin: bool = True
     tag: NamedTuple
     kernels: Kernels
 
     def coefficients(self, h: Harvester, dt: float) -> np.ndarray:
-        """Coefficient array ``cf`` of one step ``dt`` (layout in :mod:`montecarlo._kernels`)."""
+        """Coefficient array ``cf`` of one step ``dt`` (layout in :mod:`montecarlo.layout`)."""
         raise NotImplementedError
 
     def refusal(self, h: Harvester, kind: int) -> str | None:
-        """Why this scheme cannot serve ``h`` with on-site treatment ``kind``, or None."""
+        """Why this stepper cannot serve ``h`` with on-site treatment ``kind`` at any time step,
+        or None."""
         return None
+
+    def preferred(self, h: Harvester, kind: int, dt: float) -> bool:
+        """Whether this stepper is the one to take for ``h`` at the coarse time step ``dt``
+        (:attr:`preference`)."""
+        return True
+
+    def start_dt(self, h: Harvester, kind: int, scale: float) -> float:
+        """The coarse step at which an automatic ``dt`` starts: ``scale`` times :attr:`dt_start`
+        (the solver's ``scale`` is 2 with extrapolation)."""
+        return scale * self.dt_start
+
+    def twin_matrices(self, lin: Harvester, dt: float) -> tuple[np.ndarray, np.ndarray, np.ndarray, float]:
+        """Per-mode one-step matrices of this step on the harmonic ring ``lin`` (n = 2), from which
+        the twin's exact law follows (:mod:`montecarlo.harmonic`).
+
+        Returns
+        -------
+        M : ndarray (N, 4, 4)
+            Mode q's state (x, v, V, xi) before one step -> before the next (without noise).
+        T : ndarray (N, 4, 4)
+            State before a step -> the measured state.
+        Q : ndarray (4, 4)
+            Covariance of the noise added per step.
+        half : float
+            Factor on the measured :math:`v\\xi` (``cf[CF_XI_HALF]``).
+        """
+        raise NotImplementedError(f"the {self.name} step has no harmonic twin")

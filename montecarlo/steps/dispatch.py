@@ -1,11 +1,11 @@
-"""Compile-time dispatch of the step protocol: each kernel of :class:`~montecarlo.steps.base.StepScheme`
-as a generic numba function of the scheme's tag.
+"""Compile-time dispatch of the step protocol: each kernel of :class:`~montecarlo.steps.base.Stepper`
+as a generic numba function of the stepper's tag.
 
 The path loop calls ``noise(tag, ...)``, ``step(tag, ...)`` etc.; numba resolves each call from
-the tag's type (its NamedTuple class) to the scheme's own kernel when the loop is compiled, so
-the loop is specialised per scheme and cached like any other kernel. ``step`` is an intrinsic
-that calls the scheme's step kernel directly, as the two loops before it did; the small
-kernels are inlined (numba IR) (:class:`~montecarlo.steps.base.StepScheme` says what the calls
+the tag's type (its NamedTuple class) to the stepper's own kernel when the loop is compiled, so
+the loop is specialised per stepper and cached like any other kernel. ``step`` is an intrinsic
+that calls the stepper's step kernel directly, as the two loops before it did; the small
+kernels are inlined (numba IR) (:class:`~montecarlo.steps.base.Stepper` says what the calls
 cost).
 """
 
@@ -17,16 +17,16 @@ from llvmlite import ir
 from numba.core import cgutils, types
 from numba.extending import intrinsic, overload
 
-from . import STEPS
+from . import STEPPERS
 
 __all__ = ["normals", "noise", "compose", "step", "advance", "twin_xi", "STEP_ARGS"]
 
-#: The arguments of ``step(tag, ...)`` after the tag, by name; a scheme's step kernel takes the
-#: ones it names (:class:`~montecarlo.steps.base.StepScheme`).
+#: The arguments of ``step(tag, ...)`` after the tag, by name; a stepper's step kernel takes the
+#: ones it names (:class:`~montecarlo.steps.base.Stepper`).
 STEP_ARGS = ("x", "v", "V", "xi", "F", "stuck", "pvx", "eps", "cf", "pp", "kind", "xm", "fext", "cs", "rbm",
              "rbx", "w", "counters", "gen")
 
-_KERNELS = {type(s.tag): s.kernels for s in STEPS.values()}
+_KERNELS = {type(s.tag): s.kernels for s in STEPPERS.values()}
 
 
 def _kernels(tag):
@@ -34,12 +34,12 @@ def _kernels(tag):
 
 
 def normals(tag):
-    """Standard normals per unit and step of the scheme ``tag``, a compile-time constant."""
+    """Standard normals per unit and step of the stepper ``tag``, a compile-time constant."""
     raise NotImplementedError("numba only")
 
 
 def noise(tag, cf, z, buf):
-    """The level's noise for one step (``kernels.noise`` of the scheme ``tag``)."""
+    """The level's noise for one step (``kernels.noise`` of the stepper ``tag``)."""
     raise NotImplementedError("numba only")
 
 
@@ -81,8 +81,8 @@ def _compose(tag, cf_a, cf_b, e1, e2, out):
 
 @intrinsic
 def step(typingctx, tag, x, v, V, xi, F, stuck, pvx, eps, cf, pp, kind, xm, fext, cs, rbm, rbx, w, counters, gen):
-    """Advance one level over one step: a direct call of ``kernels.fast`` of the scheme ``tag``
-    and, where it declines (or the scheme has none), of ``kernels.step``, each with the
+    """Advance one level over one step: a direct call of ``kernels.fast`` of the stepper ``tag``
+    and, where it declines (or the stepper has none), of ``kernels.step``, each with the
     arguments (of :data:`STEP_ARGS`) that the kernel's parameters name.
 
     An intrinsic, not an inlined wrapper: inlined, the wrapper's parameters became copies of

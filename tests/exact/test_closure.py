@@ -7,7 +7,7 @@ import pytest
 from fpe_harvester import Harvester
 from fpe_harvester.exact.moments import closure_mismatch
 from fpe_harvester.fpe.hermite import equivalent_harmonic
-from montecarlo.controls.twin import linearized_stiffness
+from montecarlo import linearized_stiffness
 
 
 @pytest.mark.parametrize("n, a", [(3.0, 0.5), (1.5, 1.0), (8.0, 2.0)])

@@ -28,7 +28,7 @@ def test_harmonic_bias_is_second_order() -> None:
     h = Harvester.build(a=0.5)
     dts = (0.4, 0.2, 0.1)
     diff, err, _ = _coupled_differences(h, dts, seed=11, paths=64, replicas=8, t_burn=20.0, t_run=50.0,
-                                        joint=False)
+                                        step="frozen")
     assert np.all(np.abs(diff) > 4 * err)
     order = np.polyfit(np.log(dts), np.log(np.abs(diff)), 1)[0]
     assert 1.7 < order < 2.3, order
@@ -40,7 +40,7 @@ def test_joint_step_has_no_bias_on_a_harmonic_unit(tau: float) -> None:
     # noise vanishes at steps where the frozen-xi step's difference is 20 standard errors
     h = Harvester.build(a=0.5, tau=tau)
     diff, err, _ = _coupled_differences(h, (0.4,), seed=11, paths=64, replicas=8, t_burn=20.0, t_run=50.0,
-                                        joint=True)
+                                        step="joint")
     assert abs(diff[0]) < 4 * err[0], (diff, err)
 
 
@@ -49,19 +49,19 @@ def test_richardson_bias_estimate_matches_actual_error() -> None:
     # reported) must account for it (the frozen-xi step: the joint step is exact for a harmonic unit)
     h = Harvester.build(a=0.5)
     r = solve(h, "mc", seed=4, dt=0.4, tol=0.05, paths=64, t_run=50.0, min_replicas=8, progress=False,
-              joint=False, extrapolate=False)
+              step="frozen", extrapolate=False)
     exact = 20 / 39
     assert abs(r.info["bias_eta"]) > 2 * r.info["eta_standard_error"]
     assert abs(r.eta - exact) < 4 * r.eta_err
     assert abs((r.eta - r.info["bias_eta"]) - exact) < abs(r.eta - exact)
 
 
-@pytest.mark.parametrize("joint", [False, True])
-def test_smooth_nonlinear_bias_is_second_order(joint: bool) -> None:
+@pytest.mark.parametrize("step", ["frozen", "joint"])
+def test_smooth_nonlinear_bias_is_second_order(step: str) -> None:
     h = Harvester.build(a=0.5, n=4, N=3, k=-0.3)
     dts = (0.2, 0.1)
     diff, err, _ = _coupled_differences(h, dts, seed=5, paths=64, replicas=6, t_burn=20.0, t_run=40.0,
-                                        joint=joint)
+                                        step=step)
     assert np.all(np.abs(diff) > 3 * err)
     ratio = diff[0] / diff[1]
     assert 2.5 < ratio < 6.5, ratio
@@ -114,12 +114,12 @@ def test_simulate_is_deterministic_and_counts_steps() -> None:
 
 
 def test_near_kink_potentials_use_the_kink_scheme() -> None:
-    from montecarlo._kernels import KIND_KICK, KIND_KINK
-    from montecarlo.scheme import KINK_WIDTH, scheme_kind
+    from montecarlo.layout import KIND_KICK, KIND_KINK
+    from montecarlo.coefficients import KINK_WIDTH, onsite_kind
 
-    assert scheme_kind(Harvester.build(n=1.0)) == KIND_KINK
-    assert scheme_kind(Harvester.build(n=1.0 + KINK_WIDTH / 2)) == KIND_KINK
-    assert scheme_kind(Harvester.build(n=1.0 + 2 * KINK_WIDTH)) == KIND_KICK
+    assert onsite_kind(Harvester.build(n=1.0)) == KIND_KINK
+    assert onsite_kind(Harvester.build(n=1.0 + KINK_WIDTH / 2)) == KIND_KINK
+    assert onsite_kind(Harvester.build(n=1.0 + 2 * KINK_WIDTH)) == KIND_KICK
     # n = 1.0001 is the kink up to |x|^1e-4: same noise, nearly the same paths as n = 1
     # (at a = 0.5, where units are rarely near rest and the paths do not decorrelate)
     kw = dict(dt=0.04, paths=16, replicas=2, t_burn=5.0, t_run=20.0, seed=4)
@@ -133,8 +133,8 @@ def test_near_kink_potentials_use_the_kink_scheme() -> None:
 @pytest.mark.slow
 def test_smooth_scheme_is_biased_just_above_the_kink() -> None:
     # a = 2, n = 1.0001: the kick scheme chatters across x = 0 (eta ~5 % low at dt = 0.01),
-    # the kink scheme agrees with n = 1 (docs/model.md §3; montecarlo.scheme.scheme_kind)
-    from montecarlo._kernels import KIND_KICK
+    # the kink scheme agrees with n = 1 (docs/model.md §3; montecarlo.coefficients.onsite_kind)
+    from montecarlo.layout import KIND_KICK
 
     h = Harvester.build(a=2.0, n=1.0001)
     kw = dict(dt=0.02, paths=32, replicas=12, t_burn=30.0, t_run=100.0, seed=41)

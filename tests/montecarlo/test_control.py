@@ -11,14 +11,11 @@ from fpe_harvester import Harvester, Status, solve
 from fpe_harvester.errors import ParameterError
 from fpe_harvester.exact import dense_covariance, mode_moments
 from montecarlo import estimate, simulate
+from montecarlo.controls import sets
+from montecarlo.controls.base import Control
 from montecarlo.controls.regression import regression_estimate
-from montecarlo.controls.twin import (
-    TWIN_MOMENTS,
-    initial_cholesky,
-    linearized_stiffness,
-    twin_expectations,
-    twin_harvester,
-)
+from montecarlo.controls.twin import TWIN_MOMENTS
+from montecarlo.harmonic import initial_cholesky, linearized_stiffness, twin_expectations, twin_harvester
 
 
 def test_twin_expectations_tend_to_the_closed_form_as_dt_shrinks() -> None:
@@ -43,13 +40,13 @@ def test_initial_law_is_the_ring_covariance() -> None:
     assert np.allclose(C, dense, rtol=2e-3, atol=2e-4 * np.abs(dense).max())
 
 
-@pytest.mark.parametrize("joint", [False, True])
-def test_simulated_twin_matches_its_discrete_expectations_not_the_continuous_ones(joint: bool) -> None:
+@pytest.mark.parametrize("step", ["frozen", "joint"])
+def test_simulated_twin_matches_its_discrete_expectations_not_the_continuous_ones(step: str) -> None:
     # dt = 0.4: the scheme's bias (~5 %) is far larger than the standard errors
     h = Harvester.build(a=0.5, n=3, N=3, k=-0.2)
     kappa = 1.3
     e = simulate(h, dt=0.4, paths=64, replicas=24, t_burn=0.0, t_run=200.0, seed=6, twin=kappa,
-                 start="twin", sample_every=0.0, joint=joint)
+                 start="twin", sample_every=0.0, step=step)
     m = e.moments(0)
     lin = twin_harvester(h, kappa)
     cont = {key: float(np.mean(val)) for key, val in mode_moments(lin.mode_stiffness(), lin.params).items()}
@@ -58,7 +55,7 @@ def test_simulated_twin_matches_its_discrete_expectations_not_the_continuous_one
         se = x.std(ddof=1) / math.sqrt(x.size)
         assert abs(x.mean() - e.twin_mean[name]) < 4 * se, name
     se = m["t_vxi"].std(ddof=1) / math.sqrt(24)
-    if joint:
+    if step == "joint":
         # the joint step's only bias in a harmonic ring is the neighbours' force held at its
         # predicted midpoint: far smaller, within the standard error here
         assert abs(e.twin_mean["vxi"] - cont["vxi"]) < 1e-3 * cont["vxi"]
@@ -66,16 +63,16 @@ def test_simulated_twin_matches_its_discrete_expectations_not_the_continuous_one
         assert abs(m["t_vxi"].mean() - cont["vxi"]) > 10 * se
 
 
-@pytest.mark.parametrize("joint", [False, True])
-def test_control_variates_are_unbiased_on_a_harmonic_system(joint: bool) -> None:
+@pytest.mark.parametrize("step", ["frozen", "joint"])
+def test_control_variates_are_unbiased_on_a_harmonic_system(step: str) -> None:
     # the system is harmonic, so its discrete-time expectation is known exactly; a twin of
     # another stiffness must not bias the estimate, and must reduce its variance
     h = Harvester.build(a=0.5, N=3, k=-0.2)
     dt = 0.4
     e = simulate(h, dt=dt, paths=32, replicas=48, t_burn=40.0, t_run=100.0, seed=9, twin=1.4,
-                 start="twin", joint=joint)
+                 start="twin", step=step)
     est = estimate(e, h, control=True)
-    ref = twin_expectations(h, dt, joint=joint)
+    ref = twin_expectations(h, dt, step=step)
     assert est.control and est.reduction["eta"] > 2.0
     assert abs(est.mean["V2"] - ref["V2"]) < 4 * est.se["V2"]
     assert abs(est.mean["Pin"] - ref["vxi"]) < 4 * est.se["Pin"]
@@ -158,3 +155,28 @@ def test_regression_leaves_out_a_control_constant_to_round_off(rng) -> None:
     r = regression_estimate(y, np.hstack([c, flat]), np.array([0.0, 0.5 + 1e-14]))
     assert r.mean[0] == pytest.approx(ref.mean[0], rel=1e-12)
     assert r.cov[0, 0] == pytest.approx(ref.cov[0, 0] * (64 - 2) / (64 - 3), rel=1e-9)
+
+
+class _NoiseOnly(Control):
+    """The martingale's noise-only sums (``he_*``, mean 0 exactly) as a control of their own."""
+
+    name = "noise"
+
+    def columns(self, e, valid):
+        names = [n for n in e.ctl_names.get("martingale", ()) if n.startswith("he_")]
+        if not names:
+            return None
+        mg, first = e.control_sums("martingale"), e.control_sums("martingale", first_half=True)
+        return [mg[n][valid] for n in names], [first[n][valid] for n in names], [0.0] * len(names)
+
+
+def test_a_registered_control_reaches_the_estimate(monkeypatch) -> None:
+    # a new control is its object in CONTROLS and a set that names it: nothing else changes
+    monkeypatch.setitem(sets.CONTROLS, "noise", _NoiseOnly())
+    monkeypatch.setitem(sets.CONTROL_SETS, "noise", ("noise",))
+    h = Harvester.build(a=0.5, n=3)
+    e = simulate(h, dt=0.05, paths=4, replicas=40, t_burn=5.0, t_run=20.0, seed=2, controls=("martingale",))
+    est = estimate(e, h, controls="noise")
+    assert est.control and est.controls == "noise"
+    with pytest.raises(ParameterError, match="needs an ensemble with control variates"):
+        estimate(simulate(h, dt=0.05, paths=4, replicas=40, t_burn=5.0, t_run=20.0, seed=2), h, controls="noise")

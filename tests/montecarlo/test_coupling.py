@@ -14,7 +14,7 @@ from fpe_harvester.landscape.energy import RingEnergy
 from montecarlo import MonteCarlo
 from montecarlo._kernels import _coupling_force, _ring_neighbours
 from montecarlo.escape import escape_study
-from montecarlo.scheme import linear_stiffness
+from montecarlo.coefficients import linear_stiffness
 from montecarlo.switching import _count_switches, buckled_labels, switching_times
 
 
@@ -167,7 +167,7 @@ def test_switching_slower_in_deeper_wells() -> None:
 
 @pytest.mark.parametrize("k, k3, expect", [(-0.5, 0.1, 2.838682), (-1.5, 1.0, 1.060775)])
 def test_boltzmann_kink_white_noise(k: float, k3: float, expect: float) -> None:
-    """n = 1, a = 1 at tau = 1e-4: the kink scheme's averaged-noise step reaches the white-noise
+    """n = 1, a = 1 at tau = 1e-4: the kink's averaged-noise step reaches the white-noise
     limit (bond density (|d| + T/a) exp(-(a|d| + k d^2 + (k3/2) d^4)/T))."""
     assert MonteCarlo().unsupported_reason(Harvester.build(n=1, tau=1e-4)) is None
     _check_boltzmann(Harvester.build(a=1.0, n=1, k=k, k3=k3, **_WHITE), expect, tol=3e-2)
@@ -181,5 +181,6 @@ def test_boltzmann_kink_uncoupled() -> None:
 
 def test_kink_refuses_between() -> None:
     """Between the averaged step's measured range (tau <= 1e-4) and the frozen step's (tau >=
-    10 x the finest automatic step) the kink scheme still refuses."""
-    assert "too short for the kink scheme" in MonteCarlo().unsupported_reason(Harvester.build(n=1, tau=1e-3))
+    10 x the finest automatic step) the kink still refuses."""
+    reason = MonteCarlo().unsupported_reason(Harvester.build(n=1, tau=1e-3))
+    assert "too short for the automatic time step" in reason and "measured only for tau <= 0.0001" in reason

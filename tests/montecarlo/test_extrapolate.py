@@ -11,27 +11,27 @@ import pytest
 from fpe_harvester import Harvester, solve
 from fpe_harvester.errors import ParameterError
 from montecarlo import MonteCarlo, estimate, simulate
-from montecarlo.controls.twin import twin_expectations
+from montecarlo.harmonic import twin_expectations
 from montecarlo.estimate import RESIDUAL_RULE
 
 
-def _discrete_eta(h: Harvester, dt: float, joint: bool) -> float:
-    m = twin_expectations(h, dt, 2.0, joint)
+def _discrete_eta(h: Harvester, dt: float, step: str) -> float:
+    m = twin_expectations(h, dt, 2.0, step)
     return m["V2"] / (h.params.R * h.params.sigma * m["vxi"])
 
 
-@pytest.mark.parametrize("joint", [False, True])
+@pytest.mark.parametrize("step", ["frozen", "joint"])
 @pytest.mark.parametrize("dt", [0.04, 0.16, 0.32])
 @pytest.mark.parametrize("k", [0.0, -0.2, -0.3])
 def test_residual_rule_bounds_the_extrapolation_error_of_harmonic_schemes(k: float, dt: float,
-                                                                          joint: bool) -> None:
+                                                                          step: str) -> None:
     # exact stationary values of the discrete schemes (discrete Lyapunov) against the exact
     # solver: no sampling noise. The rule's D / (2^q - 1) must cover the extrapolation's error
     # (measured ratio 0.40-0.47 for the frozen step, whose next term is dt^4, and 0.87-0.99
     # for the joint ring, dt^3); the joint step is exact for a single unit (both ~1e-16)
     h = Harvester.build(a=0.5, N=1 if k == 0.0 else 3, k=k)
     exact = solve(h, "exact").eta
-    eta = {d: _discrete_eta(h, d, joint) for d in (dt / 2, dt, 2 * dt)}
+    eta = {d: _discrete_eta(h, d, step) for d in (dt / 2, dt, 2 * dt)}
     scale = 1.0 / 3.0
     r_fine = eta[dt / 2] + scale * (eta[dt / 2] - eta[dt])
     r_coarse = eta[dt] + scale * (eta[dt] - eta[2 * dt])
@@ -40,16 +40,16 @@ def test_residual_rule_bounds_the_extrapolation_error_of_harmonic_schemes(k: flo
     assert abs(r_fine - exact) <= abs(eta[dt / 2] - exact) + 1e-12
 
 
-@pytest.mark.parametrize("joint", [False, True])
-def test_coarsest_level_has_the_law_of_its_own_step(joint: bool) -> None:
+@pytest.mark.parametrize("step", ["frozen", "joint"])
+def test_coarsest_level_has_the_law_of_its_own_step(step: str) -> None:
     # harmonic ring at coarse steps: the coupled differences of each level from the fine one
     # must match the exact discrete values' differences, which the frozen step resolves (the
     # joint step's are ~1e-5, only checked for agreement)
     h = Harvester.build(a=0.5, N=3, k=-0.2)
     e = simulate(h, dt=0.32, paths=32, replicas=16, t_burn=20.0, t_run=100.0, seed=3, richardson=True,
-                 third_level=True, start="twin", joint=joint)
+                 third_level=True, start="twin", step=step)
     assert e.dts == (0.16, 0.32, 0.64)
-    ex = [twin_expectations(h, d, 2.0, joint) for d in e.dts]
+    ex = [twin_expectations(h, d, 2.0, step) for d in e.dts]
     m = [e.moments(level) for level in range(3)]
     for name in ("V2", "x2", "vxi"):
         for level in (1, 2):
@@ -57,7 +57,8 @@ def test_coarsest_level_has_the_law_of_its_own_step(joint: bool) -> None:
             se = d.std(ddof=1) / math.sqrt(d.size)
             want = ex[level][name] - ex[0][name]
             assert abs(d.mean() - want) < 4 * se, (level, name, d.mean(), want, se)
-            if level == 2 and name != "x2" and not joint:  # x moves slowly: its differences are not resolved
+            # x moves slowly: its differences are not resolved
+            if level == 2 and name != "x2" and step == "frozen":
                 assert abs(want) > 8 * se, (level, name)
 
 
@@ -66,9 +67,9 @@ def test_extrapolated_solve_is_unbiased_where_the_fine_level_is_not() -> None:
     # value's error bars, the extrapolated value lies within its error bar of the exact solver
     h = Harvester.build(a=0.5, N=3, k=-0.2)
     exact = solve(h, "exact").eta
-    r = solve(h, MonteCarlo(seed=5, dt=0.16, tol=2e-4, progress=False, joint=False, extrapolate=True))
+    r = solve(h, MonteCarlo(seed=5, dt=0.16, tol=2e-4, progress=False, step="frozen", extrapolate=True))
     assert r.info["extrapolated"] and r.info["dt_coarsest"] == 0.32
-    fine_bias = _discrete_eta(h, 0.08, False) - exact
+    fine_bias = _discrete_eta(h, 0.08, "frozen") - exact
     assert abs(fine_bias) > 5 * r.eta_err
     assert abs(r.eta - exact) < 3 * r.eta_err, (r.eta, exact, r.eta_err)
 
@@ -104,7 +105,7 @@ def test_end_of_window_terms_make_a_harmonic_ring_nearly_exact() -> None:
     # agree with the exact solver to its (small) error bar
     h = Harvester.build(a=0.5, N=3, k=-0.2)
     e = simulate(h, dt=0.04, paths=2, replicas=120, t_burn=20.0, t_run=100.0, seed=8, start="twin",
-                 martingale=True, richardson=True, third_level=True)
+                 controls=("martingale",), richardson=True, third_level=True)
     est = estimate(e, h, controls="martingale+boundary")
     without = estimate(e, h, controls="martingale")
     assert est.reduction["eta"] > 1e3 > 10 * without.reduction["eta"]
@@ -116,14 +117,15 @@ def test_end_of_window_terms_make_a_harmonic_ring_nearly_exact() -> None:
 def test_end_of_window_terms_are_refused_for_a_window_with_a_transient() -> None:
     # they have mean 0 only for a stationary window: a ring started at rest with a short burn-in
     # must not get them, the same ring with a long one must
-    from montecarlo.controls.sets import stationary_window
+    from montecarlo.controls.martingale import stationary_window
 
     h = Harvester.build(a=0.5, n=3, N=3, k=-0.5)
     ok = []
     for t_burn in (5.0, 50.0):
         e = simulate(h, dt=0.1, paths=4, replicas=200, t_burn=t_burn, t_run=40.0, seed=8, richardson=True,
-                     martingale=True)
-        ok.append(stationary_window(e.martingale(), np.ones(e.replicas, dtype=bool), e.mart_names))
+                     controls=("martingale",))
+        ok.append(stationary_window(e.control_sums("martingale"), np.ones(e.replicas, dtype=bool),
+                                    e.ctl_names["martingale"]))
     assert ok == [False, True]
 
 

@@ -11,9 +11,11 @@ import scipy.linalg
 from fpe_harvester import Harvester, Status, solve
 from fpe_harvester.errors import MethodNotAvailableError, ParameterError
 from fpe_harvester.exact import mode_moments
-from montecarlo import simulate
-from montecarlo.controls.twin import TWIN_MOMENTS, twin_expectations
-from montecarlo.scheme import joint_matrices, noise_factor, uses_joint_step
+from montecarlo import MonteCarlo, simulate
+from montecarlo.controls.twin import TWIN_MOMENTS
+from montecarlo.harmonic import twin_expectations
+from montecarlo.steps import resolve_step
+from montecarlo.steps.joint import joint_matrices, noise_factor
 
 FAST = dict(tol=0.01, paths=64, t_run=50.0, min_replicas=8, progress=False)
 
@@ -51,7 +53,7 @@ def test_joint_twin_of_a_unit_has_the_exact_moments(tau: float) -> None:
     # doubled 30 times from a step of 1e-3 / |A|)
     lin = Harvester.build(a=0.5, tau=tau)
     exact = {key: float(val[0]) for key, val in mode_moments(lin.mode_stiffness(), lin.params).items()}
-    t = twin_expectations(lin, 0.05, joint=True)
+    t = twin_expectations(lin, 0.05, step="joint")
     for name in ("V2", "vV", "v2", "x2", "vxi"):
         assert t[name] == pytest.approx(exact[name], rel=1e-9 if tau >= 1e-4 else 1e-6), name
 
@@ -67,22 +69,57 @@ def test_white_noise_limit_is_continuous() -> None:
     assert mats[-1][2][1, 1] == pytest.approx(2.0 * 0.02, rel=0.05)
 
 
-def test_step_choice_and_refusal() -> None:
-    assert uses_joint_step(Harvester.build(a=0.5, n=3, tau=1e-4), 0.02)
-    assert not uses_joint_step(Harvester.build(a=0.5, n=3, tau=1.0), 0.02)
-    # the kink's short-tau step is the averaged-noise step, taken when tau < dt
-    assert uses_joint_step(Harvester.build(a=0.5, n=1, tau=1e-4), 0.02)
-    assert not uses_joint_step(Harvester.build(a=0.5, n=1, tau=0.05), 0.02)
+@pytest.mark.parametrize(("system", "dt", "step"), [
+    (dict(n=3, tau=1e-4), 0.02, "joint"),       # tau < 10 dt
+    (dict(n=3, tau=0.3), 0.02, "frozen"),
+    (dict(n=2, tau=0.1), 0.02, "joint"),
+    (dict(n=1, tau=1e-4), 0.02, "averaged"),    # the kink's short-tau step, tau < dt
+    (dict(n=1, tau=0.05), 0.02, "frozen"),
+    (dict(n=1, tau=1e-4), 1e-4, "frozen"),      # dt <= tau
+])
+def test_auto_step_at_a_given_dt(system: dict, dt: float, step: str) -> None:
+    assert resolve_step(Harvester.build(a=0.5, **system), "auto", dt)[0].name == step
+
+
+@pytest.mark.parametrize(("system", "step", "dt"), [
+    (dict(n=3, tau=1e-4), "joint", 0.04),
+    (dict(n=3, tau=1.0), "frozen", 0.02),
+    (dict(n=1, tau=1e-4), "averaged", 0.04),
+    (dict(n=1, tau=1.0), "frozen", 0.02),
+    (dict(n=1, tau=0.01), "frozen", 0.01),      # the kink's frozen step starts at dt = tau
+])
+def test_auto_step_and_its_starting_dt(system: dict, step: str, dt: float) -> None:
+    stepper, start = resolve_step(Harvester.build(a=0.5, **system))
+    assert (stepper.name, start) == (step, dt)
+
+
+def test_refusals_name_the_step_and_the_reason() -> None:
+    kink = Harvester.build(a=0.5, n=1)
+    with pytest.raises(ParameterError, match="step = 'joint' cannot serve.*kink"):
+        resolve_step(kink, "joint", 0.02)
+    # the averaged step is measured only for tau <= 1e-4: asked for at tau = 1 it refuses
+    with pytest.raises(ParameterError, match=r"'averaged' cannot serve.*measured only for tau <= 0.0001"):
+        resolve_step(kink, "averaged", 0.02)
+    with pytest.raises(ParameterError, match="averaged-noise step serves the kink"):
+        resolve_step(Harvester.build(a=0.5, n=3, tau=1e-4), "averaged", 0.02)
+    with pytest.raises(ParameterError, match="step must be one of"):
+        resolve_step(kink, "leapfrog", 0.02)
+    with pytest.raises(ParameterError, match="step must be one of"):
+        MonteCarlo(step="leapfrog")
+    assert "kink" in MonteCarlo(step="joint").unsupported_reason(kink)
+    assert "measured only" in MonteCarlo(step="averaged").unsupported_reason(kink)
+    with pytest.raises(MethodNotAvailableError, match="step = 'joint' cannot serve"):
+        solve(kink, "mc", step="joint", progress=False)
     e = simulate(Harvester.build(a=0.5, n=1, tau=1e-4), dt=0.02, paths=2, replicas=1, t_run=1.0, seed=1)
     assert e.notes["step"] == "averaged"
-    with pytest.raises(ParameterError, match="averaged-noise step .* has no harmonic twin"):
+    with pytest.raises(ParameterError, match="averaged step has no harmonic twin"):
         simulate(Harvester.build(a=0.5, n=1, tau=1e-4), dt=0.02, paths=2, replicas=1, t_run=1.0, twin=1.0)
 
 
 def test_twin_at_fast_noise_matches_its_expectations() -> None:
     h = Harvester.build(a=0.5, n=3, tau=1e-4)
     e = simulate(h, dt=0.02, paths=64, replicas=16, t_burn=0.0, t_run=50.0, seed=8, twin=1.2, start="twin")
-    assert e.notes["joint_step"]
+    assert e.notes["step"] == "joint"
     m = e.moments(0)
     for name in TWIN_MOMENTS:
         x = m["t_" + name]
@@ -97,7 +134,7 @@ def test_fast_noise_harmonic_unit_matches_exact(N: int, k: float) -> None:
     ex = solve(h, "exact")
     mc = solve(h, "mc", seed=3, **FAST)
     assert mc.status is Status.STABLE, mc.message
-    assert mc.info["joint_step"]
+    assert mc.info["step"] == "joint"
     for name in ("eta", "V2", "Pin", "v2", "vV"):
         value, err = mc.value(name)
         ref = getattr(ex, name)
@@ -109,16 +146,19 @@ def test_fast_noise_cubic_unit_agrees_with_fokker_planck() -> None:
     fp = solve(h, "fpe", tol=1e-5)
     mc = solve(h, "mc", seed=5, **FAST)
     assert mc.status is Status.STABLE, mc.message
-    assert mc.info["joint_step"]
+    assert mc.info["step"] == "joint"
     assert abs(mc.eta - fp.eta) < 4 * math.hypot(mc.eta_err, fp.eta_err), (mc.eta, mc.eta_err, fp.eta)
 
 
 def test_kink_refuses_a_tau_shorter_than_its_step() -> None:
-    # the kink scheme keeps xi frozen over a step: at tau = 1e-4 it had returned eta ~ 6e4
-    # (not converged, paths escaping); its averaged-noise step now serves tau <= 1e-4
-    # (tests/montecarlo/test_coupling.py), and between that and the frozen step's range it says why
+    # the kink's frozen step needs dt <= tau, its averaged-noise step serves tau <= 1e-4
+    # (tests/montecarlo/test_coupling.py): between the two it says why
     h = Harvester.build(a=0.5, n=1, tau=1e-3)
-    with pytest.raises(MethodNotAvailableError, match="tau = 0.001 is too short for the kink scheme"):
+    with pytest.raises(MethodNotAvailableError, match="tau = 0.001 is too short for the automatic time step"):
         solve(h, "mc", progress=False)
-    with pytest.raises(MethodNotAvailableError, match="shorter than dt = 0.01"):
+    with pytest.raises(MethodNotAvailableError, match="no Monte Carlo step serves n = 1, tau = 0.001 at dt"):
         solve(h, "mc", dt=1e-2, progress=False)
+    with pytest.raises(ParameterError, match="no Monte Carlo step serves"):
+        simulate(h, dt=1e-2, paths=2, replicas=1, t_run=1.0)
+    # an explicit dt <= tau is served by the frozen step
+    assert MonteCarlo(dt=1e-3).unsupported_reason(h) is None

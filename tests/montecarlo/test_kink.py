@@ -11,7 +11,7 @@ from fpe_harvester import Harvester
 from fpe_harvester.errors import ParameterError
 from montecarlo import estimate, simulate
 from montecarlo._kink import N_TAYLOR, _average_swing, _kink_unit
-from montecarlo.scheme import physical_vector, step_coefficients
+from montecarlo.coefficients import physical_vector, step_coefficients
 
 
 def _unit(a: float, dt: float, rule: str):

@@ -12,24 +12,25 @@ from fpe_harvester import Harvester, solve
 from fpe_harvester.errors import ParameterError
 from montecarlo import estimate, simulate
 from montecarlo.controls.regression import enough_dof, regression_estimate
-from montecarlo.controls.twin import poisson_controls, twin_expectations
+from montecarlo.controls.martingale import poisson_controls
+from montecarlo.harmonic import twin_expectations
 
 
-@pytest.mark.parametrize("joint", [False, True])
-def test_martingale_sums_have_mean_zero_and_leave_the_paths_unchanged(joint: bool) -> None:
+@pytest.mark.parametrize("step", ["frozen", "joint"])
+def test_martingale_sums_have_mean_zero_and_leave_the_paths_unchanged(step: str) -> None:
     # a nonlinear ring at a coarse step: every martingale control's mean must be 0 whatever the
     # bias of the scheme (chi^2 of the z-scores of all controls against its 0.1 % tail); the
     # end-of-window terms bd_* are not martingales (mean 0 only for a stationary window) and are
     # left out
     h = Harvester.build(a=0.5, n=3, N=3, k=-0.5)
-    kw = dict(dt=0.1, paths=4, replicas=200, t_burn=5.0, t_run=40.0, seed=8, joint=joint, richardson=True)
-    e = simulate(h, martingale=True, **kw)
-    off = simulate(h, martingale=False, **kw)
+    kw = dict(dt=0.1, paths=4, replicas=200, t_burn=5.0, t_run=40.0, seed=8, step=step, richardson=True)
+    e = simulate(h, controls=("martingale",), **kw)
+    off = simulate(h, **kw)
     assert np.array_equal(e.sums, off.sums) and np.array_equal(e.counts, off.counts)
-    assert e.mart_names and off.mart is None
+    assert e.ctl_names["martingale"] and off.ctl is None and not off.ctl_names
     for half in (False, True):
-        mg = e.martingale(first_half=half)
-        names = [n for n in e.mart_names if not n.startswith("bd_")]
+        mg = e.control_sums("martingale", first_half=half)
+        names = [n for n in e.ctl_names["martingale"] if not n.startswith("bd_")]
         z = np.array([mg[n].mean() / (mg[n].std(ddof=1) / math.sqrt(e.replicas)) for n in names])
         assert np.all(np.isfinite(z))
         assert float(z @ z) < chi2.ppf(0.999, z.size), dict(zip(names, z.round(2)))
@@ -43,9 +44,10 @@ def test_poisson_control_of_a_harmonic_ring_removes_all_but_the_boundary_term() 
     h = Harvester.build(a=0.5, N=2, k=-0.1)
     dt = 0.04
     e = simulate(h, dt=dt, paths=2, replicas=40, t_burn=0.0, t_run=2000.0, seed=3, sample_every=0.0,
-                 start="twin", martingale=True)
-    w = poisson_controls(h, dt, e.mart_names)
-    C = np.column_stack([e.martingale()[n] for n in e.mart_names])
+                 start="twin", controls=("martingale",))
+    names = e.ctl_names["martingale"]
+    w = poisson_controls(h, dt, names)
+    C = np.column_stack([e.control_sums("martingale")[n] for n in names])
     m = e.moments(0)
     exact = twin_expectations(h, dt)
     for key, y, mu in (("V2", m["V2"], exact["V2"]), ("Pin", m["vxi"], exact["vxi"])):
@@ -61,8 +63,8 @@ def test_martingale_estimate_is_unbiased_at_a_coarse_step() -> None:
     # the Richardson extrapolation must then meet the exact solver's continuous-time value
     h = Harvester.build(a=0.5, N=3, k=-0.2)
     dt = 0.2
-    e = simulate(h, dt=dt, paths=4, replicas=64, t_burn=30.0, t_run=400.0, seed=12, martingale=True,
-                 richardson=True, joint=False)
+    e = simulate(h, dt=dt, paths=4, replicas=64, t_burn=30.0, t_run=400.0, seed=12, controls=("martingale",),
+                 richardson=True, step="frozen")
     est = estimate(e, h, controls="martingale")
     disc = twin_expectations(h, dt / 2)
     assert est.controls == "martingale" and est.reduction["eta"] > 5.0
@@ -86,7 +88,7 @@ def test_martingale_error_bars_cover_the_exact_solution_over_seeds() -> None:
     z = []
     for seed in range(32):
         e = simulate(h, dt=dt, paths=2, replicas=48, t_burn=20.0, t_run=60.0, seed=100 + seed, start="twin",
-                     martingale=True)
+                     controls=("martingale",))
         est = estimate(e, h, controls="martingale")
         z.append(abs(est.mean["eta"] - eta) / est.se["eta"])
     z = np.array(z)
@@ -96,12 +98,14 @@ def test_martingale_error_bars_cover_the_exact_solution_over_seeds() -> None:
 
 def test_estimate_controls_argument() -> None:
     h = Harvester.build(a=0.5, n=3)
-    e = simulate(h, dt=0.05, paths=4, replicas=4, t_burn=1.0, t_run=2.0, seed=1, martingale=True)
+    e = simulate(h, dt=0.05, paths=4, replicas=4, t_burn=1.0, t_run=2.0, seed=1, controls=("martingale",))
     with pytest.raises(ParameterError, match="controls must be None or one of"):
         estimate(e, h, controls="poisson")
     with pytest.raises(ParameterError, match="needs an ensemble with control variates"):
         estimate(e, h, controls="martingale")  # 4 replicas are too few for 15 controls
-    with pytest.raises(ParameterError, match="martingale must be True or False"):
-        simulate(h, dt=0.05, paths=4, replicas=1, t_run=2.0, martingale=1)
+    with pytest.raises(ParameterError, match=r"controls must be a tuple of distinct names among \('martin"):
+        simulate(h, dt=0.05, paths=4, replicas=1, t_run=2.0, controls="martingale")
+    with pytest.raises(ParameterError, match="controls must be a tuple"):
+        simulate(h, dt=0.05, paths=4, replicas=1, t_run=2.0, controls=("twin",))
     assert enough_dof(24, 11) and not enough_dof(23, 11)
     assert enough_dof(41, 20) and not enough_dof(40, 20)

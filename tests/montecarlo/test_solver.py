@@ -211,10 +211,10 @@ def test_confined_system_blowing_up_is_not_converged() -> None:
     # n = 8 at dt = 0.5: the stiff-wall substeps keep every path (the bias of the frozen-xi
     # step is large, and said)
     h = Harvester.build(a=2.0, n=8)
-    r = solve(h, "mc", seed=2, dt=0.5, t_run=50.0, progress=False, joint=False)
+    r = solve(h, "mc", seed=2, dt=0.5, t_run=50.0, progress=False, step="frozen")
     assert r.info["escaped_paths"] == 0 and r.eta is not None and "lower dt" in r.message
     # every path leaves |x| < 0.3 during burn-in: reported as a blow-up, with no numbers
-    r = solve(h, "mc", seed=2, dt=0.5, t_run=50.0, escape=0.3, progress=False, joint=False)
+    r = solve(h, "mc", seed=2, dt=0.5, t_run=50.0, escape=0.3, progress=False, step="frozen")
     assert r.status is Status.NOT_CONVERGED
     assert "blew up" in r.message and "Lower dt" in r.message
     assert r.eta is None
@@ -295,7 +295,7 @@ def test_escape_threshold_follows_the_natural_amplitude_of_a_confined_system() -
     """Strong noise on the kink (n = 1, D = 100) has sd(x) ~ 94: its ordinary paths must not
     count as blown up at |x| = 100; a weakly driven unit keeps the floor 100."""
     from montecarlo.solver import ESCAPE_AMPLITUDES
-    from montecarlo.controls.twin import natural_amplitude
+    from montecarlo.harmonic import natural_amplitude
 
     strong = Harvester.build(a=0.5, n=1.0, D=100.0)
     amp = natural_amplitude(strong)

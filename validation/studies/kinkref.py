@@ -14,7 +14,7 @@ The reference shares none of the kink scheme's approximations (:mod:`montecarlo.
   the net force reaches the kink's strength a (the effect of ``w_min`` is checked by
   lowering it on the same noise).
 
-On the same noise path, the production scheme (:func:`montecarlo.steps.frozen._d_step`) runs at
+On the same noise path, the production scheme (:func:`montecarlo.steps.frozen.d_step`) runs at
 steps ``K * delta`` for each ``(K, rule)`` asked for, with the noise frozen at the centre of
 each of its steps as in :func:`montecarlo.simulate`. The scheme's and the reference's time
 averages are then strongly correlated, and their difference measures the scheme's time-step
@@ -36,11 +36,10 @@ from numba import njit
 from fpe_harvester import Harvester
 from fpe_harvester.errors import ParameterError, check_real
 from fpe_harvester.parallel import default_threads
-from montecarlo._kernels import KIND_KINK
-from montecarlo._kink import N_TAYLOR
+from montecarlo.coefficients import physical_vector, step_coefficients
 from montecarlo.estimate import student_factor
-from montecarlo.scheme import physical_vector, step_coefficients
-from montecarlo.steps.frozen import _d_step
+from montecarlo.layout import KIND_KINK
+from montecarlo.steps.frozen import N_TAYLOR, d_step
 
 __all__ = ["reference_run", "summarize", "draw", "main", "MOMENTS"]
 
@@ -265,7 +264,7 @@ def _chunk(gen, P: int, nburn: int, nrun: int, stride: int, delta: float, tau: f
         for j in range(L):
             K = Ks[j]
             if (k + 1) % K == K // 2:
-                _d_step(xs[j], vs[j], Vs[j], centre[j], Fs, stuck[j], xm, fext, w, cfs[j], pps[j],
+                d_step(xs[j], vs[j], Vs[j], centre[j], Fs, stuck[j], xm, fext, w, cfs[j], pps[j],
                         KIND_KINK, kc, cs)
                 if meas:
                     for p in range(P):

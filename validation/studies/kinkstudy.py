@@ -26,8 +26,7 @@ from typing import Any
 import numpy as np
 
 from fpe_harvester import Harvester
-from montecarlo import estimate, simulate
-from montecarlo.controls.twin import linearized_stiffness
+from montecarlo import estimate, linearized_stiffness, simulate
 
 __all__ = ["fit_weak_order", "fit_difference_order", "pilot_kappa", "sweep_point", "sweep", "fits",
            "rule_comparison"]

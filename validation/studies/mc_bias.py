@@ -66,16 +66,16 @@ def bias_study(quick: bool) -> dict[str, Any]:
     return out
 
 
-def coupled_diff(h: Harvester, quick: bool, seed: int, joint: bool | None) -> dict[str, Any]:
-    """eta(0.01) - eta(0.02) on common noise (``joint`` as in :func:`montecarlo.simulate`)."""
+def coupled_diff(h: Harvester, quick: bool, seed: int, step: str = "auto") -> dict[str, Any]:
+    """eta(0.01) - eta(0.02) on common noise (``step`` as in :func:`montecarlo.simulate`)."""
     e = simulate(h, dt=0.02, paths=64, replicas=6 if quick else 16, t_burn=20.0, t_run=50.0, seed=seed,
-                 richardson=True, joint=joint)
+                 richardson=True, step=step)
     m0, m1 = e.moments(0), e.moments(1)
     d = m0["V2"] / m0["vxi"] - m1["V2"] / m1["vxi"]
     # V2 too: with xi frozen at tau << dt the plain v xi has the variance D/tau and eta per
     # replica is meaningless
     dv = m0["V2"] - m1["V2"]
-    return {"joint_step": bool(e.notes["joint_step"]), "dt": 0.02, "diff": float(d.mean()),
+    return {"step": e.notes["step"], "dt": 0.02, "diff": float(d.mean()),
             "diff_se": float(d.std(ddof=1) / math.sqrt(d.size)),
             "rel_diff": float(d.mean() / (m0["V2"] / m0["vxi"]).mean()),
             "rel_diff_V2": float(dv.mean() / m0["V2"].mean()),

@@ -58,7 +58,7 @@ def steep_study(quick: bool) -> dict[str, Any]:
             row["mc_minus_fpe_in_combined_errors"] = (r.eta - fp.eta) / math.hypot(r.eta_err, fp.eta_err or 0.0)
         rate = rate(h, 0.01, 256, 4, t_run)["path_steps_per_cpu_s"]
         row.update(path_steps_per_cpu_s=rate, cost_ratio_vs_n3=base / rate)
-        row["coupled_diff"] = coupled_diff(h, quick, 90 + i, None)
+        row["coupled_diff"] = coupled_diff(h, quick, 90 + i)
         out[f"n_{n:g}"] = row
     return out
 

@@ -43,13 +43,13 @@ def tau_study(quick: bool) -> dict[str, Any]:
             "fpe_eta": fp.eta, "fpe_eta_err": fp.eta_err, "fpe_status": fp.status.value,
             "mc_eta": r.eta, "mc_eta_err": r.eta_err, "mc_status": r.status.value,
             "wall_s": r.info["wall_time"], "replicas": r.info["replicas"], "dt": r.info["dt"],
-            "joint_step": r.info["joint_step"], "bias_eta": r.info["bias_eta"],
+            "step": r.info["step"], "bias_eta": r.info["bias_eta"],
             "variance_reduction": r.info["variance_reduction"]}
         if r.eta is not None and fp.eta is not None:
             row["mc_minus_fpe_in_combined_errors"] = (r.eta - fp.eta) / math.hypot(r.eta_err, fp.eta_err)
-        row["coupled_diff"] = coupled_diff(h, quick, 60 + i, None)
-        if row["coupled_diff"]["joint_step"]:
-            row["coupled_diff_frozen"] = coupled_diff(h, quick, 60 + i, False)
+        row["coupled_diff"] = coupled_diff(h, quick, 60 + i)
+        if row["coupled_diff"]["step"] == "joint":
+            row["coupled_diff_frozen"] = coupled_diff(h, quick, 60 + i, "frozen")
         out[f"tau_{tau:g}"] = row
     return out
 
