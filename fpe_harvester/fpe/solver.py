@@ -9,7 +9,7 @@ from typing import ClassVar
 
 import numpy as np
 
-from ..errors import HarvesterError, MethodNotAvailableError
+from ..errors import HarvesterError, MethodNotAvailableError, ParameterError
 from ..model import Harvester
 from ..result import Stats, Status
 from .settings import Settings
@@ -62,6 +62,11 @@ class FokkerPlanck:
         element), ``"geometric"`` (n < 2: layers toward 0) or ``"adaptive"`` (any n: a
         mesh step bisects only the elements an error indicator marks, see
         :mod:`~fpe_harvester.fpe.schemes.x.adapt`).
+    force : bool
+        Attempt the solve outside the measured domain of the solver (see
+        :mod:`~fpe_harvester.fpe.domain`) instead of declining at once. Default False: outside
+        it, :meth:`unsupported_reason` names the domain and Monte Carlo, and
+        :func:`~fpe_harvester.solve` raises :class:`~fpe_harvester.errors.MethodNotAvailableError`.
 
     Examples
     --------
@@ -84,11 +89,14 @@ class FokkerPlanck:
     progress: bool | Callable[[str], None] = False
     scheme: str = "auto"
     mesh: str = "auto"
+    force: bool = False
 
     def __post_init__(self) -> None:
         settings = self.settings
         for name in ("tol", "M", "elements", "order", "max_seconds", "max_gb"):
             object.__setattr__(self, name, getattr(settings, name))
+        if not isinstance(self.force, bool):
+            raise ParameterError(f"force must be True or False, got {self.force!r} (type {type(self.force).__name__})")
         object.__setattr__(self, "domain", settings.theta)
 
     @functools.cached_property
