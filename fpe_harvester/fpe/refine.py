@@ -35,7 +35,6 @@ error (not the finest), or none when no estimate is smaller than its value.
 from __future__ import annotations
 
 import math
-import os
 import time
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
@@ -45,9 +44,9 @@ import numpy as np
 
 from ..errors import NotConvergedError
 from .estimate import mesh_error, tail_error
-from .protocol import Discretization, Level
+from .protocol import Discretization, Level, RefinementPlan
 
-__all__ = ["Plan", "Estimate", "RefinementResult", "refine", "default_memory_gb", "MESH_SHARE", "Levels",
+__all__ = ["Estimate", "RefinementResult", "refine", "MESH_SHARE", "Levels",
            "hermite_estimate", "predicted_seconds", "stalled"]
 
 #: Observables carried through the refinement (each gets its own estimate).
@@ -63,46 +62,6 @@ MESH_SHARE = 0.25
 #: half; refined early, 5.8 s against 8.6 s), n = 8, a = 0.5 3.9e-5 (refined early at a
 #: threshold of MESH_SHARE: 5.1 s against 3.4 s, the coarse mesh met tol as it was).
 EARLY_SHARE = 0.5
-
-
-@dataclass(frozen=True)
-class Plan:
-    """Starting level and limits of the refinement (made by a scheme,
-    :meth:`~.protocol.Scheme.plan`).
-
-    Attributes
-    ----------
-    M : int
-        Hermite degree to start from (fixed with ``fixed``), >= 2.
-    size : int
-        The discretization's mesh knob to start from (fixed with ``fixed``); one refinement
-        step doubles it.
-    fixed : bool
-        If True, solve at (M, size) and estimate the error from one refinement step of each
-        knob (M + 2, twice the size); no adaptation.
-    max_M, max_size, max_dofs : int
-        Limits; the solve reports NOT_CONVERGED when tol needs more. ``max_dofs`` counts
-        the unknowns of the whole domain (:meth:`~.protocol.Discretization.unknowns`).
-    max_seconds : float or None
-        Wall-time budget (s); no level starts whose predicted cost would exceed it.
-    max_gb : float or None
-        Memory bound of one level in GB (:meth:`~.protocol.Discretization.gigabytes`);
-        default (None): half the physical memory.
-    """
-
-    M: int
-    size: int
-    fixed: bool = False
-    max_M: int = 24
-    max_size: int = 256
-    max_dofs: int = 600_000
-    max_seconds: float | None = None
-    max_gb: float | None = None
-
-    @property
-    def memory_limit(self) -> float:
-        """The memory bound in GB (``max_gb`` or half the physical memory)."""
-        return default_memory_gb() if self.max_gb is None else self.max_gb
 
 
 @dataclass(frozen=True)
@@ -160,7 +119,7 @@ class _Stop(Exception):
 class Levels:
     """Solved levels of one refinement, keyed by (M, size), with the plan's limits."""
 
-    def __init__(self, disc: Discretization, plan: Plan, progress: Callable[[str], None] | None) -> None:
+    def __init__(self, disc: Discretization, plan: RefinementPlan, progress: Callable[[str], None] | None) -> None:
         self.disc, self.plan, self.progress = disc, plan, progress
         self.cache: dict[tuple[int, int], Level] = {}
         self.failed: dict[tuple[int, int], str] = {}
@@ -233,7 +192,7 @@ class Levels:
         return [lv.summary() for _, lv in sorted(self.cache.items())]
 
 
-def refine(disc: Discretization, tol: float, plan: Plan, progress: Callable[[str], None] | None = None
+def refine(disc: Discretization, tol: float, plan: RefinementPlan, progress: Callable[[str], None] | None = None
            ) -> RefinementResult:
     """Refine M and the mesh of ``disc`` until the estimated relative error on eta is below ``tol``.
 
@@ -469,15 +428,6 @@ def _unphysical(lv: Level) -> str:
         if not math.isfinite(mo[name]) or mo[name] <= 0.0:
             return f"{name} = {mo[name]:.3g}"
     return ""
-
-
-def default_memory_gb() -> float:
-    """Half the physical memory in GB (8 GB if the platform does not tell)."""
-    try:
-        total = os.sysconf("SC_PAGE_SIZE") * os.sysconf("SC_PHYS_PAGES")
-    except (AttributeError, ValueError, OSError):
-        return 8.0
-    return max(0.5 * total / 1e9, 1.0)
 
 
 def predicted_seconds(cache: dict[tuple[int, int], Level], M: int, nh: int, disc: Discretization

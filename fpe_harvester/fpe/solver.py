@@ -12,6 +12,7 @@ import numpy as np
 from ..errors import HarvesterError, MethodNotAvailableError, ParameterError
 from ..model import Harvester
 from ..result import Stats, Status
+from .schemes import check_settings
 from .settings import Settings
 from .stationary import ring_reason, solve_settings
 
@@ -93,18 +94,17 @@ class FokkerPlanck:
 
     def __post_init__(self) -> None:
         settings = self.settings
-        for name in ("tol", "M", "elements", "order", "max_seconds", "max_gb"):
+        for name in ("tol", "M", "elements", "order", "domain", "max_seconds", "max_gb"):
             object.__setattr__(self, name, getattr(settings, name))
         if not isinstance(self.force, bool):
             raise ParameterError(f"force must be True or False, got {self.force!r} (type {type(self.force).__name__})")
-        object.__setattr__(self, "domain", settings.theta)
 
     @functools.cached_property
     def settings(self) -> Settings:
         """The validated settings of the stationary solve (made, and so checked, at construction)."""
-        return Settings(tol=self.tol, M=self.M, elements=self.elements, order=self.order, theta=self.domain,
-                        max_M=self.max_M, max_seconds=self.max_seconds, max_gb=self.max_gb,
-                        scheme=self.scheme, mesh=self.mesh)
+        return check_settings(Settings(tol=self.tol, M=self.M, elements=self.elements, order=self.order,
+                                       domain=self.domain, max_M=self.max_M, max_seconds=self.max_seconds,
+                                       max_gb=self.max_gb, scheme=self.scheme, mesh=self.mesh))
 
     def unsupported_reason(self, h: Harvester) -> str | None:
         """``None`` for a single oscillator, else why not (rings: use mc, or exact if harmonic)."""

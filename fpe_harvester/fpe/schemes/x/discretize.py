@@ -55,7 +55,7 @@ DEGREES_PER_ELEMENT = 1.5
 
 #: What a user can do when no level of scheme x gives an error estimate.
 ADVICE = ("the Hermite expansion around the equivalent harmonic unit does not resolve this "
-          "density; use method='mc', or fix M and half_elements to inspect the levels")
+          "density; use method='mc', or fix M and elements to inspect the levels")
 
 
 @dataclass(frozen=True)
@@ -168,9 +168,9 @@ class Whitening:
         """Effective temperature :math:`T_{eff} = \\kappa\\langle x^2\\rangle`."""
         return self.kappa * self.x2
 
-    def domain(self, h: Harvester, theta: float) -> float:
-        """Half-width L with :math:`U(L) = \\Theta T_{eff}`."""
-        return (theta * self.temperature / h.a) ** (1.0 / h.n)
+    def half_width(self, h: Harvester, domain: float) -> float:
+        """Half-width L of the x domain with :math:`U(L) = \\Theta T_{eff}`, :math:`\\Theta` = ``domain``."""
+        return (domain * self.temperature / h.a) ** (1.0 / h.n)
 
 
 def hierarchy_matrices(h: Harvester, M: int, w: Whitening) -> tuple[HermiteBasis, np.ndarray, sp.csr_matrix,

@@ -12,8 +12,7 @@ from typing import TYPE_CHECKING
 
 from ....errors import ParameterError
 from ....model import Harvester
-from ...protocol import Discretization, Scheme
-from ...refine import Plan
+from ...protocol import Discretization, RefinementPlan, Scheme
 from .adapt import AdaptiveHermiteDG
 from .discretize import HermiteDG, Whitening
 from .mesh import XMesh
@@ -71,8 +70,8 @@ class XMeshRule:
 
     Attributes
     ----------
-    theta : float
-        Domain factor :math:`U(L)/T_{eff}`.
+    domain : float
+        Domain factor :math:`\\Theta = U(L)/T_{eff}`.
     grading : float
         Mesh grading toward x = 0.
     wall : float
@@ -83,14 +82,14 @@ class XMeshRule:
         Ratio of successive geometric layers, in (0, 1).
     """
 
-    theta: float = 30.0
+    domain: float = 30.0
     grading: float = 1.0
     wall: float = 0.1
     layers: int = 0
     ratio: float = GEOMETRIC_RATIO
 
     @classmethod
-    def of(cls, h: Harvester, mesh: str = "auto", theta: float = 30.0) -> XMeshRule:
+    def of(cls, h: Harvester, mesh: str = "auto", domain: float = 30.0) -> XMeshRule:
         """Smooth potentials (n >= 2) on a mesh graded toward the walls, n < 2 (kink or
         non-smooth force at 0) graded toward 0.
 
@@ -105,24 +104,23 @@ class XMeshRule:
         the Hermite expansion in (v, V, xi), not the mesh.
         """
         geometric = resolve_mesh(h, mesh) == "geometric"
-        return cls(theta=theta, grading=2.5 if h.n < 2.0 and not geometric else 1.0, wall=0.1,
+        return cls(domain=domain, grading=2.5 if h.n < 2.0 and not geometric else 1.0, wall=0.1,
                    layers=GEOMETRIC_LAYERS if geometric else 0, ratio=GEOMETRIC_RATIO)
 
     def build(self, h: Harvester, w: Whitening, half_elements: int) -> XMesh:
         """The mesh for ``h``: domain :math:`U(L) = \\Theta T_{eff}` of the weight ``w``,
         ``half_elements`` elements per half."""
-        return XMesh(w.domain(h, self.theta), half_elements, n=h.n, scale=math.sqrt(w.x2), theta=self.theta,
+        return XMesh(w.half_width(h, self.domain), half_elements, n=h.n, scale=math.sqrt(w.x2), domain=self.domain,
                      wall=self.wall, grading=self.grading, layers=self.layers, ratio=self.ratio)
 
 
-def default_plan(h: Harvester, settings: Settings) -> Plan:
-    """The refinement of scheme ``"x"``: from M = 4 on 8 elements per half (or the given
-    ``M``, ``half_elements`` or ``elements``; fixed when both M and the mesh are given)."""
+def default_plan(h: Harvester, settings: Settings) -> RefinementPlan:
+    """The refinement of scheme ``"x"``: from M = 4 on 16 elements, 8 per half (or the given
+    ``M`` or ``elements``; fixed when both are given). Its mesh knob ``size`` is the
+    elements per half."""
     resolve_mesh(h, settings.mesh)
-    size = settings.half_elements
-    if size is None and settings.elements is not None:
-        size = settings.elements // 2
-    return Plan(M=4 if settings.M is None else settings.M, size=8 if size is None else size,
+    size = None if settings.elements is None else settings.elements // 2
+    return RefinementPlan(M=4 if settings.M is None else settings.M, size=8 if size is None else size,
                 fixed=settings.M is not None and size is not None, max_M=settings.max_M,
                 max_dofs=settings.max_dofs, max_seconds=settings.max_seconds, max_gb=settings.max_gb)
 
@@ -143,13 +141,13 @@ class XScheme(Scheme):
         if settings.weight is not None and not isinstance(settings.weight, Whitening):
             raise ParameterError(f"weight must be a Whitening or None, got {type(settings.weight).__name__}")
 
-    def plan(self, h: Harvester, settings: Settings) -> Plan:
+    def plan(self, h: Harvester, settings: Settings) -> RefinementPlan:
         return default_plan(h, settings)
 
-    def build(self, h: Harvester, settings: Settings, plan: Plan, tol: float, deadline: float | None
+    def build(self, h: Harvester, settings: Settings, plan: RefinementPlan, tol: float, deadline: float | None
               ) -> Discretization:
         w = Whitening.of(h) if settings.weight is None else settings.weight
-        base = XMeshRule.of(h, settings.mesh, settings.theta).build(h, w, plan.size)
+        base = XMeshRule.of(h, settings.mesh, settings.domain).build(h, w, plan.size)
         order = ORDER if settings.order is None else settings.order
         if resolve_mesh(h, settings.mesh) == "adaptive":
             return AdaptiveHermiteDG(h, base, order, w)
