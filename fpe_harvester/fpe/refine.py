@@ -10,15 +10,8 @@ redone on the finer mesh from the same M (its lower degrees are cheap). A Hermit
 that stops contracting triggers the mesh check early: unresolved high modes are a mesh
 problem.
 
-The previous design certified a level by its neighbours M + 2 and half or a quarter of the
-elements at the same M. That cost 3-10 times the level itself, and for steep potentials
-the coarse meshes at high M were numerically meaningless (n = 8, a = 1: its 4- and
-8-element levels at M = 14-18 sent it to M = 18 on a mesh that cannot carry those modes,
-NOT_CONVERGED after 49 s with eta wrong by 5e-4). Choosing the mesh at a low degree first
-(M = 6, a ladder of meshes) was measured and dropped: the mesh error at M = 6 is not that
-at M = 12 (n = 6, a = 1: 16 elements are 1.4e-4 off at M = 6 and 1.7e-5 at M = 12), so it
-chose meshes 1.5 times finer than needed. The numbers of the alternatives are in
-:mod:`validation.studies.fpe`.
+Why this order (and not a certificate from neighbouring levels, nor a mesh chosen at a low
+degree first): the measurements are in the methods notes (docs/methods.md, Fokker-Planck design notes).
 
 With the element-wise discretization (:class:`~.schemes.x.adapt.AdaptiveHermiteDG`, ``mesh="adaptive"``)
 "twice the elements" is the mesh whose marked elements are bisected (all of them when M
@@ -57,10 +50,7 @@ MESH_SHARE = 0.25
 
 #: A discretization that refines early (``refine_early``) does so when the first mesh check
 #: finds more than this share of tol: with the Hermite part at most 1 - MESH_SHARE of tol, a
-#: mesh part above half of it is likely to fail the final check. Measured with the
-#: element-wise refinement at tol = 1e-4: n = 8, a = 2 finds 1.4e-4 at M = 8 (8 elements per
-#: half; refined early, 5.8 s against 8.6 s), n = 8, a = 0.5 3.9e-5 (refined early at a
-#: threshold of MESH_SHARE: 5.1 s against 3.4 s, the coarse mesh met tol as it was).
+#: mesh part above half of it is likely to fail the final check (docs/methods.md, Fokker-Planck design notes).
 EARLY_SHARE = 0.5
 
 
@@ -249,10 +239,8 @@ def _hermite(levels: Levels, nh: int, M: int, tol: float, mesh: float, found: li
     M - 2 while that is cheap, so that every later estimate (and a stop at a limit)
     carries a measured mesh error. A discretization whose refinement step is cheap
     (``refine_early``, the element-wise one) refines right away when that check fails
-    (returns ``"mesh"``); the uniform one does not refine the mesh: for steep potentials the
-    mesh error at a low degree overestimates that at high M (n = 6, a = 1: 16 elements
-    are 1.4e-4 off at M = 6 and 1.7e-5 at M = 12; n = 8, a = 2: 2e-4 and 3e-5), hence the
-    check at M - 2 >= 8 (n = 8, a = 0.5: 9.2e-6 at M = 8, 1.1e-5 at M = 12).
+    (returns ``"mesh"``); the uniform one does not refine the mesh: for steep potentials the mesh error at a low
+    degree overestimates that at high M (docs/methods.md, Fokker-Planck design notes), hence the check at M - 2 >= 8.
     """
     algebraic = levels.disc.algebraic
     est = None
@@ -338,9 +326,7 @@ def _mesh_check(levels: Levels, est: Estimate, nh: int, Mc: int | None = None,
     above ``enough`` (relative): it can only sharpen the estimate.
 
     The mesh error changes with M, in both directions, so a check at a lower degree is an
-    estimate, not a bound: on 8 elements per half n = 8, a = 2 has 6.8e-5 (relative) at
-    M = 8 and 2.9e-5 at M = 12, n = 6, a = 1 has 4.0e-6 at M = 8 and 2.9e-5 at M = 12.
-    The benchmark checks the reported against the actual error.
+    estimate, not a bound; the benchmark checks the reported against the actual error.
     """
     M = est.level.M
     if Mc is None:

@@ -26,11 +26,7 @@ __all__ = ["XScheme", "XMeshRule", "default_plan", "resolve_mesh", "MESHES", "OR
 #: The x meshes (see :func:`resolve_mesh`).
 MESHES = ("auto", "algebraic", "geometric", "adaptive")
 
-#: DG order unless given. P4 was measured as an alternative at tol = 1e-4 and is not a
-#: robust gain: n = 8 took 21 s (16 P4 elements) against 37 s (32 P3) at a = 0.5 but 51 s
-#: against 16 s at a = 2; for n = 1.5, 3, 4 (a = 0.5) P4 is 30-50 % slower (timings of the
-#: earlier one-sweep block solver). P2 is no gain for the kink either: n = 1, a = 0.5,
-#: tol = 1e-3 took 50 s (M = 16, 32 elements) against 22 s with P3 (twisted solver).
+#: DG order unless given (P2 and P4 measured no robust gain: docs/methods.md, Fokker-Planck design notes).
 ORDER = 3
 
 #: Geometric layers toward x = 0 of the ``"geometric"`` mesh and their ratio. Measured for
@@ -96,12 +92,9 @@ class XMeshRule:
         ``mesh`` (n < 2 only, :func:`resolve_mesh`): ``"algebraic"`` grades the nodes like
         :math:`t^{2.5}` toward 0; ``"geometric"`` keeps the bulk uniform (:math:`\\beta = 1`)
         and splits the element at 0 into :data:`GEOMETRIC_LAYERS` layers of ratio
-        :data:`GEOMETRIC_RATIO`, with Gauss--Jacobi quadrature of the force there. Measured for
-        n = 1.5, a = 1 (relative eta change to a mesh twice as fine, fixed M): the algebraic
-        mesh with 16 elements per half is within 3e-9 at M = 8 to 14; the geometric one with
-        16 bulk elements and 4-8 layers 1.5e-6 (the uniform bulk dominates once 2 layers are
-        there). The Hermite sequence in M is the same on both meshes: what limits 1 < n < 2 is
-        the Hermite expansion in (v, V, xi), not the mesh.
+        :data:`GEOMETRIC_RATIO`, with Gauss--Jacobi quadrature of the force there. For
+        1 < n < 2 what limits the accuracy is the Hermite expansion in (v, V, xi), not the mesh
+        (docs/methods.md, Fokker-Planck design notes).
         """
         geometric = resolve_mesh(h, mesh) == "geometric"
         return cls(domain=domain, grading=2.5 if h.n < 2.0 and not geometric else 1.0, wall=0.1,

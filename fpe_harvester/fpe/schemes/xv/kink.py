@@ -49,9 +49,8 @@ transport (with its parity partner), swept mode by mode with the coupling betwee
 (noise and relaxation of (V, xi)) in Gauss--Seidel fashion
 (:class:`~.modesolve.ModePreconditioner`): the transport around the trap is cyclic (the
 flow spirals into the origin), and a solve per mode resolves the cycles exactly on any
-mesh. Measured on a = 2 with four layers at M = 6: 164 iterations in 11 s with the modes
-solved independently, against 566 iterations in 205 s with element-block symmetric
-Gauss--Seidel, whose sweeps cannot follow the rotation.
+mesh, where element-block Gauss--Seidel sweeps cannot follow the rotation
+(docs/methods.md, Fokker-Planck design notes).
 """
 
 from __future__ import annotations
@@ -329,10 +328,8 @@ class ModeOperator:
     """The operator in the mode basis, applied to all modes at once: the mode-independent
     sparse parts as sparse-times-dense products, the v faces (whose upwind side depends on
     the mode) as one sparse matrix on the flattened unknowns (row-major: (x, v) unknown
-    outer, mode inner), the parity (a signed permutation of the modes) as a sparse matrix.
-
-    Measured at n = 1, a = 1, M = 16 (2304 x 153 unknowns): 24 ms a product with the faces
-    gathered per v node (einsum) and a dense parity, 13 ms so."""
+    outer, mode inner), the parity (a signed permutation of the modes) as a sparse matrix:
+    about half the time of a product with the faces gathered per v node (docs/methods.md, Fokker-Planck design notes)."""
 
     def __init__(self, pl: KinkPlane, hi: KinkHierarchy, parts: tuple[np.ndarray, np.ndarray]) -> None:
         self.pl, self.hi = pl, hi
@@ -384,9 +381,8 @@ class CoarseCorrection:
     Used after the mode preconditioner (multiplicatively): the modes' solves miss the
     coupling of the modes by the (V, xi) dynamics, whose slowest part lives in the lowest
     Hermite degrees. It depends on the mesh, the DG degree and the frame only, so one
-    factorization serves every M of a refinement. Measured at a = 1, M = 8 (144
-    rectangles): 212 GMRES iterations without, 113 with Mc = 2, 85 with Mc = 4 (whose
-    factorization costs more than it saves).
+    factorization serves every M of a refinement. Degree 2 (:data:`~.kinkdisc.COARSE_DEGREE`)
+    halves the iterations; degree 4 costs more than it saves (docs/methods.md, Fokker-Planck design notes).
     """
 
     def __init__(self, h: Harvester, mesh: PlaneMesh, order: int, frame: KinkFrame, Mc: int = 2) -> None:

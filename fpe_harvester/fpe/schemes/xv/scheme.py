@@ -37,11 +37,8 @@ class XVScheme(Scheme):
     """DG in (x, v), Hermite functions of (V, xi): 1 <= n < 2, the choice of
     ``scheme="auto"`` there unless an option of scheme ``"x"`` or its mesh knob is given.
 
-    Measured for 1 < n < 2 at tol = 1e-4 (one run, ``python -m validation.studies.fpe
-    --schemes``, 45 s budget): ``"xv"`` converges in 7 of the 9 cases n in {1.25, 1.5, 1.75}
-    x a in {0.5, 1, 2} (4.7-10.5 s), ``"x"`` in 4 (1.1-12.7 s; n = 1.25 at every a and
-    n = 1.5 at a = 1, 2 not in 25-30 s); where both converge ``"x"`` is faster at n = 1.75,
-    a <= 1 (1.1 and 2.9 s against 4.7 and 5.7 s). The two agree within their error bars in all 9.
+    For 1 < n < 2 it converges in more cases than scheme ``"x"`` and the two agree within
+    their error bars where both do (docs/methods.md, Fokker-Planck design notes).
     """
 
     name = "xv"
