@@ -11,12 +11,9 @@ from __future__ import annotations
 
 import dataclasses
 from dataclasses import dataclass
-from typing import TYPE_CHECKING, Any
+from typing import Any
 
 from ..errors import ParameterError, check_int, check_real
-
-if TYPE_CHECKING:
-    from .schemes.x.discretize import Whitening
 
 __all__ = ["Settings"]
 
@@ -50,7 +47,9 @@ class Settings:
     mesh : str
         x mesh of scheme ``"x"``.
     weight : Whitening or None
-        Gaussian weight of scheme ``"x"``.
+        Gaussian weight of scheme ``"x"`` (a :class:`~.schemes.x.discretize.Whitening`; typed
+        ``Any`` here so that the settings, which every scheme reads, import no scheme; scheme
+        ``"x"`` checks its type).
     """
 
     tol: float = 1e-4
@@ -64,7 +63,7 @@ class Settings:
     max_gb: float | None = None
     scheme: str = "auto"
     mesh: str = "auto"
-    weight: Whitening | None = None
+    weight: Any = None
 
     def __post_init__(self) -> None:
         fix = lambda name, value: object.__setattr__(self, name, value)  # noqa: E731

@@ -11,7 +11,7 @@ measures (docs/methods.md, Fokker-Planck design notes). It is built in three ste
    (:func:`~...hermite.equivalent_harmonic`), which for a strong kink is poor (a = 2: it gives
    :math:`\\langle v^2\\rangle = 0.005` for 0.018).
 2. **Pilot**: one level at M = 4 on the base mesh with the frame of the first guess; its
-   moments give the frame of the refinement (:meth:`~.kink.KinkFrame.from_moments`) and the
+   moments give the frame of the refinement (:meth:`~.hierarchy.KinkFrame.from_moments`) and the
    domain. The Hermite weight matters at a = 2: widening it fourfold made the M = 8 level
    unphysical (V2 < 0), so the weight is the pilot's covariance, not a safe multiple of it.
 3. **Domain** (:func:`kink_domain`): large enough that the outflow through its edge is
@@ -30,7 +30,8 @@ from ....model import Harvester
 from ...hermite import equivalent_harmonic
 from ...plane import PlaneMesh
 from ...protocol import Discretization
-from .kink import GMRES_GIGABYTES, GMRES_RESTART, CoarseCorrection, KinkFrame, KinkLevel, solve_kink_level
+from .hierarchy import KinkFrame
+from .kink import GMRES_GIGABYTES, GMRES_RESTART, CoarseCorrection, KinkLevel, solve_kink_level
 
 __all__ = ["KinkDG", "kink_domain", "KinkSettings", "COARSE_DEGREE", "CHECK_CEILING"]
 
@@ -80,7 +81,7 @@ class KinkSettings:
     order : int
         DG degree in x and v.
     shifted, xshifted : bool
-        Centre the (V, xi) weight on the regression on v, on x (:class:`~.kink.KinkFrame`).
+        Centre the (V, xi) weight on the regression on v, on x (:class:`~.hierarchy.KinkFrame`).
     """
 
     layers: int = 4
@@ -113,7 +114,7 @@ def kink_domain(h: Harvester, v2: float, sF: float) -> tuple[float, float]:
 
 def _drive_sd(h: Harvester, mo: dict[str, float]) -> float:
     """Standard deviation of the drive :math:`F = \\sigma\\xi - K_v V` from V2 and Pin
-    (:math:`\\langle V\\xi\\rangle` by the identity of :meth:`~.kink.KinkFrame.from_moments`)."""
+    (:math:`\\langle V\\xi\\rangle` by the identity of :meth:`~.hierarchy.KinkFrame.from_moments`)."""
     p = h.params
     vxi = mo["Pin"] / p.sigma
     Vxi = p.Kc * vxi / (1.0 / p.tau_p + 1.0 / p.tau)

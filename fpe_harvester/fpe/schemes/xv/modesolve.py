@@ -45,7 +45,7 @@ import scipy.sparse as sp
 import scipy.sparse.linalg as spla
 
 if TYPE_CHECKING:
-    from .kink import KinkHierarchy, KinkPlane
+    from .hierarchy import KinkHierarchy, KinkPlane
 
 __all__ = ["ModePreconditioner", "mode_groups"]
 
