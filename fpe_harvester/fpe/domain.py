@@ -1,31 +1,121 @@
-"""Where the Fokker--Planck solver answers: its measured domain, and the message outside it.
+"""Where the Fokker--Planck solver answers: its measured domain, and what to use outside it.
 
-Provisional rule, replaced by the measured one.
+For :math:`1 \\le n < 2` the density of a strong potential concentrates at x = 0 (for the
+kink n = 1 a power law at the trap (x, v) = (0, 0), docs/model.md §3), and beyond a
+strength that grows with n the refinement of either scheme stops without reaching its
+tolerance: it fails, after seconds to minutes, with no number or a poor one. This module
+holds the measured boundary and the rule that :meth:`~.solver.FokkerPlanck.unsupported_reason`
+consults before any work, so that a solve outside declines at once and names Monte Carlo.
+
+**The measure of strength.** The unit is trapped near x = 0 while the net drive
+:math:`F = \\sigma\\xi - K_v V` stays inside :math:`(-a, a)` (exactly so for n = 1), so the
+strength of the potential is taken relative to the drive,
+
+.. math::
+
+    s = \\frac{a}{\\min(s_F, \\sigma\\sqrt{D/\\tau})},
+
+with :math:`s_F` the standard deviation of F in the equivalent harmonic unit
+(:func:`~.hermite.equivalent_harmonic`, a 4 x 4 Lyapunov solve: a few milliseconds) and
+:math:`\\sigma\\sqrt{D/\\tau}` that of the noise force alone. At the defaults :math:`s_F` is
+0.88-0.99 of the latter, so s is a / 0.88 at a = 0.5 and a / 0.99 at a = 3. For n = 1 a
+change of scale maps (a, sigma) to (c a, c sigma) exactly, and s is invariant under it.
+
+**The rule** (:data:`DOMAIN`, measured by ``python -m validation.studies.fpe_domain``, the table
+in docs/methods.md). Per tolerance class and band of n, the largest a (every other parameter
+at its default) at which the solver converged; a unit is inside when its s is at most the s
+of that point. The margin: the boundary is the last strength that converged, not a point
+between it and the first that failed, and a band of n takes the boundary of its lowest n
+(the potential gets harder as n falls). n >= 2 is always inside (no trap, smooth density;
+the benchmark of :mod:`validation.studies.fpe` covers n = 2-8); so are strengths below the
+measured ones (nothing there is known to fail; a failure there ends as ``not_converged``
+with its reason). Tolerances at or above 1e-3 use the 1e-3 boundary, tighter ones the 1e-4
+boundary (tighter than 1e-4 was not mapped: a stop there costs time, not a wrong number).
+
+**Off the defaults** the rule assumes that the other parameters matter only through s. s
+follows what the drive's spread does (sigma, D, tau, K_v, K_c, tau_p and the unit's response
+enter s_F); what it does not follow is how long a trapped spell lasts relative to the
+unit's damping (tau, tau_p, gamma, m). Spot checks off the defaults are in the study's
+table; outside the measured band a researcher can attempt the solve with
+``FokkerPlanck(force=True)``.
 """
 
 from __future__ import annotations
 
+import functools
 import math
 
-from ..model import Harvester
+from ..model import Harvester, Params
 from .hermite import equivalent_harmonic
 
-__all__ = ["trap_strength", "outside_reason"]
+__all__ = ["DOMAIN", "trap_strength", "strength_limit", "outside_reason"]
+
+#: The measured domain for 1 <= n < 2: per tolerance class (the tightest tol of the class),
+#: rows (n_low, a_max): for n_low <= n < the next row's n_low, the largest a (defaults
+#: otherwise) at which the solver converged. Filled from the study's map.
+DOMAIN: dict[float, tuple[tuple[float, float], ...]] = {
+    1e-3: ((1.0, 1.0), (1.5, 2.0), (1.75, 3.0)),
+    1e-4: ((1.0, 1.0), (1.5, 2.0), (1.75, 3.0)),
+}
 
 
 def trap_strength(h: Harvester) -> float:
-    """a over the standard deviation of the drive of the equivalent harmonic unit."""
+    """Strength of the potential relative to the drive, :math:`s = a/\\min(s_F, \\sigma\\sqrt{D/\\tau})`.
+
+    :math:`s_F^2 = \\sigma^2 P_{\\xi\\xi} + K_v^2 P_{VV} - 2\\sigma K_v P_{V\\xi}` from the
+    covariance P of the equivalent harmonic unit (dimensionless; a few milliseconds).
+
+    Examples
+    --------
+    >>> round(trap_strength(Harvester.build(a=1.0, n=1.0)), 2)
+    1.12
+    """
     p = h.params
     _, P = equivalent_harmonic(h)
     var = p.sigma**2 * P[3, 3] + p.Kv**2 * P[2, 2] - 2.0 * p.sigma * p.Kv * P[2, 3]
-    return h.a / min(math.sqrt(max(var, 0.0)), p.sigma * math.sqrt(p.D / p.tau))
+    return h.a / min(math.sqrt(max(var, 0.0)), p.sigma * math.sqrt(p.noise_variance))
 
 
-def outside_reason(h: Harvester) -> str | None:
-    """None inside the domain, else why not and what to use."""
-    if h.n >= 2.0 or h.n >= 1.5:
+def _tol_class(tol: float) -> float:
+    return 1e-3 if tol >= 1e-3 else 1e-4
+
+
+def _row(n: float, tol: float) -> tuple[float, float]:
+    rows = DOMAIN[_tol_class(tol)]
+    return [r for r in rows if r[0] <= n][-1]
+
+
+@functools.cache
+def _limit_at(n_low: float, a_max: float) -> float:
+    return trap_strength(Harvester.build(a=a_max, n=n_low))
+
+
+def strength_limit(n: float, tol: float = 1e-4) -> float:
+    """The largest trap strength s inside the domain at exponent n and tolerance ``tol``
+    (infinite for n >= 2)."""
+    if n >= 2.0:
+        return math.inf
+    return _limit_at(*_row(n, tol))
+
+
+def outside_reason(h: Harvester, tol: float = 1e-4) -> str | None:
+    """None if the single unit ``h`` is inside the measured domain at ``tol``, else why not
+    and what to use (Monte Carlo, or ``force=True`` to attempt it anyway)."""
+    if h.N != 1 or h.n >= 2.0:
         return None
     s = trap_strength(h)
-    if s <= 1.9:
+    limit = strength_limit(h.n, tol)
+    if s <= limit * (1.0 + 1e-9):
         return None
-    return f"outside the measured domain of the Fokker-Planck solver (n = {h.n:g}, a / sd(F) = {s:.3g}); use method='mc'"
+    n_low, a_max = _row(h.n, tol)
+    bands = DOMAIN[_tol_class(tol)]
+    nexts = [r[0] for r in bands if r[0] > n_low]
+    band = f"{n_low:g} <= n < {nexts[0] if nexts else 2:g}"
+    params = {k: v for k, v in h.params.to_dict().items() if v != getattr(Params(), k)}
+    extra = "".join(f" --param {k}={v:g}" for k, v in params.items())
+    return (f"n = {h.n:g}, a = {h.a:g} is outside the measured domain of the Fokker-Planck solver at tol "
+            f"{tol:.2g}: its trap strength a / sd(drive) = {s:.3g} exceeds {limit:.3g}, the strength at which "
+            f"it last converged for {band} (a = {a_max:g} at the default parameters; at stronger traps the "
+            f"density concentrates at x = 0 and the refinement stops without an answer). Use Monte Carlo: "
+            f"solve(h, 'mc') or harvester stats --n {h.n:g} --a {h.a:g}{extra} --method mc; "
+            f"FokkerPlanck(force=True) attempts it anyway")

@@ -12,6 +12,7 @@ import numpy as np
 from ..errors import HarvesterError, MethodNotAvailableError, ParameterError
 from ..model import Harvester
 from ..result import Stats, Status
+from .domain import outside_reason
 from .schemes import check_settings
 from .settings import Settings
 from .stationary import ring_reason, solve_settings
@@ -28,6 +29,11 @@ class FokkerPlanck:
     the mesh are refined until the estimated relative error on eta is below ``tol``
     (see :func:`~fpe_harvester.fpe.stationary`). Reaching the limits gives status
     NOT_CONVERGED with the best estimate and its error.
+
+    For 1 <= n < 2 and a potential strong against the drive (the strong kink: n = 1, a = 2 at
+    the defaults) the refinement does not converge; there the solver declines at once
+    (:meth:`unsupported_reason`, the measured domain of :mod:`~fpe_harvester.fpe.domain`) and
+    names Monte Carlo, unless ``force=True``.
 
     Parameters
     ----------
@@ -107,10 +113,15 @@ class FokkerPlanck:
                                        max_gb=self.max_gb, scheme=self.scheme, mesh=self.mesh))
 
     def unsupported_reason(self, h: Harvester) -> str | None:
-        """``None`` for a single oscillator, else why not (rings: use mc, or exact if harmonic)."""
+        """``None`` if the solver takes ``h``, else why not and what to use instead: a ring
+        (Monte Carlo, or exact if harmonic), or a single unit outside the measured domain at
+        this ``tol`` (:func:`~.domain.outside_reason`: Monte Carlo, or ``force=True``). Costs
+        a few milliseconds; :func:`~fpe_harvester.solve` calls it before solving."""
         if h.N != 1:
             return ring_reason(h)
-        return None
+        if self.force:
+            return None
+        return outside_reason(h, self.tol)
 
     def solve(self, h: Harvester) -> Stats:
         """Stationary statistics with error estimates (status NOT_CONVERGED if tol is not met)."""

@@ -183,6 +183,12 @@ def stationary(
     -------
     FPESolution
 
+    Notes
+    -----
+    This is the researcher's entry: it attempts any single unit. The solver object
+    :class:`~.solver.FokkerPlanck` (``method="fpe"``) first consults the measured domain
+    (:mod:`~fpe_harvester.fpe.domain`) and declines outside it.
+
     Examples
     --------
     >>> from fpe_harvester import Harvester

@@ -38,8 +38,8 @@ from typing import Any
 from fpe_harvester import Harvester
 from fpe_harvester.fpe import FokkerPlanck
 
-__all__ = ["STEM", "NS", "AS", "TOLS", "BUDGETS", "MAX_GB", "COMMAND", "run", "one", "references", "check",
-           "table", "plot"]
+__all__ = ["STEM", "NS", "AS", "TOLS", "BUDGETS", "MAX_GB", "COMMAND", "OFF_CHANGES", "WEAK", "run", "off_defaults",
+           "one", "references", "check", "strength_at", "table", "off_table", "plot"]
 
 STEM = "fpe_domain"
 
@@ -63,6 +63,16 @@ QUICK = ((1.75, 0.5, 1e-3, 60.0), (1.0, 2.0, 1e-3, 15.0))
 
 COMMAND = "python -m validation.studies.fpe_domain --out validation/data"
 
+#: Spot checks off the defaults (:func:`off_defaults`): one parameter changed at a time, at
+#: tol :data:`OFF_TOL`, a chosen so that the trap strength s of :mod:`fpe_harvester.fpe.domain`
+#: equals the domain's limit at n = 1 (the hardest band): inside the rule, on its boundary.
+OFF_CHANGES = ({"tau": 0.5}, {"tau": 2.0}, {"tau_p": 1.0}, {"tau_p": 4.0}, {"gamma": 0.5}, {"gamma": 2.0},
+               {"Kv": 2.0}, {"m": 2.0}, {"D": 2.0})
+OFF_TOL, OFF_BUDGET = 1e-3, 900.0
+
+#: Weak potentials below the map (a = 0.25), which the rule lets in unmeasured otherwise.
+WEAK = ((1.0, 0.25), (1.5, 0.25))
+
 _REFS = Path(__file__).resolve().parents[1] / "references" / "data"
 RECORDED = Path(__file__).resolve().parents[1] / "data" / f"{STEM}.json"
 
@@ -78,9 +88,10 @@ def _stop(message: str, converged: bool) -> str:
     return "other"
 
 
-def one(n: float, a: float, tol: float, budget: float) -> dict[str, Any]:
-    """One forced Fokker--Planck run at (n, a) to ``tol`` within ``budget`` seconds of wall time."""
-    h = Harvester.build(a=a, n=n)
+def one(n: float, a: float, tol: float, budget: float, **params: float) -> dict[str, Any]:
+    """One forced Fokker--Planck run at (n, a) (``params`` changed from the defaults) to ``tol``
+    within ``budget`` seconds of wall time."""
+    h = Harvester.build(a=a, n=n, **params)
     solver = FokkerPlanck(tol=tol, max_seconds=budget, max_gb=MAX_GB, force=True)
     load0 = os.getloadavg()[0]
     w0, c0 = time.perf_counter(), time.process_time()
@@ -90,7 +101,7 @@ def one(n: float, a: float, tol: float, budget: float) -> dict[str, Any]:
     top = max(history, key=lambda lv: (lv["M"], lv["dofs"]), default={})
     converged = r.status.value == "stable"
     reached = r.eta_err / abs(r.eta) if r.eta is not None and r.eta_err is not None and r.eta else None
-    return {"n": n, "a": a, "tol": tol, "budget": budget, "status": r.status.value,
+    return {"n": n, "a": a, "params": params, "tol": tol, "budget": budget, "status": r.status.value,
             "stop": _stop(r.message, converged), "message": r.message, "eta": r.eta, "eta_err": r.eta_err,
             "error_reached": reached, "scheme": r.info.get("scheme"), "M": r.info.get("M"),
             "dofs": r.info.get("dofs"), "M_max": top.get("M"), "dofs_max": top.get("dofs"),
@@ -133,37 +144,88 @@ def _load(path: Path) -> dict[str, Any]:
     return json.loads(path.read_text()) if path.exists() else {}
 
 
-def run(quick: bool = False, out: Path | str | None = None) -> dict[str, Any]:
-    """Run the map (or the quick subset) and write ``fpe_domain.json`` and ``.png`` into ``out``.
-
-    Every finished run is written at once into ``out/fpe_domain.partial.json``; a restart into
-    the same folder takes the runs found there and does the rest.
-    """
-    cases = QUICK if quick else tuple((n, a, tol, BUDGETS[tol]) for tol in TOLS for a in AS for n in NS)
-    partial = None if out is None else Path(out) / f"{STEM}{'.quick' if quick else ''}.partial.json"
+def _runs(cases: tuple[tuple[Any, ...], ...], partial: Path | None) -> list[dict[str, Any]]:
+    """Run ``cases`` ((n, a, tol, budget, params) each), checking converged runs against the
+    references; each finished run goes at once into ``partial`` (a restart takes the runs
+    found there)."""
     done = {} if partial is None else _load(partial)
     refs = references()
+    for n, a, tol, budget, params in cases:
+        key = f"n={n:g} a={a:.6g} tol={tol:g}" + "".join(f" {k}={v:g}" for k, v in params.items())
+        if key in done:
+            continue
+        row = one(n, a, tol, budget, **params)
+        at_defaults = refs.get((n, a), []) if not params else []
+        row["checks"] = check(row, at_defaults) if row["status"] == "stable" else []
+        done[key] = row
+        print(f"{key}: {row['status']} ({row['stop']}) err {row['error_reached']} M {row['M_max']} "
+              f"dofs {row['dofs_max']} {row['wall']:.1f} s wall {row['cpu']:.1f} s cpu", flush=True)
+        if partial is not None:
+            partial.parent.mkdir(parents=True, exist_ok=True)
+            partial.write_text(json.dumps(done, indent=1))
+    return list(done.values())
+
+
+def run(quick: bool = False, out: Path | str | None = None) -> dict[str, Any]:
+    """Run the map (or the quick subset) and write ``fpe_domain.json`` and ``.png`` into ``out``
+    (the spot checks off the defaults: :func:`off_defaults`)."""
+    cases = (tuple((n, a, tol, b, {}) for n, a, tol, b in QUICK) if quick
+             else tuple((n, a, tol, BUDGETS[tol], {}) for tol in TOLS for a in AS for n in NS))
+    partial = None if out is None else Path(out) / f"{STEM}{'.quick' if quick else ''}.partial.json"
     t0 = time.perf_counter()
-    for n, a, tol, budget in cases:
-        key = f"n={n:g} a={a:g} tol={tol:g}"
-        if key not in done:
-            row = one(n, a, tol, budget)
-            row["checks"] = check(row, refs.get((n, a), [])) if row["status"] == "stable" else []
-            done[key] = row
-            print(f"{key}: {row['status']} ({row['stop']}) err {row['error_reached']} M {row['M_max']} "
-                  f"dofs {row['dofs_max']} {row['wall']:.1f} s wall {row['cpu']:.1f} s cpu", flush=True)
-            if partial is not None:
-                partial.parent.mkdir(parents=True, exist_ok=True)
-                partial.write_text(json.dumps(done, indent=1))
+    runs = _runs(cases, partial)
     res = {"quick": quick, "command": COMMAND, "ns": list(NS), "as": list(AS), "tols": list(TOLS),
            "budgets": {f"{t:g}": b for t, b in BUDGETS.items()}, "max_gb": MAX_GB,
-           "seconds": time.perf_counter() - t0, "runs": list(done.values())}
+           "seconds": time.perf_counter() - t0, "runs": runs}
     if out is not None:
         Path(out, f"{STEM}.json").write_text(json.dumps(res, indent=1))
         plot(res, Path(out, f"{STEM}.png"))
         if partial is not None:
             partial.unlink()
     return res
+
+
+def strength_at(target: float, n: float, **params: float) -> float:
+    """The a at which the trap strength of :mod:`fpe_harvester.fpe.domain` is ``target``."""
+    from scipy.optimize import brentq
+
+    from fpe_harvester.fpe.domain import trap_strength
+
+    return float(brentq(lambda a: trap_strength(Harvester.build(a=a, n=n, **params)) - target, 1e-2, 50.0,
+                        xtol=1e-10))
+
+
+def off_defaults(quick: bool = False, out: Path | str | None = None) -> dict[str, Any]:
+    """Spot checks of the rule off the defaults, added to the recorded ``fpe_domain.json`` in ``out``.
+
+    Each of :data:`OFF_CHANGES` at n = 1 with a on the rule's boundary at :data:`OFF_TOL`
+    (the rule lets it in: it should converge), and the weak potentials :data:`WEAK` at the
+    defaults; forced runs as in the map.
+    """
+    from fpe_harvester.fpe.domain import strength_limit
+
+    limit = strength_limit(1.0, OFF_TOL)
+    changes = OFF_CHANGES[:1] if quick else OFF_CHANGES
+    cases = tuple((1.0, strength_at(limit, 1.0, **c), OFF_TOL, OFF_BUDGET, c) for c in changes)
+    cases += () if quick else tuple((n, a, OFF_TOL, OFF_BUDGET, {}) for n, a in WEAK)
+    partial = None if out is None else Path(out) / f"{STEM}.off{'.quick' if quick else ''}.partial.json"
+    runs = _runs(cases, partial)
+    for row in runs:
+        row["strength"] = _strength(row)
+    res = _load(Path(out, f"{STEM}.json")) if out is not None else {}
+    res["off_defaults"] = {"limit_n1": limit, "tol": OFF_TOL, "budget": OFF_BUDGET, "runs": runs,
+                           "command": COMMAND + " --off-defaults"}
+    if out is not None:
+        Path(out, f"{STEM}.json").write_text(json.dumps(res, indent=1))
+        if partial is not None:
+            partial.unlink()
+    return res
+
+
+def _strength(row: dict[str, Any]) -> float:
+    from fpe_harvester.fpe.domain import trap_strength
+
+    return trap_strength(Harvester.build(a=row["a"], n=row["n"], **row.get("params", {})))
 
 
 def _cell(row: dict[str, Any]) -> str:
@@ -190,6 +252,20 @@ def table(res: dict[str, Any]) -> str:
             lines.append(f"| {n:g} | " + " | ".join(cells) + " |")
         lines.append("")
     return "\n".join(lines)
+
+
+def off_table(res: dict[str, Any]) -> str:
+    """The spot checks off the defaults as Markdown: the parameter changed, a, the trap
+    strength s and the outcome."""
+    off = res.get("off_defaults")
+    if not off:
+        return ""
+    lines = [f"Off the defaults, tol = {off['tol']:g} (n = 1: rule's limit s = {off['limit_n1']:.3g})", "",
+             "| n | changed | a | s | outcome |", "|---|---|---|---|---|"]
+    for r in off["runs"]:
+        changed = ", ".join(f"{k} = {v:g}" for k, v in r.get("params", {}).items()) or "none"
+        lines.append(f"| {r['n']:g} | {changed} | {r['a']:.3g} | {r['strength']:.3g} | {_cell(r)} |")
+    return "\n".join(lines) + "\n"
 
 
 def plot(res: dict[str, Any], path: Path) -> None:
@@ -246,13 +322,21 @@ def main(argv: list[str] | None = None) -> dict[str, Any]:
                     help="folder for the JSON and PNG (default ./validation_report)")
     ap.add_argument("--replot", action="store_true",
                     help="redraw the figure and print the table of the recorded JSON in --out")
+    ap.add_argument("--off-defaults", action="store_true",
+                    help="only the spot checks off the defaults, added to the JSON in --out")
     args = ap.parse_args(argv)
+    if args.off_defaults:
+        res = off_defaults(quick=args.quick, out=args.out)
+        print(off_table(res))
+        return res
     if args.replot:
         res = json.loads((args.out / f"{STEM}.json").read_text())
         plot(res, args.out / f"{STEM}.png")
     else:
         res = run(quick=args.quick, out=args.out)
     print(table(res))
+    if "off_defaults" in res:
+        print(off_table(res))
     return res
 
 
