@@ -23,10 +23,11 @@ change of scale maps (a, sigma) to (c a, c sigma) exactly, and s is invariant un
 
 **The rule** (:data:`DOMAIN`, measured by ``python -m validation.studies.fpe_domain``, the table
 in docs/methods.md). Per tolerance class and band of n, the largest a (every other parameter
-at its default) at which the solver converged; a unit is inside when its s is at most the s
-of that point. The margin: the boundary is the last strength that converged, not a point
-between it and the first that failed, and a band of n takes the boundary of its lowest n
-(the potential gets harder as n falls). n >= 2 is always inside (no trap, smooth density;
+at its default) at which the solver converged at every measured n of the band; a unit is
+inside when its s is at most that of the default unit with that a at its own n (at the
+defaults: a <= a_max). The margin: the boundary is the last strength that converged, not a
+point between it and the first that failed, and a band of n takes the boundary of its
+lowest n (the potential gets harder as n falls). n >= 2 is always inside (no trap, smooth density;
 the benchmark of :mod:`validation.studies.fpe` covers n = 2-8); so are strengths below the
 measured ones (nothing there is known to fail; a failure there ends as ``not_converged``
 with its reason). Tolerances at or above 1e-3 use the 1e-3 boundary, tighter ones the 1e-4
@@ -51,11 +52,14 @@ from .hermite import equivalent_harmonic
 __all__ = ["DOMAIN", "trap_strength", "strength_limit", "outside_reason"]
 
 #: The measured domain for 1 <= n < 2: per tolerance class (the tightest tol of the class),
-#: rows (n_low, a_max): for n_low <= n < the next row's n_low, the largest a (defaults
-#: otherwise) at which the solver converged. Filled from the study's map.
+#: rows (n_low, a_max): for n_low <= n < the next row's n_low, the largest a of the map
+#: (a in {0.5, 1, 1.5, 2, 3}, defaults otherwise) at which the solver converged at every n
+#: of the map in the band. The map (``python -m validation.studies.fpe_domain``): at 1e-3
+#: n = 1-1.25 converge up to a = 1 and fail from 1.5, n = 1.5 up to 2 (fails at 3), n = 1.75
+#: up to 3; at 1e-4 n = 1-1.5 up to a = 1 (n = 1.5 fails from 1.5), n = 1.75 up to 2 (fails at 3).
 DOMAIN: dict[float, tuple[tuple[float, float], ...]] = {
     1e-3: ((1.0, 1.0), (1.5, 2.0), (1.75, 3.0)),
-    1e-4: ((1.0, 1.0), (1.5, 2.0), (1.75, 3.0)),
+    1e-4: ((1.0, 1.0), (1.75, 2.0)),
 }
 
 
@@ -86,16 +90,17 @@ def _row(n: float, tol: float) -> tuple[float, float]:
 
 
 @functools.cache
-def _limit_at(n_low: float, a_max: float) -> float:
-    return trap_strength(Harvester.build(a=a_max, n=n_low))
+def _limit_at(n: float, a_max: float) -> float:
+    return trap_strength(Harvester.build(a=a_max, n=n))
 
 
 def strength_limit(n: float, tol: float = 1e-4) -> float:
-    """The largest trap strength s inside the domain at exponent n and tolerance ``tol``
-    (infinite for n >= 2)."""
+    """The largest trap strength s inside the domain at exponent n and tolerance ``tol``:
+    that of the default unit with the band's ``a_max`` at this n (so that at the defaults
+    the rule is a <= a_max); infinite for n >= 2."""
     if n >= 2.0:
         return math.inf
-    return _limit_at(*_row(n, tol))
+    return _limit_at(n, _row(n, tol)[1])
 
 
 def outside_reason(h: Harvester, tol: float = 1e-4) -> str | None:

@@ -16,24 +16,36 @@ from fpe_harvester.result import Stats
 
 def _at_strength(s: float, n: float, **params: float) -> Harvester:
     """The unit of exponent n (``params`` changed) whose trap strength is s (s is close to
-    proportional to a: the root is bracketed within 10 % of a = s)."""
-    a = brentq(lambda a: trap_strength(Harvester.build(a=a, n=n, **params)) - s, 0.8 * s, 1.1 * s, xtol=1e-9)
+    proportional to a / sigma: the root is bracketed within a factor 1.6 of a = s sigma)."""
+    guess = s * params.get("sigma", 1.0)
+    a = brentq(lambda a: trap_strength(Harvester.build(a=a, n=n, **params)) - s, 0.7 * guess, 1.1 * guess,
+               xtol=1e-9)
     return Harvester.build(a=a, n=n, **params)
 
 
-@pytest.mark.parametrize("tol", [1e-3, 1e-4])
-@pytest.mark.parametrize("row", [0, 1, 2])
+@pytest.mark.parametrize(("tol", "row"), [(tol, row) for tol, rows in DOMAIN.items() for row in range(len(rows))])
 def test_rule_on_both_sides_of_each_measured_boundary(tol: float, row: int) -> None:
-    """At each band's measured point (n_low, a_max) the unit is inside, 1 % stronger outside;
-    inside the band (n just below the next band) the band's limit holds too."""
-    n_low, a_max = DOMAIN[1e-3 if tol >= 1e-3 else 1e-4][row]
-    assert outside_reason(Harvester.build(a=a_max, n=n_low), tol) is None
-    limit = strength_limit(n_low, tol)
-    assert outside_reason(_at_strength(1.01 * limit, n_low), tol) is not None
-    n_hi = 1.999 if row == 2 else DOMAIN[1e-3 if tol >= 1e-3 else 1e-4][row + 1][0] - 1e-3
-    assert strength_limit(n_hi, tol) == limit
-    assert outside_reason(_at_strength(0.99 * limit, n_hi), tol) is None
-    assert outside_reason(_at_strength(1.01 * limit, n_hi), tol) is not None
+    """At the defaults the rule is a <= a_max across each band (its lowest n and the top of
+    it); off the defaults (a stronger noise) the boundary moves with the trap strength s."""
+    rows = DOMAIN[tol]
+    n_low, a_max = rows[row]
+    n_top = rows[row + 1][0] - 1e-3 if row + 1 < len(rows) else 1.999
+    for n in (n_low, n_top):
+        assert outside_reason(Harvester.build(a=a_max, n=n), tol) is None
+        assert outside_reason(Harvester.build(a=1.01 * a_max, n=n), tol) is not None
+        limit = strength_limit(n, tol)
+        assert trap_strength(Harvester.build(a=a_max, n=n)) == pytest.approx(limit, rel=1e-12)
+        assert outside_reason(_at_strength(0.99 * limit, n, sigma=1.5), tol) is None
+        assert outside_reason(_at_strength(1.01 * limit, n, sigma=1.5), tol) is not None
+
+
+def test_tolerance_classes() -> None:
+    """tol >= 1e-3 takes the 1e-3 map's boundary, tighter ones the 1e-4 map's."""
+    for n in (1.0, 1.3, 1.6, 1.9):
+        assert strength_limit(n, 1e-2) == strength_limit(n, 1e-3)
+        assert strength_limit(n, 1e-6) == strength_limit(n, 1e-4) <= strength_limit(n, 1e-3)
+    assert outside_reason(Harvester.build(a=2.0, n=1.5), 1e-3) is None
+    assert outside_reason(Harvester.build(a=2.0, n=1.5), 1e-4) is not None
 
 
 def test_rule_known_points() -> None:
