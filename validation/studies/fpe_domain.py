@@ -39,7 +39,7 @@ from fpe_harvester import Harvester
 from fpe_harvester.fpe import FokkerPlanck
 
 __all__ = ["STEM", "NS", "AS", "TOLS", "BUDGETS", "MAX_GB", "COMMAND", "OFF_CHANGES", "WEAK", "run", "off_defaults",
-           "one", "references", "check", "strength_at", "table", "off_table", "plot"]
+           "one", "references", "check", "strength_at", "agreement", "table", "off_table", "plot"]
 
 STEM = "fpe_domain"
 
@@ -251,7 +251,22 @@ def table(res: dict[str, Any]) -> str:
             cells = [_cell(runs[(n, a, tol)]) if (n, a, tol) in runs else "" for a in res["as"]]
             lines.append(f"| {n:g} | " + " | ".join(cells) + " |")
         lines.append("")
-    return "\n".join(lines)
+    lines.append("The domain rule on these runs: " + ", ".join(f"{k} {v}" for k, v in agreement(res).items()))
+    return "\n".join(lines) + "\n"
+
+
+def agreement(res: dict[str, Any]) -> dict[str, int]:
+    """How the domain rule of :mod:`fpe_harvester.fpe.domain` sorts the map's runs: inside and
+    converged, outside and failed, inside but failed (a miss of the rule: must be none) and
+    outside but converged (the price of its margin)."""
+    from fpe_harvester.fpe.domain import outside_reason
+
+    out = {"inside, converged": 0, "outside, failed": 0, "inside, failed": 0, "outside, converged": 0}
+    for r in res["runs"]:
+        inside = outside_reason(Harvester.build(a=r["a"], n=r["n"], **r.get("params", {})), r["tol"]) is None
+        ok = r["status"] == "stable"
+        out[f"{'inside' if inside else 'outside'}, {'converged' if ok else 'failed'}"] += 1
+    return out
 
 
 def off_table(res: dict[str, Any]) -> str:
@@ -301,15 +316,17 @@ def plot(res: dict[str, Any], path: Path) -> None:
                 text = _cell(r).replace("fails: ", "").replace(", ", "\n")
                 ax.text(j, i, text, ha="center", va="center", fontsize=6.5,
                         color="k" if r["status"] != "stable" or grid[i, j] > 2.0 else "w")
-                if outside_reason(Harvester.build(a=a, n=n)) is not None:
+                if outside_reason(Harvester.build(a=a, n=n), tol) is not None:
                     ax.add_patch(Rectangle((j - 0.47, i - 0.47), 0.94, 0.94, fill=False, edgecolor="C3", lw=2))
         ax.set_xticks(range(len(as_)), [f"{a:g}" for a in as_])
         ax.set_yticks(range(len(ns)), [f"{n:g}" for n in ns])
         ax.set_xlabel("a")
         ax.set_ylabel("n")
         ax.set_title(f"tol {tol:g}: wall time (s) or failure", fontsize=9)
-    fig.colorbar(im, ax=axes[0].tolist(), label="log10 wall time to converge (s)", shrink=0.85)
-    fig.text(0.01, 0.01, "red outline: declined by the domain rule (force=True attempts it)", fontsize=7)
+    fig.subplots_adjust(left=0.06, right=0.86, bottom=0.17, top=0.9, wspace=0.25)
+    fig.colorbar(im, cax=fig.add_axes((0.89, 0.17, 0.015, 0.73)), label="log10 wall time to converge (s)")
+    fig.text(0.01, 0.015, "grey: the forced run failed (its reason, the relative error it reached, its time); "
+             "red outline: declined by the domain rule at that tol (force=True attempts it)", fontsize=7)
     fig.savefig(path, dpi=110)
     plt.close(fig)
 
