@@ -33,12 +33,19 @@ measured ones (nothing there is known to fail; a failure there ends as ``not_con
 with its reason). Tolerances at or above 1e-3 use the 1e-3 boundary, tighter ones the 1e-4
 boundary (tighter than 1e-4 was not mapped: a stop there costs time, not a wrong number).
 
-**Off the defaults** the rule assumes that the other parameters matter only through s. s
-follows what the drive's spread does (sigma, D, tau, K_v, K_c, tau_p and the unit's response
-enter s_F); what it does not follow is how long a trapped spell lasts relative to the
-unit's damping (tau, tau_p, gamma, m). Spot checks off the defaults are in the study's
-table; outside the measured band a researcher can attempt the solve with
-``FokkerPlanck(force=True)``.
+**Off the defaults.** The model depends on some parameters only through combinations:
+R enters only eta, K_c and K_v only through :math:`K_c K_v` (write :math:`W = K_v V`), sigma
+and D only through :math:`\\sigma\\sqrt D`, and for n = 1 a change of scale maps
+(a, :math:`\\sigma\\sqrt D`) to (c a, c :math:`\\sigma\\sqrt D`) exactly, leaving s and the
+solver's work unchanged. A unit whose m, gamma, tau, tau_p and :math:`K_c K_v` (and for n != 1
+also :math:`\\sigma\\sqrt D`) are the defaults is *at the defaults* (:func:`at_defaults`) and
+gets the measured bands. s does not follow how long a trapped spell lasts against the
+unit's damping: with gamma = 0.5 a kink on the boundary of the band (s = 1.12) fails, where
+tau = 0.5 or 2, tau_p = 1 and gamma = 2 converge (the study's spot checks). So any other unit
+gets the weakest measured strength as its limit, that of a = :data:`A_OFF_DEFAULTS` at the
+defaults at its n, whatever the band; spot checks there with gamma, tau, tau_p, m and
+:math:`K_c K_v` changed in turn are in the study's table. Beyond it a researcher can attempt
+the solve with ``FokkerPlanck(force=True)``.
 """
 
 from __future__ import annotations
@@ -49,7 +56,7 @@ import math
 from ..model import Harvester, Params
 from .hermite import equivalent_harmonic
 
-__all__ = ["DOMAIN", "trap_strength", "strength_limit", "outside_reason"]
+__all__ = ["DOMAIN", "A_OFF_DEFAULTS", "trap_strength", "at_defaults", "strength_limit", "outside_reason"]
 
 #: The measured domain for 1 <= n < 2: per tolerance class (the tightest tol of the class),
 #: rows (n_low, a_max): for n_low <= n < the next row's n_low, the largest a of the map
@@ -61,6 +68,21 @@ DOMAIN: dict[float, tuple[tuple[float, float], ...]] = {
     1e-3: ((1.0, 1.0), (1.5, 2.0), (1.75, 3.0)),
     1e-4: ((1.0, 1.0), (1.75, 2.0)),
 }
+
+
+#: Off the defaults (:func:`at_defaults` False) the limit is the strength of this a at the
+#: defaults: the weakest point of the map, converged at every n and both tolerances in 1-23 s.
+A_OFF_DEFAULTS = 0.5
+
+
+def at_defaults(h: Harvester) -> bool:
+    """True if every parameter that shapes the trap is at the paper's default, up to the
+    model's exact invariances (R; :math:`K_c K_v` together; :math:`\\sigma\\sqrt D` together,
+    and for n = 1 not at all, since s absorbs it)."""
+    p, d = h.params, Params()
+    same = all(getattr(p, k) == getattr(d, k) for k in ("m", "gamma", "tau", "tau_p"))
+    same = same and math.isclose(p.Kc * p.Kv, d.Kc * d.Kv, rel_tol=1e-12)
+    return same and (h.n == 1.0 or math.isclose(p.sigma**2 * p.D, d.sigma**2 * d.D, rel_tol=1e-12))
 
 
 def trap_strength(h: Harvester) -> float:
@@ -94,13 +116,14 @@ def _limit_at(n: float, a_max: float) -> float:
     return trap_strength(Harvester.build(a=a_max, n=n))
 
 
-def strength_limit(n: float, tol: float = 1e-4) -> float:
+def strength_limit(n: float, tol: float = 1e-4, defaults: bool = True) -> float:
     """The largest trap strength s inside the domain at exponent n and tolerance ``tol``:
-    that of the default unit with the band's ``a_max`` at this n (so that at the defaults
-    the rule is a <= a_max); infinite for n >= 2."""
+    that of the default unit at this n with the band's ``a_max`` (so that at the defaults
+    the rule is a <= a_max), or off the defaults (``defaults=False``) with
+    :data:`A_OFF_DEFAULTS`; infinite for n >= 2."""
     if n >= 2.0:
         return math.inf
-    return _limit_at(n, _row(n, tol)[1])
+    return _limit_at(n, _row(n, tol)[1] if defaults else A_OFF_DEFAULTS)
 
 
 def outside_reason(h: Harvester, tol: float = 1e-4) -> str | None:
@@ -108,19 +131,24 @@ def outside_reason(h: Harvester, tol: float = 1e-4) -> str | None:
     and what to use (Monte Carlo, or ``force=True`` to attempt it anyway)."""
     if h.N != 1 or h.n >= 2.0:
         return None
+    defaults = at_defaults(h)
     s = trap_strength(h)
-    limit = strength_limit(h.n, tol)
+    limit = strength_limit(h.n, tol, defaults)
     if s <= limit * (1.0 + 1e-9):
         return None
-    n_low, a_max = _row(h.n, tol)
-    bands = DOMAIN[_tol_class(tol)]
-    nexts = [r[0] for r in bands if r[0] > n_low]
-    band = f"{n_low:g} <= n < {nexts[0] if nexts else 2:g}"
     params = {k: v for k, v in h.params.to_dict().items() if v != getattr(Params(), k)}
+    if defaults:
+        n_low, a_max = _row(h.n, tol)
+        nexts = [r[0] for r in DOMAIN[_tol_class(tol)] if r[0] > n_low]
+        where = (f"the strength at which it last converged for {n_low:g} <= n < {nexts[0] if nexts else 2:g} "
+                 f"(a = {a_max:g} at the default parameters")
+    else:
+        changed = ", ".join(f"{k} = {v:g}" for k, v in params.items())
+        where = (f"the limit off the default parameters ({changed}), that of a = {A_OFF_DEFAULTS:g} at the "
+                 f"defaults (the domain was measured at the defaults only")
     extra = "".join(f" --param {k}={v:g}" for k, v in params.items())
     return (f"n = {h.n:g}, a = {h.a:g} is outside the measured domain of the Fokker-Planck solver at tol "
-            f"{tol:.2g}: its trap strength a / sd(drive) = {s:.3g} exceeds {limit:.3g}, the strength at which "
-            f"it last converged for {band} (a = {a_max:g} at the default parameters; at stronger traps the "
-            f"density concentrates at x = 0 and the refinement stops without an answer). Use Monte Carlo: "
-            f"solve(h, 'mc') or harvester stats --n {h.n:g} --a {h.a:g}{extra} --method mc; "
+            f"{tol:.2g}: its trap strength a / sd(drive) = {s:.3g} exceeds {limit:.3g}, {where}; at stronger "
+            f"traps the density concentrates at x = 0 and the refinement stops without an answer). Use Monte "
+            f"Carlo: solve(h, 'mc') or harvester stats --n {h.n:g} --a {h.a:g}{extra} --method mc; "
             f"FokkerPlanck(force=True) attempts it anyway")

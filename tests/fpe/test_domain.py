@@ -10,16 +10,18 @@ from scipy.optimize import brentq
 
 from fpe_harvester import Harvester, MethodNotAvailableError, ParameterError, Status, solve
 from fpe_harvester.fpe import FokkerPlanck, solver
-from fpe_harvester.fpe.domain import DOMAIN, outside_reason, strength_limit, trap_strength
+from fpe_harvester.fpe.domain import (
+    A_OFF_DEFAULTS, DOMAIN, at_defaults, outside_reason, strength_limit, trap_strength,
+)
 from fpe_harvester.result import Stats
 
 
 def _at_strength(s: float, n: float, **params: float) -> Harvester:
-    """The unit of exponent n (``params`` changed) whose trap strength is s (s is close to
-    proportional to a / sigma: the root is bracketed within a factor 1.6 of a = s sigma)."""
-    guess = s * params.get("sigma", 1.0)
-    a = brentq(lambda a: trap_strength(Harvester.build(a=a, n=n, **params)) - s, 0.7 * guess, 1.1 * guess,
-               xtol=1e-9)
+    """The unit of exponent n (``params`` changed) whose trap strength is s (s is nearly
+    proportional to a: the root is bracketed around the proportional guess)."""
+    strength = lambda a: trap_strength(Harvester.build(a=a, n=n, **params))  # noqa: E731
+    guess = s / strength(1.0)
+    a = brentq(lambda a: strength(a) - s, 0.7 * guess, 1.4 * guess, xtol=1e-9)
     return Harvester.build(a=a, n=n, **params)
 
 
@@ -35,8 +37,31 @@ def test_rule_on_both_sides_of_each_measured_boundary(tol: float, row: int) -> N
         assert outside_reason(Harvester.build(a=1.01 * a_max, n=n), tol) is not None
         limit = strength_limit(n, tol)
         assert trap_strength(Harvester.build(a=a_max, n=n)) == pytest.approx(limit, rel=1e-12)
-        assert outside_reason(_at_strength(0.99 * limit, n, sigma=1.5), tol) is None
-        assert outside_reason(_at_strength(1.01 * limit, n, sigma=1.5), tol) is not None
+        assert outside_reason(Harvester.build(a=0.99 * a_max, n=n, R=3.0, Kc=2.0, Kv=0.5), tol) is None
+        assert outside_reason(Harvester.build(a=1.01 * a_max, n=n, R=3.0, Kc=2.0, Kv=0.5), tol) is not None
+
+
+def test_rule_off_the_defaults() -> None:
+    """A parameter that shapes the trap off its default (gamma, tau, tau_p, m, K_c K_v, and for
+    n != 1 sigma sqrt(D)) gets the limit of a = 0.5 at the defaults, on both sides of it; the
+    exact invariances (R, K_c K_v, and for n = 1 sigma sqrt(D) with a) keep the measured bands."""
+    tol = 1e-4
+    assert strength_limit(1.0, 1e-3, defaults=False) == strength_limit(1.0, tol, defaults=False)
+    assert at_defaults(Harvester.build(a=2.0, n=1.0, sigma=2.0, D=0.5, R=3.0, Kc=2.0, Kv=0.5))
+    assert at_defaults(Harvester.build(a=2.0, n=1.5, sigma=2.0, D=0.25))
+    for change in ({"gamma": 0.5}, {"tau": 2.0}, {"tau_p": 4.0}, {"m": 2.0}, {"Kv": 2.0}):
+        assert not at_defaults(Harvester.build(a=1.0, n=1.0, **change))
+    assert not at_defaults(Harvester.build(a=1.0, n=1.5, sigma=2.0))
+    for n, change in ((1.0, {"gamma": 0.5}), (1.0, {"tau": 2.0}), (1.5, {"sigma": 2.0})):
+        limit = strength_limit(n, tol, defaults=False)
+        assert limit == pytest.approx(trap_strength(Harvester.build(a=A_OFF_DEFAULTS, n=n)), rel=1e-12)
+        assert outside_reason(_at_strength(0.99 * limit, n, **change), tol) is None
+        message = outside_reason(_at_strength(1.01 * limit, n, **change), tol)
+        assert message is not None and "off the default parameters" in message
+    # on the band's boundary at the defaults, gamma = 0.5 is declined (it fails there)
+    assert outside_reason(_at_strength(strength_limit(1.0, tol), 1.0, gamma=0.5), tol) is not None
+    # sigma = 2 at n = 1 is the default unit with a / 2: the bands hold
+    assert outside_reason(Harvester.build(a=2.0, n=1.0, sigma=2.0), tol) is None
 
 
 def test_tolerance_classes() -> None:
@@ -59,12 +84,12 @@ def test_rule_known_points() -> None:
 
 
 def test_strength_is_relative_to_the_drive() -> None:
-    """For n = 1 (a, sigma) -> (c a, c sigma) is an exact change of scale: s does not move, nor
-    does the verdict; a stronger noise makes the same a weaker."""
+    """For n = 1 (a, sigma) -> (c a, c sigma) is an exact change of scale: s does not move; a
+    stronger noise makes the same a weaker; K_c and K_v act only through their product."""
     s = trap_strength(Harvester.build(a=1.0, n=1.0))
     assert trap_strength(Harvester.build(a=2.0, n=1.0, sigma=2.0)) == pytest.approx(s, rel=1e-9)
-    assert outside_reason(Harvester.build(a=2.0, n=1.0, sigma=2.0)) is None
     assert trap_strength(Harvester.build(a=1.0, n=1.0, D=4.0)) < s
+    assert trap_strength(Harvester.build(a=1.0, n=1.0, Kc=2.0, Kv=0.5)) == pytest.approx(s, rel=1e-9)
 
 
 def test_decline_names_monte_carlo_and_solves_nothing(monkeypatch: pytest.MonkeyPatch) -> None:

@@ -38,7 +38,7 @@ from typing import Any
 from fpe_harvester import Harvester
 from fpe_harvester.fpe import FokkerPlanck
 
-__all__ = ["STEM", "NS", "AS", "TOLS", "BUDGETS", "MAX_GB", "COMMAND", "OFF_CHANGES", "WEAK", "run", "off_defaults",
+__all__ = ["STEM", "NS", "AS", "TOLS", "BUDGETS", "MAX_GB", "COMMAND", "BOUNDARY_CHANGES", "LIMIT_CHANGES", "WEAK", "run", "off_defaults",
            "one", "references", "check", "strength_at", "agreement", "table", "off_table", "plot"]
 
 STEM = "fpe_domain"
@@ -63,14 +63,24 @@ QUICK = ((1.75, 0.5, 1e-3, 60.0), (1.0, 2.0, 1e-3, 15.0))
 
 COMMAND = "python -m validation.studies.fpe_domain --out validation/data"
 
-#: Spot checks off the defaults (:func:`off_defaults`): one parameter changed at a time, at
-#: tol :data:`OFF_TOL`, a chosen so that the trap strength s of :mod:`fpe_harvester.fpe.domain`
-#: equals the domain's limit at n = 1 (the hardest band): inside the rule, on its boundary.
-OFF_CHANGES = ({"tau": 0.5}, {"tau": 2.0}, {"tau_p": 1.0}, {"tau_p": 4.0}, {"gamma": 0.5}, {"gamma": 2.0},
-               {"Kv": 2.0}, {"m": 2.0}, {"D": 2.0})
-OFF_TOL, OFF_BUDGET = 1e-3, 900.0
+#: Spot checks off the defaults (:func:`off_defaults`), one parameter changed at a time.
+#: First on the boundary of the hardest band at the defaults (n = 1, tol 1e-3, a chosen so
+#: that the trap strength s of :mod:`fpe_harvester.fpe.domain` equals the band's limit): does
+#: s alone carry the rule off the defaults?
+BOUNDARY_CHANGES = ({"tau": 0.5}, {"tau": 2.0}, {"tau_p": 1.0}, {"tau_p": 4.0}, {"gamma": 0.5}, {"gamma": 2.0},
+                    {"Kv": 2.0}, {"m": 2.0}, {"D": 2.0})
+BOUNDARY_TOL = 1e-3
 
-#: Weak potentials below the map (a = 0.25), which the rule lets in unmeasured otherwise.
+#: Then on the rule's limit off the defaults (s of a = 0.5 at the defaults, every band) at
+#: tol 1e-4, with wider changes, at n = 1 and at n = 1.5 (where sigma sqrt(D) also counts).
+LIMIT_CHANGES = ((1.0, {"gamma": 0.25}), (1.0, {"gamma": 0.5}), (1.0, {"gamma": 4.0}), (1.0, {"tau": 0.25}),
+                 (1.0, {"tau": 4.0}), (1.0, {"tau_p": 0.5}), (1.0, {"tau_p": 8.0}), (1.0, {"m": 0.5}),
+                 (1.0, {"m": 2.0}), (1.0, {"Kv": 2.0, "Kc": 2.0}), (1.5, {"gamma": 0.25}), (1.5, {"tau_p": 8.0}),
+                 (1.5, {"sigma": 2.0}))
+LIMIT_TOL = 1e-4
+
+#: Budget (s) of the spot checks, and weak potentials below the map (a = 0.25, defaults).
+OFF_BUDGET = 1800.0
 WEAK = ((1.0, 0.25), (1.5, 0.25))
 
 _REFS = Path(__file__).resolve().parents[1] / "references" / "data"
@@ -198,23 +208,26 @@ def strength_at(target: float, n: float, **params: float) -> float:
 def off_defaults(quick: bool = False, out: Path | str | None = None) -> dict[str, Any]:
     """Spot checks of the rule off the defaults, added to the recorded ``fpe_domain.json`` in ``out``.
 
-    Each of :data:`OFF_CHANGES` at n = 1 with a on the rule's boundary at :data:`OFF_TOL`
+    :data:`BOUNDARY_CHANGES` at n = 1 with a on the band's boundary at :data:`BOUNDARY_TOL`,
+    :data:`LIMIT_CHANGES` with a on the rule's limit off the defaults at :data:`LIMIT_TOL`
     (the rule lets it in: it should converge), and the weak potentials :data:`WEAK` at the
-    defaults; forced runs as in the map.
+    defaults; forced runs as in the map, budget :data:`OFF_BUDGET`.
     """
     from fpe_harvester.fpe.domain import strength_limit
 
-    limit = strength_limit(1.0, OFF_TOL)
-    changes = OFF_CHANGES[:1] if quick else OFF_CHANGES
-    cases = tuple((1.0, strength_at(limit, 1.0, **c), OFF_TOL, OFF_BUDGET, c) for c in changes)
-    cases += () if quick else tuple((n, a, OFF_TOL, OFF_BUDGET, {}) for n, a in WEAK)
+    boundary = BOUNDARY_CHANGES[:1] if quick else BOUNDARY_CHANGES
+    cases = tuple((1.0, strength_at(strength_limit(1.0, BOUNDARY_TOL), 1.0, **c), BOUNDARY_TOL, OFF_BUDGET, c)
+                  for c in boundary)
+    if not quick:
+        cases += tuple((n, strength_at(strength_limit(n, LIMIT_TOL, defaults=False), n, **c), LIMIT_TOL,
+                        OFF_BUDGET, c) for n, c in LIMIT_CHANGES)
+        cases += tuple((n, a, LIMIT_TOL, OFF_BUDGET, {}) for n, a in WEAK)
     partial = None if out is None else Path(out) / f"{STEM}.off{'.quick' if quick else ''}.partial.json"
     runs = _runs(cases, partial)
     for row in runs:
         row["strength"] = _strength(row)
     res = _load(Path(out, f"{STEM}.json")) if out is not None else {}
-    res["off_defaults"] = {"limit_n1": limit, "tol": OFF_TOL, "budget": OFF_BUDGET, "runs": runs,
-                           "command": COMMAND + " --off-defaults"}
+    res["off_defaults"] = {"runs": runs, "command": COMMAND + " --off-defaults"}
     if out is not None:
         Path(out, f"{STEM}.json").write_text(json.dumps(res, indent=1))
         if partial is not None:
@@ -270,16 +283,20 @@ def agreement(res: dict[str, Any]) -> dict[str, int]:
 
 
 def off_table(res: dict[str, Any]) -> str:
-    """The spot checks off the defaults as Markdown: the parameter changed, a, the trap
-    strength s and the outcome."""
+    """The spot checks off the defaults as Markdown: n, the parameter changed, a, the trap
+    strength s, the tolerance, the rule's limit for that unit and the outcome."""
+    from fpe_harvester.fpe.domain import at_defaults, strength_limit
+
     off = res.get("off_defaults")
     if not off:
         return ""
-    lines = [f"Off the defaults, tol = {off['tol']:g} (n = 1: rule's limit s = {off['limit_n1']:.3g})", "",
-             "| n | changed | a | s | outcome |", "|---|---|---|---|---|"]
+    lines = ["| n | changed | a | s | tol | limit | outcome |", "|---|---|---|---|---|---|---|"]
     for r in off["runs"]:
-        changed = ", ".join(f"{k} = {v:g}" for k, v in r.get("params", {}).items()) or "none"
-        lines.append(f"| {r['n']:g} | {changed} | {r['a']:.3g} | {r['strength']:.3g} | {_cell(r)} |")
+        params = r.get("params", {})
+        changed = ", ".join(f"{k} = {v:g}" for k, v in params.items()) or "none"
+        limit = strength_limit(r["n"], r["tol"], at_defaults(Harvester.build(a=r["a"], n=r["n"], **params)))
+        lines.append(f"| {r['n']:g} | {changed} | {r['a']:.3g} | {r['strength']:.3g} | {r['tol']:g} | "
+                     f"{limit:.3g} | {_cell(r)} |")
     return "\n".join(lines) + "\n"
 
 
