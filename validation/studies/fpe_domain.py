@@ -76,7 +76,8 @@ BOUNDARY_TOL = 1e-3
 LIMIT_CHANGES = ((1.0, {"gamma": 0.25}), (1.0, {"gamma": 0.5}), (1.0, {"gamma": 4.0}), (1.0, {"tau": 0.25}),
                  (1.0, {"tau": 4.0}), (1.0, {"tau_p": 0.5}), (1.0, {"tau_p": 8.0}), (1.0, {"m": 0.5}),
                  (1.0, {"m": 2.0}), (1.0, {"Kv": 2.0, "Kc": 2.0}), (1.5, {"gamma": 0.25}), (1.5, {"tau_p": 8.0}),
-                 (1.5, {"sigma": 2.0}))
+                 (1.5, {"sigma": 2.0}), (1.0, {"gamma": 0.75}), (1.0, {"Kv": 0.5}), (1.0, {"Kv": 2.0}),
+                 (1.5, {"sigma": 0.5}))
 LIMIT_TOL = 1e-4
 
 #: Budget (s) of the spot checks, and weak potentials below the map (a = 0.25, defaults).
