@@ -103,7 +103,8 @@ class FokkerPlanck:
         for name in ("tol", "M", "elements", "order", "domain", "max_seconds", "max_gb"):
             object.__setattr__(self, name, getattr(settings, name))
         if not isinstance(self.force, bool):
-            raise ParameterError(f"force must be True or False, got {self.force!r} (type {type(self.force).__name__})")
+            raise ParameterError(f"force must be True or False, got {self.force!r} "
+                                 f"(type {type(self.force).__name__})")
 
     @functools.cached_property
     def settings(self) -> Settings:

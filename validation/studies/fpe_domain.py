@@ -17,12 +17,19 @@ reported error, :math:`e_{ref}` the reference's standard error). A Fokker--Planc
 (the same solver at a tighter tolerance) is a convergence check, not a correctness check, and
 is labelled so; it counts as agreeing if :math:`|\\eta - \\eta_{ref}| \\le e + e_{ref}`.
 
-``python -m validation.studies.fpe_domain [--quick] [--out DIR]`` runs it (the full map takes
-30-90 minutes on two loaded cores; a point whose run is written is not run again when the
-run is restarted into the same folder) and writes ``fpe_domain.json`` and ``fpe_domain.png``
-(the map, one panel per tolerance, with the cells the domain rule of
-:mod:`fpe_harvester.fpe.domain` declines outlined). ``--replot`` redraws the figure and
-prints the table of the recorded JSON without solving anything.
+Off the defaults (:func:`off_defaults`, ``--off-defaults``): spot checks with one quantity
+changed at a time, on the boundary of the hardest band at the defaults (does the trap strength
+alone carry the rule off the defaults? It does not: gamma = 0.5 and K_v = 2 fail there) and on
+the rule's limit off the defaults (which ranges converge there), plus weak potentials below
+the map; they are added to the recorded JSON as ``off_defaults``.
+
+``python -m validation.studies.fpe_domain [--quick] [--out DIR]`` runs the map (30 minutes on
+two loaded cores; a run already written to the folder's partial file is not run again when
+the study is restarted into it) and writes ``fpe_domain.json`` and ``fpe_domain.png`` (the map,
+one panel per tolerance, with the cells the domain rule of :mod:`fpe_harvester.fpe.domain`
+declines outlined); ``--off-defaults`` then adds the spot checks (about 40 minutes).
+``--replot`` redraws the figure and prints the tables of the recorded JSON and how the rule
+sorts its runs, without solving anything.
 """
 
 from __future__ import annotations
@@ -38,8 +45,9 @@ from typing import Any
 from fpe_harvester import Harvester
 from fpe_harvester.fpe import FokkerPlanck
 
-__all__ = ["STEM", "NS", "AS", "TOLS", "BUDGETS", "MAX_GB", "COMMAND", "BOUNDARY_CHANGES", "LIMIT_CHANGES", "WEAK", "run", "off_defaults",
-           "one", "references", "check", "strength_at", "agreement", "table", "off_table", "plot"]
+__all__ = ["STEM", "NS", "AS", "TOLS", "BUDGETS", "MAX_GB", "COMMAND", "BOUNDARY_CHANGES", "LIMIT_CHANGES",
+           "WEAK", "run", "off_defaults", "one", "references", "check", "strength_at", "agreement", "table",
+           "off_table", "plot"]
 
 STEM = "fpe_domain"
 
@@ -67,17 +75,17 @@ COMMAND = "python -m validation.studies.fpe_domain --out validation/data"
 #: First on the boundary of the hardest band at the defaults (n = 1, tol 1e-3, a chosen so
 #: that the trap strength s of :mod:`fpe_harvester.fpe.domain` equals the band's limit): does
 #: s alone carry the rule off the defaults?
-BOUNDARY_CHANGES = ({"tau": 0.5}, {"tau": 2.0}, {"tau_p": 1.0}, {"tau_p": 4.0}, {"gamma": 0.5}, {"gamma": 2.0},
-                    {"Kv": 2.0}, {"m": 2.0}, {"D": 2.0})
+BOUNDARY_CHANGES = ({"tau": 0.5}, {"tau": 2.0}, {"tau_p": 1.0}, {"tau_p": 4.0}, {"gamma": 0.5},
+                    {"gamma": 2.0}, {"Kv": 2.0}, {"m": 2.0}, {"D": 2.0})
 BOUNDARY_TOL = 1e-3
 
 #: Then on the rule's limit off the defaults (s of a = 0.5 at the defaults, every band) at
 #: tol 1e-4, with wider changes, at n = 1 and at n = 1.5 (where sigma sqrt(D) also counts).
 LIMIT_CHANGES = ((1.0, {"gamma": 0.25}), (1.0, {"gamma": 0.5}), (1.0, {"gamma": 4.0}), (1.0, {"tau": 0.25}),
                  (1.0, {"tau": 4.0}), (1.0, {"tau_p": 0.5}), (1.0, {"tau_p": 8.0}), (1.0, {"m": 0.5}),
-                 (1.0, {"m": 2.0}), (1.0, {"Kv": 2.0, "Kc": 2.0}), (1.5, {"gamma": 0.25}), (1.5, {"tau_p": 8.0}),
-                 (1.5, {"sigma": 2.0}), (1.0, {"gamma": 0.75}), (1.0, {"Kv": 0.5}), (1.0, {"Kv": 2.0}),
-                 (1.5, {"sigma": 0.5}))
+                 (1.0, {"m": 2.0}), (1.0, {"Kv": 2.0, "Kc": 2.0}), (1.5, {"gamma": 0.25}),
+                 (1.5, {"tau_p": 8.0}), (1.5, {"sigma": 2.0}), (1.0, {"gamma": 0.75}), (1.0, {"Kv": 0.5}),
+                 (1.0, {"Kv": 2.0}), (1.5, {"sigma": 0.5}))
 LIMIT_TOL = 1e-4
 
 #: Budget (s) of the spot checks, and weak potentials below the map (a = 0.25, defaults).
@@ -145,7 +153,8 @@ def check(row: dict[str, Any], refs: list[dict[str, Any]]) -> list[dict[str, Any
     for ref in refs:
         actual = abs(row["eta"] - ref["eta"])
         bar = row["eta_err"] + (2.0 if ref["independent"] else 1.0) * ref["eta_err"]
-        out.append({"reference": ref["label"], "independent": ref["independent"], "reference_status": ref["status"],
+        out.append({"reference": ref["label"], "independent": ref["independent"],
+                    "reference_status": ref["status"],
                     "actual": actual, "reported": row["eta_err"], "reference_err": ref["eta_err"],
                     "within": bool(actual <= bar)})
     return out
@@ -265,39 +274,47 @@ def table(res: dict[str, Any]) -> str:
             cells = [_cell(runs[(n, a, tol)]) if (n, a, tol) in runs else "" for a in res["as"]]
             lines.append(f"| {n:g} | " + " | ".join(cells) + " |")
         lines.append("")
-    lines.append("The domain rule on these runs: " + ", ".join(f"{k} {v}" for k, v in agreement(res).items()))
+    lines.append(_verdicts(res["runs"]))
     return "\n".join(lines) + "\n"
 
 
-def agreement(res: dict[str, Any]) -> dict[str, int]:
-    """How the domain rule of :mod:`fpe_harvester.fpe.domain` sorts the map's runs: inside and
+def agreement(runs: list[dict[str, Any]]) -> dict[str, int]:
+    """How the domain rule of :mod:`fpe_harvester.fpe.domain` sorts ``runs``: inside and
     converged, outside and failed, inside but failed (a miss of the rule: must be none) and
     outside but converged (the price of its margin)."""
     from fpe_harvester.fpe.domain import outside_reason
 
     out = {"inside, converged": 0, "outside, failed": 0, "inside, failed": 0, "outside, converged": 0}
-    for r in res["runs"]:
+    for r in runs:
         inside = outside_reason(Harvester.build(a=r["a"], n=r["n"], **r.get("params", {})), r["tol"]) is None
         ok = r["status"] == "stable"
         out[f"{'inside' if inside else 'outside'}, {'converged' if ok else 'failed'}"] += 1
     return out
 
 
+def _verdicts(runs: list[dict[str, Any]]) -> str:
+    return "The domain rule on these runs: " + ", ".join(f"{k} {v}" for k, v in agreement(runs).items())
+
+
 def off_table(res: dict[str, Any]) -> str:
-    """The spot checks off the defaults as Markdown: n, the parameter changed, a, the trap
-    strength s, the tolerance, the rule's limit for that unit and the outcome."""
-    from fpe_harvester.fpe.domain import at_defaults, strength_limit
+    """The spot checks off the defaults as Markdown: n, the parameters changed, a, the trap
+    strength s, the tolerance, the rule's limit of s for that unit, the rule's verdict and the
+    outcome; the checks on the band's boundary (tol 1e-3) first, then those on the limit."""
+    from fpe_harvester.fpe.domain import at_defaults, outside_reason, strength_limit
 
     off = res.get("off_defaults")
     if not off:
         return ""
-    lines = ["| n | changed | a | s | tol | limit | outcome |", "|---|---|---|---|---|---|---|"]
-    for r in off["runs"]:
+    lines = ["| n | changed | a | s | tol | limit of s | rule | outcome |", "|---" * 8 + "|"]
+    for r in sorted(off["runs"], key=lambda r: (-r["tol"], not r.get("params"), r["n"], r["strength"])):
         params = r.get("params", {})
+        h = Harvester.build(a=r["a"], n=r["n"], **params)
         changed = ", ".join(f"{k} = {v:g}" for k, v in params.items()) or "none"
-        limit = strength_limit(r["n"], r["tol"], at_defaults(Harvester.build(a=r["a"], n=r["n"], **params)))
+        limit = strength_limit(r["n"], r["tol"], at_defaults(h))
+        verdict = "inside" if outside_reason(h, r["tol"]) is None else "declines"
         lines.append(f"| {r['n']:g} | {changed} | {r['a']:.3g} | {r['strength']:.3g} | {r['tol']:g} | "
-                     f"{limit:.3g} | {_cell(r)} |")
+                     f"{limit:.3g} | {verdict} | {_cell(r)} |")
+    lines += ["", _verdicts(off["runs"])]
     return "\n".join(lines) + "\n"
 
 
@@ -330,12 +347,14 @@ def plot(res: dict[str, Any], path: Path) -> None:
                 if r is None:
                     continue
                 if r["status"] != "stable":
-                    ax.add_patch(Rectangle((j - 0.5, i - 0.5), 1, 1, facecolor="0.85", hatch="//", edgecolor="0.6"))
+                    ax.add_patch(Rectangle((j - 0.5, i - 0.5), 1, 1, facecolor="0.85", hatch="//",
+                                           edgecolor="0.6"))
                 text = _cell(r).replace("fails: ", "").replace(", ", "\n")
                 ax.text(j, i, text, ha="center", va="center", fontsize=6.5,
                         color="k" if r["status"] != "stable" or grid[i, j] > 2.0 else "w")
                 if outside_reason(Harvester.build(a=a, n=n), tol) is not None:
-                    ax.add_patch(Rectangle((j - 0.47, i - 0.47), 0.94, 0.94, fill=False, edgecolor="C3", lw=2))
+                    ax.add_patch(Rectangle((j - 0.47, i - 0.47), 0.94, 0.94, fill=False, edgecolor="C3",
+                                           lw=2))
         ax.set_xticks(range(len(as_)), [f"{a:g}" for a in as_])
         ax.set_yticks(range(len(ns)), [f"{n:g}" for n in ns])
         ax.set_xlabel("a")
@@ -343,15 +362,17 @@ def plot(res: dict[str, Any], path: Path) -> None:
         ax.set_title(f"tol {tol:g}: wall time (s) or failure", fontsize=9)
     fig.subplots_adjust(left=0.06, right=0.86, bottom=0.17, top=0.9, wspace=0.25)
     fig.colorbar(im, cax=fig.add_axes((0.89, 0.17, 0.015, 0.73)), label="log10 wall time to converge (s)")
-    fig.text(0.01, 0.015, "grey: the forced run failed (its reason, the relative error it reached, its time); "
-             "red outline: declined by the domain rule at that tol (force=True attempts it)", fontsize=7)
+    fig.text(0.01, 0.015, "grey: the forced run failed (its reason, the relative error it reached, its "
+             "time); red outline: declined by the domain rule at that tol (force=True attempts it)",
+             fontsize=7)
     fig.savefig(path, dpi=110)
     plt.close(fig)
 
 
 def main(argv: list[str] | None = None) -> dict[str, Any]:
     """``python -m validation.studies.fpe_domain [--quick] [--out DIR] [--replot]``."""
-    ap = argparse.ArgumentParser(prog="python -m validation.studies.fpe_domain", description=__doc__.splitlines()[0])
+    ap = argparse.ArgumentParser(prog="python -m validation.studies.fpe_domain",
+                                 description=(__doc__ or "").splitlines()[0])
     ap.add_argument("--quick", action="store_true", help="two points, under a minute")
     ap.add_argument("--out", type=Path, default=Path("validation_report"), metavar="DIR",
                     help="folder for the JSON and PNG (default ./validation_report)")
