@@ -295,11 +295,56 @@ def _dg_force(x0: float, xl: float, c: float, a: float, n: float) -> tuple[float
     return f, False
 
 
+@njit(cache=True)
+def _generator(y: np.ndarray, side: float, resting: bool, pp: np.ndarray, powers: np.ndarray, tab: np.ndarray,
+               out: np.ndarray) -> None:
+    """Add :math:`\\mathcal{L}f` at the state ``y`` to ``out`` for each monomial
+    :math:`f = x^i v^j V^k \\xi^l` of ``powers``, with the generator of the scheme's own dynamics:
+
+    .. math::
+
+        \\mathcal{L}f = \\dot x f_x + \\dot v f_v + (K_c v - V/\\tau_p) f_V - \\frac{\\xi}{\\tau} f_\\xi
+        + \\frac{D}{\\tau^2} f_{\\xi\\xi},\\qquad
+        \\dot x = v,\\ \\dot v = (F - m\\gamma v - K_v V + \\sigma\\xi)/m,
+
+    F the on-site force (n = 1: :math:`-a s` on the unit's side s), and :math:`\\dot x = \\dot v = 0`
+    for a unit held at rest. Its stationary mean is 0, so its time average is a control variate."""
+    m, gamma, Kv, Kc, sigma, tau, D, tau_p, a, n = pp[0], pp[1], pp[2], pp[3], pp[4], pp[5], pp[6], pp[7], pp[8], pp[9]
+    x, v, V, xi = y[0], y[1], y[2], y[3]
+    for c in range(4):
+        tab[c, 0] = 0.0  # x^-1 etc.: the derivative's factor i makes them vanish
+        tab[c, 1] = 1.0
+        for d in range(2, 6):
+            tab[c, d] = tab[c, d - 1] * y[c]
+    if resting:
+        dx, dv = 0.0, 0.0
+    else:
+        force = -a * side if n == 1.0 else -a * n * abs(x) ** (n - 1.0) * (1.0 if x > 0 else -1.0 if x < 0 else 0.0)
+        dx, dv = v, (force - m * gamma * v - Kv * V + sigma * xi) / m
+    dV = Kc * v - V / tau_p
+    for q in range(powers.shape[0]):
+        i, j, k, l = powers[q, 0], powers[q, 1], powers[q, 2], powers[q, 3]
+        px, pv, pV, pxi = tab[0, i + 1], tab[1, j + 1], tab[2, k + 1], tab[3, l + 1]
+        r = 0.0
+        if i > 0:
+            r += i * tab[0, i] * pv * pV * pxi * dx
+        if j > 0:
+            r += j * px * tab[1, j] * pV * pxi * dv
+        if k > 0:
+            r += k * px * pv * tab[2, k] * pxi * dV
+        if l > 0:
+            r -= l * px * pv * pV * tab[3, l + 1] / tau
+        if l > 1:
+            r += l * (l - 1) * px * pv * pV * tab[3, l - 1] * D / (tau * tau)
+        out[q] += r
+
+
 @njit(parallel=True, cache=True)
 def run_paths(seeds: np.ndarray, n_burn: int, n_run: int, every: int, Lf: np.ndarray, Ef: np.ndarray,
               mult: np.ndarray, E: np.ndarray, Pv: np.ndarray, pvec: np.ndarray, hs: np.ndarray,
               Ex: np.ndarray, Cx: np.ndarray, pc: np.ndarray, wtrap: np.ndarray, pp: np.ndarray,
-              kink: bool, edges: np.ndarray, means: np.ndarray, counts: np.ndarray, shells: np.ndarray) -> None:
+              kink: bool, edges: np.ndarray, means: np.ndarray, counts: np.ndarray, shells: np.ndarray,
+              powers: np.ndarray, cv_every: int, bobs: np.ndarray, bcv: np.ndarray) -> None:
     """Run ``seeds.size`` independent paths of every variant on one noise per path.
 
     The fine step's noise ``Lf z`` is drawn once; variant ``j`` steps every ``mult[j]`` fine steps
@@ -309,8 +354,12 @@ def run_paths(seeds: np.ndarray, n_burn: int, n_run: int, every: int, Lf: np.nda
     fine steps, the state of every variant is sampled every ``every`` fine steps (a multiple of
     every ``mult``) into ``means[path, variant, :]`` (V^2, v xi, v^2, v V averaged) and, for variant
     0 and ``edges`` not empty, the fraction of samples with ``edges[i] < m v^2/2 + a|x| <=
-    edges[i + 1]`` into ``shells[path, i]``. Each path seeds its own generator, so the results do
-    not depend on the threads."""
+    edges[i + 1]`` into ``shells[path, i]``. With ``powers`` not empty, every variant's observables
+    are also averaged over each of ``bobs.shape[2]`` consecutive batches of the samples into
+    ``bobs[path, variant, batch, :]``, and the generator applied to each monomial
+    ``x^i v^j V^k xi^l`` (a row ``(i, j, k, l)`` of ``powers``) every ``cv_every`` samples into
+    ``bcv[path, variant, batch, :]`` (:func:`_generator`: stationary mean 0, the control variates).
+    Each path seeds its own generator, so the results do not depend on the threads."""
     P, nv = seeds.size, mult.size
     m, Kv, sigma, tau_p, a, n = pp[0], pp[2], pp[4], pp[7], pp[8], pp[9]
     nsh = max(edges.size - 1, 0)
@@ -333,6 +382,10 @@ def run_paths(seeds: np.ndarray, n_burn: int, n_run: int, every: int, Lf: np.nda
             st[j, 1] = 1.0 if kink else 0.0
         nsamp = 0
         sample_in = n_burn + every
+        ncv, nb = powers.shape[0], bobs.shape[2]
+        per_path = n_run // every
+        bn, bc = np.zeros(nb), np.zeros(nb)
+        tab = np.zeros((4, 6))
         for i in range(n_burn + n_run):
             z0, z1 = np.random.standard_normal(), np.random.standard_normal()
             z2, z3 = np.random.standard_normal(), np.random.standard_normal()
@@ -408,6 +461,25 @@ def run_paths(seeds: np.ndarray, n_burn: int, n_run: int, every: int, Lf: np.nda
                         if edges[b] < en <= edges[b + 1]:
                             shells[p, b] += 1.0
                             break
+                if ncv > 0:
+                    bt = min((nsamp - 1) * nb // per_path, nb - 1)
+                    bn[bt] += 1.0
+                    for j in range(nv):
+                        vj, Vj = y[j, 1], y[j, 2]
+                        bobs[p, j, bt, 0] += Vj * Vj
+                        bobs[p, j, bt, 1] += vj * y[j, 3]
+                        bobs[p, j, bt, 2] += vj * vj
+                        bobs[p, j, bt, 3] += vj * Vj
+                    if nsamp % cv_every == 0:
+                        bc[bt] += 1.0
+                        for j in range(nv):
+                            _generator(y[j], st[j, 0], kink and st[j, 1] != 0.0, pp, powers, tab, bcv[p, j, bt])
+        for j in range(bobs.shape[1]):
+            for bt in range(nb):
+                for q in range(N_OBS):
+                    bobs[p, j, bt, q] /= max(bn[bt], 1.0)
+                for q in range(ncv):
+                    bcv[p, j, bt, q] /= max(bc[bt], 1.0)
         for j in range(nv):
             for q in range(N_OBS):
                 means[p, j, q] = sums[j, q] / max(nsamp, 1)

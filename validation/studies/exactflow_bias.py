@@ -8,13 +8,16 @@ force. Every variant of a system runs on the same Brownian path (:func:`~validat
 exactflow.coupled`), so the paired differences from the finest variant measure the bias at a small
 fraction of the cost of independent runs.
 
-A setting's **bias bound** per quantity, relative to its value, is
-:math:`|d| + 2\\,\\mathrm{se}(d) + r`, with :math:`d` its difference from the finest variant and
-:math:`r` the finest variant's own remaining bias, taken as large as the difference it has from
-its next-coarser neighbour in each knob (step; ``w_trap`` for n = 1), plus two standard errors of
-each: first-order biases halve when the knob halves, so the neighbour's difference is at least the
-finest's own. :func:`validation.references.exactflow.solve_flow` adds the bound of its setting to
-its errors.
+A setting's **bias bound** per quantity, relative to its value, comes from a model of the bias
+that vanishes with the knobs, fitted to all the paired differences at once: for n = 1,
+:math:`b(h, w) = c_h h + c_w w` (first order in the step and in ``w_trap``, the slowest a bias of
+either can vanish), for n > 1 :math:`b(h) = c_1 h + c_2 h^2`. The coefficients are fitted by
+generalised least squares to the variants' differences from the finest, with their covariance over
+the paths (they share the finest variant); a fit worse than its degrees of freedom inflates the
+covariance by :math:`\\chi^2/\\mathrm{dof}`. The bound at a setting is
+:math:`|\\hat b| + 2\\,\\mathrm{se}(\\hat b)`: the fitted bias and two of its standard errors,
+the finest variant's own bias included (the model extrapolates to zero knobs).
+:func:`validation.references.exactflow.solve_flow` adds the bound of its setting to its errors.
 
 ``python -m validation.studies.exactflow_bias [--quick] [--out validation/data]`` writes
 ``exactflow_bias.json`` and ``exactflow_bias.png``.
@@ -22,6 +25,7 @@ its errors.
 
 from __future__ import annotations
 
+import math
 import time
 from pathlib import Path
 from typing import Any
@@ -39,37 +43,55 @@ STEM = "exactflow_bias"
 #: The command that writes ``validation/data/exactflow_bias.json``.
 COMMAND = "python -m validation.studies.exactflow_bias --out validation/data"
 
-#: Per system: (n, a), the fine step, the variants (the finest first), and the neighbours of the
-#: finest in each knob (indices into the variants: (coarser, its base) pairs whose difference
-#: bounds the finest's own remaining bias).
+#: Per system: (n, a), the fine step and the variants (the finest first).
 PLANS: dict[str, dict[str, Any]] = {
     "n1_a2": {"n": 1.0, "a": 2.0, "fine": 0.0025,
               "variants": (Variant(1, 0.001), Variant(2, 0.001), Variant(4, 0.001), Variant(8, 0.001),
-                           Variant(4, 0.003), Variant(4, 0.01), Variant(8, 0.003)),
-              "neighbours": ((1, 0), (4, 2))},
+                           Variant(4, 0.003), Variant(4, 0.01), Variant(8, 0.003), Variant(8, 0.01))},
     "n1.25_a2": {"n": 1.25, "a": 2.0, "fine": 0.0025,
-                 "variants": (Variant(1, 0.0), Variant(2, 0.0), Variant(4, 0.0), Variant(8, 0.0), Variant(16, 0.0)),
-                 "neighbours": ((1, 0),)},
+                 "variants": (Variant(1, 0.0), Variant(2, 0.0), Variant(4, 0.0), Variant(8, 0.0),
+                              Variant(16, 0.0))},
 }
 
 _QUANTITIES = ("eta", "V2", "Pin", "v2", "vV")
 
 
-def bounds(res: dict[str, Any], plan: dict[str, Any]) -> list[dict[str, Any]]:
-    """The bias bound of every variant's setting (see the module docstring), per quantity, relative."""
+def _features(n: float, step: float, w_trap: float) -> np.ndarray:
+    """The bias model's terms at a setting (see the module docstring)."""
+    return np.array([step, w_trap]) if n == 1.0 else np.array([step, step * step])
+
+
+def bounds(res: dict[str, Any]) -> list[dict[str, Any]]:
+    """The bias bound of every variant's setting (see the module docstring), per quantity, relative
+    to the finest variant's value, with the fitted model and the measured differences."""
+    n = res["system"]["n"]
+    X = np.array([_features(n, v["step"], v["w_trap"]) for v in res["variants"]])
+    A = X[1:] - X[0]                                            # differences from the finest
+    fits = {}
+    for q in _QUANTITIES:
+        paths = res["per_path"][q]
+        D = paths[:, 1:] - paths[:, :1]                         # (paths, variants - 1)
+        d, S = D.mean(axis=0), np.cov(D, rowvar=False) / D.shape[0]
+        Si = np.linalg.inv(S)
+        cov = np.linalg.inv(A.T @ Si @ A)
+        c = cov @ A.T @ Si @ d
+        chi2 = float((d - A @ c) @ Si @ (d - A @ c))
+        dof = max(A.shape[0] - A.shape[1], 1)
+        cov = cov * max(1.0, chi2 / dof)
+        fits[q] = (c, cov, chi2, dof, abs(res["variants"][0]["estimates"][q][0]))
     rows = []
-    ref = res["variants"][0]["estimates"]
-    resid = {q: sum(abs(d) + 2.0 * se for d, se in (difference(res, j, k, q) for j, k in plan["neighbours"]))
-             for q in _QUANTITIES}
     for j, v in enumerate(res["variants"]):
-        rel, measured = {}, {}
-        for q in _QUANTITIES:
-            d, se = difference(res, j, 0, q) if j else (0.0, 0.0)
-            scale = abs(ref[q][0])
-            rel[q] = (abs(d) + 2.0 * se + resid[q]) / scale
-            measured[q] = {"minus_finest": d / scale, "se": se / scale}
+        x = X[j]
+        rel, measured, model = {}, {}, {}
+        for q, (c, cov, chi2, dof, scale) in fits.items():
+            b, se = float(x @ c), float(math.sqrt(x @ cov @ x))
+            rel[q] = (abs(b) + 2.0 * se) / scale
+            dq, dse = difference(res, j, 0, q) if j else (0.0, 0.0)
+            measured[q] = {"minus_finest": dq / scale, "se": dse / scale}
+            model[q] = {"bias": b / scale, "se": se / scale, "chi2": chi2, "dof": dof}
         rows.append({"system": dict(res["system"]), "step": v["step"], "w_trap": v["w_trap"],
-                     "relative_bias_bound": rel, "relative_difference_from_finest": measured})
+                     "relative_bias_bound": rel, "relative_difference_from_finest": measured,
+                     "model": model})
     return rows
 
 
@@ -77,15 +99,16 @@ def bias_study(quick: bool) -> dict[str, Any]:
     """Every system of :data:`PLANS`: the coupled variants, their differences and the bounds."""
     paths, t_run = (16, 300.0) if quick else (128, 8000.0)
     out: dict[str, Any] = {"systems": {}, "bounds": [], "paths": paths, "t_run": t_run,
-                           "bound_rule": "|d| + 2 se(d) + the finest variant's neighbour differences (+ 2 se each), "
-                                         "relative to the finest variant's value"}
+                           "bound_rule": "|b| + 2 se(b), b the bias fitted (GLS over the paired differences, "
+                                         "covariance inflated by chi2/dof when above 1) by c_h h + c_w w_trap "
+                                         "(n = 1) or c_1 h + c_2 h^2 (n > 1), relative to the finest "
+                                         "variant's value"}
     for i, (key, plan) in enumerate(PLANS.items()):
         h = Harvester.build(a=plan["a"], n=plan["n"])
         res = coupled(h, plan["fine"], plan["variants"], paths=paths, t_run=t_run, seed=4700 + i)
-        rows = bounds(res, plan)
+        rows = bounds(res)
         out["bounds"] += rows
         out["systems"][key] = {k: v for k, v in res.items() if k != "per_path"}
-        out["systems"][key]["neighbours"] = [list(p) for p in plan["neighbours"]]
     return out
 
 
