@@ -56,77 +56,76 @@ def _dpoly(c: np.ndarray, s: float) -> float:
 
 
 @njit(cache=True)
-def _path(t: float, h: float, cx: np.ndarray, pc: np.ndarray, tsw: np.ndarray, dfs: np.ndarray,
-          nsw: int) -> tuple[float, float]:
-    """(x, v) at time t of the step on the conditional-mean path: ``cx`` the step's polynomial in
-    t/h (free flow and noise), plus the response ``P_x`` to each force switch before t."""
-    x = _poly(cx, t / h)
-    v = _dpoly(cx, t / h) / h
-    for k in range(nsw):
-        tau = t - tsw[k]
-        if tau > 0.0:
-            x += dfs[k] * _poly(pc, tau)
-            v += dfs[k] * _dpoly(pc, tau)
-    return x, v
+def _path(t: float, h: float, cx: np.ndarray) -> tuple[float, float]:
+    """(x, v) at time t of the step on the conditional-mean path, ``cx`` its polynomial in t/h
+    (free flow, noise, and the response to every force switch so far: :func:`_add_switch`)."""
+    return _poly(cx, t / h), _dpoly(cx, t / h) / h
 
 
 @njit(cache=True)
-def _root(lo: float, hi: float, s: float, h: float, cx: np.ndarray, pc: np.ndarray, tsw: np.ndarray,
-          dfs: np.ndarray, nsw: int, guess: float) -> float:
-    """The crossing in (lo, hi]: ``s x(lo) > 0 >= s x(hi)``; Newton kept inside the bracket."""
+def _add_switch(cx: np.ndarray, pc: np.ndarray, tk: float, df: float, h: float) -> None:
+    """Fold the response to a force step ``df`` at ``tk``, :math:`df\\,P_x(t - t_k)`, into ``cx``
+    (a polynomial in t/h): the path is only ever evaluated after the latest switch, where every
+    switch acts, so one polynomial carries them all."""
+    hp = 1.0
+    for e in range(pc.shape[0]):
+        acc, binom, mt = 0.0, 1.0, 1.0
+        for d in range(e, pc.shape[0]):
+            acc += pc[d] * binom * mt
+            binom = binom * (d + 1) / (d + 1 - e)
+            mt *= -tk
+        cx[e] += df * hp * acc
+        hp *= h
+
+
+@njit(cache=True)
+def _root(lo: float, hi: float, s: float, h: float, cx: np.ndarray, guess: float) -> float:
+    """The crossing in (lo, hi]: ``s x(lo) > 0 >= s x(hi)``; Newton kept inside the bracket, done
+    when its step or the bracket is below 1e-14 h (Newton closes in from one side, so the bracket
+    alone would not shrink)."""
     t = guess if lo < guess < hi else 0.5 * (lo + hi)
     for _ in range(60):
-        x, v = _path(t, h, cx, pc, tsw, dfs, nsw)
+        x, v = _path(t, h, cx)
         if s * x > 0.0:
             lo = t
         else:
             hi = t
-        if hi - lo <= 1e-14 * h:
-            break
         tn = t - x / v if v != 0.0 else -1.0
+        if hi - lo <= 1e-14 * h or abs(tn - t) <= 1e-14 * h:
+            return min(max(tn, lo), hi)
         t = tn if lo < tn < hi else 0.5 * (lo + hi)
     return hi
 
 
 @njit(cache=True)
-def _accel(t: float, h: float, cx: np.ndarray, pc: np.ndarray, tsw: np.ndarray, dfs: np.ndarray, nsw: int) -> float:
-    """x'' at t+ on the conditional-mean path (a switch at t counts: its force acts from t on)."""
+def _accel(t: float, h: float, cx: np.ndarray) -> float:
+    """x'' at t on the conditional-mean path (a switch at t acts from t on)."""
     r = 0.0
     for d in range(cx.shape[0] - 1, 1, -1):
         r = r * (t / h) + d * (d - 1) * cx[d]
-    r /= h * h
-    for k in range(nsw):
-        tau = t - tsw[k]
-        if tau >= 0.0:
-            q = 0.0
-            for d in range(pc.shape[0] - 1, 1, -1):
-                q = q * tau + d * (d - 1) * pc[d]
-            r += dfs[k] * q
-    return r
+    return r / (h * h)
 
 
 @njit(cache=True)
-def _turning(lo: float, hi: float, s: float, h: float, cx: np.ndarray, pc: np.ndarray, tsw: np.ndarray,
-             dfs: np.ndarray, nsw: int) -> float:
+def _turning(lo: float, hi: float, s: float, h: float, cx: np.ndarray) -> float:
     """Where v = 0 in (lo, hi), given ``s v(lo) < 0 < s v(hi)``: Newton on v kept in the bracket."""
     t = 0.5 * (lo + hi)
     for _ in range(60):
-        _, v = _path(t, h, cx, pc, tsw, dfs, nsw)
+        _, v = _path(t, h, cx)
         if s * v < 0.0:
             lo = t
         else:
             hi = t
-        if hi - lo <= 1e-14 * h:
-            break
-        acc = _accel(t, h, cx, pc, tsw, dfs, nsw)
+        acc = _accel(t, h, cx)
         tn = t - v / acc if acc != 0.0 else -1.0
+        if hi - lo <= 1e-14 * h or abs(tn - t) <= 1e-14 * h:
+            return min(max(tn, lo), hi)
         t = tn if lo < tn < hi else 0.5 * (lo + hi)
     return t
 
 
 @njit(cache=True)
-def _first_crossing(t0: float, s: float, h: float, cx: np.ndarray, pc: np.ndarray, tsw: np.ndarray,
-                    dfs: np.ndarray, nsw: int, nscan: int = SCAN) -> float:
+def _first_crossing(t0: float, s: float, h: float, cx: np.ndarray, nscan: int = SCAN) -> float:
     """First time in (t0, h] where the path leaves side ``s`` (``s x <= 0``), or -1; -2 for a
     swing too small to resolve (the caller collapses it).
 
@@ -135,22 +134,22 @@ def _first_crossing(t0: float, s: float, h: float, cx: np.ndarray, pc: np.ndarra
     points are scanned; between two of them where the path turns back (v changes sign), its
     turning point is found and a crossing there counts too (a dip across and back)."""
     tl = t0
-    xl, vl = _path(t0, h, cx, pc, tsw, dfs, nsw)
+    xl, vl = _path(t0, h, cx)
     if h - t0 <= 0.0:
         return -1.0
     if s * xl <= 0.0 or t0 > 0.0:
-        acc = _accel(t0, h, cx, pc, tsw, dfs, nsw)
+        acc = _accel(t0, h, cx)
         if s * acc < 0.0 and s * vl > 0.0:
             tr = t0 - 2.0 * vl / acc
             if tr < h:
                 tb = min(t0 + 1.3 * (tr - t0), h)
-                xb, vb = _path(tb, h, cx, pc, tsw, dfs, nsw)
+                xb, vb = _path(tb, h, cx)
                 if s * xb <= 0.0:
                     ta = t0 - vl / acc
-                    xa, _ = _path(ta, h, cx, pc, tsw, dfs, nsw)
+                    xa, _ = _path(ta, h, cx)
                     if s * xa <= 0.0:
                         return -2.0
-                    return _root(ta, tb, s, h, cx, pc, tsw, dfs, nsw, tr)
+                    return _root(ta, tb, s, h, cx, tr)
                 tl, xl, vl = tb, xb, vb
         elif s * vl <= 0.0 and s * acc <= 0.0:
             return -2.0  # on the boundary and not moving into side s: nothing to resolve
@@ -159,7 +158,7 @@ def _first_crossing(t0: float, s: float, h: float, cx: np.ndarray, pc: np.ndarra
         return -1.0
     for i in range(1, nscan + 1):
         tr = tl + i * dt if i < nscan else h
-        xr, vr = _path(tr, h, cx, pc, tsw, dfs, nsw)
+        xr, vr = _path(tr, h, cx)
         tp = tl + (i - 1) * dt
         if s * xr <= 0.0:
             lo = tp
@@ -169,17 +168,17 @@ def _first_crossing(t0: float, s: float, h: float, cx: np.ndarray, pc: np.ndarra
                 ta = tp - vl / a if a * vl < 0.0 else 0.5 * (tp + tr)
                 if not tp < ta < tr:
                     ta = 0.5 * (tp + tr)
-                xa, _ = _path(ta, h, cx, pc, tsw, dfs, nsw)
+                xa, _ = _path(ta, h, cx)
                 if s * xa <= 0.0:
                     return -2.0
                 lo = ta
-            return _root(lo, tr, s, h, cx, pc, tsw, dfs, nsw, tr - xr / vr if vr != 0.0 else -1.0)
+            return _root(lo, tr, s, h, cx, tr - xr / vr if vr != 0.0 else -1.0)
         if s * xl > 0.0 and s * vl < 0.0 < s * vr:
             # both ends on side s and the path turns between them: across at its turning point?
-            tt = _turning(tp, tr, s, h, cx, pc, tsw, dfs, nsw)
-            xt, _ = _path(tt, h, cx, pc, tsw, dfs, nsw)
+            tt = _turning(tp, tr, s, h, cx)
+            xt, _ = _path(tt, h, cx)
             if s * xt <= 0.0:
-                return _root(tp, tt, s, h, cx, pc, tsw, dfs, nsw, -1.0)
+                return _root(tp, tt, s, h, cx, -1.0)
         xl, vl = xr, vr
     return -1.0
 
@@ -221,19 +220,21 @@ def _kink_crossings(y: np.ndarray, st: np.ndarray, eta: np.ndarray, E: np.ndarra
     nsw = 1
     for d in range(cx.shape[0]):
         acc = 0.0
-        for c in range(4):
-            acc += Ex[c, d] * y[c] + Cx[c, d] * eta[c]
+        if d < Ex.shape[1]:
+            for c in range(4):
+                acc += Ex[c, d] * y[c] + Cx[c, d] * eta[c]
         cx[d] = acc
+    _add_switch(cx, pc, 0.0, dfs[0], h)
     t = 0.0
     while True:
-        tc = _first_crossing(t, s, h, cx, pc, tsw, dfs, nsw, nscan)
+        tc = _first_crossing(t, s, h, cx, nscan)
         if tc == -1.0:
             break
         frac = max(tc, t) / h
         F = sigma * ((1 - frac) * y[3] + frac * y1[3]) - Kv * ((1 - frac) * y[2] + frac * y1[2])
         vc = 0.0
         if tc > 0.0:
-            _, vc = _path(tc, h, cx, pc, tsw, dfs, nsw)
+            _, vc = _path(tc, h, cx)
         if tc == -2.0 or nsw == MAX_SWITCHES or (abs(vc) < wtrap and abs(F) < a):
             tc = max(tc, t)
             if nsw == MAX_SWITCHES:
@@ -250,6 +251,7 @@ def _kink_crossings(y: np.ndarray, st: np.ndarray, eta: np.ndarray, E: np.ndarra
         counts[C_CROSS] += 1
         tsw[nsw] = tc
         dfs[nsw] = 2.0 * a * s
+        _add_switch(cx, pc, tc, dfs[nsw], h)
         nsw += 1
         s = -s
         t = tc
@@ -372,7 +374,7 @@ def run_paths(seeds: np.ndarray, n_burn: int, n_run: int, every: int, Lf: np.nda
         decay = np.exp(-hs / tau_p)
         eta, y1 = np.zeros(4), np.zeros(4)
         tsw, dfs = np.zeros(MAX_SWITCHES + 1), np.zeros(MAX_SWITCHES + 1)
-        cx = np.zeros(Ex.shape[2])
+        cx = np.zeros(max(Ex.shape[2], pc.size))
         sums = np.zeros((nv, N_OBS))
         cnt = np.zeros((nv, N_COUNTS), dtype=np.int64)
         xi0 = math.sqrt(pp[6] / pp[5]) * np.random.standard_normal()
