@@ -205,14 +205,16 @@ def _end_state(y0: np.ndarray, eta: np.ndarray, E: np.ndarray, pvec: np.ndarray,
 def _kink_crossings(y: np.ndarray, st: np.ndarray, eta: np.ndarray, E: np.ndarray, pvec: np.ndarray, h: float,
                     Ex: np.ndarray, Cx: np.ndarray, pc: np.ndarray, wtrap: float, pp: np.ndarray,
                     counts: np.ndarray, tsw: np.ndarray, dfs: np.ndarray, cx: np.ndarray, y1: np.ndarray,
-                    nscan: int = SCAN) -> None:
+                    powers: np.ndarray, jumps: np.ndarray, nscan: int = SCAN) -> None:
     """A kink step (n = 1) that may cross x = 0: ``y1`` holds its end without a crossing.
 
     The crossings are located one after the other on the conditional-mean path
     (:func:`_first_crossing`); the force switches from :math:`-as` to :math:`as` at each. A unit
     whose crossing speed falls below ``wtrap`` while the net drive :math:`|\\sigma\\xi - K_v V| < a`
     holds it is set at rest at the origin (``st[1] = 1``; its swings would shrink like
-    :math:`e^{-\\gamma t/3}` with ever more crossings): V decays from there, xi runs exactly."""
+    :math:`e^{-\\gamma t/3}` with ever more crossings): V decays from there, xi runs exactly. That
+    jump of v to 0 changes each monomial of ``powers`` by :math:`f(\\text{after}) - f(\\text{before})`,
+    added to ``jumps``: with it, the controls keep their mean 0 for the scheme's own dynamics."""
     sigma, Kv, tau_p, a = pp[4], pp[2], pp[7], pp[8]
     s = st[0]
     tsw[0] = 0.0
@@ -242,6 +244,10 @@ def _kink_crossings(y: np.ndarray, st: np.ndarray, eta: np.ndarray, E: np.ndarra
             counts[C_COLLAPSE] += 1
             frac = tc / h
             Vc = (1 - frac) * y[2] + frac * y1[2]
+            xic = (1 - frac) * y[3] + frac * y1[3]
+            for q in range(jumps.shape[0]):
+                if powers[q, 0] == 0 and powers[q, 1] > 0:  # x = 0 at the crossing: only x-free terms move
+                    jumps[q] -= vc ** powers[q, 1] * Vc ** powers[q, 2] * xic ** powers[q, 3]
             y[0] = 0.0
             y[1] = 0.0
             y[2] = Vc * math.exp(-(h - tc) / tau_p)
@@ -346,7 +352,7 @@ def run_paths(seeds: np.ndarray, n_burn: int, n_run: int, every: int, Lf: np.nda
               mult: np.ndarray, E: np.ndarray, Pv: np.ndarray, pvec: np.ndarray, hs: np.ndarray,
               Ex: np.ndarray, Cx: np.ndarray, pc: np.ndarray, wtrap: np.ndarray, pp: np.ndarray,
               kink: bool, edges: np.ndarray, means: np.ndarray, counts: np.ndarray, shells: np.ndarray,
-              powers: np.ndarray, cv_every: int, bobs: np.ndarray, bcv: np.ndarray) -> None:
+              powers: np.ndarray, cv_every: int, bobs: np.ndarray, bcv: np.ndarray, bjump: np.ndarray) -> None:
     """Run ``seeds.size`` independent paths of every variant on one noise per path.
 
     The fine step's noise ``Lf z`` is drawn once; variant ``j`` steps every ``mult[j]`` fine steps
@@ -360,7 +366,8 @@ def run_paths(seeds: np.ndarray, n_burn: int, n_run: int, every: int, Lf: np.nda
     are also averaged over each of ``bobs.shape[2]`` consecutive batches of the samples into
     ``bobs[path, variant, batch, :]``, and the generator applied to each monomial
     ``x^i v^j V^k xi^l`` (a row ``(i, j, k, l)`` of ``powers``) every ``cv_every`` samples into
-    ``bcv[path, variant, batch, :]`` (:func:`_generator`: stationary mean 0, the control variates).
+    ``bcv[path, variant, batch, :]`` (:func:`_generator`: stationary mean 0, the control variates),
+    and the monomials' jumps at the trap's collapses (sums) into ``bjump[path, variant, batch, :]``.
     Each path seeds its own generator, so the results do not depend on the threads."""
     P, nv = seeds.size, mult.size
     m, Kv, sigma, tau_p, a, n = pp[0], pp[2], pp[4], pp[7], pp[8], pp[9]
@@ -386,6 +393,7 @@ def run_paths(seeds: np.ndarray, n_burn: int, n_run: int, every: int, Lf: np.nda
         sample_in = n_burn + every
         ncv, nb = powers.shape[0], bobs.shape[2]
         per_path = n_run // every
+        nojump = np.zeros(0)
         bn, bc = np.zeros(nb), np.zeros(nb)
         tab = np.zeros((4, 6))
         for i in range(n_burn + n_run):
@@ -443,8 +451,11 @@ def run_paths(seeds: np.ndarray, n_burn: int, n_run: int, every: int, Lf: np.nda
                             + m * pp[1] * (max(abs(y[j, 1]), abs(y1[1])) + 0.1)) / m
                     if not (x0 > 0.0 and x1 > 0.0 and min(x0, x1) > 0.25 * amax * hs[j] * hs[j]):
                         cnt[j, C_SEARCH] += 1
+                        # a collapse counts toward the batch of the next sample (none in the burn-in)
+                        bt = min(nsamp * nb // max(per_path, 1), nb - 1) if ncv > 0 else 0
                         _kink_crossings(y[j], st[j], eta, E[j], pvec, hs[j], Ex[j], Cx[j], pc, wtrap[j], pp,
-                                        cnt[j], tsw, dfs, cx, y1)
+                                        cnt[j], tsw, dfs, cx, y1, powers,
+                                        bjump[p, j, bt] if ncv > 0 and i >= n_burn else nojump)
                         continue
                 for r in range(4):
                     y[j, r] = y1[r]

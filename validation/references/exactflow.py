@@ -235,13 +235,18 @@ def _run(h: Harvester, fine: float, variants: tuple[Variant, ...], paths: int, t
     powers = monomials(degree)
     bobs = np.zeros((paths, nv, batches if degree else 0, fk.N_OBS))
     bcv = np.zeros((paths, nv, batches if degree else 0, powers.shape[0]))
+    bjump = np.zeros_like(bcv)
     pick = [mats[v.mult] for v in variants]
     pc, Ex, Cx = _trimmed(base, pick)
     t0 = time.perf_counter()
     fk.run_paths(seeds, n_burn, n_run, every, base.L, base.E, mults,
                  np.stack([m.E for m in pick]), np.stack([m.Pv for m in pick]), base.pvec,
                  np.array([m.h for m in pick]), Ex, Cx, pc, np.array([v.w_trap for v in variants]), _pp(h),
-                 h.n == 1.0, edges, means, counts, shells, powers, cv_every, bobs, bcv)
+                 h.n == 1.0, edges, means, counts, shells, powers, cv_every, bobs, bcv, bjump)
+    if degree:
+        # the controls: the generator's time average plus the collapses' jumps per unit time
+        samples = np.bincount(np.arange(n_run // every) * batches // (n_run // every), minlength=batches)
+        bcv += bjump / (samples * every * fine)[None, None, :, None]
     return _Run(means, counts, shells, bobs, bcv, time.perf_counter() - t0,
                 {"t_run": n_run * fine, "t_burn": n_burn * fine, "every": every * fine})
 

@@ -57,7 +57,8 @@ def test_a_kink_step_without_noise_matches_an_ode_solve_with_events(scale):
         counts = np.zeros(fk.N_COUNTS, dtype=np.int64)
         y1 = M.E @ y0 + M.Pv * (-KINK.a * s0)
         fk._kink_crossings(y, st, eta, M.E, M.pvec, step, Ex[0], Cx[0], pc, 0.0, pp, counts,
-                           np.zeros(fk.MAX_SWITCHES + 1), np.zeros(fk.MAX_SWITCHES + 1), np.zeros(Ex.shape[2]), y1)
+                           np.zeros(fk.MAX_SWITCHES + 1), np.zeros(fk.MAX_SWITCHES + 1),
+                           np.zeros(max(Ex.shape[2], pc.size)), y1, np.zeros((0, 4), dtype=np.int64), np.zeros(0))
         ref, s_ref = _ode_step(KINK, y0, s0, step)
         np.testing.assert_allclose(y, ref, rtol=0, atol=1e-12)
         assert st[0] == s_ref
