@@ -29,7 +29,7 @@ from fpe_harvester.result import Stats, Status
 from ..harness.checks import CheckResult, Context, agree, expect, skipped, solver_available
 from .crosscheck import MAX_REL_TOL as CROSS_MAX_REL_TOL
 from .crosscheck import identity_checks, mc_within_cap
-from .strongkink import declines
+from .strongkink import declines, product
 from ..references.analytic import mp_ring_moments
 from ..harness.report import Section, Table
 
@@ -239,7 +239,7 @@ def _nonlinear_cases(ctx: Context) -> list[tuple[str, Callable[[], list[CheckRes
             # narrowed to the cap only when a reference number is there to compare with; without
             # one the result is judged by its status and the identities only, at IDENTITIES_TOL
             if strong:
-                return ctx.solve(h, "mc")
+                return product(ctx, h)
             try:
                 usable = ref is not None and (r := ref()).ok and r.eta is not None
             except HarvesterError:

@@ -39,6 +39,7 @@ def _stats(eta: float, rel: float, method: str) -> Stats:
 
 def _ctx(mc: Stats, flow: Stats, quick: bool = False) -> SimpleNamespace:
     return SimpleNamespace(quick=quick, seed=1, require=lambda *m: None, solve=lambda h, m, **o: mc,
+                           mc_options={"max_time": 90.0},
                            cache=SimpleNamespace(reference=lambda h, name, fn, **s: flow))
 
 
