@@ -23,7 +23,7 @@ from __future__ import annotations
 import math
 
 import numpy as np
-from numba import njit, prange
+from numba import njit
 
 #: Counters of events per path: zero crossings, collapses into the trap, releases from it,
 #: steps whose crossing search hit :data:`MAX_SWITCHES`, discrete-gradient solves that did not
@@ -347,13 +347,14 @@ def _generator(y: np.ndarray, side: float, resting: bool, pp: np.ndarray, powers
         out[q] += r
 
 
-@njit(parallel=True, cache=True)
-def run_paths(seeds: np.ndarray, n_burn: int, n_run: int, every: int, Lf: np.ndarray, Ef: np.ndarray,
+@njit(cache=True, nogil=True)
+def run_paths(first: int, last: int, seeds: np.ndarray, n_burn: int, n_run: int, every: int, Lf: np.ndarray,
+              Ef: np.ndarray,
               mult: np.ndarray, E: np.ndarray, Pv: np.ndarray, pvec: np.ndarray, hs: np.ndarray,
               Ex: np.ndarray, Cx: np.ndarray, pc: np.ndarray, wtrap: np.ndarray, pp: np.ndarray,
               kink: bool, edges: np.ndarray, means: np.ndarray, counts: np.ndarray, shells: np.ndarray,
               powers: np.ndarray, cv_every: int, bobs: np.ndarray, bcv: np.ndarray, bjump: np.ndarray) -> None:
-    """Run ``seeds.size`` independent paths of every variant on one noise per path.
+    """Run paths ``first`` to ``last - 1`` (of ``seeds.size``) of every variant on one noise per path.
 
     The fine step's noise ``Lf z`` is drawn once; variant ``j`` steps every ``mult[j]`` fine steps
     with the noise of its own step, :math:`\\eta \\leftarrow E_f\\eta + \\eta_f` summed exactly over
@@ -368,11 +369,12 @@ def run_paths(seeds: np.ndarray, n_burn: int, n_run: int, every: int, Lf: np.nda
     ``x^i v^j V^k xi^l`` (a row ``(i, j, k, l)`` of ``powers``) every ``cv_every`` samples into
     ``bcv[path, variant, batch, :]`` (:func:`_generator`: stationary mean 0, the control variates),
     and the monomials' jumps at the trap's collapses (sums) into ``bjump[path, variant, batch, :]``.
-    Each path seeds its own generator, so the results do not depend on the threads."""
-    P, nv = seeds.size, mult.size
+    Each path seeds its own generator, so the results do not depend on how the paths are shared
+    between threads (the caller runs chunks in threads: the kernel releases the GIL)."""
+    nv = mult.size
     m, Kv, sigma, tau_p, a, n = pp[0], pp[2], pp[4], pp[7], pp[8], pp[9]
     nsh = max(edges.size - 1, 0)
-    for p in prange(P):
+    for p in range(first, last):
         np.random.seed(seeds[p])
         y = np.zeros((nv, 4))
         st = np.zeros((nv, 2))

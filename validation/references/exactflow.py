@@ -32,11 +32,13 @@ from __future__ import annotations
 import json
 import math
 import time
+from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
 import mpmath
+import numba
 import numpy as np
 
 from fpe_harvester import Harvester, Stats, Status
@@ -239,10 +241,15 @@ def _run(h: Harvester, fine: float, variants: tuple[Variant, ...], paths: int, t
     pick = [mats[v.mult] for v in variants]
     pc, Ex, Cx = _trimmed(base, pick)
     t0 = time.perf_counter()
-    fk.run_paths(seeds, n_burn, n_run, every, base.L, base.E, mults,
-                 np.stack([m.E for m in pick]), np.stack([m.Pv for m in pick]), base.pvec,
-                 np.array([m.h for m in pick]), Ex, Cx, pc, np.array([v.w_trap for v in variants]), _pp(h),
-                 h.n == 1.0, edges, means, counts, shells, powers, cv_every, bobs, bcv, bjump)
+    args = (seeds, n_burn, n_run, every, base.L, base.E, mults, np.stack([m.E for m in pick]),
+            np.stack([m.Pv for m in pick]), base.pvec, np.array([m.h for m in pick]), Ex, Cx, pc,
+            np.array([v.w_trap for v in variants]), _pp(h), h.n == 1.0, edges, means, counts, shells, powers,
+            cv_every, bobs, bcv, bjump)
+    # chunks of paths in threads (the kernel releases the GIL; each path has its own stream)
+    workers = max(1, min(numba.get_num_threads(), paths))
+    bounds = np.linspace(0, paths, workers + 1).astype(int)
+    with ThreadPoolExecutor(workers) as pool:
+        list(pool.map(lambda k: fk.run_paths(int(bounds[k]), int(bounds[k + 1]), *args), range(workers)))
     if degree:
         # the controls: the generator's time average plus the collapses' jumps per unit time
         samples = np.bincount(np.arange(n_run // every) * batches // (n_run // every), minlength=batches)
