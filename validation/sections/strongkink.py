@@ -32,8 +32,8 @@ STRONG_KINK = ((1.0, 2.0), (1.25, 2.0))
 #: Largest tolerance of a strong-kink row relative to its value (see the module docstring).
 STRONG_CAP = 0.05
 #: Exact-flow settings per n (full run): step and trap threshold whose bias bounds the study puts
-#: at 0.2-0.3 % (n = 1: h = 0.01, w_trap = 0.003) and 0.06 % (n = 1.25: h = 0.02) on eta, V2 and
-#: Pin, and runs measured to give (with the control variates) about 0.45 / 0.55 / 0.45 % on eta /
+#: at 0.27 / 0.39 / 0.46 % on eta / V2 / Pin (n = 1: h = 0.01, w_trap = 0.003) and 0.006 / 0.055 /
+#: 0.047 % (n = 1.25: h = 0.02; validation/data/exactflow_bias.json), and runs measured to give (with the control variates) about 0.45 / 0.55 / 0.45 % on eta /
 #: V2 / Pin at n = 1 (64 paths x 4000: 33 s on the loaded 2-core machine) and 0.1 / 0.3 / 0.3 % at
 #: n = 1.25 (64 x 1000: 5 s).
 FLOW: dict[float, dict[str, float]] = {1.0: {"step": 0.01, "w_trap": 0.003, "paths": 64, "t_run": 4000.0},
