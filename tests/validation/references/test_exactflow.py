@@ -121,3 +121,15 @@ def test_the_energy_shells_hold_the_time_spent_in_them():
     edges = np.array([0.0, 0.05, 0.5, 1e6])
     r = ef.solve_flow(Harvester.build(a=0.5, n=1), ef.FlowSettings(paths=4, t_run=200.0, seed=3), edges)
     assert sum(r.info["shells"]) == pytest.approx(1.0, abs=0.02) and len(r.info["shells_err"]) == 3
+
+
+def test_the_reports_settings_have_a_recorded_bias_bound():
+    """The strong-kink rows' exact-flow settings are rows of the bias study, whose bound their errors
+    include (validation/data/exactflow_bias.json)."""
+    from validation.sections.strongkink import FLOW
+
+    for n, s in FLOW.items():
+        settings = ef.FlowSettings(step=s["step"], w_trap=s["w_trap"])
+        bound = ef.bias_bound(Harvester.build(a=2.0, n=n), settings)
+        assert bound is not None and max(bound[q] for q in ("eta", "V2", "Pin")) < 0.01, (n, bound)
+    assert ef.bias_bound(Harvester.build(a=0.5, n=1), ef.FlowSettings(step=0.01, w_trap=0.003)) is None
