@@ -49,7 +49,7 @@ def _references(d: dict[str, Any]) -> Table:
             why = reftable.staleness(e, e["method"], case)
         except (RuntimeError, OSError):
             return "unknown (no git history)"
-        return "current" if why is None else f"**stale**: {why}"
+        return "current" if why is None else f"stale: {why}"
 
     rows = [[f"``{name}``", _pm(e["eta"], e["eta_err"]), e["status"], _num(e["seconds"]), f"``{e['commit']}``",
              state(name, e), f"``{e['command']}``"] for name, e in d.items()]
