@@ -41,10 +41,33 @@ def _pct(x: float | None) -> str:
 
 
 def _references(d: dict[str, Any]) -> Table:
+    from validation.references import reftable
+
+    def state(name: str, e: dict[str, Any]) -> str:
+        case = next((c for c in reftable.CASES if c.label == name), None)
+        try:
+            why = reftable.staleness(e, e["method"], case)
+        except (RuntimeError, OSError):
+            return "unknown (no git history)"
+        return "current" if why is None else f"stale: {why}"
+
     rows = [[f"``{name}``", _pm(e["eta"], e["eta_err"]), e["status"], _num(e["seconds"]), f"``{e['commit']}``",
-             f"``{e['command']}``"] for name, e in d.items()]
-    return (["entry", "eta ± error", "status", "s", "commit", "command"], rows,
+             state(name, e), f"``{e['command']}``"] for name, e in d.items()]
+    return (["entry", "eta ± error", "status", "s", "commit", "state", "command"], rows,
             "validation/references/data/reference_values.json", "python -m validation.references.reftable")
+
+
+def _exactflow_bias(d: dict[str, Any]) -> Table:
+    rows = []
+    for b in d["bounds"]:
+        diff, bound = b["relative_difference_from_finest"], b["relative_bias_bound"]
+        rows.append([f"n = {b['system']['n']:g}, a = {b['system']['a']:g}", f"{b['step']:g}",
+                     f"{b['w_trap']:g}" if b["system"]["n"] == 1.0 else "-",
+                     *(f"{diff[q]['minus_finest']:+.1e} ± {diff[q]['se']:.0e}" for q in ("eta", "V2", "Pin")),
+                     *(f"{bound[q]:.1e}" for q in ("eta", "V2", "Pin"))])
+    head = ["system", "step h", "w_trap", "eta minus finest", "V2 minus finest", "Pin minus finest",
+            "bias bound eta", "V2", "Pin"]
+    return head, rows, "exactflow_bias.json", "python -m validation.studies.exactflow_bias --out validation/data"
 
 
 def _fpe_time(d: dict[str, Any]) -> Table:
@@ -161,6 +184,7 @@ TABLES: dict[str, tuple[str, Callable[[dict[str, Any]], Table]]] = {
     "mc-coverage": ("bench_montecarlo_martingale_coverage.json", _mc_coverage),
     "mc-controls": ("bench_montecarlo_martingale_rows.json", _mc_controls),
     "mc-boundary": ("bench_montecarlo_boundary_rows.json", _mc_boundary),
+    "exactflow-bias": ("exactflow_bias.json", _exactflow_bias),
 }
 
 

@@ -249,7 +249,8 @@ QUICK_MIN_RAN = 0.9
 def exit_code(report: Report, quick: bool) -> int:
     """1 if a check failed, if a full run skipped any check (nothing may go unchecked there),
     or if a quick run skipped more than 1 - :data:`QUICK_MIN_RAN` of its checks (a quick run
-    may skip a few for its time budget, and says how many and which)."""
+    may skip a few for its time budget, and says how many and which); else 0. Recorded checks
+    and findings do not fail a run: the summary counts them apart from the passes."""
     if report.failed:
         return 1
     n_skip, n_all = len(report.skipped), len(report.checks)
@@ -283,8 +284,10 @@ def run_cli(quick: bool = False, out: Path | str = "validation_report", seed: in
     def step_done(sec: Section) -> None:
         failed = sum(c.outcome.value == "FAIL" for c in sec.checks)
         found = sum(c.outcome.value == "FINDING" for c in sec.checks)
+        kept = sum(c.outcome.value == "RECORDED" for c in sec.checks)
         line = (f"{time.perf_counter() - t0:7.1f} s  {sec.title}: {sec.seconds:.1f} s ({sec.cpu_seconds:.0f} CPU-s), "
                 f"{len(sec.checks)} checks"
+                + (f", {kept} recorded" if kept else "")
                 + (f", {found} finding{'' if found == 1 else 's'}" if found else "")
                 + (f", {failed} FAILED" if failed else ""))
         if bar is not None:

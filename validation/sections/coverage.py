@@ -154,6 +154,13 @@ def _reference(case: CoverageCase, seed: int) -> Stats:
     return solve(case.h, "mc", seed=seed, **opts)
 
 
+def _stale(ref: Stats) -> str:
+    """The reason a reference taken from the reference table is stale ("" when it is current or
+    was computed in this run): :func:`validation.references.reftable.stale_note` marks its message."""
+    i = ref.message.find("STALE: ")
+    return ref.message[i + len("STALE: "):] if i >= 0 else ""
+
+
 #: A reference that stopped short of its tolerance still serves when its relative error on eta
 #: is at most this fraction of the results' tolerance: its error enters every z in quadrature.
 REF_MAX_SHARE = 0.25
@@ -291,7 +298,7 @@ def mc_coverage(quick: bool = True, runs: int | None = None, seed: int = 0,
                 zs[q].append(float(z))
         out_cases.append({
             "label": case.label, "reference_method": ref.method, "reference_eta": ref.eta,
-            "reference_eta_err": ref.eta_err, "z": z_case, "statuses": statuses,
+            "reference_eta_err": ref.eta_err, "reference_stale": _stale(ref), "z": z_case, "statuses": statuses,
             "median_rel_err_eta": float(np.median(rel)), "wall_s": time.perf_counter() - t0,
         })
 

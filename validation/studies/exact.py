@@ -32,10 +32,15 @@ from fpe_harvester.exact import dense_covariance
 from validation.studies.cli import bench_main, save_benchmark
 from validation.references.analytic import mp_closed_form, mp_ring_moments, rational_eta
 
-__all__ = ["STEM", "run"]
+__all__ = ["STEM", "REPORT_KW", "ACCURACY", "run", "report_checks"]
 
 #: Name of the written ``.json`` and ``.png``.
 STEM = "bench_exact"
+#: Keyword arguments the report's benchmark section passes to :func:`run` (none: it runs it all).
+REPORT_KW: dict[str, Any] = {}
+#: Largest relative error of eta allowed against the independent references (the solver's
+#: error is round-off, ~1e-16).
+ACCURACY = 1e-13
 
 
 def _best_time(fn: Callable[[], Any], repeat: int) -> tuple[float, Any]:
@@ -97,6 +102,17 @@ def run(quick: bool = False, out: Path | None = None) -> dict[str, Any]:
 
     save_benchmark(res, out, STEM, _plot)
     return res
+
+
+def report_checks(res: dict[str, Any]) -> list[tuple[str, bool, str]]:
+    """What a run compared: the exact solver's eta against the 40-digit Lyapunov solve, the
+    rational value and the 60-digit closed form, each within :data:`ACCURACY` (relative)."""
+    fourier = max(r["fourier_eta_rel_error"] for r in res["fourier_vs_dense"])
+    errors = {"N = 3 ring vs the 40-digit Lyapunov solve": res["single_call_eta_rel_error"],
+              "N = 4 ring vs its rational value": res["rational_check"]["eta_rel_error"],
+              "rings N = 2..: worst against the 60-digit closed form": fourier}
+    return [(f"eta, {label}", err <= ACCURACY, f"relative error {err:.2g} (tolerance {ACCURACY:g})")
+            for label, err in errors.items()]
 
 
 def _plot(res: dict[str, Any], path: Path) -> None:

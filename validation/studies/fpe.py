@@ -94,10 +94,13 @@ from fpe_harvester.fpe import stationary
 from fpe_harvester.fpe.schemes.x import discretize
 from validation.studies.cli import bench_main, save_benchmark
 
-__all__ = ["STEM", "PREVIOUS", "run", "run_meshes", "meshes", "run_schemes", "schemes", "run_convergence", "convergence", "work", "table"]
+__all__ = ["STEM", "REPORT_KW", "PREVIOUS", "run", "report_checks", "run_meshes", "meshes", "run_schemes", "schemes",
+           "run_convergence", "convergence", "work", "table"]
 
 #: Name of the written ``.json`` and ``.png``.
 STEM = "bench_fpe"
+#: Keyword arguments the report's benchmark section passes to :func:`run` (none).
+REPORT_KW: dict[str, Any] = {}
 
 #: Speed targets of the smooth cases (s) and of the non-smooth ones at 1e-4.
 TARGETS = {"1e-4": 0.5, "1e-6": 5.0, "sub_quadratic_1e-4": 10.0}
@@ -382,6 +385,17 @@ def _summary(cases: dict[str, Any]) -> dict[str, Any]:
     return {"reported_bounds_actual": f"{sum(bounded)} of {len(bounded)}",
             "reported_over_actual_median": float(np.median(ratios)) if ratios else None,
             "reported_over_actual_within_10x": f"{sum(1 for x in ratios if x <= 10)} of {len(ratios)}"}
+
+
+def report_checks(result: dict) -> list[tuple[str, bool, str]]:
+    """What a run compared: in every case, the reported error of each run at least its actual
+    error against the case's tightest run (the same solver: a convergence check, not a
+    correctness one; the report's cross-checks hold Fokker--Planck against the other solvers)."""
+    runs = [(name, key, r) for name, c in result["cases"].items() for key, r in c["runs"].items()
+            if "bounds_actual" in r]
+    missed = [f"{name} tol {key}" for name, key, r in runs if not r["bounds_actual"]]
+    return [("reported error bounds the error against its own tighter run (convergence)", bool(runs) and not missed,
+             f"{len(runs) - len(missed)} of {len(runs)} runs; missed: {', '.join(missed) or 'none'}")]
 
 
 def table(result: dict) -> str:

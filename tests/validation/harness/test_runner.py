@@ -41,6 +41,23 @@ def _finding(ctx):
     return sec
 
 
+def _recording(ctx):
+    from validation.harness.checks import recorded
+
+    sec = Section("rec", "Recorded step")
+    sec.checks.append(recorded("old data", "Recorded step", True, "two decades", source="validation/data/x.json",
+                               command="python -m validation.studies.x --out validation/data"))
+    return sec
+
+
+def _raising_check(ctx):
+    """A step whose one check raises inside the run's guard: a FAIL with its reason, the step goes on."""
+    sec = Section("raise", "Raising check")
+    sec.checks += ctx.check("explodes", "Raising check", lambda: 1 / 0)
+    sec.checks.append(expect("after it", "Raising check", True, "still ran"))
+    return sec
+
+
 def _skipping(ctx):
     from validation.harness.checks import skipped
 
@@ -104,6 +121,8 @@ def test_cli_arguments():
     (((_passing, "Passing step"), (_skipping, "Skipping step")), True, 0),
     (((_passing, "Passing step"), (_skipping, "Skipping step")), False, 1),
     (((_passing, "Passing step"), (_finding, "Finding step")), True, 0),
+    (((_passing, "Passing step"), (_recording, "Recorded step")), True, 0),
+    (((_passing, "Passing step"), (_raising_check, "Raising check")), True, 1),
 ])
 def test_cli_exit_code(monkeypatch, tmp_path, capsys, steps, quick, code):
     """A failure fails any run; a skip fails the full run, and a quick run names every skip."""
@@ -114,12 +133,19 @@ def test_cli_exit_code(monkeypatch, tmp_path, capsys, steps, quick, code):
     assert "passed" in out and "report.md" in out
     # each step's wall time is printed as soon as it ends (a long full run shows where it is)
     assert all(f"{title}: " in captured.err for _, title in steps)
-    assert ("1 FAILED" in captured.err) == any(title == "Failing step" for _, title in steps)
+    assert ("1 FAILED" in captured.err) == any(title in ("Failing step", "Raising check") for _, title in steps)
     assert (tmp_path / "report.html").is_file()
     if any(title == "Skipping step" for _, title in steps):
-        assert "SKIP     never ran" in out and "check(s) SKIPPED" in out
+        assert "SKIP      never ran" in out and "check(s) SKIPPED" in out
+    if any(title == "Recorded step" for _, title in steps):
+        assert "RECORDED  old data" in out and "40 passed, 1 recorded, 0 findings, 0 failed, 3 skipped" in out
+        assert "validation/data/x.json, written by python -m validation.studies.x" in out
+        assert "1 checks, 1 recorded" in captured.err
+    if any(title == "Raising check" for _, title in steps):
+        assert "FAIL      explodes" in out and "ZeroDivisionError" in out
+        assert "41 passed, 0 recorded, 0 findings, 1 failed, 3 skipped" in out
     if any(title == "Finding step" for _, title in steps):
-        assert "FINDING  paper off" in out and "40 passed, 1 finding, 0 failed, 3 skipped" in out
+        assert "FINDING   paper off" in out and "40 passed, 0 recorded, 1 finding, 0 failed, 3 skipped" in out
         assert "Finding step: " in captured.err and "1 checks, 1 finding" in captured.err
         assert ("a quick run fails below 90%" in out) == quick
 
