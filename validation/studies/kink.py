@@ -13,7 +13,7 @@ Per a in {0.5, 1, 2} (defaults otherwise), one run:
   (:math:`\\beta_1`) and across it (:math:`\\beta_2`), in the core box of the trap and
   outside it. This is the measurement of where the accuracy is lost;
 * the concentration of the law of V at V = 0 from Monte Carlo states
-  (:func:`validation.sections.kinkdensity.v_concentration`): at a = 2 it is a spike,
+  (:func:`validation.comparisons.kinkdensity.v_concentration`): at a = 2 it is a spike,
   :math:`P(|V| < \\delta\\,\\mathrm{sd}) \\sim \\delta^{0.3}`, which the Hermite series in V cannot
   follow.
 
@@ -34,7 +34,7 @@ from fpe_harvester import Harvester
 from fpe_harvester.fpe import stationary
 from fpe_harvester.fpe.schemes.xv.kinkdisc import KinkDG, KinkSettings
 from validation.studies.cli import bench_main, save_benchmark
-from validation.sections.kinkdensity import v_concentration
+from validation.comparisons.kinkdensity import v_concentration
 from validation.references.reftable import recorded_kink
 
 __all__ = ["STEM", "TARGETS", "run", "convergence", "table"]

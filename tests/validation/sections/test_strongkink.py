@@ -15,7 +15,8 @@ import pytest
 from fpe_harvester import Harvester, MethodNotAvailableError, Stats, Status
 from fpe_harvester.fpe import FokkerPlanck
 from validation.harness.checks import Outcome, expect
-from validation.sections import crosscheck, kinkdensity, strongkink, stress
+from validation.comparisons import kinkdensity, strongkink
+from validation.sections import crosscheck, stress
 
 REASON = "outside the measured domain of Fokker-Planck (a = 2, n < 1.4): use solve(h, 'mc')"
 
@@ -27,6 +28,12 @@ def fpe_declines(monkeypatch):
         return REASON if h.N == 1 and h.a >= 2.0 and h.n < 1.4 else None
 
     monkeypatch.setattr(FokkerPlanck, "unsupported_reason", reason)
+
+
+@pytest.fixture
+def fpe_accepts(monkeypatch):
+    """Fokker-Planck takes every single unit (its domain rule switched off)."""
+    monkeypatch.setattr(FokkerPlanck, "unsupported_reason", lambda self, h: None)
 
 
 def _stats(eta: float, rel: float, method: str) -> Stats:
@@ -79,7 +86,7 @@ def test_the_cross_checks_compare_two_monte_carlo_constructions_where_fokker_pla
     assert names.count("mc vs exact-flow mc: n = 1, a = 2") == 1
 
 
-def test_the_strong_kink_rows_run_whether_or_not_fokker_planck_declines():
+def test_the_strong_kink_rows_run_whether_or_not_fokker_planck_declines(fpe_accepts):
     names = _planned(False)
     assert "fpe vs mc: n = 1, a = 2" in names and "mc vs exact-flow mc: n = 1.25, a = 2" in names
     assert not any(n.startswith("mc vs exact-flow") for n in _planned(True))

@@ -1,4 +1,4 @@
-"""Shell densities of the kink figure (validation.sections.kinkdensity)."""
+"""Shell densities of the kink figure (validation.comparisons.kinkdensity)."""
 
 import math
 
@@ -7,7 +7,7 @@ import pytest
 import scipy.integrate
 
 from fpe_harvester import Harvester
-from validation.sections.kinkdensity import shell_area, shell_density_mc, v_concentration
+from validation.comparisons.kinkdensity import shell_area, shell_density_mc, v_concentration
 
 
 @pytest.mark.parametrize("a, m", [(0.5, 1.0), (2.0, 3.0)])

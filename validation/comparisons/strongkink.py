@@ -59,7 +59,7 @@ def flow_settings(ctx: Context, h: Harvester):
 
 def flow(ctx: Context, h: Harvester) -> Stats:
     """The exact-flow result of ``h`` in this run (computed once; with the energy shells of the kink
-    density figure, :data:`validation.sections.kinkdensity.EDGES`, for n = 1)."""
+    density figure, :data:`validation.comparisons.kinkdensity.EDGES`, for n = 1)."""
     from ..references.exactflow import solve_flow
     from .kinkdensity import EDGES
 

@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 from fpe_harvester import Harvester, solve
-from validation.sections.coverage import (NORMAL_COVERAGE, QUICK_CASES, CoverageCase, binomial_limits, coverage_checks,
+from validation.comparisons.coverage import (NORMAL_COVERAGE, QUICK_CASES, CoverageCase, binomial_limits, coverage_checks,
                                           detection, mc_coverage, min_results)
 
 
@@ -42,7 +42,7 @@ def _typical(count: int, scale: float) -> list[float]:
 def test_checks_fail_when_the_bars_are_too_small_or_too_large(run) -> None:
     """Honest bars pass; the typical results of bars 1.5x too small, or 2x too large, fail, at
     the number of results per quantity of the quick run (60) and of the full grid (104)."""
-    from validation.sections.coverage import FULL_CASES, FULL_RUNS
+    from validation.comparisons.coverage import FULL_CASES, FULL_RUNS
     from validation.sections.errorbars import _QUICK_MC_RUNS
 
     count = len(QUICK_CASES) * _QUICK_MC_RUNS if run == "quick" else sum(c.runs or FULL_RUNS for c in FULL_CASES)
@@ -97,7 +97,7 @@ def test_full_coverage() -> None:
 
 def test_a_reference_short_of_its_tolerance_serves_only_when_precise_enough() -> None:
     from fpe_harvester import Stats, Status
-    from validation.sections.coverage import REF_MAX_SHARE, usable_reference
+    from validation.comparisons.coverage import REF_MAX_SHARE, usable_reference
 
     def ref(rel: float, status: Status = Status.NOT_CONVERGED) -> Stats:
         return Stats(V2=1.0, V2_err=rel, Pin=2.0, Pin_err=2.0 * rel, eta=0.5, eta_err=0.5 * rel, status=status,
@@ -122,7 +122,7 @@ def test_an_unusable_reference_is_reported_and_the_other_cases_run() -> None:
 
 
 def test_the_full_grid_takes_its_monte_carlo_references_from_the_table() -> None:
-    from validation.sections.coverage import FULL_CASES, _table_reference
+    from validation.comparisons.coverage import FULL_CASES, _table_reference
 
     for case in FULL_CASES:
         if case.method == "mc":
