@@ -6,7 +6,7 @@ no integrator code: the product's (:mod:`montecarlo`: splitting steps, located c
 noise held over a step, control variates) and the exact-flow construction of
 :mod:`validation.references.exactflow` (exact Gaussian transitions of the linear flow, the kink's
 force exact on each side with crossings located on the conditional-mean path; its step bias
-measured by :mod:`validation.studies.exactflow_bias` and added to its errors).
+measured by :mod:`validation.studies.kink.exactflow_bias` and added to its errors).
 
 The rows' tolerance is 4 combined error bars, capped at :data:`STRONG_CAP` of the value: a scheme
 that steps over the kink's crossings is off by about 8 % at a = 2 and dt = 0.01 (docs/model.md),

@@ -122,7 +122,7 @@ def validate(
     progress : callable, optional
         Called with the title of each step before it starts.
     bench : path, optional
-        Folder written by ``python -m validation.studies.fpe --out DIR`` (and the other
+        Folder written by ``python -m validation.studies.fpe.bench --out DIR`` (and the other
         benchmark modules): their exhaustive results are included in the report. The
         report's own benchmark section always runs the short benchmarks.
     finished : callable, optional

@@ -275,7 +275,7 @@ def _strong_text(ctx: Context, declined: dict[tuple[float, float], str]) -> str:
             "exact-flow Monte Carlo of validation/references/exactflow.py, a second construction sharing no integrator "
             "code with it (exact Gaussian transitions of the linear flow; for n = 1 the kink's force exact on each side, "
             "crossings located on the conditional-mean path; for n > 1 the discrete-gradient force), whose errors add "
-            "its step bias bound measured by python -m validation.studies.exactflow_bias. Each row passes when "
+            "its step bias bound measured by python -m validation.studies.kink.exactflow_bias. Each row passes when "
             f"|a - b| <= 4 sqrt(err_a^2 + err_b^2), that tolerance at most {STRONG_CAP:.0%} of the value: below the "
             "~8 % bias of a scheme that steps over the kink's crossings at a = 2 (docs/model.md).")
 
