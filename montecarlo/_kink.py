@@ -24,7 +24,7 @@ from .layout import (C_AVERAGED, C_CROSSINGS, C_EXHAUSTED, C_SLOW, CF_E, CF_G, C
 #: (docs/model.md §3). AVERAGE (default) advances them with the averaged map of their crossing
 #: speed, w -> w exp(-gamma r/3) (:func:`_average_swing`), once AVG_SWINGS full swings fit in
 #: the time left of a step; HOLD follows them until MAX_EVENTS crossings in one step and then
-#: holds the unit at rest, a time-step artifact (validation/studies/mc/bench.py compares them).
+#: holds the unit at rest, a time-step artifact (validation/studies/montecarlo.py compares them).
 AVERAGE = 0.0
 HOLD = 1.0
 AVG_SWINGS = 4.0
