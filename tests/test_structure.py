@@ -201,7 +201,7 @@ def private_imports(h: House) -> list[tuple[str, str, str]]:
                 owner = ".".join(parts[:i])
                 if _private(part) and not (mod.name == owner or mod.name.startswith(owner + ".")):
                     out.append((mod.name, imp.target, f"{mod.rel}:{imp.line} imports the private module {imp.target}"))
-    return out
+    return list(dict.fromkeys(out))
 
 
 def docstrings(tree: ast.Module) -> Iterator[ast.Constant]:

@@ -1,10 +1,11 @@
 """Run the whole validation and write the report (``harvester validate``, ``python -m validation``).
 
-The steps are the report's sections, each a module with ``run(ctx) -> Section``, in the order of
-:data:`validation.sections.SECTIONS` (which also says the order they run in: the cross-checks,
-the paper comparison, beyond the paper, the stress tests, the paper's figures (scenes), the
-benchmarks, and last the stationary identities on every result computed in the run).
-A step that crashes becomes a failed check; the run always ends with a report.
+The steps are the report's sections, each a module with ``run(ctx) -> Section``, read in the
+order of :data:`validation.sections.SECTIONS`: the cross-checks, the error bars, the paper
+comparison, beyond the paper, the stress tests, the paper's figures (scenes), the benchmarks, and
+last the stationary identities on every result computed in the run. The same table says the
+order they run in, in a quick and in a full run. A step that crashes becomes a failed check;
+the run always ends with a report.
 """
 
 from __future__ import annotations
