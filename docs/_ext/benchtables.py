@@ -67,7 +67,7 @@ def _exactflow_bias(d: dict[str, Any]) -> Table:
                      *(f"{bound[q]:.1e}" for q in ("eta", "V2", "Pin"))])
     head = ["system", "step h", "w_trap", "eta minus finest", "V2 minus finest", "Pin minus finest",
             "bias bound eta", "V2", "Pin"]
-    return head, rows, "exactflow_bias.json", "python -m validation.studies.exactflow_bias --out validation/data"
+    return head, rows, "exactflow_bias.json", "python -m validation.studies.kink.exactflow_bias --out validation/data"
 
 
 def _fpe_time(d: dict[str, Any]) -> Table:
@@ -80,7 +80,7 @@ def _fpe_time(d: dict[str, Any]) -> Table:
                          f"{ada['seconds']:.3g} ({ada['status']})"])
     head = ["case", "tol", "s, default mesh", "reported error", "actual error", "bar holds",
             "s, adaptive mesh"]
-    return head, rows, "bench_fpe_meshes.json", "python -m validation.studies.fpe --meshes"
+    return head, rows, "bench_fpe_meshes.json", "python -m validation.studies.fpe.bench --meshes"
 
 
 def _yes(flag: bool | None) -> str:
@@ -97,7 +97,7 @@ def _fpe_schemes(d: dict[str, Any]) -> Table:
                      _pm(mc["eta"], mc["eta_err"]) if mc else "-"])
     head = ["case", "tol", "s, DG in x", "eta, DG in x", "s, DG in (x, v)", "eta, DG in (x, v)",
             "agree within bars", "eta, Monte Carlo"]
-    return head, rows, "bench_fpe_schemes.json", "python -m validation.studies.fpe --schemes"
+    return head, rows, "bench_fpe_schemes.json", "python -m validation.studies.fpe.bench --schemes"
 
 
 def _mc_policy(d: dict[str, Any]) -> Table:
@@ -110,7 +110,7 @@ def _mc_policy(d: dict[str, Any]) -> Table:
                      _num(ha["cpu_s"]), _num(ha["dt"])])
     head = [f"case (tol {d['rows']['tol']:g})", "eta, extrapolation (opt-in)", "CPU s",
             "eta, halving rule (default)", "CPU s", "final dt"]
-    return head, rows, "bench_montecarlo_policy.json", "python -m validation.studies.mc_policy (policy_rows)"
+    return head, rows, "bench_montecarlo_policy.json", "python -m validation.studies.mc.policy (policy_rows)"
 
 
 def _mc_policy_coverage(d: dict[str, Any]) -> Table:
@@ -126,7 +126,7 @@ def _mc_policy_coverage(d: dict[str, Any]) -> Table:
                          _num(r["median_cpu_s"])])
     head = [f"case (tol {cov['tol']:g})", "time-step rule", "reference", "seeds", "within 1 error",
             "within 2 errors", "max abs z", "median CPU s"]
-    return head, rows, "bench_montecarlo_policy.json", "python -m validation.studies.mc_policy (policy_coverage)"
+    return head, rows, "bench_montecarlo_policy.json", "python -m validation.studies.mc.policy (policy_coverage)"
 
 
 def _mc_coverage(d: dict[str, Any]) -> Table:
@@ -139,7 +139,7 @@ def _mc_coverage(d: dict[str, Any]) -> Table:
     rows.append(["nominal (Gaussian)", "-", _pct(nominal["within_1"]), _pct(nominal["within_2"]), "-"])
     return (["check", "seeds", "within 1 error", "within 2 errors", "max abs z"], rows,
             "bench_montecarlo_martingale_coverage.json",
-            "python -m validation.studies.mc_martingale (martingale_coverage)")
+            "python -m validation.studies.mc.martingale (martingale_coverage)")
 
 
 _CONTROL_SETS = ("plain", "twin", "martingale", "both")
@@ -155,7 +155,7 @@ def _mc_controls(d: dict[str, Any]) -> Table:
     head = ["case", "confinement", "variance reduction: twin", "martingale", "both",
             "s to 1e-4: plain", "twin", "martingale", "both"]
     return head, rows, "bench_montecarlo_martingale_rows.json", \
-        "python -m validation.studies.mc_martingale (martingale_rows)"
+        "python -m validation.studies.mc.martingale (martingale_rows)"
 
 
 def _mc_boundary(d: dict[str, Any]) -> Table:
@@ -163,7 +163,7 @@ def _mc_boundary(d: dict[str, Any]) -> Table:
     rows = [[name] + [_vrf(r.get(s)) for s in sets] + [_num(r["cpu_s"])]
             for name, r in d.items() if isinstance(r, dict)]
     return (["case"] + [f"variance reduction: {s}" for s in sets] + ["CPU s"], rows,
-            "bench_montecarlo_boundary_rows.json", "python -m validation.studies.mc_boundary (boundary_rows)")
+            "bench_montecarlo_boundary_rows.json", "python -m validation.studies.mc.boundary (boundary_rows)")
 
 
 def _work_precision(d: dict[str, Any]) -> Table:

@@ -21,14 +21,14 @@ with :math:`s_F` the standard deviation of F in the equivalent harmonic unit
 0.88-0.99 of the latter, so s is a / 0.88 at a = 0.5 and a / 0.99 at a = 3. For n = 1 a
 change of scale maps (a, sigma) to (c a, c sigma) exactly, and s is invariant under it.
 
-**The rule** (:data:`DOMAIN`, measured by ``python -m validation.studies.fpe_domain``, the table
+**The rule** (:data:`DOMAIN`, measured by ``python -m validation.studies.fpe.domain``, the table
 in docs/methods.md). Per tolerance class and band of n, the largest a (every other parameter
 at its default) at which the solver converged at every measured n of the band; a unit is
 inside when its s is at most that of the default unit with that a at its own n (at the
 defaults: a <= a_max). The margin: the boundary is the last strength that converged, not a
 point between it and the first that failed, and a band of n takes the boundary of its
 lowest n (the potential gets harder as n falls). n >= 2 is always inside (no trap, smooth density;
-the benchmark of :mod:`validation.studies.fpe` covers n = 2-8); so are strengths below the
+the benchmark of :mod:`validation.studies.fpe.bench` covers n = 2-8); so are strengths below the
 measured ones (nothing there is known to fail; a failure there ends as ``not_converged``
 with its reason). Tolerances at or above 1e-3 use the 1e-3 boundary, tighter ones the 1e-4
 boundary (tighter than 1e-4 was not mapped: a stop there costs time, not a wrong number).
@@ -63,7 +63,7 @@ __all__ = ["DOMAIN", "A_OFF_DEFAULTS", "CHECKED", "trap_strength", "at_defaults"
 #: The measured domain for 1 <= n < 2: per tolerance class (the tightest tol of the class),
 #: rows (n_low, a_max): for n_low <= n < the next row's n_low, the largest a of the map
 #: (a in {0.5, 1, 1.5, 2, 3}, defaults otherwise) at which the solver converged at every n
-#: of the map in the band. The map (``python -m validation.studies.fpe_domain``): at 1e-3
+#: of the map in the band. The map (``python -m validation.studies.fpe.domain``): at 1e-3
 #: n = 1-1.25 converge up to a = 1 and fail from 1.5, n = 1.5 up to 2 (fails at 3), n = 1.75
 #: up to 3; at 1e-4 n = 1-1.5 up to a = 1 (n = 1.5 fails from 1.5), n = 1.75 up to 2 (fails at 3).
 DOMAIN: dict[float, tuple[tuple[float, float], ...]] = {

@@ -23,7 +23,7 @@ States are sampled at the steps' ends (exact in law for an exact step, so the av
 quadrature error). Errors are standard errors over independent paths. What remains is the step's
 bias (crossing times, the trap threshold and the release's timing for n = 1, the discrete gradient
 for n > 1), measured against step size and ``w_trap`` by
-:mod:`validation.studies.exactflow_bias` on common noise (:func:`coupled`) and recorded in
+:mod:`validation.studies.kink.exactflow_bias` on common noise (:func:`coupled`) and recorded in
 ``validation/data/exactflow_bias.json``; :func:`solve_flow` adds the recorded bound to its errors.
 """
 
@@ -53,7 +53,7 @@ __all__ = ["FlowSettings", "StepMatrices", "Variant", "step_matrices", "coupled"
 _EVENTS = ("crossings", "collapses", "releases", "overflows", "dg_unsolved", "searches")
 #: Degree of the polynomials (in t/h) of the path within a step.
 DEGREE = 12
-#: The recorded bias study (:mod:`validation.studies.exactflow_bias`).
+#: The recorded bias study (:mod:`validation.studies.kink.exactflow_bias`).
 BIAS_PATH = Path(__file__).resolve().parents[1] / "data" / "exactflow_bias.json"
 
 

@@ -7,8 +7,8 @@ data only, so they are RECORDED, not passes. The Monte Carlo curves are measured
 references that do not share their errors; the Fokker--Planck curves against Fokker--Planck's own
 run at a tighter tolerance (self-convergence: they show convergence, not correctness, which the
 cross-checks against Monte Carlo and the exact solver test). The study modules
-:mod:`validation.studies.exact`, :mod:`validation.studies.fpe` and
-:mod:`validation.studies.montecarlo` (:func:`bench_modules`) each provide ``run(quick, out, **REPORT_KW)
+:mod:`validation.studies.exact.bench`, :mod:`validation.studies.fpe.bench` and
+:mod:`validation.studies.mc.bench` (:func:`bench_modules`) each provide ``run(quick, out, **REPORT_KW)
 -> dict`` and write their own JSON and PNG (named by their ``STEM``); every error/time pair they
 report is tabulated (:func:`error_time_pairs`), and ``report_checks(data)`` says what their short
 run compared (nothing, for a module that only times: then no check is counted).
@@ -36,9 +36,11 @@ _SECTION = "Benchmarks: error versus wall time"
 def bench_modules() -> tuple[ModuleType, ...]:
     """The study modules this section runs, one per solver: exact, Fokker--Planck, Monte Carlo
     (imported when the section runs: importing them loads every solver)."""
-    from ..studies import exact, fpe, montecarlo
+    from ..studies.exact import bench as exact
+    from ..studies.fpe import bench as fpe
+    from ..studies.mc import bench as mc
 
-    return exact, fpe, montecarlo
+    return exact, fpe, mc
 
 
 def _is_time(key: str) -> bool:
@@ -216,7 +218,7 @@ def run(ctx: Context) -> Section:
         "errors, and the cross-checks test it against Monte Carlo and the exact solver). The figure is recorded "
         "by a full run of the study, not this run, so its checks are RECORDED. "
         "Each benchmark module then measures its own solver and baselines in this run, in its short version "
-        "(the exhaustive sweeps are python -m validation.studies.fpe, .montecarlo, .exact; harvester validate "
+        "(the exhaustive sweeps are python -m validation.studies.fpe.bench, .mc.bench, .exact.bench; harvester validate "
         "--bench DIR includes their latest output, labelled with its date)."
         + (f" Included: {ctx.bench}." if ctx.bench else " None included in this run.")
         + " Each module's table lists every error/time pair it reports (reported errors included)."

@@ -1,17 +1,14 @@
-"""Cross-checks between the three solvers and against the exact identities.
+"""Cross-checks between the three solvers.
 
 * exact vs Monte Carlo on harmonic rings (N = 1, 2, 3, 5);
 * Fokker--Planck vs Monte Carlo on single nonlinear units (n x a grid), except where Fokker--Planck
   declines (its domain rule): there, and at the strong kink (n = 1 and 1.25, a = 2) in any case,
-  the product's Monte Carlo vs the exact-flow construction (:mod:`validation.sections.strongkink`);
+  the product's Monte Carlo vs the exact-flow construction (:mod:`validation.comparisons.strongkink`);
 * Fokker--Planck vs exact on the harmonic unit (n = 2);
-* the Fourier-mode exact solution vs a dense 4N x 4N Lyapunov solve (scipy) for small N;
-* the stationary identities (docs/model.md §2) for every result computed in this run:
+* the Fourier-mode exact solution vs a dense 4N x 4N Lyapunov solve (scipy) for small N.
 
-.. math::
-
-    \\langle V^2\\rangle = K_c\\tau_p\\langle vV\\rangle,\\qquad
-    P_{in} = m\\gamma\\langle v^2\\rangle + K_v\\langle vV\\rangle.
+The stationary identities of every result computed in the run are the closing section's
+(:mod:`validation.sections.identities`).
 
 Each comparison of a quantity ``q`` passes when
 :math:`|q_1 - q_2| \\le 4\\sqrt{\\delta_1^2 + \\delta_2^2} + \\text{floor}` (see
@@ -29,11 +26,10 @@ from fpe_harvester.model import Harvester
 from fpe_harvester.result import Stats, Status
 
 from ..harness.checks import CheckResult, Context, agree, expect
-from ..harness.report import Section, Table
-from .strongkink import STRONG_CAP, STRONG_KINK, declines, mc_vs_flow
+from ..harness.report import Section
+from ..comparisons.strongkink import STRONG_CAP, STRONG_KINK, declines, mc_vs_flow
 
-__all__ = ["run", "identity_checks", "describe", "results_table", "HARMONIC_RINGS", "NONLINEAR_GRID",
-           "QUICK_NONLINEAR", "MAX_REL_TOL"]
+__all__ = ["run", "HARMONIC_RINGS", "NONLINEAR_GRID", "QUICK_NONLINEAR", "MAX_REL_TOL"]
 
 #: (N, k) of the harmonic rings compared with Monte Carlo (a = 0.5; all inside the stable range).
 HARMONIC_RINGS = ((1, 0.0), (2, -0.15), (3, -0.25), (5, -0.2))
@@ -69,30 +65,6 @@ def _compare(label: str, r1: Stats, r2: Stats, *, quick: bool, floor: float = 0.
                        + ": no stationary number to cross-check") for q in names]
     return [agree(f"{label}: {q}", _SECTION, *r1.value(q), *r2.value(q), floor=floor,
                   rel_floor=rel_floor, max_rel_tol=MAX_REL_TOL[quick], note=note) for q in names]
-
-
-def identity_checks(label: str, r: Stats, h: Harvester, section: str = _SECTION) -> list[CheckResult]:
-    """The two stationary identities (docs/model.md §2) on one result, within its errors.
-
-    A result that lacks ``vV`` or ``v2`` fails: the identities are every solver's self-check.
-    """
-    p = h.params
-    floor = 1e-12 if r.method == "exact" else 0.0
-    if r.vV is None or r.v2 is None or r.V2 is None or r.Pin is None:
-        return [expect(f"identities [{r.method}] {label}", section, False,
-                       f"result lacks V2/Pin/vV/v2 (V2={r.V2}, Pin={r.Pin}, vV={r.vV}, v2={r.v2}); "
-                       f"status {r.status.value}")]
-    e = lambda x: 0.0 if x is None else x  # noqa: E731
-    rhs1 = p.Kc * p.tau_p * r.vV
-    rhs1_err = p.Kc * p.tau_p * e(r.vV_err)
-    rhs2 = p.m * p.gamma * r.v2 + p.Kv * r.vV
-    rhs2_err = math.hypot(p.m * p.gamma * e(r.v2_err), p.Kv * e(r.vV_err))
-    return [
-        agree(f"identities [{r.method}] {label}: V2 = Kc tau_p vV", section, r.V2, r.V2_err, rhs1, rhs1_err,
-              rel_floor=floor),
-        agree(f"identities [{r.method}] {label}: Pin = m gamma v2 + Kv vV", section, r.Pin, r.Pin_err, rhs2,
-              rhs2_err, rel_floor=floor),
-    ]
 
 
 #: Share of the cap that 4 error bars of a Monte Carlo run may take before it is solved again tighter.
@@ -167,11 +139,11 @@ def table_checks(ctx: Context) -> list[CheckResult]:
 
 
 def _kink_density(ctx: Context, sec: Section) -> list[CheckResult]:
-    """The kink's (x, v) density near its trap (:mod:`validation.sections.kinkdensity`): Monte Carlo
+    """The kink's (x, v) density near its trap (:mod:`validation.comparisons.kinkdensity`): Monte Carlo
     against Fokker-Planck, or, where Fokker-Planck declines the unit (a = 2), against the exact-flow
-    Monte Carlo (:mod:`validation.sections.strongkink`); quick mode a = 0.5 only."""
-    from .kinkdensity import FPE_TOL, ShellDensity, kink_density_figure, shell_area
-    from .strongkink import flow, shells
+    Monte Carlo (:mod:`validation.comparisons.strongkink`); quick mode a = 0.5 only."""
+    from ..comparisons.kinkdensity import FPE_TOL, ShellDensity, kink_density_figure, shell_area
+    from ..comparisons.strongkink import flow, shells
 
     a_values = (0.5,) if ctx.quick else (0.5, 2.0)
     ctx.require("mc", *(("fpe",) if any(declines(Harvester.build(a=a, n=1.0)) is None for a in a_values) else ()))
@@ -303,7 +275,7 @@ def _strong_text(ctx: Context, declined: dict[tuple[float, float], str]) -> str:
             "exact-flow Monte Carlo of validation/references/exactflow.py, a second construction sharing no integrator "
             "code with it (exact Gaussian transitions of the linear flow; for n = 1 the kink's force exact on each side, "
             "crossings located on the conditional-mean path; for n > 1 the discrete-gradient force), whose errors add "
-            "its step bias bound measured by python -m validation.studies.exactflow_bias. Each row passes when "
+            "its step bias bound measured by python -m validation.studies.kink.exactflow_bias. Each row passes when "
             f"|a - b| <= 4 sqrt(err_a^2 + err_b^2), that tolerance at most {STRONG_CAP:.0%} of the value: below the "
             "~8 % bias of a scheme that steps over the kink's crossings at a = 2 (docs/model.md).")
 
@@ -330,29 +302,3 @@ def systematic_offset(checks: list[CheckResult]) -> str:
     return (f"{pos} of {n} differences are positive (two-sided sign-test p = {p:.2g}); mean normalized "
             f"difference {zbar:+.2f} (in units of the combined error), RMS {math.sqrt(sum(x * x for x in z) / len(z)):.2f}"
             + (". The signs suggest a common offset smaller than the stated errors." if p < 0.01 else "."))
-
-
-def _fmt(v: float | None, e: float | None) -> str:
-    if v is None:
-        return "-"
-    return f"{v:.6g}" if not e else f"{v:.6g} +- {e:.2g}"
-
-
-def describe(h: Harvester) -> str:
-    """Short label of a harvester: a, n, N, k and the parameters that differ from the defaults."""
-    from fpe_harvester.model import Params
-
-    base = Params().to_dict()
-    extra = ", ".join(f"{k}={v:g}" for k, v in h.params.to_dict().items() if v != base[k])
-    return f"a={h.a:g}, n={h.n:g}, N={h.N}, k={h.k:.6g}" + (f", {extra}" if extra else "")
-
-
-def results_table(ctx: Context) -> Table:
-    """Every result solved in this run, with its status, errors and solver time."""
-    rows = []
-    for h, method, r in ctx.cache.results():
-        t = r.info.get("wall_time", r.info.get("seconds"))
-        rows.append((describe(h), method, r.status.value, _fmt(*r.value("eta")), _fmt(*r.value("V2")),
-                     _fmt(*r.value("Pin")), f"{t:.3g}" if isinstance(t, (int, float)) else "-"))
-    return Table("Every result computed in this run", ("system", "method", "status", "eta", "V2", "Pin",
-                                                       "solver time [s]"), rows)

@@ -3,7 +3,7 @@
 Every number the library returns for a nonlinear system carries an error estimate. This step
 checks those estimates against actual errors:
 
-* **Monte Carlo** (:func:`validation.sections.coverage.mc_coverage`): many results with independent
+* **Monte Carlo** (:func:`validation.comparisons.coverage.mc_coverage`): many results with independent
   seeds against another solver (exact for harmonic rings, Fokker--Planck ten times tighter
   for single nonlinear units; an independent run ten times tighter only where no other
   solver answers); the fractions of results within 1, 2, 3 reported standard errors of the
@@ -38,7 +38,7 @@ __all__ = ["run", "FpeCase", "QUICK_FPE", "FULL_FPE", "fpe_bounds"]
 _SECTION = "Error bars"
 #: Monte Carlo results per coverage case in quick mode (the full run: the coverage default): 3 x 20
 #: = 60 per quantity. Bars 1.5x too small then fail with probability 0.68, 2x too wide 0.994
-#: (:func:`validation.sections.coverage.detection`; the full run's 104: 0.92 and 1), and the typical
+#: (:func:`validation.comparisons.coverage.detection`; the full run's 104: 0.92 and 1), and the typical
 #: sample of either fails (at 48, the fewest with probability 0.5, that of bars 1.5x too small
 #: still passes: the binomial limits move in steps of 1/count).
 _QUICK_MC_RUNS = 20
@@ -281,7 +281,7 @@ def _fpe_checks(ctx: Context, sec: Section) -> list[CheckResult]:
 
 
 def _mc_checks(ctx: Context, sec: Section) -> list[CheckResult]:
-    from .coverage import ALPHA, MISSCALED, NORMAL_COVERAGE, coverage_checks, detection, mc_coverage, min_results
+    from ..comparisons.coverage import ALPHA, MISSCALED, NORMAL_COVERAGE, coverage_checks, detection, mc_coverage, min_results
 
     ctx.require("mc")
     res = mc_coverage(quick=ctx.quick, runs=_QUICK_MC_RUNS if ctx.quick else None, seed=ctx.seed)

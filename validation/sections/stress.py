@@ -26,12 +26,13 @@ from fpe_harvester.exact import k_di
 from fpe_harvester.model import Harvester
 from fpe_harvester.result import Stats, Status
 
+from ..comparisons.strongkink import declines, product
 from ..harness.checks import CheckResult, Context, agree, expect, skipped, solver_available
-from .crosscheck import MAX_REL_TOL as CROSS_MAX_REL_TOL
-from .crosscheck import identity_checks, mc_within_cap
-from .strongkink import declines, product
-from ..references.analytic import mp_ring_moments
 from ..harness.report import Section, Table
+from ..references.analytic import mp_ring_moments
+from .crosscheck import MAX_REL_TOL as CROSS_MAX_REL_TOL
+from .crosscheck import mc_within_cap
+from .identities import identity_checks
 
 __all__ = ["run_exact", "run_solvers"]
 
@@ -189,7 +190,7 @@ def _judge(label: str, method: str, run: Callable[[], Stats], h: Harvester,
 #: Monte Carlo tolerance on eta of a stress case that has no reference number: its status and the
 #: two identities are all that is judged, and they hold at any accuracy. (At the strong kink, where
 #: Fokker-Planck declines, the case reuses the cross-checks' run, which the second Monte Carlo
-#: construction checks: :mod:`validation.sections.strongkink`.)
+#: construction checks: :mod:`validation.comparisons.strongkink`.)
 IDENTITIES_TOL = 0.02
 
 #: Longest wall time [s] Fokker--Planck may take to decline a unit outside its domain ("at once").

@@ -9,6 +9,10 @@ import validation.harness.runner as runner
 from fpe_harvester.cli import build_parser, main
 from validation.harness.checks import expect
 from validation.harness.report import Section
+from validation.sections import SECTIONS, Step
+
+#: The closing section: the identities of every result of the run (none here: one skip per solver).
+IDENTITIES = SECTIONS[-1]
 
 
 def _passing(ctx):
@@ -67,7 +71,7 @@ def _skipping(ctx):
 
 
 def test_validate_writes_both_reports(tmp_path):
-    rep = runner.validate(quick=True, out=tmp_path, steps=[(_passing, "Passing step")])
+    rep = runner.validate(quick=True, out=tmp_path, steps=[(_passing, "Passing step"), IDENTITIES])
     assert not rep.failed
     assert (tmp_path / "report.md").is_file() and (tmp_path / "report.html").is_file()
     assert "Passing step" in (tmp_path / "report.md").read_text()
@@ -80,7 +84,7 @@ def test_validate_writes_both_reports(tmp_path):
 
 def test_a_quick_run_fails_when_too_few_checks_ran(tmp_path):
     """1 check ran and 3 were skipped: 25 % ran, below QUICK_MIN_RAN."""
-    rep = runner.validate(quick=True, out=tmp_path, steps=[(_few_passing, "Few checks")])
+    rep = runner.validate(quick=True, out=tmp_path, steps=[(_few_passing, "Few checks"), IDENTITIES])
     assert not rep.failed and len(rep.skipped) == 3
     assert runner.exit_code(rep, quick=True) == 1
     rep.sections[0].checks += [expect(f"more {i}", "Few checks", True, "ok") for i in range(26)]
@@ -126,7 +130,7 @@ def test_cli_arguments():
 ])
 def test_cli_exit_code(monkeypatch, tmp_path, capsys, steps, quick, code):
     """A failure fails any run; a skip fails the full run, and a quick run names every skip."""
-    monkeypatch.setattr(runner, "STEPS", steps)
+    monkeypatch.setattr(runner, "SECTIONS", (*steps, IDENTITIES))
     assert main(["validate", *(["--quick"] if quick else []), "--no-progress", "--out", str(tmp_path)]) == code
     captured = capsys.readouterr()
     out = captured.out
@@ -151,7 +155,7 @@ def test_cli_exit_code(monkeypatch, tmp_path, capsys, steps, quick, code):
 
 
 def test_cli_negative_seed_is_a_clean_error(monkeypatch, tmp_path, capsys):
-    monkeypatch.setattr(runner, "STEPS", ())
+    monkeypatch.setattr(runner, "SECTIONS", ())
     assert main(["validate", "--seed", "-3", "--no-progress", "--out", str(tmp_path)]) == 2
     assert "seed" in capsys.readouterr().err
 
@@ -170,7 +174,39 @@ def test_module_steps_are_imported_and_a_missing_one_fails(tmp_path):
 
 def test_report_keeps_the_plan_order(tmp_path):
     rep = runner.validate(out=tmp_path, steps=[(_failing, "Failing step"), (_passing, "Passing step")])
-    assert [s.title for s in rep.sections][:2] == ["Failing step", "Passing step"]
+    assert [s.title for s in rep.sections] == ["Failing step", "Passing step"]
+
+
+@pytest.mark.parametrize("quick", [True, False])
+def test_steps_run_in_their_mode_s_order_and_read_in_the_table_s(tmp_path, quick):
+    ran = []
+
+    def step(name):
+        def run(ctx):
+            ran.append(name)
+            return Section(name, name)
+        return run
+
+    plan = [Step(step("a"), "a", quick=2, full=1), Step(step("b"), "b", quick=1, full=3),
+            Step(step("c"), "c", quick=3, full=2)]
+    rep = runner.validate(quick=quick, out=tmp_path, steps=plan)
+    assert ran == (["b", "a", "c"] if quick else ["a", "c", "b"])
+    assert [s.title for s in rep.sections] == ["a", "b", "c"]
+
+
+def test_the_sections_table_names_each_section_once_and_the_identities_last():
+    import importlib
+
+    targets = [s.target for s in SECTIONS]
+    assert len(set(targets)) == len(targets) and len({s.title for s in SECTIONS}) == len(SECTIONS)
+    for s in SECTIONS:
+        name, _, func = s.target.partition(":")
+        assert callable(getattr(importlib.import_module(name), func or "run")), s.target
+    # the identities read every result the other sections computed: they run last in both modes
+    for mode in ("quick", "full"):
+        assert max(SECTIONS, key=lambda s: getattr(s, mode)) is IDENTITIES
+        assert sorted(getattr(s, mode) for s in SECTIONS).count(getattr(IDENTITIES, mode)) == 1
+    assert IDENTITIES.target == "validation.sections.identities"
 
 
 def test_python_m_validation_unwritable_out_is_a_one_line_error(capsys):

@@ -126,7 +126,7 @@ def test_the_energy_shells_hold_the_time_spent_in_them():
 def test_the_reports_settings_have_a_recorded_bias_bound():
     """The strong-kink rows' exact-flow settings are rows of the bias study, whose bound their errors
     include (validation/data/exactflow_bias.json)."""
-    from validation.sections.strongkink import FLOW
+    from validation.comparisons.strongkink import FLOW
 
     for n, s in FLOW.items():
         settings = ef.FlowSettings(step=s["step"], w_trap=s["w_trap"])

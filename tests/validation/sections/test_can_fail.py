@@ -212,7 +212,9 @@ def test_benchmark_checks_say_what_their_short_run_compared():
     """A benchmark module counts a check only for what it compared: the exact solver's errors
     against its references, Fokker-Planck's error bars against its own tighter runs; the Monte
     Carlo benchmark compares nothing (timings) and counts none."""
-    from validation.studies import exact, fpe, montecarlo
+    from validation.studies.exact import bench as exact
+    from validation.studies.fpe import bench as fpe
+    from validation.studies.mc import bench as montecarlo
 
     good = {"single_call_eta_rel_error": 2e-16, "rational_check": {"eta_rel_error": 0.0},
             "fourier_vs_dense": [{"fourier_eta_rel_error": 4e-16}]}

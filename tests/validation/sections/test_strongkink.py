@@ -16,7 +16,8 @@ import pytest
 from fpe_harvester import Harvester, MethodNotAvailableError, Stats, Status
 from fpe_harvester.fpe import FokkerPlanck
 from validation.harness.checks import Outcome, expect
-from validation.sections import crosscheck, kinkdensity, strongkink, stress
+from validation.comparisons import kinkdensity, strongkink
+from validation.sections import crosscheck, stress
 
 REASON = "outside the measured domain of Fokker-Planck (a = 2, n < 1.4): use solve(h, 'mc')"
 

@@ -42,7 +42,7 @@ def resolve_mesh(h: Harvester, mesh: str) -> str:
     ``"auto"`` is ``"algebraic"``: for 1 < n < 2 it measured at least as accurate per
     unknown as the geometric one (see :class:`XMeshRule`), and the element-wise
     refinement (``"adaptive"``, any n) did not measure faster overall (see
-    :mod:`validation.studies.fpe`). For n >= 2 the mesh is graded toward the walls only and
+    :mod:`validation.studies.fpe.bench`). For n >= 2 the mesh is graded toward the walls only and
     ``"algebraic"`` names that mesh; ``"geometric"`` is refused.
     """
     _check_mesh_name(mesh)
