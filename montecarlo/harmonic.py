@@ -103,6 +103,10 @@ def stationary_covariances(lin: Harvester, dt: float, step: str = "frozen") -> n
     (spectral radius >= 1).
     """
     M, _, Q, _ = step_matrices(lin, dt, step)
+    if not (np.all(np.isfinite(M)) and np.all(np.isfinite(Q))):
+        raise ParameterError(f"the harmonic twin (stiffness {2 * lin.a:g}, k = {lin.k:g}) has a step at dt = {dt:g} "
+                             f"beyond double precision (its matrix exponential overflows): rescale the model so that "
+                             f"a and |k| are of moderate size")
     out = np.empty_like(M)
     for q in range(lin.N):
         rho = float(np.max(np.abs(np.linalg.eigvals(M[q]))))
