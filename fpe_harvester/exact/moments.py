@@ -152,12 +152,14 @@ def balanced_lyapunov(A: np.ndarray, Q: np.ndarray) -> np.ndarray:
 
     import scipy.linalg
 
-    B, (scale, _) = scipy.linalg.matrix_balance(A, permute=False, separate=True)
     with warnings.catch_warnings():
         warnings.simplefilter("error", RuntimeWarning)
         try:
+            # balancing itself fails on a stiffness near the smallest doubles (kappa = 1e-21)
+            with np.errstate(all="raise"):
+                B, (scale, _) = scipy.linalg.matrix_balance(A, permute=False, separate=True)
             Xb = scipy.linalg.solve_continuous_lyapunov(B, -(Q / scale[:, None]) / scale[None, :])
-        except RuntimeWarning as exc:
+        except (RuntimeWarning, FloatingPointError) as exc:
             raise np.linalg.LinAlgError(f"Lyapunov equation too ill-conditioned to solve: {exc}") from exc
     return Xb * scale[:, None] * scale[None, :]
 
