@@ -72,7 +72,7 @@ def _step_constants(h: float, pp: np.ndarray) -> tuple:
     return (h, _degree(h, rho), 0.125 * h * h * rho * rho * math.exp(rho * h)) + _decays(h, pp)
 
 
-@njit(cache=True, nogil=True)
+@njit(cache=True, nogil=True, inline="always")
 def _series(x: float, v: float, V: float, F: float, pp: np.ndarray, cs: np.ndarray, K: int) -> None:
     """Taylor coefficients ``cs[i, k] = y_i^(k)(0)/k!``, k <= K, of the linear flow with constant force F."""
     m, gamma, Kv, Kc, tau_p, c = pp[P_M], pp[P_GAMMA], pp[P_KV], pp[P_KC], pp[P_TAU_P], pp[P_STIFFNESS]
@@ -122,7 +122,7 @@ def _model_root(q0: float, q1: float, q2: float) -> float:
     return 2.0 * q0 / d if d > 0.0 else -1.0
 
 
-@njit(cache=True, nogil=True)
+@njit(cache=True, nogil=True, inline="always")
 def _polish(cs: np.ndarray, s: float, shift: int, lo: float, hi: float, t: float, rem: float, K: int) -> float:
     """The root of s g in the bracket (lo, hi) (s g(lo) > 0 >= s g(hi), x(t) = t^shift g(t)) by
     safeguarded Newton from t; a converged iterate is the root whichever side of it round-off
@@ -153,7 +153,7 @@ def _polish(cs: np.ndarray, s: float, shift: int, lo: float, hi: float, t: float
     return t if g == 0.0 else hi
 
 
-@njit(cache=True, nogil=True)
+@njit(cache=True, nogil=True, inline="always")
 def _first_crossing(cs: np.ndarray, s: float, shift: int, rem: float, K: int) -> float:
     """First t in (0, rem] where s x(t) <= 0, or -1. ``shift`` deflates a root at t = 0.
 
@@ -269,7 +269,7 @@ def _average_swing(x: float, v: float, V: float, f: float, rem: float, pp: np.nd
     return x, v, V + Kc * x, u
 
 
-@njit(cache=True, nogil=True)
+@njit(cache=True, nogil=True, inline="always")
 def _kink_unit(x: float, v: float, V: float, stuck: bool, f: float, pp: np.ndarray,
                counters: np.ndarray, cs: np.ndarray, kc: tuple) -> tuple:
     """Advance one unit of the n = 1 potential over one D step with external force f.
@@ -343,9 +343,10 @@ def _kink_flow(x, v, V, stuck, f, w, cf, pp, counters, cs) -> None:
     """
     N, P = x.shape
     m, gamma, Kv, Kc, a, c = pp[P_M], pp[P_GAMMA], pp[P_KV], pp[P_KC], pp[P_KINK_FORCE], pp[P_STIFFNESS]
-    tau_p = pp[P_TAU_P]
-    kc = _step_constants(cf[CF_H], pp)
-    h, margin = kc[0], kc[2]
+    tau_p, h = pp[P_TAU_P], cf[CF_H]
+    # the step's constants only once some unit needs them (none do, mostly, at small a): with a
+    # few paths per call their exponentials would cost more than the steps themselves
+    kc = (h, 0, 0.0, 0.0, 0.0, 0.0, 0.0)
     averaging = pp[P_KINK_RULE] != HOLD
     for j in range(N):
         for p in range(P):
@@ -363,19 +364,25 @@ def _kink_flow(x, v, V, stuck, f, w, cf, pp, counters, cs) -> None:
                     if s * x0 > h * (abs(v0) + 2.0 * h * bound):
                         x[j, p], v[j, p], V[j, p] = xn, vn, Vn
                         continue
+                    if kc[1] == 0:
+                        kc = _step_constants(h, pp)
                     acc0 = (Fs - c * x0 - Kv * V0) / m - gamma * v0
                     accn = (Fs - c * xn - Kv * Vn) / m - gamma * vn
-                    if max(s * acc0, s * accn) + margin * max(abs(v0), abs(acc0), abs(Kc * v0 - V0 / tau_p)) < 0.0:
+                    if max(s * acc0, s * accn) + kc[2] * max(abs(v0), abs(acc0), abs(Kc * v0 - V0 / tau_p)) < 0.0:
                         x[j, p], v[j, p], V[j, p] = xn, vn, Vn
                         continue
                 if averaging and _short_swing(x0, v0, f[j, p] - Kv * V0, s, h, pp):
                     # the trap's short swings, averaged over the whole step (the common slow
                     # case at large a, here without the event loop's call)
+                    if kc[1] == 0:
+                        kc = _step_constants(h, pp)
                     x1, v1, V1, u = _average_swing(x0, v0, V0, f[j, p], h, pp, kc)
                     if u == h:
                         counters[C_SLOW] += 1
                         counters[C_AVERAGED] += 1
                         x[j, p], v[j, p], V[j, p] = x1, v1, V1
                         continue
+            if kc[1] == 0:
+                kc = _step_constants(h, pp)
             x[j, p], v[j, p], V[j, p], stuck[j, p] = _kink_unit(
                 x0, v0, V0, stuck[j, p], f[j, p], pp, counters, cs, kc)

@@ -25,7 +25,7 @@ each writes its key of ``mc_kink_speed.json`` and keeps the others, under ``--la
 * ``validate``: seeded solves against the Fokker-Planck references (a = 0.5, 1 at tol 1e-4) and
   long runs of the kink at a = 2 and of a kink ring (tol 1e-3), for each tree.
 
-``--tree NAME=PATH`` runs ``census``, ``throughput``, ``solve`` and ``validate`` also in another checkout
+``--tree NAME=PATH`` runs every part but ``bias`` also in another checkout
 (its own packages, through ``PYTHONPATH``; ``throughput`` alternates the trees round by round), for
 numbers before and after a change of the step.
 """
@@ -382,6 +382,8 @@ def _worker(spec: dict[str, Any]) -> Any:
     part = spec.pop("part")
     if part == "census":
         return {f"a={a:g} dt={dt:g}": census(a, dt)[0] for a, dt in CASES}
+    if part == "parts":
+        return {f"a={a:g} dt={dt:g}": parts(a, dt, census(a, dt)[1]) for a, dt in CASES if a != 0.5}
     if part == "throughput":
         spec["kappas"] = {float(k): v for k, v in spec["kappas"].items()}
         return throughput(**spec)
@@ -389,7 +391,7 @@ def _worker(spec: dict[str, Any]) -> Any:
         return solve_time()
     if part == "validate":
         return validate(tuple(spec.get("only", ())))
-    raise ValueError(f"part must be census, throughput, solve or validate, got {part!r}")
+    raise ValueError(f"part must be census, parts, throughput, solve or validate, got {part!r}")
 
 
 def _trees(specs: list[str]) -> dict[str, str]:
@@ -414,7 +416,7 @@ def main(argv: list[str] | None = None) -> dict[str, Any]:
     ap.add_argument("--out", type=Path, required=True, metavar="DIR")
     ap.add_argument("--label", default="this tree")
     ap.add_argument("--tree", action="append", default=[], metavar="NAME=PATH",
-                    help="another checkout to run census, throughput, solve and validate in too")
+                    help="another checkout to run every part but bias in too")
     ap.add_argument("--rounds", type=int, default=12, help="throughput: alternations per tree")
     ap.add_argument("--t-run", type=float, default=80.0, help="throughput: measured time per run")
     ap.add_argument("--rules", nargs="+", default=["follow4=4", "average=0.25", "avg8=0.125", "avg16=0.0625"],
@@ -440,7 +442,7 @@ def main(argv: list[str] | None = None) -> dict[str, Any]:
         if part == "census":
             save("census", {name: _in_tree(p, "census", {}) for name, p in trees.items()})
         elif part == "parts":
-            save("parts", {f"a={a:g} dt={dt:g}": parts(a, dt, census(a, dt)[1]) for a, dt in CASES if a != 0.5})
+            save("parts", {name: _in_tree(p, "parts", {}) for name, p in trees.items()})
         elif part == "throughput":
             kappas = {a: _kappa(a) for a, _ in CASES}
             out: dict[str, Any] = {}
