@@ -143,9 +143,10 @@ def _polish(cs: np.ndarray, s: float, shift: int, lo: float, hi: float, t: float
         tn = t - g / dg if dg != 0.0 else 0.5 * (lo + hi)
         # converged before the bracket test: a last step that lands on the bracket's end
         # (the root to round-off) is no reason to bisect. Newton's next error is about
-        # step^2 g''/2g' ~ step^2/t here (arcs are near-parabolas over t), so a step of 1e-9 t
-        # leaves the root exact to round-off without another evaluation.
-        if abs(tn - t) <= max(1e-9 * t, 1e-15 * rem):
+        # step^2 g''/2g' ~ step^2/2t here (arcs are near-parabolas over t), so after a step of
+        # 1e-6 t the root is within 1e-12 t (x within ~1e-12 of its scale: x = 0 set there)
+        # without another evaluation.
+        if abs(tn - t) <= max(1e-6 * t, 1e-15 * rem):
             return tn
         if not (lo < tn < hi):
             tn = 0.5 * (lo + hi)
@@ -154,21 +155,21 @@ def _polish(cs: np.ndarray, s: float, shift: int, lo: float, hi: float, t: float
 
 
 @njit(cache=True, nogil=True, inline="always")
-def _first_crossing(cs: np.ndarray, s: float, shift: int, rem: float, K: int) -> float:
+def _first_crossing(cs: np.ndarray, s: float, shift: int, rem: float, K: int, crosses: bool) -> float:
     """First t in (0, rem] where s x(t) <= 0, or -1. ``shift`` deflates a root at t = 0.
 
     x(t) = t^shift g(t) with s g(0) > 0. Where the series bounds the sign of x'' over the whole
     interval the answer needs no search: s x concave (a swing's arc toward x = 0) is positive on
     an interval [0, t*), so it crosses iff s x(rem) <= 0, once; s x convex and not falling at
     t = 0 (an arc leaving x = 0) never crosses. The crossing is then polished from the root of
-    the series' quadratic model. Otherwise (arcs near the trap's edge |F - K_v V| ~ a, or
-    returning against a force that pushes away) a grid of N_SAMPLE points brackets the first
-    sign change of g.
+    the series' quadratic model. ``crosses``: the caller has proven that (concave, s x(rem) <= 0).
+    Otherwise (arcs near the trap's edge |F - K_v V| ~ a, or returning against a force that
+    pushes away) a grid of N_SAMPLE points brackets the first sign change of g.
     """
     curv = 2.0 * s * cs[0, 2]
-    bound = _curvature_bound(cs, rem, K)
+    bound = 0.0 if crosses else _curvature_bound(cs, rem, K)
     if shift < 2 and curv + bound < 0.0:
-        if s * _horner(cs, 0, rem, shift, K) > 0.0:
+        if not crosses and s * _horner(cs, 0, rem, shift, K) > 0.0:
             return -1.0
         q0, q1, q2, q3 = s * cs[0, shift], s * cs[0, shift + 1], s * cs[0, shift + 2], s * cs[0, shift + 3]
         t0 = _model_root(q0, q1, q2)
@@ -271,11 +272,12 @@ def _average_swing(x: float, v: float, V: float, f: float, rem: float, pp: np.nd
 
 @njit(cache=True, nogil=True, inline="always")
 def _kink_unit(x: float, v: float, V: float, stuck: bool, f: float, pp: np.ndarray,
-               counters: np.ndarray, cs: np.ndarray, kc: tuple) -> tuple:
+               counters: np.ndarray, cs: np.ndarray, kc: tuple, crosses: bool) -> tuple:
     """Advance one unit of the n = 1 potential over one D step with external force f.
 
     The slow path of :func:`_kink_flow`, for units that may cross x = 0 within the step; ``kc``
-    is :func:`_step_constants` of the step. Exact piecewise flow: each side of x = 0 is linear
+    is :func:`_step_constants` of the step; ``crosses``: the unit's arc is proven to cross once
+    within the step (:func:`_first_crossing`). Exact piecewise flow: each side of x = 0 is linear
     with constant force f - a s (a = ``pp[P_KINK_FORCE]``); zero crossings are located on the
     flow's Taylor series (:func:`_first_crossing`). Swings shorter than the step never stop
     (docs/model.md §3): once ``pp[P_KINK_RULE]`` (:data:`AVERAGE` by default) full swings fit in
@@ -314,7 +316,7 @@ def _kink_unit(x: float, v: float, V: float, stuck: bool, f: float, pp: np.ndarr
             s = 1.0 if f - Kv * V > 0.0 else -1.0
             shift = 2
         _series(x, v, V, f - a * s, pp, cs, K)
-        tc = _first_crossing(cs, s, shift, rem, K)
+        tc = _first_crossing(cs, s, shift, rem, K, crosses and t == 0.0)
         if tc < 0.0:
             return _horner(cs, 0, rem, 0, K), _horner(cs, 1, rem, 0, K), _horner(cs, 2, rem, 0, K), False
         v, V = _horner(cs, 1, tc, 0, K), _horner(cs, 2, tc, 0, K)
@@ -344,45 +346,49 @@ def _kink_flow(x, v, V, stuck, f, w, cf, pp, counters, cs) -> None:
     N, P = x.shape
     m, gamma, Kv, Kc, a, c = pp[P_M], pp[P_GAMMA], pp[P_KV], pp[P_KC], pp[P_KINK_FORCE], pp[P_STIFFNESS]
     tau_p, h = pp[P_TAU_P], cf[CF_H]
-    # the step's constants only once some unit needs them (none do, mostly, at small a): with a
-    # few paths per call their exponentials would cost more than the steps themselves
+    # the concavity test's margin, with e^(rho h) <= 1/(1 - rho h) (no test beyond rho h = 1/2)
+    rho = max(1.0, (abs(c) + abs(Kv)) / m + gamma, abs(Kc) + 1.0 / tau_p)
+    margin = 0.125 * h * h * rho * rho / (1.0 - rho * h) if rho * h < 0.5 else math.inf
+    # the step's other constants only once some unit needs them (none do, mostly, at small a):
+    # with a few paths per call their exponentials would cost more than the steps themselves
     kc = (h, 0, 0.0, 0.0, 0.0, 0.0, 0.0)
     averaging = pp[P_KINK_RULE] != HOLD
     for j in range(N):
         for p in range(P):
+            x0, v0, V0 = x[j, p], v[j, p], V[j, p]
+            s = 1.0 if x0 > 0.0 else -1.0
+            Fs = f[j, p] - a * s
+            xn = cf[CF_E] * x0 + cf[CF_E + 1] * v0 + cf[CF_E + 2] * V0 + cf[CF_G] * Fs
+            vn = cf[CF_E + 3] * x0 + cf[CF_E + 4] * v0 + cf[CF_E + 5] * V0 + cf[CF_G + 1] * Fs
+            Vn = cf[CF_E + 6] * x0 + cf[CF_E + 7] * v0 + cf[CF_E + 8] * V0 + cf[CF_G + 2] * Fs
+            bound = (abs(Fs) + abs(c * x0) + m * gamma * abs(v0) + Kv * abs(V0)) / m
+            acc0 = (Fs - c * x0 - Kv * V0) / m - gamma * v0
+            accn = (Fs - c * xn - Kv * Vn) / m - gamma * vn
+            z0 = max(abs(v0), abs(acc0), abs(Kc * v0 - V0 / tau_p))
+            # both tests and their conditions combined without branches: at large a a unit's
+            # outcome changes from step to step, and each mispredicted branch costs more than
+            # the arithmetic
+            side = (s * xn > 0.0) & (x0 != 0.0) & (w[p] != 0.0) & ~stuck[j, p]
+            side_crossed = (s * xn <= 0.0) & (x0 != 0.0) & ~stuck[j, p]
+            reach = s * x0 > h * (abs(v0) + 2.0 * h * bound)
+            concave = max(s * acc0, s * accn) + margin * z0 < 0.0
+            if side & (reach | concave):
+                x[j, p], v[j, p], V[j, p] = xn, vn, Vn
+                continue
             if w[p] == 0.0:
                 continue
-            x0, v0, V0 = x[j, p], v[j, p], V[j, p]
-            if not stuck[j, p] and x0 != 0.0:
-                s = 1.0 if x0 > 0.0 else -1.0
-                Fs = f[j, p] - a * s
-                xn = cf[CF_E] * x0 + cf[CF_E + 1] * v0 + cf[CF_E + 2] * V0 + cf[CF_G] * Fs
-                if s * xn > 0.0:
-                    vn = cf[CF_E + 3] * x0 + cf[CF_E + 4] * v0 + cf[CF_E + 5] * V0 + cf[CF_G + 1] * Fs
-                    Vn = cf[CF_E + 6] * x0 + cf[CF_E + 7] * v0 + cf[CF_E + 8] * V0 + cf[CF_G + 2] * Fs
-                    bound = (abs(Fs) + abs(c * x0) + m * gamma * abs(v0) + Kv * abs(V0)) / m
-                    if s * x0 > h * (abs(v0) + 2.0 * h * bound):
-                        x[j, p], v[j, p], V[j, p] = xn, vn, Vn
-                        continue
-                    if kc[1] == 0:
-                        kc = _step_constants(h, pp)
-                    acc0 = (Fs - c * x0 - Kv * V0) / m - gamma * v0
-                    accn = (Fs - c * xn - Kv * Vn) / m - gamma * vn
-                    if max(s * acc0, s * accn) + kc[2] * max(abs(v0), abs(acc0), abs(Kc * v0 - V0 / tau_p)) < 0.0:
-                        x[j, p], v[j, p], V[j, p] = xn, vn, Vn
-                        continue
-                if averaging and _short_swing(x0, v0, f[j, p] - Kv * V0, s, h, pp):
-                    # the trap's short swings, averaged over the whole step (the common slow
-                    # case at large a, here without the event loop's call)
-                    if kc[1] == 0:
-                        kc = _step_constants(h, pp)
-                    x1, v1, V1, u = _average_swing(x0, v0, V0, f[j, p], h, pp, kc)
-                    if u == h:
-                        counters[C_SLOW] += 1
-                        counters[C_AVERAGED] += 1
-                        x[j, p], v[j, p], V[j, p] = x1, v1, V1
-                        continue
+            if averaging and x0 != 0.0 and not stuck[j, p] and _short_swing(x0, v0, f[j, p] - Kv * V0, s, h, pp):
+                # the trap's short swings, averaged over the whole step (the common slow
+                # case at large a, here without the event loop's call)
+                if kc[1] == 0:
+                    kc = _step_constants(h, pp)
+                x1, v1, V1, u = _average_swing(x0, v0, V0, f[j, p], h, pp, kc)
+                if u == h:
+                    counters[C_SLOW] += 1
+                    counters[C_AVERAGED] += 1
+                    x[j, p], v[j, p], V[j, p] = x1, v1, V1
+                    continue
             if kc[1] == 0:
                 kc = _step_constants(h, pp)
             x[j, p], v[j, p], V[j, p], stuck[j, p] = _kink_unit(
-                x0, v0, V0, stuck[j, p], f[j, p], pp, counters, cs, kc)
+                x0, v0, V0, stuck[j, p], f[j, p], pp, counters, cs, kc, side_crossed & concave)

@@ -53,7 +53,7 @@ from montecarlo.coefficients import KINK_RULES, physical_vector, step_coefficien
 from montecarlo.layout import (C_AVERAGED, C_CROSSINGS, C_SLOW, CF_H, CF_XI_DECAY, CF_XI_NOISE, N_COUNTERS,
                                P_KINK_FORCE, P_KV, P_M, P_SIGMA, P_XI_VAR)
 
-__all__ = ["STEM", "census", "parts", "throughput", "bias", "solve_time", "validate", "main"]
+__all__ = ["STEM", "census", "parts", "throughput", "bias", "solve_time", "validate", "draw", "main"]
 
 #: Name of the written ``.json``.
 STEM = "mc_kink_speed"
@@ -183,7 +183,7 @@ def _component_kernels(new: bool):
     if new:
         prep = njit(lambda h, pp: kk._step_constants(h, pp))
         series = njit(lambda x, v, V, F, pp, cs, kc: kk._series(x, v, V, F, pp, cs, kc[1]))
-        cross = njit(lambda cs, s, rem, kc: kk._first_crossing(cs, s, 0, rem, kc[1]))
+        cross = njit(lambda cs, s, rem, kc: kk._first_crossing(cs, s, 0, rem, kc[1], False))
         ends = njit(lambda cs, rem, kc: kk._horner(cs, 0, rem, 0, kc[1]) + kk._horner(cs, 1, rem, 0, kc[1])
                     + kk._horner(cs, 2, rem, 0, kc[1]))
         avg = njit(lambda x, v, V, f, rem, pp, kc: kk._average_swing(x, v, V, f, rem, pp, kc)[0])
@@ -263,34 +263,47 @@ def _kappa(a: float) -> float:
     return float(linearized_stiffness(h, float(m["xdU"].mean()), float(m["x2"].mean())))
 
 
-def throughput(mode: str, rounds: int, t_run: float, kappas: dict[float, float] | None = None) -> dict[str, Any]:
+def throughput(mode: str, rounds: int, t_run: float, kappas: dict[float, float] | None = None,
+               rules: dict[str, float] | None = None) -> dict[str, Any]:
     """Thread-CPU nanoseconds per path-step of :func:`montecarlo.simulate` for :data:`CASES`, the cases
     alternating run by run, ``rounds`` times (64 paths in chunks of 16, one thread, burn-in 20,
     ``t_run`` measured). ``mode``: ``"bare"`` (fine level alone) or ``"solver"`` (Richardson pair
-    at 2 dt and dt, harmonic twin from its law, martingale sums)."""
+    at 2 dt and dt, harmonic twin from its law, martingale sums). ``rules`` (name -> swings,
+    registered in KINK_RULES for the run) adds a = 2 under each of those kink rules (the
+    candidates' costs; ratios to a = 0.5 under the default rule)."""
     kappas = kappas or {a: _kappa(a) for a, _ in CASES}
+    cases = [(f"a={a:g}", a, dt, "average") for a, dt in CASES]
+    cases += [(f"a=2 rule {name}", 2.0, 0.01, name) for name in (rules or {})]
     hs = {a: Harvester.build(a=a, n=1) for a, _ in CASES}
 
-    def kw(a: float, dt: float, seed: int, t: float) -> dict[str, Any]:
-        k = {"paths": 64, "chunk": 16, "replicas": 1, "threads": 1, "t_burn": 20.0, "t_run": t, "seed": seed}
+    def kw(a: float, dt: float, rule: str, seed: int, t: float) -> dict[str, Any]:
+        k = {"paths": 64, "chunk": 16, "replicas": 1, "threads": 1, "t_burn": 20.0, "t_run": t, "seed": seed,
+             "kink_rule": rule}
         if mode == "solver":
             return {**k, "dt": 2 * dt, "richardson": True, "twin": kappas[a], "start": "twin",
                     "controls": ("martingale",)}
         return {**k, "dt": dt}
 
-    for a, dt in CASES:
-        simulate(hs[a], **kw(a, dt, 0, 1.0))
-    ns: dict[str, list[float]] = {f"a={a:g}": [] for a, _ in CASES}
-    for r in range(rounds):
-        for a, dt in CASES:
-            t0 = time.thread_time()
-            e = simulate(hs[a], **kw(a, dt, 1 + r, t_run))
-            ns[f"a={a:g}"].append((time.thread_time() - t0) / e.path_steps * 1e9)
-    ratios = [x2 / x05 for x2, x05 in zip(ns["a=2"], ns["a=0.5"])]
-    return {"mode": mode, "cases": [list(c) for c in CASES], "ns_per_path_step": ns,
+    saved = dict(KINK_RULES)
+    KINK_RULES.update(rules or {})
+    ns: dict[str, list[float]] = {name: [] for name, *_ in cases}
+    try:
+        for _, a, dt, rule in cases:
+            simulate(hs[a], **kw(a, dt, rule, 0, 1.0))
+        for r in range(rounds):
+            for name, a, dt, rule in cases:
+                t0 = time.thread_time()
+                e = simulate(hs[a], **kw(a, dt, rule, 1 + r, t_run))
+                ns[name].append((time.thread_time() - t0) / e.path_steps * 1e9)
+    finally:
+        KINK_RULES.clear()
+        KINK_RULES.update(saved)
+    ratios = {name: [x / x05 for x, x05 in zip(v, ns["a=0.5"])] for name, v in ns.items() if name.startswith("a=2")}
+    return {"mode": mode, "cases": [list(c) for c in cases], "ns_per_path_step": ns,
             "median_ns": {k: statistics.median(v) for k, v in ns.items()},
             "path_steps_per_cpu_s": {k: 1e9 / statistics.median(v) for k, v in ns.items()},
-            "ratio_a2_over_a05": ratios, "median_ratio_a2_over_a05": statistics.median(ratios)}
+            "ratio_a2_over_a05": ratios["a=2"], "median_ratio_a2_over_a05": statistics.median(ratios["a=2"]),
+            "ratios_over_a05": ratios}
 
 
 def bias(a: float, dts: tuple[float, ...], rules: dict[str, float], *, reference: str, replicas: int,
@@ -419,14 +432,17 @@ def main(argv: list[str] | None = None) -> dict[str, Any]:
                     help="another checkout to run every part but bias in too")
     ap.add_argument("--rounds", type=int, default=12, help="throughput: alternations per tree")
     ap.add_argument("--t-run", type=float, default=80.0, help="throughput: measured time per run")
+    ap.add_argument("--candidates", action="store_true", help="throughput: a = 2 under each of --rules too")
     ap.add_argument("--rules", nargs="+", default=["follow4=4", "average=0.25", "avg8=0.125", "avg16=0.0625"],
-                    metavar="NAME=SWINGS", help="bias: kink rules (the first is the reference)")
+                    metavar="NAME=SWINGS", help="bias (the first is the reference) and throughput --candidates: "
+                    "kink rules, the swings that must fit in the time left before they are averaged")
     ap.add_argument("--bias-a", type=float, default=2.0)
     ap.add_argument("--bias-dts", type=float, nargs="+", default=[0.08, 0.04, 0.02])
     ap.add_argument("--bias-replicas", type=int, default=128)
     ap.add_argument("--only", nargs="*", default=[], help="validate: these labels only")
     args = ap.parse_args(argv)
     trees = _trees(args.tree)
+    rules = {name: float(sw) for name, _, sw in (r.partition("=") for r in args.rules)}
     path = args.out / f"{STEM}.json"
     res = json.loads(path.read_text()) if path.exists() else {}
     entry = res.setdefault(args.label, {})
@@ -436,6 +452,8 @@ def main(argv: list[str] | None = None) -> dict[str, Any]:
         entry[key] = value
         args.out.mkdir(parents=True, exist_ok=True)
         path.write_text(json.dumps(res, indent=1, default=float))
+        if key in ("throughput", "bias"):
+            draw(entry, args.out / f"{STEM}_{args.label.replace(' ', '_')}.png")
         print(f"{key}: written to {path}", flush=True)
 
     for part in args.parts:
@@ -450,12 +468,13 @@ def main(argv: list[str] | None = None) -> dict[str, Any]:
                 runs: dict[str, list] = {name: [] for name in trees}
                 for _ in range(args.rounds):
                     for name, p in trees.items():
+                        # the candidate rules only here: another tree's kernels may read the rule otherwise
+                        extra = {"rules": rules} if name == "this" and args.candidates else {}
                         runs[name].append(_in_tree(p, "throughput", {"mode": mode, "rounds": 1, "t_run": args.t_run,
-                                                                     "kappas": kappas}))
+                                                                     "kappas": kappas, **extra}))
                 out[mode] = {name: _pool(r) for name, r in runs.items()}
             save("throughput", {"kappas": kappas, **out})
         elif part == "bias":
-            rules = {name: float(sw) for name, _, sw in (r.partition("=") for r in args.rules)}
             save("bias", bias(args.bias_a, tuple(args.bias_dts), rules, reference=next(iter(rules)),
                               replicas=args.bias_replicas))
         elif part == "solve":
@@ -465,14 +484,50 @@ def main(argv: list[str] | None = None) -> dict[str, Any]:
     return res
 
 
+def draw(entry: dict[str, Any], path: Path) -> None:
+    """Two panels of one label's entry: path-steps per CPU-second per case and tree (throughput),
+    and |eta(dt) - eta(dt/2)| per coarse dt and kink rule (bias)."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    fig, (ax1, ax2) = plt.subplots(1, 2, figsize=(10.0, 4.0))
+    for i, (mode, trees) in enumerate((k, v) for k, v in entry.get("throughput", {}).items() if k != "kappas"):
+        for j, (tree, r) in enumerate(trees.items()):
+            rates = r["path_steps_per_cpu_s"]
+            ax1.bar([3 * k + 0.4 * (2 * i + j) for k in range(len(rates))], list(rates.values()), 0.4,
+                    label=f"{mode}, {tree} (a=2/a=0.5: {r['median_ratio_a2_over_a05']:.2f})")
+            ax1.set_xticks([3 * k + 0.6 for k in range(len(rates))], list(rates))
+    ax1.set_yscale("log")
+    ax1.set_ylabel("path-steps per CPU second")
+    ax1.legend(fontsize=6)
+    rows = entry.get("bias", [])
+    for rule in dict.fromkeys(r["rule"] for r in rows):
+        sel = [r for r in rows if r["rule"] == rule]
+        ax2.errorbar([r["dt_coarse"] for r in sel], [abs(r["diff"]) for r in sel], [r["diff_se"] for r in sel],
+                     fmt="o-", capsize=3, label=rule)
+    ax2.set_xscale("log")
+    ax2.set_yscale("log")
+    ax2.set_xlabel("coarse dt")
+    ax2.set_ylabel("|eta(dt) - eta(dt/2)| (common noise)")
+    ax2.legend(fontsize=7)
+    fig.tight_layout()
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
+
+
 def _pool(runs: list[dict[str, Any]]) -> dict[str, Any]:
     """One tree's throughput runs (one round each) pooled: the medians over the rounds."""
     ns = {k: [x for r in runs for x in r["ns_per_path_step"][k]] for k in runs[0]["ns_per_path_step"]}
     ratios = [x for r in runs for x in r["ratio_a2_over_a05"]]
+    others = {k: [x for r in runs for x in r.get("ratios_over_a05", {}).get(k, [])]
+              for k in runs[0].get("ratios_over_a05", {})}
     return {"rounds": len(ratios), "median_ns": {k: statistics.median(v) for k, v in ns.items()},
             "path_steps_per_cpu_s": {k: 1e9 / statistics.median(v) for k, v in ns.items()},
             "ratio_a2_over_a05": ratios, "median_ratio_a2_over_a05": statistics.median(ratios),
-            "ratio_quartiles": [float(q) for q in np.quantile(ratios, [0.25, 0.75])]}
+            "ratio_quartiles": [float(q) for q in np.quantile(ratios, [0.25, 0.75])],
+            "median_ratios_over_a05": {k: statistics.median(v) for k, v in others.items()}}
 
 
 if __name__ == "__main__":  # pragma: no cover
