@@ -2,17 +2,16 @@
 
 At n = 1 and a = 2 the unit spends most of its time in the trap (|sigma xi - K_v V| < a), swinging
 across x = 0 on ever smaller arcs, and the frozen step's exact piecewise flow locates every zero
-crossing. Parts (``python -m validation.studies.mc_kink_speed PART [PART ...] --out validation/data``;
-each writes its key of ``mc_kink_speed.json`` and keeps the others, under ``--label``):
+crossing. Parts (``python -m validation.studies.kink.speed PART [PART ...] --out validation/data``;
+each writes its key of ``kink_speed.json`` and keeps the others, under ``--label``):
 
 * ``census``: on the product's D step of the kink (:func:`montecarlo._kink._kink_flow`, one unit at a
   time so that each unit-step's events are seen), per a and dt: the distribution of zero crossings
   per unit-step, the fractions of unit-steps on the slow path and in the averaged swing map, the
   fraction trapped (|F - K_v V| < a) and near rest (E = v^2/2 + a|x| < 1e-3), and crossings by the
   swing's period P over the step h;
-* ``parts``: nanoseconds of the step's parts on a sample of the census's slow unit-steps: the slow
-  unit-step through ``_kink_flow``, a fast one, the Taylor series, the root finding with and
-  without a crossing, the averaged swing map, the end-of-step evaluation;
+* ``parts``: thread-CPU nanoseconds of one unit's frozen step on a sample of the census's slow
+  unit-steps (with their crossings and averaged maps per step) and of its fast ones;
 * ``throughput``: path-steps per thread-CPU-second of :func:`montecarlo.simulate` at a = 0.5, 1
   (dt 0.005) and 2 (dt 0.01), the solver's fine steps, the cases alternating run by run (a load
   change hits all): fine level alone (``bare``) and as the solver runs it (``solver``: Richardson
@@ -32,7 +31,6 @@ numbers before and after a change of the step.
 
 from __future__ import annotations
 
-import inspect
 import json
 import math
 import os
@@ -48,15 +46,15 @@ from numba import njit
 
 from fpe_harvester import Harvester, solve
 from montecarlo import estimate, simulate
-from montecarlo._kink import N_TAYLOR, _kink_flow
 from montecarlo.coefficients import KINK_RULES, physical_vector, step_coefficients
-from montecarlo.layout import (C_AVERAGED, C_CROSSINGS, C_SLOW, CF_H, CF_XI_DECAY, CF_XI_NOISE, N_COUNTERS,
+from montecarlo.layout import (C_AVERAGED, C_CROSSINGS, C_SLOW, CF_H, CF_XI_DECAY, CF_XI_NOISE, KIND_KINK, N_COUNTERS,
                                P_KINK_FORCE, P_KV, P_M, P_SIGMA, P_XI_VAR)
+from montecarlo.steps.frozen import N_TAYLOR, d_step
 
 __all__ = ["STEM", "census", "parts", "throughput", "bias", "solve_time", "validate", "draw", "main"]
 
 #: Name of the written ``.json``.
-STEM = "mc_kink_speed"
+STEM = "kink_speed"
 #: The solver's fine steps: a = 0.5 and 1 run at 0.005, a = 2 at 0.01.
 CASES = ((0.5, 0.005), (1.0, 0.005), (2.0, 0.01))
 #: Upper edges of the swing-period bins (P / h) of the census.
@@ -69,14 +67,15 @@ MAX_COUNT = 9
 @njit(nogil=True)
 def _census(gen, P, nburn, nrun, cf, pp, hist, periods, totals, cap, cap_every):
     """P units from rest through nburn + nrun steps of the frozen step (xi exact OU, f = sigma xi),
-    one ``_kink_flow`` call per unit so that each unit-step's counters are its own. ``hist``
+    one :func:`montecarlo.steps.frozen.d_step` call per unit so that each unit-step's counters are its own. ``hist``
     (MAX_COUNT + 1, 2): unit-steps by crossings, untrapped / trapped; ``periods`` (bins + 1, 3):
     unit-steps, slow unit-steps, crossings by the swing's period at the start (last row: untrapped);
     ``totals``: unit-steps, slow, crossings, averaged, trapped, near rest; ``cap`` (n, 5): every
     ``cap_every``-th slow and fast unit-step's start (x, v, V, f, slow)."""
-    x, v, V = np.zeros((1, 1)), np.zeros((1, 1)), np.zeros((1, 1))
+    x, v, V, xi, F, xm, f = np.zeros((1, 1)), np.zeros((1, 1)), np.zeros((1, 1)), np.zeros((1, 1)), np.zeros((1, 1)), \
+        np.zeros((1, 1)), np.zeros((1, 1))
     st = np.zeros((1, 1), dtype=np.bool_)
-    f, w = np.zeros((1, 1)), np.ones(1)
+    w = np.ones(1)
     cnt = np.zeros(N_COUNTERS, dtype=np.int64)
     cs = np.zeros((3, N_TAYLOR + 1))
     xs, vs, Vs, xis = np.zeros(P), np.zeros(P), np.zeros(P), np.zeros(P)
@@ -89,7 +88,7 @@ def _census(gen, P, nburn, nrun, cf, pp, hist, periods, totals, cap, cap_every):
         for p in range(P):
             x[0, 0], v[0, 0], V[0, 0] = xs[p], vs[p], Vs[p]
             fp = pp[P_SIGMA] * xis[p]
-            f[0, 0] = fp
+            xi[0, 0] = xis[p]
             net = fp - pp[P_KV] * Vs[p]
             trapped = abs(net) < a
             b = PERIOD_EDGES.size
@@ -102,7 +101,7 @@ def _census(gen, P, nburn, nrun, cf, pp, hist, periods, totals, cap, cap_every):
                     b += 1
             c0, c1, c2 = cnt[C_SLOW], cnt[C_CROSSINGS], cnt[C_AVERAGED]
             start = (xs[p], vs[p], Vs[p], fp)
-            _kink_flow(x, v, V, st, f, w, cf, pp, cnt, cs)
+            d_step(x, v, V, xi, F, st, xm, f, w, cf, pp, KIND_KINK, cnt, cs)
             xs[p], vs[p], Vs[p] = x[0, 0], v[0, 0], V[0, 0]
             xis[p] = cf[CF_XI_DECAY] * xis[p] + cf[CF_XI_NOISE] * gen.standard_normal()
             if it < nburn:
@@ -160,64 +159,21 @@ def census(a: float, dt: float, *, paths: int = 256, t_run: float = 200.0, t_bur
 
 @njit(nogil=True)
 def _time_flow(cap, cf, pp, reps):
-    """``_kink_flow`` once per captured start, ``reps`` times over the sample."""
-    x, v, V = np.zeros((1, 1)), np.zeros((1, 1)), np.zeros((1, 1))
+    """The frozen step (:func:`montecarlo.steps.frozen.d_step`, one unit) once per captured start,
+    ``reps`` times over the sample."""
+    x, v, V, xi, F, xm, f = np.zeros((1, 1)), np.zeros((1, 1)), np.zeros((1, 1)), np.zeros((1, 1)), np.zeros((1, 1)), \
+        np.zeros((1, 1)), np.zeros((1, 1))
     st = np.zeros((1, 1), dtype=np.bool_)
-    f, w = np.zeros((1, 1)), np.ones(1)
+    w = np.ones(1)
     cnt = np.zeros(N_COUNTERS, dtype=np.int64)
     cs = np.zeros((3, N_TAYLOR + 1))
     acc = 0.0
     for _ in range(reps):
         for i in range(cap.shape[0]):
-            x[0, 0], v[0, 0], V[0, 0], f[0, 0] = cap[i, 0], cap[i, 1], cap[i, 2], cap[i, 3]
-            _kink_flow(x, v, V, st, f, w, cf, pp, cnt, cs)
+            x[0, 0], v[0, 0], V[0, 0], xi[0, 0] = cap[i, 0], cap[i, 1], cap[i, 2], cap[i, 3] / pp[P_SIGMA]
+            d_step(x, v, V, xi, F, st, xm, f, w, cf, pp, KIND_KINK, cnt, cs)
             acc += x[0, 0]
     return acc, cnt
-
-
-def _component_kernels(new: bool):
-    """numba timing loops of the slow step's parts over captured starts; ``new``: the kernels with a
-    Taylor degree and step constants (else the earlier signatures, for another tree)."""
-    from montecarlo import _kink as kk
-
-    if new:
-        prep = njit(lambda h, pp: kk._step_constants(h, pp))
-        series = njit(lambda x, v, V, F, pp, cs, kc: kk._series(x, v, V, F, pp, cs, kc[1]))
-        cross = njit(lambda cs, s, rem, kc: kk._first_crossing(cs, s, 0, rem, kc[1], False))
-        ends = njit(lambda cs, rem, kc: kk._horner(cs, 0, rem, 0, kc[1]) + kk._horner(cs, 1, rem, 0, kc[1])
-                    + kk._horner(cs, 2, rem, 0, kc[1]))
-        avg = njit(lambda x, v, V, f, rem, pp, kc: kk._average_swing(x, v, V, f, rem, pp, kc)[0])
-    else:
-        prep = njit(lambda h, pp: (h,))
-        series = njit(lambda x, v, V, F, pp, cs, kc: kk._series(x, v, V, F, pp, cs))
-        cross = njit(lambda cs, s, rem, kc: kk._first_crossing(cs, s, 0, rem))
-        ends = njit(lambda cs, rem, kc: kk._horner(cs, 0, rem, 0) + kk._horner(cs, 1, rem, 0) + kk._horner(cs, 2, rem, 0))
-        avg = njit(lambda x, v, V, f, rem, pp, kc: kk._average_swing(v, V, f, rem, pp)[0])
-
-    @njit(nogil=True)
-    def loop(cap, h, pp, reps, part):
-        cs = np.zeros((3, N_TAYLOR + 1))
-        kc = prep(h, pp)
-        a = pp[P_KINK_FORCE]
-        acc, found = 0.0, 0
-        for _ in range(reps):
-            for i in range(cap.shape[0]):
-                s = 1.0 if cap[i, 0] > 0.0 else -1.0
-                if part == 3:
-                    acc += avg(cap[i, 0], cap[i, 1], cap[i, 2], cap[i, 3], h, pp, kc)
-                    continue
-                series(cap[i, 0], cap[i, 1], cap[i, 2], cap[i, 3] - a * s, pp, cs, kc)
-                if part == 1:
-                    tc = cross(cs, s, h, kc)
-                    found += tc >= 0.0
-                    acc += tc
-                elif part == 2:
-                    acc += ends(cs, h, kc)
-                else:
-                    acc += cs[0, 3]
-        return acc, found
-
-    return loop
 
 
 def _ns(fn, n: int, repeats: int = 5) -> float:
@@ -232,10 +188,11 @@ def _ns(fn, n: int, repeats: int = 5) -> float:
 
 
 def parts(a: float, dt: float, cap: np.ndarray, reps: int = 20) -> dict[str, Any]:
-    """Nanoseconds of the slow step's parts on the census's captured starts (its sample of slow
-    unit-steps, and of fast ones for the call's own cost)."""
-    from montecarlo import _kink as kk
-
+    """Nanoseconds of one unit's frozen step on the census's captured starts: its sample of slow
+    unit-steps (with their crossings and averaged maps per step) and of fast ones (the call's own
+    cost). The split of a slow step into its series, root finding and averaged map is timed on
+    the kernel's private functions, which a study does not import: the numbers measured that way
+    are in docs/methods.md."""
     h = Harvester.build(a=a, n=1)
     cf, pp = step_coefficients(h, dt), physical_vector(h, 1e300)
     slow = np.ascontiguousarray(cap[(cap[:, 4] > 0) & ~((cap[:, 0] == 0.0) & (cap[:, 1] == 0.0))])
@@ -245,12 +202,6 @@ def parts(a: float, dt: float, cap: np.ndarray, reps: int = 20) -> dict[str, Any
     out["per_slow_step"] = {"crossings": cnt[C_CROSSINGS] / len(slow), "averaged": cnt[C_AVERAGED] / len(slow)}
     out["ns_flow_slow_step"] = _ns(lambda: _time_flow(slow, cf, pp, reps), reps * len(slow))
     out["ns_flow_fast_step"] = _ns(lambda: _time_flow(fast, cf, pp, reps), reps * len(fast))
-    loop = _component_kernels("kc" in inspect.signature(kk._kink_unit.py_func).parameters)
-    xs = np.ascontiguousarray(slow[slow[:, 0] != 0.0])
-    for name, part in (("ns_series", 0), ("ns_series_and_root_finding", 1), ("ns_series_and_end_state", 2),
-                       ("ns_averaged_map", 3)):
-        out[name] = _ns(lambda: loop(xs, dt, pp, reps, part), reps * len(xs))
-    out["root_found_fraction"] = loop(xs, dt, pp, 1, 1)[1] / len(xs)
     return out
 
 
@@ -385,7 +336,7 @@ def _in_tree(path: str, part: str, args: dict[str, Any]) -> Any:
     """Run ``part`` of this module with ``args`` in the checkout at ``path`` (its packages first
     on ``PYTHONPATH``) and return its JSON result."""
     env = {**os.environ, "PYTHONPATH": os.path.abspath(path)}
-    # -P: the script's own folder (which holds a module named montecarlo) stays off sys.path
+    # -P: the script's own folder stays off sys.path (only the tree's packages are imported)
     cmd = [sys.executable, "-P", os.path.abspath(__file__), "--worker", json.dumps({"part": part, **args})]
     done = subprocess.run(cmd, env=env, capture_output=True, text=True, check=True)
     return json.loads(done.stdout.splitlines()[-1])
@@ -409,7 +360,7 @@ def _worker(spec: dict[str, Any]) -> Any:
 
 def _trees(specs: list[str]) -> dict[str, str]:
     """``NAME=PATH`` arguments as a dict, with this checkout as ``"this"``."""
-    trees = {"this": str(Path(__file__).resolve().parents[2])}
+    trees = {"this": str(Path(__file__).resolve().parents[3])}
     for spec in specs:
         name, _, path = spec.partition("=")
         if not name or not path or not Path(path, "montecarlo").is_dir():
@@ -419,11 +370,11 @@ def _trees(specs: list[str]) -> dict[str, str]:
 
 
 def main(argv: list[str] | None = None) -> dict[str, Any]:
-    """Command line: the parts asked for, each written into ``--out``/mc_kink_speed.json under
+    """Command line: the parts asked for, each written into ``--out``/kink_speed.json under
     ``--label`` as soon as it is done (the file's other entries kept)."""
     import argparse
 
-    ap = argparse.ArgumentParser(prog="python -m validation.studies.mc_kink_speed",
+    ap = argparse.ArgumentParser(prog="python -m validation.studies.kink.speed",
                                  description=__doc__.splitlines()[0])
     ap.add_argument("parts", nargs="+", choices=("census", "parts", "throughput", "bias", "solve", "validate"))
     ap.add_argument("--out", type=Path, required=True, metavar="DIR")
@@ -446,7 +397,7 @@ def main(argv: list[str] | None = None) -> dict[str, Any]:
     path = args.out / f"{STEM}.json"
     res = json.loads(path.read_text()) if path.exists() else {}
     entry = res.setdefault(args.label, {})
-    entry["command"] = "python -m validation.studies.mc_kink_speed " + " ".join(argv if argv is not None else sys.argv[1:])
+    entry["command"] = "python -m validation.studies.kink.speed " + " ".join(argv if argv is not None else sys.argv[1:])
 
     def save(key: str, value: Any) -> None:
         entry[key] = value
