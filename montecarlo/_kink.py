@@ -65,11 +65,10 @@ def _decays(u: float, pp: np.ndarray) -> tuple:
 @njit(cache=True, nogil=True)
 def _step_constants(h: float, pp: np.ndarray) -> tuple:
     """What every unit's step of size h shares, computed once per step: h, the Taylor degree
-    (:func:`_degree`), the curvature margin of :func:`_kink_flow`'s concavity test
-    :math:`(h^2/8)\\rho^2e^{\\rho h}` with :math:`\\rho = \\|A\\|_\\infty`, and :func:`_decays` of h."""
+    (:func:`_degree`, with :math:`\\rho = \\|A\\|_\\infty`) and :func:`_decays` of h."""
     m, gamma, Kv, Kc, tau_p, c = pp[P_M], pp[P_GAMMA], pp[P_KV], pp[P_KC], pp[P_TAU_P], pp[P_STIFFNESS]
     rho = max(1.0, (abs(c) + abs(Kv)) / m + gamma, abs(Kc) + 1.0 / tau_p)
-    return (h, _degree(h, rho), 0.125 * h * h * rho * rho * math.exp(rho * h)) + _decays(h, pp)
+    return (h, _degree(h, rho)) + _decays(h, pp)
 
 
 @njit(cache=True, nogil=True, inline="always")
@@ -233,9 +232,9 @@ def _average_swing(x: float, v: float, V: float, f: float, rem: float, pp: np.nd
     """
     m, Kc, tau_p, a = pp[P_M], pp[P_KC], pp[P_TAU_P], pp[P_KINK_FORCE]
     h = kc[0]
-    u = _net_exit_time(f, V, rem, pp, kc[3] if rem == h else math.exp(-rem / tau_p))
+    u = _net_exit_time(f, V, rem, pp, kc[2] if rem == h else math.exp(-rem / tau_p))
     net = f - pp[P_KV] * V
-    e_p, e_w, decay, grow = (kc[3], kc[4], kc[5], kc[6]) if u == h else _decays(u, pp)
+    e_p, e_w, decay, grow = (kc[2], kc[3], kc[4], kc[5]) if u == h else _decays(u, pp)
     V = V * e_p
     if x == 0.0 and v == 0.0:
         return 0.0, 0.0, V, u
@@ -351,7 +350,7 @@ def _kink_flow(x, v, V, stuck, f, w, cf, pp, counters, cs) -> None:
     margin = 0.125 * h * h * rho * rho / (1.0 - rho * h) if rho * h < 0.5 else math.inf
     # the step's other constants only once some unit needs them (none do, mostly, at small a):
     # with a few paths per call their exponentials would cost more than the steps themselves
-    kc = (h, 0, 0.0, 0.0, 0.0, 0.0, 0.0)
+    kc = (h, 0, 0.0, 0.0, 0.0, 0.0)
     averaging = pp[P_KINK_RULE] != HOLD
     for j in range(N):
         for p in range(P):
