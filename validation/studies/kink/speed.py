@@ -462,7 +462,8 @@ def draw(entry: dict[str, Any], path: Path) -> None:
     ax2.set_yscale("log")
     ax2.set_xlabel("coarse dt")
     ax2.set_ylabel("|eta(dt) - eta(dt/2)| (common noise)")
-    ax2.legend(fontsize=7)
+    if rows:
+        ax2.legend(fontsize=7)
     fig.tight_layout()
     fig.savefig(path, dpi=110)
     plt.close(fig)
