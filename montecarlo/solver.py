@@ -107,20 +107,31 @@ def _common_random_numbers(solver: MonteCarlo, h: Harvester, replicas: int) -> d
             "min_replicas": replicas, "max_replicas": replicas, "tol": 0.999}
 
 
-def _check_range(est: Estimate, h: Harvester) -> None:
-    """Raise :class:`ParameterError` when V2, Pin or eta left the normal double range.
+def _estimate(ens: Ensemble, h: Harvester) -> Estimate:
+    """:func:`~.estimate.estimate`, or :class:`ParameterError` where the parameters' scales leave
+    the double range.
 
-    Every parameter is > 0, so each is > 0 in exact arithmetic; a mean of 0 (or a subnormal or
-    infinite one) means the parameters' scales under- or overflow double precision (a subnormal
-    K_c makes V2 ~ K_c^2 = 0), and no relative error exists for it.
+    Every parameter is > 0, so V2, Pin and eta are > 0 in exact arithmetic; a mean of 0 (or a
+    subnormal or infinite one), an infinite error, or an overflow in the estimate means the
+    scales under- or overflow double precision (a subnormal K_c makes V2 ~ K_c^2 = 0; sigma = 1e78
+    makes the variance of V2 ~ sigma^8 overflow), and no relative error exists for it.
     """
-    bad = {q: est.mean[q] for q in ("V2", "Pin", "eta")
-           if est.replicas and not SMALLEST_NORMAL <= abs(est.mean[q]) < math.inf}
-    if bad:
-        what = ", ".join(f"{q} = {v:.3g}" for q, v in bad.items())
-        raise ParameterError(f"the Monte Carlo estimate has {what}: the parameters' scales (a = {h.a:g}, "
-                             f"{', '.join(f'{k} = {v:g}' for k, v in h.params.to_dict().items())}) put it "
-                             f"outside double precision; rescale the problem (docs/model.md §5)")
+    def refuse(what: str) -> ParameterError:
+        given = ", ".join(f"{k} = {v:g}" for k, v in h.params.to_dict().items())
+        return ParameterError(f"the Monte Carlo estimate has {what}: the parameters' scales (a = {h.a:g}, "
+                              f"{given}) put it outside double precision; rescale the problem (docs/model.md §5)")
+
+    try:
+        with np.errstate(over="raise"):
+            est = estimate(ens, h)
+    except FloatingPointError as exc:
+        raise refuse(f"an overflow ({exc})") from exc
+    if est.replicas:
+        bad = {q: est.mean[q] for q in ("V2", "Pin", "eta")
+               if not (SMALLEST_NORMAL <= abs(est.mean[q]) < math.inf and math.isfinite(est.se[q]))}
+        if bad:
+            raise refuse(", ".join(f"{q} = {v:.3g}" for q, v in bad.items()))
+    return est
 
 
 @dataclass(frozen=True)
@@ -477,8 +488,7 @@ class MonteCarlo:
         with bar:
             ens = self._run(h, plan, self.min_replicas, 0)
             bar.update(ens.replicas)
-            est = estimate(ens, h)
-            _check_range(est, h)
+            est = _estimate(ens, h)
             met = False
             while True:
                 # the bias or a transient may only show once enough replicas resolve it:
@@ -490,7 +500,7 @@ class MonteCarlo:
                     plan = redo[1]
                     ens = self._run(h, plan, self.min_replicas, 0)
                     bar.update(ens.replicas)
-                    est = estimate(ens, h)
+                    est = _estimate(ens, h)
                     continue
                 rel = est.rel_error("eta")
                 stat_rel = est.se["eta"] / abs(est.mean["eta"]) if est.replicas else math.inf
@@ -519,7 +529,7 @@ class MonteCarlo:
                     break
                 ens = ens.merge(self._run(h, plan, batch, R))
                 bar.update(batch)
-                est = estimate(ens, h)
+                est = _estimate(ens, h)
         return ens, est, met, dataclasses.replace(plan, notes={**plan.notes, "restarts": restarts})
 
     # -- result ------------------------------------------------------------------------------
