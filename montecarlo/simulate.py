@@ -57,7 +57,7 @@ def simulate(
     step: str = "auto",
     controls: tuple[str, ...] = (),
     third_level: bool = False,
-    generator_every: float = 0.05,
+    generator_every: float = 0.0,
 ) -> Ensemble:
     """Simulate independent replicas of ``h`` and return their raw moment sums.
 
@@ -125,8 +125,8 @@ def simulate(
     generator_every : float
         Time between the points of the generator control (``"generator"`` in ``controls``,
         :mod:`montecarlo.controls.generator`), >= 0, rounded to whole steps of level 0 (at least
-        one); the default 0.05 is the moments' sample interval. Shorter intervals follow the
-        basis functions more closely (more variance removed) at more cost per step.
+        one); the default 0 takes every step. Longer intervals cost less per step and remove
+        less variance (docs/methods.md, "Generator controls").
     third_level : bool
         With ``richardson``, also run level 2 at ``2 dt`` on the same noise (two coarse
         increments composed exactly), so that two Richardson extrapolations, from

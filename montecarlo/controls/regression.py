@@ -53,6 +53,10 @@ def crossfit_dof(replicas: int, p: int) -> bool:
     fold's fit (all replicas but the fold's) meets :func:`enough_dof`."""
     return enough_dof(replicas - -(-replicas // FOLDS), p)
 
+#: Eigenvalues of a fold's scaled Gram matrix below this fraction of the largest are left out of
+#: its fit (:func:`crossfit_estimate`; the square of a singular-value cut of 1e-7).
+_RANK_CUT = 1e-14
+
 #: Relative spread over replicas below which a control counts as constant (round-off).
 _FLAT = 1e-9
 
@@ -152,13 +156,13 @@ def crossfit_estimate(Y: np.ndarray, C: np.ndarray, mu: np.ndarray, folds: int =
 
     .. math::
 
-        Z_i = Y_i - \hat B_{-k(i)} (C_i - \mu),
+        Z_i = Y_i - \\hat B_{-k(i)} (C_i - \\mu),
 
-    with :math:`\hat B_{-k}` the least-squares coefficients fitted on the replicas outside its
-    fold k(i). :math:`\hat B_{-k}` is independent of replica i and :math:`E[C_i] = \mu`, so every
+    with :math:`\\hat B_{-k}` the least-squares coefficients fitted on the replicas outside its
+    fold k(i). :math:`\\hat B_{-k}` is independent of replica i and :math:`E[C_i] = \\mu`, so every
     :math:`Z_i` has mean :math:`E[Y]` exactly, whatever the fit: the estimate
-    :math:`\bar Z` is unbiased for any number of controls, and its error bar is the spread of
-    the :math:`Z_i` over replicas, :math:`\widehat{\mathrm{Cov}}(\bar Z) = S_Z / R` (R - 1
+    :math:`\\bar Z` is unbiased for any number of controls, and its error bar is the spread of
+    the :math:`Z_i` over replicas, :math:`\\widehat{\\mathrm{Cov}}(\\bar Z) = S_Z / R` (R - 1
     degrees of freedom). In-sample regression (:func:`regression_estimate`) is exact for a linear
     relation but, with many controls, its intercept picks up the nonlinear part of the relation
     fitted on the same replicas; here the fit's error only adds variance, which the spread shows.
@@ -185,21 +189,30 @@ def crossfit_estimate(Y: np.ndarray, C: np.ndarray, mu: np.ndarray, folds: int =
     if R < 2 * folds:
         raise ParameterError(f"cross-fitting needs at least 2 replicas per fold, got R = {R} for {folds} folds")
     fold = np.arange(R) % folds
+    # one pass over the data: the folds' fits come from the whole Gram matrix minus each fold's
+    # (centred and scaled globally first, so that the folds' re-centring is a small correction)
+    cbar = C.mean(axis=0)
+    sd = C.std(axis=0)
+    flat = sd <= _FLAT * np.maximum(np.abs(cbar), np.abs(mu))
+    scale = np.where(flat | (sd == 0), 1.0, sd)
+    X = np.where(flat, 0.0, (C - cbar) / scale)
+    Yc = Y - Y.mean(axis=0)
+    G, H = X.T @ X, X.T @ Yc
     Z = np.empty_like(Y)
     coefs = []
     for k in range(folds):
-        fit, out = fold != k, fold == k
-        Cf, Yf = C[fit], Y[fit]
-        cbar = Cf.mean(axis=0)
-        Cc = Cf - cbar
-        scale = np.sqrt((Cc**2).sum(axis=0))
-        flat = scale <= _FLAT * np.sqrt(Cf.shape[0]) * np.maximum(np.abs(cbar), np.abs(mu))
-        scale = np.where((scale > 0) & ~flat, scale, 1.0)
-        Cc = np.where(flat, 0.0, Cc)
-        coef_s, *_ = np.linalg.lstsq(Cc / scale, Yf - Yf.mean(axis=0), rcond=1e-10)
-        coef = np.where(flat[:, None], 0.0, coef_s / scale[:, None]).T
-        Z[out] = Y[out] - (C[out] - mu) @ coef.T
-        coefs.append(coef)
+        out = fold == k
+        Xk, Yk = X[out], Yc[out]
+        n = R - Xk.shape[0]
+        mx, my = -Xk.sum(axis=0) / n, -Yk.sum(axis=0) / n
+        Gt = G - Xk.T @ Xk - n * np.outer(mx, mx)
+        Ht = H - Xk.T @ Yk - n * np.outer(mx, my)
+        w, V = np.linalg.eigh(Gt)
+        # the least-squares solution on the resolved directions (lstsq's rank cut, squared)
+        keep = w > _RANK_CUT * max(w.max(), 0.0)
+        coef = (V[:, keep] / w[keep]) @ (V[:, keep].T @ Ht)
+        Z[out] = Y[out] - ((C[out] - mu) / scale) @ np.where(flat[:, None], 0.0, coef)
+        coefs.append(np.where(flat[:, None], 0.0, coef / scale[:, None]).T)
     zbar, ybar = Z.mean(axis=0), Y.mean(axis=0)
     Zc, Yc = Z - zbar, Y - ybar
     return Regression(mean=zbar, cov=Zc.T @ Zc / (R - 1) / R, plain_mean=ybar, plain_cov=Yc.T @ Yc / (R - 1) / R,
