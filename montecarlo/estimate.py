@@ -40,7 +40,7 @@ from fpe_harvester.model import Harvester
 
 from .coefficients import onsite_kind
 from .controls.regression import crossfit_estimate, regression_estimate
-from .controls.sets import CONTROL_SETS, choose_controls, control_columns
+from .controls.sets import CONTROL_SETS, SetColumns, choose_controls, control_columns
 from .ensemble import Ensemble
 from .layout import KIND_KINK
 
@@ -261,9 +261,8 @@ def _estimate(e: Ensemble, h: Harvester, order: float | None, control: bool | No
     Y = Ff + scale * (Ff - coarse[valid]) if extrapolate else Ff
     chosen = "none"
     if use:
-        chosen = choose_controls({name: cols[0].shape[1] for name, cols in sets.items()})
+        chosen, (mean, cov, plain_cov) = _choose(sets, Y, R)
         C, C_first, mu, crossfit = sets[chosen]
-        mean, cov, plain_cov = _regression(Y, C, mu, crossfit)
         for i, name in enumerate(_NAMES):
             if cov[i, i] > 0:
                 reduction[name] = float(plain_cov[i, i] / cov[i, i])
@@ -303,6 +302,32 @@ def _estimate(e: Ensemble, h: Harvester, order: float | None, control: bool | No
         identity_V2=_mean_se(r1), identity_power=_mean_se(r2), drift=drift, drift_se=drift_se,
         reduction=reduction, control=use, controls=chosen, extrapolated=bool(extrapolate),
         residual=residual, residual_se=residual_se)
+
+
+def _choose(sets: dict[str, SetColumns], Y: np.ndarray, R: float) -> tuple[str, tuple[np.ndarray, ...]]:
+    """The set to use (:func:`choose_controls`) and its regression (:func:`_regression`).
+
+    A cross-fitted set (many controls) is kept only where its variance of eta is below that of
+    the richest in-sample set: with heavy-tailed replicas (short runs of the strong kink) its
+    fit can add more variance than it removes. Both variances come from hundreds of replicas
+    (:func:`montecarlo.controls.regression.crossfit_dof`), so the choice's preference for an
+    underestimated variance is a few per cent of it (the coverage: docs/methods.md, "Generator
+    controls").
+    """
+    chosen = choose_controls({name: cols.C.shape[1] for name, cols in sets.items()})
+    fit = _regression(Y, *_controls(sets[chosen]))
+    plain = {name: cols.C.shape[1] for name, cols in sets.items() if not cols.crossfit}
+    if not sets[chosen].crossfit or not plain:
+        return chosen, fit
+    other = choose_controls(plain)
+    other_fit = _regression(Y, *_controls(sets[other]))
+    if _ratio(other_fit[0], other_fit[1], R)[1] < _ratio(fit[0], fit[1], R)[1]:
+        return other, other_fit
+    return chosen, fit
+
+
+def _controls(cols: SetColumns) -> Controls:
+    return cols.C, cols.mu, cols.crossfit
 
 
 @functools.cache

@@ -97,9 +97,10 @@ _T_RUN_MART_TOL = 1e-3
 #: and martingale controls leave much of it (the strong kink), the generator's reduce eta's
 #: variance 2-10x more; elsewhere 1.0-1.6x, which fewer paths per replica would eat up
 #: (docs/methods.md, "Generator controls"). The run restarts with them when it is long enough for
-#: their fit: ``_GEN_REPLICAS`` replicas per control at ``_GEN_MIN_PATHS`` paths or more, given a
-#: variance reduction of at least ``_GEN_VR`` (the least measured where the rule adds them).
-_GEN_RELVAR, _GEN_VR, _GEN_REPLICAS, _GEN_MIN_PATHS = 2.4, 40.0, 4.0, 2
+#: their fit, ``_GEN_FIT`` replicas per control at ``_GEN_MIN_PATHS`` paths, given a variance
+#: reduction of at least ``_GEN_VR`` (the least measured where the rule adds them); the paths per
+#: replica aim at ``_GEN_REPLICAS`` replicas per control.
+_GEN_RELVAR, _GEN_VR, _GEN_FIT, _GEN_REPLICAS, _GEN_MIN_PATHS = 2.4, 40.0, 4.0, 8.0, 2
 
 #: A confined system's escape threshold is at least this many natural amplitudes
 #: (:func:`~montecarlo.harmonic.natural_amplitude`), and at least 100.
@@ -464,15 +465,16 @@ class MonteCarlo:
             return "t_burn", dataclasses.replace(plan, t_burn=t_burn, t_run=t_run, paths=paths)
         return None
 
-    def _generator_plan(self, h: Harvester, plan: RunPlan, ens: Ensemble, est: Estimate) -> tuple[RunPlan, bool]:
+    def _generator_plan(self, h: Harvester, plan: RunPlan, ens: Ensemble, est: Estimate) -> tuple[RunPlan, int]:
         """After the first batch: the plan with the generator controls and the paths per replica
-        for their fit, and True, where they pay (see ``generator`` and ``_GEN_RELVAR``); else the
-        plan with a note why not, and False."""
-        def note(why: str, switch: bool = False, **changes: Any) -> tuple[RunPlan, bool]:
-            return dataclasses.replace(plan, notes={**plan.notes, "generator": why}, **changes), switch
+        for their fit, and the replicas of its first batch (half those it is expected to need),
+        where they pay (see ``generator`` and ``_GEN_RELVAR``); else the plan with a note why
+        not, and 0."""
+        def note(why: str, first: int = 0, **changes: Any) -> tuple[RunPlan, int]:
+            return dataclasses.replace(plan, notes={**plan.notes, "generator": why}, **changes), first
 
         if not (self.generator and self.martingale and self.control) or plan.generator:
-            return plan, False
+            return plan, 0
         if h.N > 1:
             return note("not used: a ring (measured: no gain over the twin and martingale controls)")
         eta = est.mean["eta"]
@@ -484,13 +486,13 @@ class MonteCarlo:
                         f"{_GEN_RELVAR:g}")
         controls = len(GENERATOR.sums(h)) + len(MARTINGALE.sums(h)) + (len(TWIN_MOMENTS) if plan.twin else 0)
         need = relvar / (_GEN_VR * (0.9 * self.tol) ** 2 * plan.t_run)  # paths to reach tol with them
-        want = _GEN_REPLICAS * controls
-        paths = self.paths or max(_GEN_MIN_PATHS, min(plan.paths, int(need / want)))
-        if need / paths < want:
+        paths = self.paths or max(_GEN_MIN_PATHS, min(plan.paths, int(need / (_GEN_REPLICAS * controls))))
+        if need / paths < _GEN_FIT * controls:
             return note(f"not used: the run (about {need:.3g} paths with them) is too short for the fit of "
-                        f"{controls} controls ({want:.0f} replicas of {paths} paths)")
+                        f"{controls} controls ({_GEN_FIT * controls:.0f} replicas of {paths} paths)")
+        first = min(self.max_replicas, max(self.min_replicas, round(0.5 * need / paths)))
         return note(f"used: plain relative variance of eta {relvar:.3g} per unit path time; about {need:.3g} "
-                    f"paths, {paths} per replica", True, generator=True, paths=paths)
+                    f"paths, {paths} per replica", first, generator=True, paths=paths)
 
     def run(self, h: Harvester, plan: RunPlan | None = None) -> tuple[Ensemble, Estimate, bool, RunPlan]:
         """Adaptive replica loop; returns the ensemble, its estimate, whether tol was met, the plan."""
@@ -510,10 +512,10 @@ class MonteCarlo:
             ens = self._run(h, plan, self.min_replicas, 0)
             bar.update(ens.replicas)
             est = estimate(ens, h)
-            plan, switch = self._generator_plan(h, plan, ens, est)
-            if switch:
+            plan, first = self._generator_plan(h, plan, ens, est)
+            if first:
                 restarts.append("generator")
-                ens = self._run(h, plan, self.min_replicas, 0)
+                ens = self._run(h, plan, first, 0)
                 bar.update(ens.replicas)
                 est = estimate(ens, h)
             met = False
