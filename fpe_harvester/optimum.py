@@ -105,14 +105,14 @@ class Optimum:
     def to_dict(self) -> dict[str, Any]:
         """JSON-ready dict with the attributes' names (``over``, ``maximize``, ``x_opt``,
         ``x_opt_err``, ``value``, ``value_err``, ``x_ci``, ``value_ci``, ...)."""
-        from .result import _jsonable
+        from .result import jsonable
 
         return {"over": self.over, "maximize": self.maximize, "x_opt": self.x_opt, "x_opt_err": self.x_opt_err,
                 "value": self.value, "value_err": self.value_err,
                 "x_ci": None if self.x_ci is None else list(self.x_ci),
                 "value_ci": None if self.value_ci is None else list(self.value_ci),
                 "confidence": self.confidence, "method": self.method, "status": self.status.value,
-                "message": self.message, "info": _jsonable(dict(self.info))}
+                "message": self.message, "info": jsonable(dict(self.info))}
 
 
 def _fit(x: np.ndarray, y: np.ndarray, x0: float, scale: float) -> tuple[float, float, float, float, float]:

@@ -14,7 +14,7 @@ from .model import Harvester
 from .wide import LARGEST, Wide
 
 __all__ = ["QUANTITIES", "Stats", "Status", "parameters", "harvester_from_dict", "to_frame",
-           "propagated_eta_error"]
+           "propagated_eta_error", "jsonable"]
 
 #: Names of the stationary observables every solver reports, each with its error ``<name>_err``
 #: (the one list of them: scenes, the point cache and the command line use it too).
@@ -223,7 +223,7 @@ class Stats:
             message=self.message,
             method=self.method,
             growth_rate=self.growth_rate,
-            info=_jsonable(dict(self.info)),
+            info=jsonable(dict(self.info)),
         )
         if self.harvester is not None:
             out["harvester"] = self.harvester.to_dict()
@@ -328,14 +328,14 @@ def _float_or_refuse(where: str, what: str, value: Wide) -> float:
     return x
 
 
-def _jsonable(obj: Any) -> Any:
+def jsonable(obj: Any) -> Any:
     """Convert numpy scalars/arrays and nested containers to JSON-ready Python objects."""
     if isinstance(obj, Mapping):
-        return {str(k): _jsonable(v) for k, v in obj.items()}
+        return {str(k): jsonable(v) for k, v in obj.items()}
     if isinstance(obj, (list, tuple)):
-        return [_jsonable(v) for v in obj]
+        return [jsonable(v) for v in obj]
     if hasattr(obj, "tolist"):
-        return _jsonable(obj.tolist())
+        return jsonable(obj.tolist())
     if isinstance(obj, float) and not math.isfinite(obj):
         return None
     if isinstance(obj, enum.Enum):

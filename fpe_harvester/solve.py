@@ -345,10 +345,21 @@ def _chosen(res: Stats, name: str, declined: Mapping[str, str]) -> Stats:
     message = res.message
     if declined:
         # the reason's first clause says why; the advice after it (which method to use) is moot
-        why = ", ".join(f"{title(n)} ({reason.split('; ')[0]})" for n, reason in declined.items())
+        why = ", ".join(f"{title(n)} ({_first_clause(reason)})" for n, reason in declined.items())
         note = f"method auto chose {title(name)}; declined: {why}"
         message = f"{message}; {note}" if message else note
     return dataclasses.replace(res, info=info, message=message)
+
+
+def _first_clause(reason: str) -> str:
+    """``reason`` up to its first ``"; "`` or ``". "`` outside parentheses (a clause whose own
+    parenthesis holds a semicolon stays whole)."""
+    depth = 0
+    for i, char in enumerate(reason):
+        depth += {"(": 1, ")": -1}.get(char, 0)
+        if depth == 0 and char in ";." and reason[i + 1:i + 2] == " ":
+            return reason[:i]
+    return reason
 
 
 def _fallback(h: Harvester, first: Stats, name: str, common: Mapping[str, Any],

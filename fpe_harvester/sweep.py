@@ -22,7 +22,7 @@ import numpy as np
 
 from .errors import ParameterError
 from .model import Harvester, Params
-from .result import QUANTITIES, Stats, _jsonable, to_frame
+from .result import QUANTITIES, Stats, jsonable, to_frame
 from .solve import FALLBACK_SECONDS, Solver, solve_many
 
 __all__ = ["AXES", "Sweep", "sweep"]
@@ -79,7 +79,7 @@ class Sweep:
 
     def to_dict(self) -> dict[str, Any]:
         """JSON-ready: the axes and one row per point (its record and the solver's ``info``)."""
-        rows = [{**rec, "info": _jsonable(dict(res.info))} for rec, res in zip(self.records(), self.results)]
+        rows = [{**rec, "info": jsonable(dict(res.info))} for rec, res in zip(self.records(), self.results)]
         return {"axes": list(self.axes), "rows": rows}
 
     def table(self) -> str:

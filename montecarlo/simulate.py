@@ -7,7 +7,7 @@ so their spread gives honest standard errors (the samples inside one path are co
 
 Random numbers: every chunk of paths owns a :class:`numpy.random.Generator` (PCG64) seeded by
 ``SeedSequence(seed, spawn_key=(replica, chunk))`` and drawn from inside the numba kernel
-(measured fastest, see ``validation/studies/montecarlo.py``). Chunks run on a thread pool with
+(measured fastest, see ``validation/studies/mc/bench.py``). Chunks run on a thread pool with
 the GIL released, so results depend on the seed only, not on the number of threads.
 """
 

@@ -77,7 +77,7 @@ _LOOSE_TOL = 5e-3
 #: An upper bound on the path loop's speed, in unit-steps (one unit of one path advanced by one
 #: ``dt``) per second and thread, used to refuse a first batch that ``max_time`` cannot cover
 #: (a batch is not interrupted): eight times the fastest rate measured
-#: (``python -m validation.studies.mc_throughput``), so that no run the budget could cover is
+#: (``python -m validation.studies.mc.throughput``), so that no run the budget could cover is
 #: refused on a faster machine.
 FASTEST_UNIT_STEPS = 5e8
 #: Automatic measured time per path, in burn-ins (when longer than the default below).

@@ -2,9 +2,12 @@
 and the report written by ``harvester validate`` (or ``python -m validation``).
 
 * :mod:`.harness`: the pipeline (runner, checks, report);
-* :mod:`.sections`: one module per section of the report;
+* :mod:`.sections`: one module per section of the report, and the table that orders them;
+* :mod:`.comparisons`: what sections compute alike (error-bar coverage, the kink's density, the
+  strong kink's second Monte Carlo construction);
 * :mod:`.references`: independent references and the table of long runs;
-* :mod:`.studies`: the benchmarks and design studies, each ``python -m validation.studies.<name>``.
+* :mod:`.studies`: the benchmarks and design studies by subject, each
+  ``python -m validation.studies.<subject>.<name>``.
 """
 
 from __future__ import annotations

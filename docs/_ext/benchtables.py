@@ -41,10 +41,33 @@ def _pct(x: float | None) -> str:
 
 
 def _references(d: dict[str, Any]) -> Table:
+    from validation.references import reftable
+
+    def state(name: str, e: dict[str, Any]) -> str:
+        case = next((c for c in reftable.CASES if c.label == name), None)
+        try:
+            why = reftable.staleness(e, e["method"], case)
+        except (RuntimeError, OSError):
+            return "unknown (no git history)"
+        return "current" if why is None else f"stale: {why}"
+
     rows = [[f"``{name}``", _pm(e["eta"], e["eta_err"]), e["status"], _num(e["seconds"]), f"``{e['commit']}``",
-             f"``{e['command']}``"] for name, e in d.items()]
-    return (["entry", "eta ± error", "status", "s", "commit", "command"], rows,
+             state(name, e), f"``{e['command']}``"] for name, e in d.items()]
+    return (["entry", "eta ± error", "status", "s", "commit", "state", "command"], rows,
             "validation/references/data/reference_values.json", "python -m validation.references.reftable")
+
+
+def _exactflow_bias(d: dict[str, Any]) -> Table:
+    rows = []
+    for b in d["bounds"]:
+        diff, bound = b["relative_difference_from_finest"], b["relative_bias_bound"]
+        rows.append([f"n = {b['system']['n']:g}, a = {b['system']['a']:g}", f"{b['step']:g}",
+                     f"{b['w_trap']:g}" if b["system"]["n"] == 1.0 else "-",
+                     *(f"{diff[q]['minus_finest']:+.1e} ± {diff[q]['se']:.0e}" for q in ("eta", "V2", "Pin")),
+                     *(f"{bound[q]:.1e}" for q in ("eta", "V2", "Pin"))])
+    head = ["system", "step h", "w_trap", "eta minus finest", "V2 minus finest", "Pin minus finest",
+            "bias bound eta", "V2", "Pin"]
+    return head, rows, "exactflow_bias.json", "python -m validation.studies.kink.exactflow_bias --out validation/data"
 
 
 def _fpe_time(d: dict[str, Any]) -> Table:
@@ -57,7 +80,7 @@ def _fpe_time(d: dict[str, Any]) -> Table:
                          f"{ada['seconds']:.3g} ({ada['status']})"])
     head = ["case", "tol", "s, default mesh", "reported error", "actual error", "bar holds",
             "s, adaptive mesh"]
-    return head, rows, "bench_fpe_meshes.json", "python -m validation.studies.fpe --meshes"
+    return head, rows, "bench_fpe_meshes.json", "python -m validation.studies.fpe.bench --meshes"
 
 
 def _yes(flag: bool | None) -> str:
@@ -74,7 +97,7 @@ def _fpe_schemes(d: dict[str, Any]) -> Table:
                      _pm(mc["eta"], mc["eta_err"]) if mc else "-"])
     head = ["case", "tol", "s, DG in x", "eta, DG in x", "s, DG in (x, v)", "eta, DG in (x, v)",
             "agree within bars", "eta, Monte Carlo"]
-    return head, rows, "bench_fpe_schemes.json", "python -m validation.studies.fpe --schemes"
+    return head, rows, "bench_fpe_schemes.json", "python -m validation.studies.fpe.bench --schemes"
 
 
 def _mc_policy(d: dict[str, Any]) -> Table:
@@ -87,7 +110,7 @@ def _mc_policy(d: dict[str, Any]) -> Table:
                      _num(ha["cpu_s"]), _num(ha["dt"])])
     head = [f"case (tol {d['rows']['tol']:g})", "eta, extrapolation (opt-in)", "CPU s",
             "eta, halving rule (default)", "CPU s", "final dt"]
-    return head, rows, "bench_montecarlo_policy.json", "python -m validation.studies.mc_policy (policy_rows)"
+    return head, rows, "bench_montecarlo_policy.json", "python -m validation.studies.mc.policy (policy_rows)"
 
 
 def _mc_policy_coverage(d: dict[str, Any]) -> Table:
@@ -103,7 +126,7 @@ def _mc_policy_coverage(d: dict[str, Any]) -> Table:
                          _num(r["median_cpu_s"])])
     head = [f"case (tol {cov['tol']:g})", "time-step rule", "reference", "seeds", "within 1 error",
             "within 2 errors", "max abs z", "median CPU s"]
-    return head, rows, "bench_montecarlo_policy.json", "python -m validation.studies.mc_policy (policy_coverage)"
+    return head, rows, "bench_montecarlo_policy.json", "python -m validation.studies.mc.policy (policy_coverage)"
 
 
 def _mc_coverage(d: dict[str, Any]) -> Table:
@@ -116,7 +139,7 @@ def _mc_coverage(d: dict[str, Any]) -> Table:
     rows.append(["nominal (Gaussian)", "-", _pct(nominal["within_1"]), _pct(nominal["within_2"]), "-"])
     return (["check", "seeds", "within 1 error", "within 2 errors", "max abs z"], rows,
             "bench_montecarlo_martingale_coverage.json",
-            "python -m validation.studies.mc_martingale (martingale_coverage)")
+            "python -m validation.studies.mc.martingale (martingale_coverage)")
 
 
 _CONTROL_SETS = ("plain", "twin", "martingale", "both")
@@ -132,7 +155,7 @@ def _mc_controls(d: dict[str, Any]) -> Table:
     head = ["case", "confinement", "variance reduction: twin", "martingale", "both",
             "s to 1e-4: plain", "twin", "martingale", "both"]
     return head, rows, "bench_montecarlo_martingale_rows.json", \
-        "python -m validation.studies.mc_martingale (martingale_rows)"
+        "python -m validation.studies.mc.martingale (martingale_rows)"
 
 
 def _mc_boundary(d: dict[str, Any]) -> Table:
@@ -140,7 +163,7 @@ def _mc_boundary(d: dict[str, Any]) -> Table:
     rows = [[name] + [_vrf(r.get(s)) for s in sets] + [_num(r["cpu_s"])]
             for name, r in d.items() if isinstance(r, dict)]
     return (["case"] + [f"variance reduction: {s}" for s in sets] + ["CPU s"], rows,
-            "bench_montecarlo_boundary_rows.json", "python -m validation.studies.mc_boundary (boundary_rows)")
+            "bench_montecarlo_boundary_rows.json", "python -m validation.studies.mc.boundary (boundary_rows)")
 
 
 def _work_precision(d: dict[str, Any]) -> Table:
@@ -161,6 +184,7 @@ TABLES: dict[str, tuple[str, Callable[[dict[str, Any]], Table]]] = {
     "mc-coverage": ("bench_montecarlo_martingale_coverage.json", _mc_coverage),
     "mc-controls": ("bench_montecarlo_martingale_rows.json", _mc_controls),
     "mc-boundary": ("bench_montecarlo_boundary_rows.json", _mc_boundary),
+    "exactflow-bias": ("exactflow_bias.json", _exactflow_bias),
 }
 
 

@@ -140,11 +140,25 @@ def balanced_lyapunov(A: np.ndarray, Q: np.ndarray) -> np.ndarray:
     Balancing keeps stiff units (a up to 1e12) well conditioned: unbalanced, scipy warns that
     an eigenvalue pair sums to nearly zero (relative to the norm of A), perturbs A, and for
     kappa = 1e-8 loses eight digits of x2 (balanced: the closed form to 1e-15).
+
+    Raises
+    ------
+    numpy.linalg.LinAlgError
+        Where even the balanced matrix has an eigenvalue pair summing to nearly zero (a unit
+        whose stiffness is negligible against its damping: kappa = 2e-16 at the defaults), so
+        that scipy would perturb it and return a covariance of unknown accuracy.
     """
+    import warnings
+
     import scipy.linalg
 
     B, (scale, _) = scipy.linalg.matrix_balance(A, permute=False, separate=True)
-    Xb = scipy.linalg.solve_continuous_lyapunov(B, -(Q / scale[:, None]) / scale[None, :])
+    with warnings.catch_warnings():
+        warnings.simplefilter("error", RuntimeWarning)
+        try:
+            Xb = scipy.linalg.solve_continuous_lyapunov(B, -(Q / scale[:, None]) / scale[None, :])
+        except RuntimeWarning as exc:
+            raise np.linalg.LinAlgError(f"Lyapunov equation too ill-conditioned to solve: {exc}") from exc
     return Xb * scale[:, None] * scale[None, :]
 
 

@@ -5,6 +5,8 @@ graded geometrically toward the trap at (0, 0), Hermite functions in (V, xi) onl
 (:mod:`.schemes.xv`), behind the same refinement and error estimate. The x mesh of scheme
 ``"x"`` (:mod:`.schemes.x`) refines uniformly or element by element. Each scheme follows
 the protocol of :mod:`.protocol` and is found through the registry of :mod:`.schemes`.
+Where the solver answers is measured and declared in :mod:`.domain`: outside (the strong
+kink) :class:`FokkerPlanck` declines at once and names Monte Carlo.
 
 Public API: the solver object :class:`FokkerPlanck` (``method="fpe"``), the richer
 :func:`stationary` returning an :class:`FPESolution` (density, conditional means,

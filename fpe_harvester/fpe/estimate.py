@@ -23,14 +23,8 @@ viscous damping the oscillations toward rest at the kink decay only exponentiall
 so the Hermite coefficients decay algebraically. The algebraic tail above then applies to
 every moment, and the error of eta is at least the larger relative tail of V2 and Pin: eta
 mixes a fast moment (V2 ~ <vV>) with a slow one (Pin ~ <v^2>), and its own sequence shows a
-pre-asymptotic exponent. Measured for n = 1, a = 0.5 on 8 elements per half (the 1-D scheme):
-eta at M = 4..18 looks like a clean power law (q = 2.2, fitted at M = 10, 12, 14, it predicts
-the levels at M = 16 and 18 to 1e-6) with limit 0.61029, while :math:`\\langle v^2\\rangle`
-converges with q ~ 1; that limit happens to agree with the kink scheme's certified
-0.610303 +- 4e-5 and with Monte Carlo's time-step extrapolation 0.61026 +- 4e-5, but per-moment
-extrapolation gave error bars that did not bound the change to the next level (n = 1.5,
-a = 1: 0.387893 +- 2.8e-5 at M = 14, 0.387850 +- 1.4e-5 at M = 16), and an extrapolation
-whose error cannot be bounded is not shipped: Richardson in M was dropped. At n = 1 the
+pre-asymptotic exponent. No extrapolation in M is made: one whose error cannot be bounded is
+not shipped (the measurements behind it: docs/methods.md, Fokker-Planck design notes). At n = 1 the
 default is the kink scheme (:mod:`.schemes.xv.kink`), whose Hermite series runs only in (V, xi).
 
 *Mesh* (:func:`mesh_error`): Richardson from three meshes of sizes :math:`s_0 < s_1 < s_2`

@@ -7,13 +7,16 @@ protocols describe it, from the outside in:
 
 - :class:`Scheme`, the entry of the registry :data:`~.schemes.SCHEMES`: whether it solves a
   harvester, whether ``scheme="auto"`` should pick it, the options only it has, and how it
-  turns the user's :class:`~.settings.Settings` into a refinement :class:`~.refine.Plan`
+  turns the user's :class:`~.settings.Settings` into a refinement :class:`RefinementPlan`
   and a :class:`Discretization`.
 - :class:`Discretization`, what :func:`~.refine.refine` refines: a family of levels indexed
   by the Hermite degree M and an integer mesh knob ``size`` (one refinement step doubles
   it), with its cost model and limits.
 - :class:`Level`, one solved level: its moments (see :func:`~.moments.harvester_moments`),
   its fields on x, and its description.
+
+The plan a scheme makes, :class:`RefinementPlan` (the starting level and the limits), is
+defined here too.
 
 Adding a scheme is one subpackage of :mod:`.schemes` (its level, discretization, default
 plan and mesh, and a :class:`Scheme` object) and one entry in :data:`~.schemes.SCHEMES`;
@@ -23,17 +26,67 @@ below need not be written by a scheme that subclasses the protocol.
 
 from __future__ import annotations
 
+import os
 from collections.abc import Mapping
+from dataclasses import dataclass
 from typing import TYPE_CHECKING, Any, Protocol
 
 import numpy as np
 
 if TYPE_CHECKING:
     from ..model import Harvester
-    from .refine import Plan
     from .settings import Settings
 
-__all__ = ["Level", "Discretization", "Scheme"]
+__all__ = ["Level", "Discretization", "Scheme", "RefinementPlan", "default_memory_gb"]
+
+
+@dataclass(frozen=True)
+class RefinementPlan:
+    """Starting level and limits of the refinement (made by a scheme,
+    :meth:`Scheme.plan`).
+
+    Attributes
+    ----------
+    M : int
+        Hermite degree to start from (fixed with ``fixed``), >= 2.
+    size : int
+        The discretization's mesh knob to start from (fixed with ``fixed``); one refinement
+        step doubles it.
+    fixed : bool
+        If True, solve at (M, size) and estimate the error from one refinement step of each
+        knob (M + 2, twice the size); no adaptation.
+    max_M, max_size, max_dofs : int
+        Limits; the solve reports NOT_CONVERGED when tol needs more. ``max_dofs`` counts
+        the unknowns of the whole domain (:meth:`~.protocol.Discretization.unknowns`).
+    max_seconds : float or None
+        Wall-time budget (s); no level starts whose predicted cost would exceed it.
+    max_gb : float or None
+        Memory bound of one level in GB (:meth:`~.protocol.Discretization.gigabytes`);
+        default (None): half the physical memory.
+    """
+
+    M: int
+    size: int
+    fixed: bool = False
+    max_M: int = 24
+    max_size: int = 256
+    max_dofs: int = 600_000
+    max_seconds: float | None = None
+    max_gb: float | None = None
+
+    @property
+    def memory_limit(self) -> float:
+        """The memory bound in GB (``max_gb`` or half the physical memory)."""
+        return default_memory_gb() if self.max_gb is None else self.max_gb
+
+
+def default_memory_gb() -> float:
+    """Half the physical memory in GB (8 GB if the platform does not tell)."""
+    try:
+        total = os.sysconf("SC_PAGE_SIZE") * os.sysconf("SC_PHYS_PAGES")
+    except (AttributeError, ValueError, OSError):
+        return 8.0
+    return max(0.5 * total / 1e9, 1.0)
 
 
 class Level(Protocol):
@@ -191,11 +244,11 @@ class Scheme(Protocol):
         """Raise :class:`~fpe_harvester.errors.ParameterError` if an option of
         :attr:`options` has an invalid value (default: nothing to check)."""
 
-    def plan(self, h: Harvester, settings: Settings) -> Plan:
+    def plan(self, h: Harvester, settings: Settings) -> RefinementPlan:
         """The starting level and the limits of the refinement."""
         ...
 
-    def build(self, h: Harvester, settings: Settings, plan: Plan, tol: float, deadline: float | None
+    def build(self, h: Harvester, settings: Settings, plan: RefinementPlan, tol: float, deadline: float | None
               ) -> Discretization:
         """The discretization of ``h``; ``deadline`` is a :func:`time.perf_counter` value
         after which a solve may stop (None: no budget)."""

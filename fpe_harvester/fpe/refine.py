@@ -10,15 +10,8 @@ redone on the finer mesh from the same M (its lower degrees are cheap). A Hermit
 that stops contracting triggers the mesh check early: unresolved high modes are a mesh
 problem.
 
-The previous design certified a level by its neighbours M + 2 and half or a quarter of the
-elements at the same M. That cost 3-10 times the level itself, and for steep potentials
-the coarse meshes at high M were numerically meaningless (n = 8, a = 1: its 4- and
-8-element levels at M = 14-18 sent it to M = 18 on a mesh that cannot carry those modes,
-NOT_CONVERGED after 49 s with eta wrong by 5e-4). Choosing the mesh at a low degree first
-(M = 6, a ladder of meshes) was measured and dropped: the mesh error at M = 6 is not that
-at M = 12 (n = 6, a = 1: 16 elements are 1.4e-4 off at M = 6 and 1.7e-5 at M = 12), so it
-chose meshes 1.5 times finer than needed. The numbers of the alternatives are in
-:mod:`validation.studies.fpe`.
+Why this order (and not a certificate from neighbouring levels, nor a mesh chosen at a low
+degree first): the measurements are in the methods notes (docs/methods.md, Fokker-Planck design notes).
 
 With the element-wise discretization (:class:`~.schemes.x.adapt.AdaptiveHermiteDG`, ``mesh="adaptive"``)
 "twice the elements" is the mesh whose marked elements are bisected (all of them when M
@@ -35,7 +28,6 @@ error (not the finest), or none when no estimate is smaller than its value.
 from __future__ import annotations
 
 import math
-import os
 import time
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
@@ -45,9 +37,9 @@ import numpy as np
 
 from ..errors import NotConvergedError
 from .estimate import mesh_error, tail_error
-from .protocol import Discretization, Level
+from .protocol import Discretization, Level, RefinementPlan
 
-__all__ = ["Plan", "Estimate", "RefinementResult", "refine", "default_memory_gb", "MESH_SHARE", "Levels",
+__all__ = ["Estimate", "RefinementResult", "refine", "MESH_SHARE", "Levels",
            "hermite_estimate", "predicted_seconds", "stalled"]
 
 #: Observables carried through the refinement (each gets its own estimate).
@@ -58,51 +50,8 @@ MESH_SHARE = 0.25
 
 #: A discretization that refines early (``refine_early``) does so when the first mesh check
 #: finds more than this share of tol: with the Hermite part at most 1 - MESH_SHARE of tol, a
-#: mesh part above half of it is likely to fail the final check. Measured with the
-#: element-wise refinement at tol = 1e-4: n = 8, a = 2 finds 1.4e-4 at M = 8 (8 elements per
-#: half; refined early, 5.8 s against 8.6 s), n = 8, a = 0.5 3.9e-5 (refined early at a
-#: threshold of MESH_SHARE: 5.1 s against 3.4 s, the coarse mesh met tol as it was).
+#: mesh part above half of it is likely to fail the final check (docs/methods.md, Fokker-Planck design notes).
 EARLY_SHARE = 0.5
-
-
-@dataclass(frozen=True)
-class Plan:
-    """Starting level and limits of the refinement (made by a scheme,
-    :meth:`~.protocol.Scheme.plan`).
-
-    Attributes
-    ----------
-    M : int
-        Hermite degree to start from (fixed with ``fixed``), >= 2.
-    size : int
-        The discretization's mesh knob to start from (fixed with ``fixed``); one refinement
-        step doubles it.
-    fixed : bool
-        If True, solve at (M, size) and estimate the error from one refinement step of each
-        knob (M + 2, twice the size); no adaptation.
-    max_M, max_size, max_dofs : int
-        Limits; the solve reports NOT_CONVERGED when tol needs more. ``max_dofs`` counts
-        the unknowns of the whole domain (:meth:`~.protocol.Discretization.unknowns`).
-    max_seconds : float or None
-        Wall-time budget (s); no level starts whose predicted cost would exceed it.
-    max_gb : float or None
-        Memory bound of one level in GB (:meth:`~.protocol.Discretization.gigabytes`);
-        default (None): half the physical memory.
-    """
-
-    M: int
-    size: int
-    fixed: bool = False
-    max_M: int = 24
-    max_size: int = 256
-    max_dofs: int = 600_000
-    max_seconds: float | None = None
-    max_gb: float | None = None
-
-    @property
-    def memory_limit(self) -> float:
-        """The memory bound in GB (``max_gb`` or half the physical memory)."""
-        return default_memory_gb() if self.max_gb is None else self.max_gb
 
 
 @dataclass(frozen=True)
@@ -160,7 +109,7 @@ class _Stop(Exception):
 class Levels:
     """Solved levels of one refinement, keyed by (M, size), with the plan's limits."""
 
-    def __init__(self, disc: Discretization, plan: Plan, progress: Callable[[str], None] | None) -> None:
+    def __init__(self, disc: Discretization, plan: RefinementPlan, progress: Callable[[str], None] | None) -> None:
         self.disc, self.plan, self.progress = disc, plan, progress
         self.cache: dict[tuple[int, int], Level] = {}
         self.failed: dict[tuple[int, int], str] = {}
@@ -233,7 +182,7 @@ class Levels:
         return [lv.summary() for _, lv in sorted(self.cache.items())]
 
 
-def refine(disc: Discretization, tol: float, plan: Plan, progress: Callable[[str], None] | None = None
+def refine(disc: Discretization, tol: float, plan: RefinementPlan, progress: Callable[[str], None] | None = None
            ) -> RefinementResult:
     """Refine M and the mesh of ``disc`` until the estimated relative error on eta is below ``tol``.
 
@@ -290,10 +239,8 @@ def _hermite(levels: Levels, nh: int, M: int, tol: float, mesh: float, found: li
     M - 2 while that is cheap, so that every later estimate (and a stop at a limit)
     carries a measured mesh error. A discretization whose refinement step is cheap
     (``refine_early``, the element-wise one) refines right away when that check fails
-    (returns ``"mesh"``); the uniform one does not refine the mesh: for steep potentials the
-    mesh error at a low degree overestimates that at high M (n = 6, a = 1: 16 elements
-    are 1.4e-4 off at M = 6 and 1.7e-5 at M = 12; n = 8, a = 2: 2e-4 and 3e-5), hence the
-    check at M - 2 >= 8 (n = 8, a = 0.5: 9.2e-6 at M = 8, 1.1e-5 at M = 12).
+    (returns ``"mesh"``); the uniform one does not refine the mesh: for steep potentials the mesh error at a low
+    degree overestimates that at high M (docs/methods.md, Fokker-Planck design notes), hence the check at M - 2 >= 8.
     """
     algebraic = levels.disc.algebraic
     est = None
@@ -379,9 +326,7 @@ def _mesh_check(levels: Levels, est: Estimate, nh: int, Mc: int | None = None,
     above ``enough`` (relative): it can only sharpen the estimate.
 
     The mesh error changes with M, in both directions, so a check at a lower degree is an
-    estimate, not a bound: on 8 elements per half n = 8, a = 2 has 6.8e-5 (relative) at
-    M = 8 and 2.9e-5 at M = 12, n = 6, a = 1 has 4.0e-6 at M = 8 and 2.9e-5 at M = 12.
-    The benchmark checks the reported against the actual error.
+    estimate, not a bound; the benchmark checks the reported against the actual error.
     """
     M = est.level.M
     if Mc is None:
@@ -469,15 +414,6 @@ def _unphysical(lv: Level) -> str:
         if not math.isfinite(mo[name]) or mo[name] <= 0.0:
             return f"{name} = {mo[name]:.3g}"
     return ""
-
-
-def default_memory_gb() -> float:
-    """Half the physical memory in GB (8 GB if the platform does not tell)."""
-    try:
-        total = os.sysconf("SC_PAGE_SIZE") * os.sysconf("SC_PHYS_PAGES")
-    except (AttributeError, ValueError, OSError):
-        return 8.0
-    return max(0.5 * total / 1e9, 1.0)
 
 
 def predicted_seconds(cache: dict[tuple[int, int], Level], M: int, nh: int, disc: Discretization

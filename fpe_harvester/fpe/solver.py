@@ -9,10 +9,12 @@ from typing import ClassVar
 
 import numpy as np
 
-from ..errors import HarvesterError, MethodNotAvailableError
+from ..errors import HarvesterError, MethodNotAvailableError, ParameterError
 from ..model import Harvester
 from ..result import Stats, Status
 from ..solvers import Capabilities, Tolerance
+from .domain import outside_reason
+from .schemes import check_settings
 from .settings import Settings
 from .stationary import ring_reason, solve_settings
 
@@ -28,6 +30,11 @@ class FokkerPlanck:
     the mesh are refined until the estimated relative error on eta is below ``tol``
     (see :func:`~fpe_harvester.fpe.stationary`). Reaching the limits gives status
     NOT_CONVERGED with the best estimate and its error.
+
+    For 1 <= n < 2 and a potential strong against the drive (the strong kink: n = 1, a = 2 at
+    the defaults) the refinement does not converge; there the solver declines at once
+    (:meth:`unsupported_reason`, the measured domain of :mod:`~fpe_harvester.fpe.domain`) and
+    names Monte Carlo, unless ``force=True``.
 
     Parameters
     ----------
@@ -63,6 +70,11 @@ class FokkerPlanck:
         element), ``"geometric"`` (n < 2: layers toward 0) or ``"adaptive"`` (any n: a
         mesh step bisects only the elements an error indicator marks, see
         :mod:`~fpe_harvester.fpe.schemes.x.adapt`).
+    force : bool
+        Attempt the solve outside the measured domain of the solver (see
+        :mod:`~fpe_harvester.fpe.domain`) instead of declining at once. Default False: outside
+        it, :meth:`unsupported_reason` names the domain and Monte Carlo, and
+        :func:`~fpe_harvester.solve` raises :class:`~fpe_harvester.errors.MethodNotAvailableError`.
 
     Examples
     --------
@@ -90,25 +102,33 @@ class FokkerPlanck:
     progress: bool | Callable[[str], None] = False
     scheme: str = "auto"
     mesh: str = "auto"
+    force: bool = False
 
     def __post_init__(self) -> None:
         settings = self.settings
-        for name in ("tol", "M", "elements", "order", "max_seconds", "max_gb"):
+        for name in ("tol", "M", "elements", "order", "domain", "max_seconds", "max_gb"):
             object.__setattr__(self, name, getattr(settings, name))
-        object.__setattr__(self, "domain", settings.theta)
+        if not isinstance(self.force, bool):
+            raise ParameterError(f"force must be True or False, got {self.force!r} "
+                                 f"(type {type(self.force).__name__})")
 
     @functools.cached_property
     def settings(self) -> Settings:
         """The validated settings of the stationary solve (made, and so checked, at construction)."""
-        return Settings(tol=self.tol, M=self.M, elements=self.elements, order=self.order, theta=self.domain,
-                        max_M=self.max_M, max_seconds=self.max_seconds, max_gb=self.max_gb,
-                        scheme=self.scheme, mesh=self.mesh)
+        return check_settings(Settings(tol=self.tol, M=self.M, elements=self.elements, order=self.order,
+                                       domain=self.domain, max_M=self.max_M, max_seconds=self.max_seconds,
+                                       max_gb=self.max_gb, scheme=self.scheme, mesh=self.mesh))
 
     def unsupported_reason(self, h: Harvester) -> str | None:
-        """``None`` for a single oscillator, else why not (rings: use mc, or exact if harmonic)."""
+        """``None`` if the solver takes ``h``, else why not and what to use instead: a ring
+        (Monte Carlo, or exact if harmonic), or a single unit outside the measured domain at
+        this ``tol`` (:func:`~.domain.outside_reason`: Monte Carlo, or ``force=True``). Costs
+        a few milliseconds; :func:`~fpe_harvester.solve` calls it before solving."""
         if h.N != 1:
             return ring_reason(h)
-        return None
+        if self.force:
+            return None
+        return outside_reason(h, self.tol)
 
     def solve(self, h: Harvester) -> Stats:
         """Stationary statistics with error estimates (status NOT_CONVERGED if tol is not met)."""

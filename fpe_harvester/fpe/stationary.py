@@ -35,7 +35,7 @@ from ..result import Stats, Status
 from .estimate import reported_eta_error
 from .protocol import Level
 from .refine import RefinementResult, refine
-from .schemes import resolve_scheme
+from .schemes import check_settings, resolve_scheme
 from .settings import Settings
 
 if TYPE_CHECKING:
@@ -114,9 +114,9 @@ def stationary(
     tol: float = 1e-4,
     *,
     M: int | None = None,
-    half_elements: int | None = None,
+    elements: int | None = None,
     order: int | None = None,
-    theta: float = 30.0,
+    domain: float = 30.0,
     max_M: int = 24,
     max_dofs: int = 600_000,
     max_seconds: float | None = None,
@@ -137,14 +137,16 @@ def stationary(
         Requested relative error on :math:`\\eta`, in (0, 0.1]. Default 1e-4.
     M : int, optional
         Hermite total degree to start from (in [2, 60]; ``max_M`` is raised to it if
-        smaller); with ``half_elements`` too, the level
-        is fixed and the error is estimated from one refinement step of each knob.
-    half_elements : int, optional
-        Elements per half-domain to start from (>= 1; default 8).
+        smaller); with ``elements`` too (scheme ``"x"``), or alone (scheme ``"xv"``), the
+        level is fixed and the error is estimated from one refinement step of each knob.
+    elements : int, optional
+        Elements of the whole x mesh of scheme ``"x"`` to start from (even, in [2, 2048];
+        default 16); scheme ``"xv"`` does not use it.
     order : int, optional
         DG polynomial order in 2..5 (default 3).
-    theta : float
-        Domain factor :math:`U(L)/T_{eff}` in [5, 200]. Default 30.
+    domain : float
+        Domain factor :math:`\\Theta = U(L)/T_{eff}` in [5, 200] (the potential at the edge
+        of the x domain in effective temperatures). Default 30.
     max_M, max_dofs : int
         Refinement limits; beyond them the result is NOT_CONVERGED.
     max_seconds : float, optional
@@ -158,11 +160,10 @@ def stationary(
     scheme : str
         ``"x"``: DG in x, Hermite functions of (v, V, xi) (:mod:`.schemes.x`); ``"xv"``:
         DG in (x, v), Hermite functions of (V, xi) (:mod:`.schemes.xv`, 1 <= n < 2; there
-        ``order`` is the DG degree on its base mesh, ``half_elements`` the refinement's
-        mesh knob, which raises the degree by log2 of it, default 1; a given ``M`` alone
-        fixes the level); ``"auto"`` (default): ``"xv"`` for 1 <= n < 2 (for n > 1 the force
-        :math:`a n |x|^{n-1}` in the v transport, one core element per axis instead of the
-        kink's layers toward the trap; ``"x"`` when ``mesh``, ``half_elements`` or
+        ``order`` is the DG degree on its base mesh, which the refinement raises; a given
+        ``M`` alone fixes the level); ``"auto"`` (default): ``"xv"`` for 1 <= n < 2 (for
+        n > 1 the force :math:`a n |x|^{n-1}` in the v transport, one core element per axis
+        instead of the kink's layers toward the trap; ``"x"`` when ``mesh``, ``elements`` or
         ``weight`` is given), else ``"x"`` (see :func:`~.schemes.resolve_scheme`).
     weight : Whitening, optional
         Gaussian weight of the Hermite expansion of scheme ``"x"`` (default
@@ -182,10 +183,16 @@ def stationary(
     -------
     FPESolution
 
+    Notes
+    -----
+    This is the researcher's entry: it attempts any single unit. The solver object
+    :class:`~.solver.FokkerPlanck` (``method="fpe"``) first consults the measured domain
+    (:mod:`~fpe_harvester.fpe.domain`) and declines outside it.
+
     Examples
     --------
     >>> from fpe_harvester import Harvester
-    >>> sol = stationary(Harvester.build(a=0.5, n=2), tol=1e-4, M=4, half_elements=8)
+    >>> sol = stationary(Harvester.build(a=0.5, n=2), tol=1e-4, M=4, elements=16)
     >>> abs(sol.stats.eta - 20 / 39) < 1e-6
     True
     """
@@ -193,9 +200,9 @@ def stationary(
         raise ParameterError(f"h must be a Harvester, got {h!r} (type {type(h).__name__})")
     if h.N != 1:
         raise MethodNotAvailableError(ring_reason(h))
-    settings = Settings(tol=tol, M=M, half_elements=half_elements, order=order, theta=theta, max_M=max_M,
-                        max_dofs=max_dofs, max_seconds=max_seconds, max_gb=max_gb, scheme=scheme, mesh=mesh,
-                        weight=weight)
+    settings = check_settings(Settings(tol=tol, M=M, elements=elements, order=order, domain=domain,
+                                       max_M=max_M, max_dofs=max_dofs, max_seconds=max_seconds, max_gb=max_gb,
+                                       scheme=scheme, mesh=mesh, weight=weight))
     return solve_settings(h, settings, check_int("grid", grid, low=3), progress)
 
 

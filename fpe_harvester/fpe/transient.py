@@ -164,9 +164,9 @@ def transient(
     t_end: float,
     *,
     M: int = 6,
-    half_elements: int | None = None,
+    elements: int | None = None,
     order: int = 3,
-    theta: float = 12.0,
+    domain: float = 12.0,
     P0: np.ndarray | None = None,
     rest_width: float = 0.3,
     solver: str = "runge-kutta",
@@ -183,10 +183,11 @@ def transient(
         A single oscillator (N = 1).
     t_end : float
         Final time, > 0.
-    M, half_elements, order, theta : int, int, int, float
-        Discretization: Hermite degree (>= 2), elements per half-domain (default 8 for
-        n <= 7, 16 for steeper walls; see Notes), DG order (2..5), domain factor
-        :math:`U(L)/T_{eff}` (in [5, 200]; default 12, see Notes).
+    M, elements, order, domain : int, int, int, float
+        Discretization, named as in :func:`~.stationary.stationary`: Hermite degree (in
+        [2, 40]), elements of the whole x mesh (even, in [2, 2048]; default 16 for n <= 7,
+        32 for steeper walls; see Notes), DG order (2..5), domain factor
+        :math:`\\Theta = U(L)/T_{eff}` (in [5, 200]; default 12, see Notes).
     P0 : ndarray (4, 4), optional
         Initial covariance of (x, v, V, xi). Default: near rest (see ``rest_width``).
     rest_width : float
@@ -222,17 +223,14 @@ def transient(
     Notes
     -----
     The default domain (:math:`\\Theta = 12`, density :math:`\\sim e^{-12}` at the edge) is
-    smaller than the stationary solver's because the spurious modes live at the edge.
-    Measured spectra of the semi-discrete operator (a = 0.5 unless stated, Theta = 12):
-    with 8 elements per half all eigenvalues have Re <= 0 (up to round-off, ~1e-6) for
-    n = 1, 2, 3, 4 (also a = 2), 5, 6, 7 at M = 4..6, but n = 8 has a growing pair
-    (Re 1.7, Im 117) that comes from under-resolving the wall; with 16 per half n = 8
-    (a = 0.5, 1, 2; M = 4, 6), 10 and 12 (M = 4) are stable. Hence the default.
+    smaller than the stationary solver's because the spurious modes live at the edge, and
+    steep walls (n > 7) get twice the elements because an under-resolved wall carries a
+    growing mode; the spectra behind both choices are in the methods notes (docs/methods.md).
 
     The start is centred, so the density stays mirror-symmetric and is evolved on the half
     mesh :math:`[0, L]` with the mirror condition at 0 (the restriction of the whole-mesh
     system to its symmetric subspace: the same solution and a subset of its spectrum);
-    ``dofs`` counts those unknowns. Measured: 1.5-1.7x faster than the whole mesh.
+    ``dofs`` counts those unknowns.
     """
     import pde
 
@@ -242,33 +240,25 @@ def transient(
         raise MethodNotAvailableError(f"transient runs handle a single oscillator (N = 1), got N = {h.N}")
     t_end = check_real("t_end", t_end, low=0.0, low_open=True)
     M = check_int("M", M, low=2, high=40)
-    if half_elements is None:
-        half_elements = 8 if h.n <= 7.0 else 16
-    half_elements = check_int("half_elements", half_elements, low=1, high=1024)
+    elements = check_int("elements", (16 if h.n <= 7.0 else 32) if elements is None else elements,
+                         low=2, high=2048)
+    if elements % 2:
+        raise ParameterError(f"elements must be even (a node at x = 0), got {elements}")
     order = check_int("order", order, low=2, high=5)
-    theta = check_real("theta", theta, low=5.0, high=200.0)
+    domain = check_real("domain (the domain factor)", domain, low=5.0, high=200.0)
     rest_width = check_real("rest_width", rest_width, low=0.0, high=1.0, low_open=True)
     grid = check_int("grid", grid, low=3)
     interval = t_end / 100 if interval is None else check_real("interval", interval, low=0.0, low_open=True)
 
     w = Whitening.of(h, curved=False)
-    mesh = XMeshRule.of(h, theta=theta).build(h, w, half_elements)
+    mesh = XMeshRule.of(h, domain=domain).build(h, w, elements // 2)
     # The start is a centred Gaussian and the dynamics are mirror-symmetric, so the density
     # stays symmetric: the half mesh [0, L] with the mirror condition at 0 (see
     # :mod:`.schemes.x.discretize`) evolves the same discrete density with half the unknowns.
     hb, F, X, A, _ = assemble_level(h, M, mesh, order, w, half=True)
     G = (-(sp.kron(_mass_inverse(X, order + 1), sp.identity(hb.size)) @ A)).tocsr()
-
-    if P0 is None:
-        s = rest_width * math.sqrt(w.x2)
-        P0 = np.diag([s**2, s**2, s**2, h.params.noise_variance])
-    P0 = np.asarray(P0, dtype=float)
-    if P0.shape != (4, 4) or not np.all(np.isfinite(P0)) or not np.allclose(P0, P0.T):
-        raise ParameterError(f"P0 must be a finite symmetric 4x4 covariance, got shape {P0.shape}")
-    c0 = initial_coefficients((X, hb, w), P0)
-
-    field_grid = pde.CartesianGrid([[0.0, float(c0.size)]], c0.size)
-    state = pde.ScalarField(field_grid, c0)
+    c0 = initial_coefficients((X, hb, w), _start_covariance(h, w, P0, rest_width))
+    state = pde.ScalarField(pde.CartesianGrid([[0.0, float(c0.size)]], c0.size), c0)
 
     class _Hierarchy(pde.PDEBase):
         def evolution_rate(self, state: pde.ScalarField, t: float = 0.0) -> pde.ScalarField:
@@ -276,19 +266,9 @@ def transient(
             rate.data[...] = G @ state.data
             return rate
 
-    if solver in ("runge-kutta", "rk", "rk45"):
-        solver_options.setdefault("adaptive", True)
-        solver_options.setdefault("tolerance", 1e-7)
-    if solver == "scipy":
-        solver_options.setdefault("method", "BDF")
-        if solver_options["method"] in ("BDF", "Radau", "LSODA"):
-            solver_options.setdefault("jac", G)
-        solver_options.setdefault("rtol", 1e-8)
-        solver_options.setdefault("atol", 1e-12)
-
+    _solver_defaults(solver, solver_options, G)
     xs = np.linspace(-mesh.L, mesh.L, grid)
     records: list[tuple[float, dict[str, float], np.ndarray, float]] = []
-
     mass0 = X.copies * float(c0.reshape(-1, hb.size)[:, 0] @ X.integral)  # both halves
 
     def record(st: pde.ScalarField, t: float) -> None:
@@ -301,19 +281,50 @@ def transient(
             raise NotConvergedError(
                 f"transient run unstable at t = {t:.4g} (mass {mass:.6g}, V2 {mo['V2']:.4g}): the "
                 f"truncated hierarchy has a spurious growing mode at M = {M}, {mesh.elements} elements, "
-                f"theta = {theta:g}; use more elements, a smaller theta or a smaller M")
+                f"domain = {domain:g}; use more elements, a smaller domain or a smaller M")
         lv = Level(M, order, mesh, C, mo, c0.size, 0.0, X, hb, w)
         records.append((t, mo, lv.fields(xs)["density"], mass))
 
     tracker = [pde.CallbackTracker(record, interrupts=interval), *(trackers or [])]
-    eq = _Hierarchy()
     dt = solver_options.pop("dt", None)
     if dt is None:
         # CFL estimate: largest speed times (p + 1)^2 over the smallest element.
         speed = float(np.abs(np.linalg.eigvalsh(F)).max())
         dt = 0.5 * float(np.diff(mesh.nodes()).min()) / (speed * (order + 1) ** 2)
-    _, info = eq.solve(state, t_range=t_end, dt=dt, tracker=tracker, solver=solver, backend="numpy",
-                       ret_info=True, **solver_options)
+    _, info = _Hierarchy().solve(state, t_range=t_end, dt=dt, tracker=tracker, solver=solver, backend="numpy",
+                                 ret_info=True, **solver_options)
+    return _solution(h, records, xs, {"M": M, "elements": mesh.elements, "order": order, "L": mesh.L,
+                                      "dofs": c0.size, "solver": solver, "pde": _plain(info)})
+
+
+def _start_covariance(h: Harvester, w: Whitening, P0: np.ndarray | None, rest_width: float) -> np.ndarray:
+    """The start's covariance of (x, v, V, xi): ``P0`` checked, or the unit near rest."""
+    if P0 is None:
+        s = rest_width * math.sqrt(w.x2)
+        return np.diag([s**2, s**2, s**2, h.params.noise_variance])
+    P0 = np.asarray(P0, dtype=float)
+    if P0.shape != (4, 4) or not np.all(np.isfinite(P0)) or not np.allclose(P0, P0.T):
+        raise ParameterError(f"P0 must be a finite symmetric 4x4 covariance, got shape {P0.shape}")
+    return P0
+
+
+def _solver_defaults(solver: str, options: dict[str, Any], G: sp.csr_matrix) -> None:
+    """Fill in the defaults of py-pde's ``solver`` in ``options`` (an adaptive step for
+    Runge--Kutta; BDF with the sparse Jacobian ``G`` and tight tolerances for scipy)."""
+    if solver in ("runge-kutta", "rk", "rk45"):
+        options.setdefault("adaptive", True)
+        options.setdefault("tolerance", 1e-7)
+    if solver == "scipy":
+        options.setdefault("method", "BDF")
+        if options["method"] in ("BDF", "Radau", "LSODA"):
+            options.setdefault("jac", G)
+        options.setdefault("rtol", 1e-8)
+        options.setdefault("atol", 1e-12)
+
+
+def _solution(h: Harvester, records: list[tuple[float, dict[str, float], np.ndarray, float]], xs: np.ndarray,
+              info: dict[str, Any]) -> TransientSolution:
+    """The recorded points as a :class:`TransientSolution`."""
     t = np.array([r[0] for r in records])
     mom = {k: np.array([r[1][k] for r in records]) for k in ("V2", "Pin", "v2", "vV", "x2")}
     pin = mom["Pin"]
@@ -321,9 +332,7 @@ def transient(
                              mask=pin <= 0)
     return TransientSolution(
         t=t, V2=mom["V2"], Pin=pin, eta=eta, v2=mom["v2"], vV=mom["vV"], x2=mom["x2"],
-        mass=np.array([r[3] for r in records]), x=xs, density=np.array([r[2] for r in records]),
-        info={"M": M, "elements": mesh.elements, "order": order, "L": mesh.L, "dofs": c0.size,
-              "solver": solver, "pde": _plain(info)},
+        mass=np.array([r[3] for r in records]), x=xs, density=np.array([r[2] for r in records]), info=info,
     )
 
 

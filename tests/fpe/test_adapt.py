@@ -61,7 +61,7 @@ def test_indicator_falls_with_the_element_size_where_smooth() -> None:
 def test_marking_and_refined_mesh() -> None:
     assert mark(np.array([1.0, 1.0, 1.0, 1.0]), 0.5).sum() == 2
     assert mark(np.array([0.0, 2.0, 0.0]), 1.0).tolist() == [False, True, False]
-    m = XMesh(2.0, 4, n=2.0, scale=1.0, theta=1.0, wall=0.0)
+    m = XMesh(2.0, 4, n=2.0, scale=1.0, domain=1.0, wall=0.0)
     r = m.refined(np.array([True, False, False, True]))
     nodes = r.nodes()
     assert np.allclose(nodes, -nodes[::-1])  # mirror symmetry kept
@@ -81,7 +81,7 @@ def test_adaptive_refinement_meets_tol_and_its_error_bounds_a_tighter_run() -> N
     tighter on the uniform refinement (a convergence check of the estimate: same
     discretization family)."""
     h = Harvester.build(a=2.0, n=8.0)
-    adapted = stationary(h, tol=1e-2, half_elements=4, mesh="adaptive", grid=3).stats
+    adapted = stationary(h, tol=1e-2, elements=8, mesh="adaptive", grid=3).stats
     tight = solve(h, "fpe", tol=1e-3, mesh="algebraic")
     assert adapted.status.value == tight.status.value == "stable"
     assert any(lv["elements"] % 8 for lv in adapted.info["history"])

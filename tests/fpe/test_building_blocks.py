@@ -75,7 +75,7 @@ def test_whitening_of_a_harmonic_unit_is_its_stationary_covariance(params) -> No
 
 
 def test_mesh_has_node_at_zero_and_is_symmetric() -> None:
-    nodes = XMesh(3.0, 7, n=1.0, scale=0.5, theta=30.0, grading=2.5).nodes()
+    nodes = XMesh(3.0, 7, n=1.0, scale=0.5, domain=30.0, grading=2.5).nodes()
     assert 0.0 in nodes
     assert np.allclose(nodes, -nodes[::-1])
     assert np.all(np.diff(nodes) > 0)
@@ -84,8 +84,8 @@ def test_mesh_has_node_at_zero_and_is_symmetric() -> None:
 
 
 def test_geometric_layers_split_the_element_at_zero() -> None:
-    base = XMesh(2.0, 4, n=1.5, scale=1.0, theta=1.0, wall=0.0)
-    mesh = XMesh(2.0, 4, n=1.5, scale=1.0, theta=1.0, wall=0.0, layers=3, ratio=0.15)
+    base = XMesh(2.0, 4, n=1.5, scale=1.0, domain=1.0, wall=0.0)
+    mesh = XMesh(2.0, 4, n=1.5, scale=1.0, domain=1.0, wall=0.0, layers=3, ratio=0.15)
     half, x1 = mesh.half_nodes(), base.half_nodes()[1]
     assert np.allclose(half, [0.0, x1 * 0.15**3, x1 * 0.15**2, x1 * 0.15, *base.half_nodes()[1:]])
     assert mesh.elements == 2 * (4 + 3) and mesh.geometric and not base.geometric

@@ -11,7 +11,7 @@ import scipy.sparse as sp
 from fpe_harvester import Harvester, ParameterError, Status, solve
 from fpe_harvester.fpe import HermiteBasis, stationary
 from fpe_harvester.fpe.plane import DGLine, PlaneMesh, lobatto_points
-from fpe_harvester.fpe.schemes.xv import kink
+from fpe_harvester.fpe.schemes.xv import hierarchy, kink
 from fpe_harvester.fpe.schemes.xv.kinkdisc import KinkDG, KinkSettings, kink_domain
 from fpe_harvester.fpe.schemes.xv.modesolve import ModePreconditioner
 
@@ -80,7 +80,7 @@ def test_two_variable_hermite_basis() -> None:
 def test_frame_factor_puts_the_drive_on_the_first_variable() -> None:
     h = Harvester.build(a=1.0, n=1, Kv=2.0, sigma=1.5)
     mo = {"V2": 0.05, "Pin": 0.2, "v2": 0.15, "vV": 0.02}
-    fr = kink.KinkFrame.from_moments(h, mo)
+    fr = hierarchy.KinkFrame.from_moments(h, mo)
     L, s = fr.factor(h)
     assert np.allclose(L @ L.T, fr.Sigma)
     g = np.array([-2.0, 1.5])
@@ -88,7 +88,7 @@ def test_frame_factor_puts_the_drive_on_the_first_variable() -> None:
     # <V xi> from the identity d<V xi>/dt = 0, <xi^2> = D/tau
     assert fr.Sigma[0, 1] == pytest.approx(h.params.Kc * 0.2 / 1.5 / (1 / h.params.tau_p + 1 / h.params.tau))
     with pytest.raises(ValueError, match="positive definite"):
-        kink.KinkFrame(np.array([[1.0, 2.0], [2.0, 1.0]]))
+        hierarchy.KinkFrame(np.array([[1.0, 2.0], [2.0, 1.0]]))
 
 
 @pytest.fixture(scope="module")
@@ -101,9 +101,9 @@ def test_mode_operator_matches_the_assembled_hierarchy(small: tuple[Harvester, K
     """The matrix-free operator in the mode basis equals the sparse operator of the
     hierarchy in the Hermite basis (assembled term by term), with a shifted frame."""
     h, disc = small
-    fr = kink.KinkFrame(disc.frame.Sigma, np.array([0.1, 0.4]), np.array([0.3, 0.0]))
-    hi = kink.KinkHierarchy.of(h, 3, fr)
-    pl = kink.kink_plane(h, disc.base, 3, hi.gamma_e, hi.kappa)
+    fr = hierarchy.KinkFrame(disc.frame.Sigma, np.array([0.1, 0.4]), np.array([0.3, 0.0]))
+    hi = hierarchy.KinkHierarchy.of(h, 3, fr)
+    pl = hierarchy.kink_plane(h, disc.base, 3, hi.gamma_e, hi.kappa)
     parts = kink.face_parts(pl, hi)
     T = kink.mode_transport(pl, hi, parts)
     op = kink.ModeOperator(pl, hi, parts)
@@ -127,9 +127,9 @@ def test_mode_sweep_solves_the_block_lower_triangle(small: tuple[Harvester, Kink
     with two threads, each segment's), checked against the matrix-free operator, with a
     shifted frame (K2 != 0)."""
     h, disc = small
-    fr = kink.KinkFrame(disc.frame.Sigma, np.array([0.1, 0.4]), np.array([0.3, 0.0]))
-    hi = kink.KinkHierarchy.of(h, 4, fr)
-    pl = kink.kink_plane(h, disc.base, 2, hi.gamma_e, hi.kappa)
+    fr = hierarchy.KinkFrame(disc.frame.Sigma, np.array([0.1, 0.4]), np.array([0.3, 0.0]))
+    hi = hierarchy.KinkHierarchy.of(h, 4, fr)
+    pl = hierarchy.kink_plane(h, disc.base, 2, hi.gamma_e, hi.kappa)
     parts = kink.face_parts(pl, hi)
     prec = ModePreconditioner(kink.mode_transport(pl, hi, parts), pl, hi, threads)
     op = kink.ModeOperator(pl, hi, parts)

@@ -75,7 +75,7 @@ def test_reported_error_bounds_the_actual_one_more_cases(n: float, a: float) -> 
 
 def test_degree_never_exceeds_what_the_mesh_carries() -> None:
     h = Harvester.build(a=0.5, n=3)
-    sol = stationary(h, tol=1e-7, half_elements=2, max_seconds=4.0, grid=3)
+    sol = stationary(h, tol=1e-7, elements=4, max_seconds=4.0, grid=3)
     for lv in sol.stats.info["history"]:
         assert lv["M"] <= discretize.DEGREES_PER_ELEMENT * lv["elements"] // 2, lv
 

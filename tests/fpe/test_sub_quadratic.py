@@ -142,8 +142,8 @@ def test_auto_scheme_for_sub_quadratic_n() -> None:
     h = Harvester.build(a=1.0, n=1.5)
     assert resolve_scheme(h, Settings()).name == "xv"
     assert resolve_scheme(h, Settings(mesh="algebraic")).name == "x"
-    assert resolve_scheme(h, Settings(half_elements=8)).name == "x"
-    assert resolve_scheme(Harvester.build(a=1.0, n=1.0), Settings(half_elements=8)).name == "xv"
+    assert resolve_scheme(h, Settings(elements=16)).name == "x"
+    assert resolve_scheme(Harvester.build(a=1.0, n=1.0), Settings(elements=16)).name == "xv"
     assert resolve_scheme(Harvester.build(a=1.0, n=2.0), Settings()).name == "x"
     sol = stationary(h, tol=1e-2, M=4)
     assert sol.stats.info["scheme"] == "xv"

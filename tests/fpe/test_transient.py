@@ -17,7 +17,7 @@ from fpe_harvester.fpe.transient import lyapunov_transient, transient
 
 def test_harmonic_transient_matches_lyapunov_ode() -> None:
     h = Harvester.build(a=0.5, n=2)
-    tr = transient(h, 6.0, M=4, half_elements=8, interval=1.0, grid=51)
+    tr = transient(h, 6.0, M=4, elements=16, interval=1.0, grid=51)
     w = Whitening.of(h)
     s = 0.3 * math.sqrt(w.x2)
     P = lyapunov_transient(h, np.diag([s**2, s**2, s**2, 1.0]), tr.t)
@@ -40,7 +40,7 @@ def stationary_n3() -> tuple[Harvester, Mapping[str, float]]:
     # A module fixture is set up before the autouse strict-floats fixture of each test.
     with np.errstate(all="raise", under="ignore"):
         w = Whitening.of(h)
-        mesh = XMeshRule.of(h, theta=12.0).build(h, w, 8)
+        mesh = XMeshRule.of(h, domain=12.0).build(h, w, 8)
         st = solve_level(h, 4, mesh, 3, w).moments
     return h, MappingProxyType(dict(st))
 
@@ -48,7 +48,7 @@ def stationary_n3() -> tuple[Harvester, Mapping[str, float]]:
 def test_relaxes_to_stationary_solution(stationary_n3: tuple[Harvester, Mapping[str, float]]) -> None:
     """n = 3: the transient approaches the stationary solution of the same discretization."""
     h, st = stationary_n3
-    tr = transient(h, 24.0, M=4, half_elements=8, interval=4.0, grid=21)
+    tr = transient(h, 24.0, M=4, elements=16, interval=4.0, grid=21)
     gap = np.abs(tr.V2 - st["V2"]) / st["V2"]
     assert np.all(np.diff(gap[2:]) < 0)  # monotone approach after the initial swing
     assert gap[-1] < 2e-3
@@ -60,7 +60,7 @@ def test_steep_wall_relaxes_with_default_mesh() -> None:
     the run approaches the stationary solution of the same discretization."""
     h = Harvester.build(a=0.5, n=8)
     w = Whitening.of(h)
-    st = solve_level(h, 4, XMeshRule.of(h, theta=12.0).build(h, w, 16), 3, w).moments
+    st = solve_level(h, 4, XMeshRule.of(h, domain=12.0).build(h, w, 16), 3, w).moments
     tr = transient(h, 12.0, M=4, interval=4.0, grid=5)
     assert tr.info["elements"] == 32
     gap = np.abs(tr.V2 - st["V2"]) / st["V2"]
@@ -70,7 +70,7 @@ def test_steep_wall_relaxes_with_default_mesh() -> None:
 
 def test_unstable_discretization_is_reported() -> None:
     with pytest.raises(NotConvergedError, match="spurious growing mode"):
-        transient(Harvester.build(a=0.5, n=8), 5.0, M=4, half_elements=4, interval=0.5, grid=5)
+        transient(Harvester.build(a=0.5, n=8), 5.0, M=4, elements=8, interval=0.5, grid=5)
 
 
 def test_transient_bad_input() -> None:
@@ -79,6 +79,10 @@ def test_transient_bad_input() -> None:
         transient(h, -1.0)
     with pytest.raises(ParameterError, match="P0"):
         transient(h, 1.0, P0=np.eye(3))
+    with pytest.raises(ParameterError, match="elements must be even"):
+        transient(h, 1.0, elements=7)
+    with pytest.raises(ParameterError, match="domain"):
+        transient(h, 1.0, domain=1.0)
     with pytest.raises(MethodNotAvailableError, match="N = 3"):
         transient(Harvester.build(a=0.5, n=3, N=3, k=0.1), 1.0)
     with pytest.raises(MethodNotAvailableError, match="harmonic"):
@@ -88,5 +92,5 @@ def test_transient_bad_input() -> None:
 @pytest.mark.slow
 def test_relaxation_reaches_stationary_to_1e6(stationary_n3: tuple[Harvester, Mapping[str, float]]) -> None:
     h, st = stationary_n3
-    tr = transient(h, 80.0, M=4, half_elements=8, interval=10.0, grid=11)
+    tr = transient(h, 80.0, M=4, elements=16, interval=10.0, grid=11)
     assert abs(tr.V2[-1] - st["V2"]) < 1e-6 * st["V2"]

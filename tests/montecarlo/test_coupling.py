@@ -82,6 +82,14 @@ def test_exact_d2_from_modes() -> None:
     assert solve(Harvester.build(a=0.5), "exact").d2 is None
 
 
+#: Standard errors a Monte Carlo value may lie from its Boltzmann value (the one statement of this
+#: tolerance; docs/model.md §6 quotes it). Three: for honest Gaussian error bars a false alarm in
+#: 0.27 % of comparisons, 4 % over this file's 16 default comparisons (d2 and Pin of eight cases)
+#: when a deliberate change of results reseeds them all; two would alarm in 4.6 % of comparisons,
+#: 53 % of such changes.
+BOLTZMANN_SIGMAS = 3.0
+
+
 def _check_boltzmann(h: Harvester, expect: float, seed: int = 1, tol: float = 1e-2) -> None:
     """<d^2> and Pin of ``h`` by Monte Carlo (``tol`` on eta) against their Boltzmann values."""
     s = solve(h, "mc", seed=seed, tol=tol)
@@ -89,8 +97,8 @@ def _check_boltzmann(h: Harvester, expect: float, seed: int = 1, tol: float = 1e
     # Pin = sigma^2 D/(m (1 + gamma tau)) for K_v = 0, up to O(tau^2) (1e-8 here)
     pin = p.sigma**2 * p.D / (p.m * (1.0 + p.gamma * p.tau))
     assert s.d2_err < 0.01 * expect
-    assert abs(s.d2 - expect) < 3.0 * s.d2_err, (s.d2, s.d2_err, expect)
-    assert abs(s.Pin - pin) < 3.0 * s.Pin_err + 1e-8, (s.Pin, s.Pin_err, pin)
+    assert abs(s.d2 - expect) < BOLTZMANN_SIGMAS * s.d2_err, (s.d2, s.d2_err, expect)
+    assert abs(s.Pin - pin) < BOLTZMANN_SIGMAS * s.Pin_err + 1e-8, (s.Pin, s.Pin_err, pin)
 
 
 _WHITE = dict(N=2, Kv=0.0, tau=1e-4)

@@ -78,7 +78,7 @@ def test_martingale_estimate_is_unbiased_at_a_coarse_step() -> None:
 
 
 def test_martingale_error_bars_cover_the_exact_solution_over_seeds() -> None:
-    # smoke test of the coverage study (validation.studies.mc_martingale, martingale_coverage): 32
+    # smoke test of the coverage study (validation.studies.mc.martingale, martingale_coverage): 32
     # seeds of a harmonic pair (20 controls, 48 replicas), errors against the exact discrete value;
     # binomial 0.1 % tails of 68.3 % and 95.4 % of 32 (measured over 100 other seeds: 66 % and 93 %)
     h = Harvester.build(a=0.5, N=2, k=-0.2)

@@ -277,19 +277,19 @@ def test_parallel_workers_match_serial(tmp_path: Path, monkeypatch) -> None:
 
 
 def test_auto_falls_back_to_monte_carlo_when_fokker_planck_misses_the_tolerance(tmp_path, monkeypatch):
-    # Fokker-Planck returns numbers whose error exceeds the scene's rtol (as at n = 1.25,
-    # a = 2): Monte Carlo is tried, and kept when it reaches the tolerance or does better
+    # Fokker-Planck (inside its domain) returns numbers whose error exceeds the scene's rtol:
+    # Monte Carlo is tried, and kept when it reaches the tolerance or does better
     from fpe_harvester.fpe import FokkerPlanck
     from fpe_harvester.result import Status
     from montecarlo import MonteCarlo
 
-    exact = solve(Harvester.build(a=2.0, n=2), "exact")
+    exact = solve(Harvester.build(a=0.5, n=2), "exact")
     fpe = replace(exact, method="fpe", status=Status.NOT_CONVERGED, eta_err=0.01 * exact.eta,
                   message="fpe stopped")
     outcomes = {"fpe": fpe, "mc": replace(exact, method="mc", eta_err=0.004 * exact.eta, message="mc ok")}
     for cls in (FokkerPlanck, MonteCarlo):  # the solvers' own settings and refusals, stand-in results
         monkeypatch.setattr(cls, "solve", lambda self, h: outcomes[self.name])
-    scene = Scene(name="miss", system=Harvester.build(a=2.0, n=1.25), observables=("eta",), rtol=5e-3,
+    scene = Scene(name="miss", system=Harvester.build(a=0.5, n=1.25), observables=("eta",), rtol=5e-3,
                   outputs=())
     row = scene_run.run_scene(scene, tmp_path / "ok", progress=False, workers=1).rows[0]
     assert row.method == "mc" and row.status == "stable"
@@ -313,16 +313,21 @@ def test_auto_falls_back_to_monte_carlo_when_fokker_planck_misses_the_tolerance(
     assert row.method == "mc" and "no error estimate" in row.message
 
 
-def test_auto_falls_back_to_monte_carlo_when_fokker_planck_gives_no_result(tmp_path):
-    # n = 1, a = 2: the kink force exceeds the drive most of the time; the Hermite expansion
-    # cannot resolve that density and Fokker-Planck returns NOT_CONVERGED without numbers.
+def test_auto_goes_to_monte_carlo_where_fokker_planck_declines(tmp_path, monkeypatch):
+    # n = 1, a = 2 (the strong kink) is outside Fokker-Planck's measured domain: the scene asks
+    # the solvers in order and Monte Carlo answers, with no Fokker-Planck attempt first.
     from fpe_harvester import Harvester, Scene, run_scene
+    from fpe_harvester.fpe import FokkerPlanck
 
-    scene = Scene(name="fallback", system=Harvester.build(a=2.0, n=1), observables=("eta",),
+    def attempted(self, h):
+        raise AssertionError("Fokker-Planck attempted outside its domain")
+
+    monkeypatch.setattr(FokkerPlanck, "solve", attempted)
+    scene = Scene(name="declined", system=Harvester.build(a=2.0, n=1), observables=("eta",),
                   rtol=0.05, options={"mc": {"paths": 64, "t_run": 40.0, "min_replicas": 4},
                                       "fpe": {"max_seconds": 5.0}},
                   outputs=())
-    row = run_scene(scene, tmp_path, progress=False).rows[0]
+    row = run_scene(scene, tmp_path, progress=False, workers=1).rows[0]
     assert row.method == "mc" and row.status == "stable"
-    assert "Monte Carlo used instead" in row.message
+    assert "chose Monte Carlo" in row.message and "outside the measured domain" in row.message
     assert 0.1 < row.values["eta"] < 0.2 and row.values["eta_err"] > 0

@@ -1,4 +1,5 @@
-"""The validation pipeline: :mod:`.runner` orders the report's sections and writes the report,
+"""The validation pipeline: :mod:`.runner` runs the report's sections (in the order of
+:data:`validation.sections.SECTIONS`) and writes the report,
 :mod:`.checks` holds the pass/fail/skip logic and the shared solve cache, :mod:`.report` the
 report's data model and its Markdown/HTML writers."""
 

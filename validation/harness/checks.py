@@ -10,10 +10,14 @@ where :math:`\\delta_a, \\delta_b` are the errors the solvers report (one standa
 Monte Carlo, truncation/mesh error for Fokker--Planck, 0 for exact), :math:`n_\\sigma` is the
 number of error bars allowed (4 by default) and the floors cover what the errors do not
 (round-off for exact numbers). The tolerance is stated in every result, so a reader can
-see what was promised and what was delivered. A check whose solver is not installed is
-*skipped*, never passed. A *finding* is a disagreement with a published value that a second,
-independent solver confirms: not a failure of ours, and not a pass either, so it is counted
-apart from both.
+see what was promised and what was delivered.
+
+Outcomes say what was checked: PASS only for a comparison computed in this run; RECORDED for
+one whose verdict reads committed data only (it names the file and the command that writes it
+again, and is counted apart: it holds for that data, not for this run's code); FINDING for a
+disagreement with a published value that a second, independent solver confirms (not a failure
+of ours, not a pass either); SKIP for a check that compared nothing (a solver not installed, no
+number to compare); FAIL for a comparison that failed or a check that raised.
 """
 
 from __future__ import annotations
@@ -40,6 +44,7 @@ __all__ = [
     "CheckResult",
     "agree",
     "expect",
+    "recorded",
     "skipped",
     "failed",
     "finding",
@@ -54,12 +59,15 @@ __all__ = [
 class Outcome(str, enum.Enum):
     """Result of one check.
 
-    PASS: ours agrees with what it was held to. FINDING: a published value disagrees with ours
-    and a second, independent solver confirms ours (the run still succeeds). FAIL: ours is
-    wrong or could not be checked. SKIP: the check did not run.
+    PASS: ours, computed in this run, agrees with what it was held to. RECORDED: the verdict
+    reads committed data only (the file and the command that writes it again are named); it
+    holds for that data, and is counted apart from the passes. FINDING: a published value
+    disagrees with ours and a second, independent solver confirms ours (the run still succeeds).
+    FAIL: ours is wrong, or the check raised. SKIP: nothing was compared.
     """
 
     PASS = "PASS"
+    RECORDED = "RECORDED"
     FINDING = "FINDING"
     FAIL = "FAIL"
     SKIP = "SKIP"
@@ -67,7 +75,7 @@ class Outcome(str, enum.Enum):
 
 @dataclass(frozen=True)
 class CheckResult:
-    """One pass/finding/fail/skip verdict with the numbers behind it.
+    """One pass/recorded/finding/fail/skip verdict with the numbers behind it.
 
     Attributes
     ----------
@@ -85,6 +93,8 @@ class CheckResult:
         :math:`|a - b|` and the tolerance it was held to.
     seconds : float
         Wall time spent on the check, >= 0.
+    source, command : str
+        A RECORDED check's committed data file and the command that writes it again ("" else).
     """
 
     name: str
@@ -96,6 +106,8 @@ class CheckResult:
     diff: float | None = None
     tolerance: float | None = None
     seconds: float = 0.0
+    source: str = ""
+    command: str = ""
 
     def __post_init__(self) -> None:
         object.__setattr__(self, "outcome", Outcome(self.outcome))
@@ -198,8 +210,34 @@ def agree(
 
 
 def expect(name: str, section: str, condition: bool, detail: str) -> CheckResult:
-    """A yes/no check (e.g. "status is unstable and growth rate > 0")."""
+    """A yes/no check computed in this run (e.g. "status is unstable and growth rate > 0")."""
     return CheckResult(name, section, Outcome.PASS if condition else Outcome.FAIL, detail)
+
+
+def recorded(name: str, section: str, condition: bool, detail: str, *, source: str, command: str) -> CheckResult:
+    """A yes/no check whose verdict reads committed data only: RECORDED if ``condition`` holds
+    for that data (not a pass: nothing was computed in this run), FAIL if it does not.
+
+    Parameters
+    ----------
+    source : str
+        The data file, relative to the repository (e.g. ``"validation/data/coupling.json"``).
+    command : str
+        The command that writes it again.
+
+    Examples
+    --------
+    >>> recorded("x", "s", True, "ok", source="validation/data/x.json", command="python -m x").outcome.value
+    'RECORDED'
+    >>> recorded("x", "s", False, "off", source="validation/data/x.json", command="python -m x").outcome.value
+    'FAIL'
+    """
+    if not (source and command):
+        raise ValueError(f"a recorded check names its data file and the command that writes it; "
+                         f"got source = {source!r}, command = {command!r}")
+    where = f" [recorded: {source}, written by {command}]"
+    return CheckResult(name, section, Outcome.RECORDED if condition else Outcome.FAIL, detail + where,
+                       source=source, command=command)
 
 
 def skipped(name: str, section: str, why: str) -> CheckResult:
@@ -386,6 +424,18 @@ class SolveCache:
                 result = solve(h, solver)
             self._store[key] = result
             self.seconds[method] = self.seconds.get(method, 0.0) + time.perf_counter() - t0
+        return self._store[key]
+
+    def reference(self, h: Harvester, name: str, compute: Callable[[], Stats], **settings: Any) -> Stats:
+        """The result of a validation reference that is not one of the product's solvers (e.g. the
+        exact-flow Monte Carlo, :mod:`validation.references.exactflow`), computed once per
+        ``(h, name, settings)`` by ``compute()`` and kept with the solvers' results (so that the
+        identities and the table of results include it)."""
+        key = (h, name, tuple(sorted(settings.items())))
+        if key not in self._store:
+            t0 = time.perf_counter()
+            self._store[key] = compute()
+            self.seconds[name] = self.seconds.get(name, 0.0) + time.perf_counter() - t0
         return self._store[key]
 
     def worker_cpu(self) -> float:

@@ -46,7 +46,7 @@ def run(args: argparse.Namespace) -> int:
         raise ParameterError(f"--seed must be >= 0, got {args.seed}")
     if args.bench is not None and not os.path.isdir(args.bench):
         raise ParameterError(f"--bench {args.bench!r}: not a folder (give the --out folder of "
-                             "python -m validation.studies.fpe, .montecarlo or .exact)")
+                             "python -m validation.studies.fpe.bench, .mc.bench or .exact.bench)")
     return run_cli(quick=args.quick, out=writable_folder("--out", args.out), seed=args.seed,
                    progress=not args.no_progress, bench=args.bench)
 

@@ -19,7 +19,7 @@ __all__ = ["Table", "Figure", "Section", "Report", "write_markdown", "write_html
            "count_line"]
 
 #: Outcomes in the order the summaries count them.
-_ORDER = (Outcome.PASS, Outcome.FINDING, Outcome.FAIL, Outcome.SKIP)
+_ORDER = (Outcome.PASS, Outcome.RECORDED, Outcome.FINDING, Outcome.FAIL, Outcome.SKIP)
 
 
 @dataclass
@@ -96,23 +96,28 @@ class Report:
         """Published values that a second solver shows to be off (not failures of ours)."""
         return [c for c in self.checks if c.outcome is Outcome.FINDING]
 
+    @property
+    def recorded(self) -> list[CheckResult]:
+        """Checks whose verdict reads committed data only (not passes of this run)."""
+        return [c for c in self.checks if c.outcome is Outcome.RECORDED]
+
 
 def count_line(checks: Sequence[CheckResult]) -> str:
-    """``"N passed, F findings, M failed, S skipped"`` over ``checks``.
+    """``"N passed, R recorded, F findings, M failed, S skipped"`` over ``checks``.
 
-    Findings are named apart from passes and failures, in words a test-log reader that looks
-    for ``"N failed"`` does not mistake for failures.
+    Recorded checks and findings are named apart from passes and failures, in words a test-log
+    reader that looks for ``"N failed"`` does not mistake for failures.
 
     Examples
     --------
     >>> from validation.harness.checks import CheckResult
-    >>> count_line([CheckResult("a", "s", "PASS"), CheckResult("b", "s", "FINDING")])
-    '1 passed, 1 finding, 0 failed, 0 skipped'
+    >>> count_line([CheckResult("a", "s", "PASS"), CheckResult("b", "s", "FINDING"), CheckResult("c", "s", "RECORDED")])
+    '1 passed, 1 recorded, 1 finding, 0 failed, 0 skipped'
     """
     n = Counter(c.outcome for c in checks)
     f = n[Outcome.FINDING]
-    return (f"{n[Outcome.PASS]} passed, {f} finding{'' if f == 1 else 's'}, {n[Outcome.FAIL]} failed, "
-            f"{n[Outcome.SKIP]} skipped")
+    return (f"{n[Outcome.PASS]} passed, {n[Outcome.RECORDED]} recorded, {f} finding{'' if f == 1 else 's'}, "
+            f"{n[Outcome.FAIL]} failed, {n[Outcome.SKIP]} skipped")
 
 
 def _section_rows(report: Report) -> list[tuple[str, ...]]:
@@ -120,9 +125,11 @@ def _section_rows(report: Report) -> list[tuple[str, ...]]:
              f"{s.cpu_seconds:.1f}") for s in report.sections]
 
 
-_SECTION_HEADER = ("section", "pass", "finding", "fail", "skip", "time [s]", "CPU [s]")
-_NOTE = ("findings are published values that a second, independent solver shows to be off: not failures; "
-         "skipped checks did not run: see the reason; they are not passes")
+_SECTION_HEADER = ("section", "pass", "recorded", "finding", "fail", "skip", "time [s]", "CPU [s]")
+_NOTE = ("passed: computed in this run; recorded: read from committed data (listed below with the command that "
+         "writes it again), not a pass of this run; findings are published values that a second, independent "
+         "solver shows to be off: not failures; skipped checks compared nothing: see the reason; they are not "
+         "passes")
 
 
 def new_figure(figsize: tuple[float, float] = (6, 4), ncols: int = 1, nrows: int = 1):
@@ -193,10 +200,13 @@ def write_markdown(report: Report, path: Path) -> Path:
 
 
 def _listed(report: Report) -> list[tuple[str, list[CheckResult]]]:
-    """The summary's lists: findings, then failed and skipped checks (each only when not empty)."""
+    """The summary's lists: findings, recorded checks, then failed and skipped checks (each only
+    when not empty)."""
     bad = [c for c in report.checks if c.outcome in (Outcome.FAIL, Outcome.SKIP)]
-    return [(title, picked) for title, picked in (("Findings", report.findings), ("Failed and skipped checks", bad))
-            if picked]
+    return [(title, picked) for title, picked in (
+        ("Findings", report.findings),
+        ("Recorded checks (committed data, not computed in this run)", report.recorded),
+        ("Failed and skipped checks", bad)) if picked]
 
 
 def _inline(text: str) -> str:
@@ -218,6 +228,7 @@ _CSS = """body{font-family:sans-serif;max-width:1100px;margin:2em auto;line-heig
 table{border-collapse:collapse;margin:.5em 0 1em;font-size:.9em}td,th{border:1px solid #bbb;padding:3px 6px;
 vertical-align:top}th{background:#eee}tr.pass td:first-child{background:#c8f0c8}
 tr.fail td:first-child{background:#f5b5b5;font-weight:bold}tr.finding td:first-child{background:#b9d7f5}tr.skip td:first-child{background:#f7e3a1}
+tr.recorded td:first-child{background:#e2e2e2}
 img{max-width:100%;border:1px solid #ddd}figure{margin:1em 0}.summary{font-size:1.2em}
 code{background:#f4f4f4;padding:0 2px}"""
 
@@ -279,14 +290,15 @@ def slowest_checks(report: Report, k: int = SLOWEST) -> list[str]:
 def summary_text(report: Report, width: int = 110, show_passed: bool = False) -> str:
     """Plain-text summary for the terminal.
 
-    A table of pass/finding/fail/skip counts per section, then every failed, skipped and finding
-    check (and, with ``show_passed``, every passed one), failures first, then the slowest
-    computations (:func:`slowest_checks`), and last the counts (:func:`count_line`).
+    A table of pass/recorded/finding/fail/skip counts per section, then every failed, skipped,
+    finding and recorded check (and, with ``show_passed``, every passed one), failures first, then
+    the slowest computations (:func:`slowest_checks`), and last the counts (:func:`count_line`).
     """
-    order = {Outcome.FAIL: 0, Outcome.SKIP: 1, Outcome.FINDING: 2, Outcome.PASS: 3}
+    order = {Outcome.FAIL: 0, Outcome.SKIP: 1, Outcome.FINDING: 2, Outcome.RECORDED: 3, Outcome.PASS: 4}
     title_w = min(max([7, *(len(s.title) for s in report.sections)]), 50)
-    lines = [f"{'section':{title_w}}  {'pass':>5} {'find':>5} {'fail':>5} {'skip':>5}  {'time [s]':>8}  {'CPU [s]':>8}",
-             f"{'-' * title_w}  {'-' * 5} {'-' * 5} {'-' * 5} {'-' * 5}  {'-' * 8}  {'-' * 8}"]
+    lines = [f"{'section':{title_w}}  {'pass':>5} {'rec':>5} {'find':>5} {'fail':>5} {'skip':>5}  {'time [s]':>8}  "
+             f"{'CPU [s]':>8}",
+             f"{'-' * title_w}  {'-' * 5} {'-' * 5} {'-' * 5} {'-' * 5} {'-' * 5}  {'-' * 8}  {'-' * 8}"]
     for sec in report.sections:
         n = Counter(c.outcome for c in sec.checks)
         lines.append(f"{sec.title[:title_w]:{title_w}}  " + " ".join(f"{n[o]:5d}" for o in _ORDER)
@@ -296,18 +308,23 @@ def summary_text(report: Report, width: int = 110, show_passed: bool = False) ->
     if checks:
         name_w = min(max([5, *(len(c.name) for c in checks)]), 60)
         room = max(width - name_w - 10, 20)
-        lines += ["", f"{'result':7}  {'check':{name_w}}  detail", f"{'-' * 7}  {'-' * name_w}  {'-' * 20}"]
+        lines += ["", f"{'result':8}  {'check':{name_w}}  detail", f"{'-' * 8}  {'-' * name_w}  {'-' * 20}"]
         for c in checks:
-            detail = c.detail if len(c.detail) <= room else c.detail[: room - 3] + "..."
-            lines.append(f"{c.outcome.value:7}  {c.name[:name_w]:{name_w}}  {detail}")
+            # a recorded check shows where its data comes from, which a cut detail would lose
+            text = f"{c.source}, written by {c.command}" if c.outcome is Outcome.RECORDED else c.detail
+            detail = text if len(text) <= room else text[: room - 3] + "..."
+            lines.append(f"{c.outcome.value:8}  {c.name[:name_w]:{name_w}}  {detail}")
     lines += slowest_checks(report)
     counts = report.counts()
     lines.append("")
     lines.append(count_line(report.checks))
+    if counts.get("RECORDED", 0):
+        lines.append("Recorded checks read committed data (file and command listed above): they hold for that data "
+                     "and are not passes of this run.")
     if counts.get("FINDING", 0):
         lines.append("FINDINGS are published values that a second, independent solver shows to be off: listed "
                      "above, they are not failures.")
     if counts.get("SKIP", 0):
-        lines.append("SKIPPED checks did not run (time budget, solver or module not available, or no number to "
-                     "check): they are NOT passes.")
+        lines.append("SKIPPED checks compared nothing (time budget, solver or module not available, or no number "
+                     "to compare): they are NOT passes.")
     return "\n".join(lines)

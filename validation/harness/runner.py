@@ -1,10 +1,11 @@
 """Run the whole validation and write the report (``harvester validate``, ``python -m validation``).
 
-Steps, in order (each a module with ``run(ctx) -> Section``): the cross-checks, the paper
-comparison, beyond the paper, the stress tests, the paper's figures (scenes), the
-benchmarks, and last the stationary identities (docs/model.md §2) on every result computed in
-the run.
-A step that crashes becomes a failed check; the run always ends with a report.
+The steps are the report's sections, each a module with ``run(ctx) -> Section``, read in the
+order of :data:`validation.sections.SECTIONS`: the cross-checks, the error bars, the paper
+comparison, beyond the paper, the stress tests, the paper's figures (scenes), the benchmarks, and
+last the stationary identities on every result computed in the run. The same table says the
+order they run in, in a quick and in a full run. A step that crashes becomes a failed check;
+the run always ends with a report.
 """
 
 from __future__ import annotations
@@ -20,38 +21,16 @@ from datetime import datetime, timezone
 from pathlib import Path
 
 from fpe_harvester.errors import ParameterError, check_int
-from fpe_harvester.result import Status
-from fpe_harvester.solve import METHODS
 
-from .checks import Context, SolveCache, guarded, skipped
+from ..sections import SECTIONS, Step
+from .checks import Context, SolveCache, guarded
 from .report import Report, Section, summary_text, write_html, write_markdown
 
-__all__ = ["STEPS", "QUICK_BUDGET", "QUICK_MIN_RAN", "validate", "exit_code", "run_cli"]
-
-#: Steps run before the others (cheapest per check first); unlisted steps follow in plan order.
-RUN_FIRST = ("validation.sections.stress:run_exact", "validation.sections.figures:run_exact", "validation.sections.crosscheck",
-             "validation.sections.paper", "validation.sections.beyond", "validation.sections.stress:run_solvers")
-#: The full run's order: the Monte Carlo-only steps (beyond the paper, the paper's rings) run
-#: while the worker process solves the Fokker-Planck problems the later steps announced.
-RUN_FIRST_FULL = ("validation.sections.stress:run_exact", "validation.sections.figures:run_exact", "validation.sections.beyond",
-                  "validation.sections.paper", "validation.sections.crosscheck", "validation.sections.stress:run_solvers")
+__all__ = ["SECTIONS", "Step", "QUICK_BUDGET", "QUICK_MIN_RAN", "validate", "exit_code", "run_cli"]
 
 #: Wall-time budget [s] of the checks in quick mode; checks that would start later are skipped
 #: (and listed as such), so that CI always gets its report within 3 minutes.
 QUICK_BUDGET = 165.0
-
-#: (module, title) of each step, run in this order.
-STEPS: tuple[tuple[str, str], ...] = (
-    ("validation.sections.crosscheck", "Cross-checks"),
-    ("validation.sections.errorbars", "Error bars: Monte Carlo coverage and Fokker-Planck bounds"),
-    ("validation.sections.paper", "Paper comparison"),
-    ("validation.sections.beyond", "Beyond the paper"),
-    ("validation.sections.stress:run_exact", "Stress tests: exact solver"),
-    ("validation.sections.stress:run_solvers", "Stress tests: Fokker-Planck and Monte Carlo"),
-    ("validation.sections.figures:run_exact", "The paper's figures: harmonic scenes (exact)"),
-    ("validation.sections.figures:run_solvers", "The paper's figures: nonlinear scenes (Fokker-Planck, Monte Carlo)"),
-    ("validation.sections.benchmarks", "Benchmarks: error versus wall time"),
-)
 
 
 def cpu_time(cache: SolveCache | None = None) -> float:
@@ -60,37 +39,6 @@ def cpu_time(cache: SolveCache | None = None) -> float:
     own, kids = resource.getrusage(resource.RUSAGE_SELF), resource.getrusage(resource.RUSAGE_CHILDREN)
     worker = cache.worker_cpu() if cache is not None else 0.0
     return own.ru_utime + own.ru_stime + kids.ru_utime + kids.ru_stime + worker
-
-
-def _identities(ctx: Context) -> Section:
-    from ..sections.crosscheck import describe, identity_checks, results_table
-
-    sec = Section("identities", "Stationary identities, docs/model.md §2 (every solver, every result of this run)")
-    sec.text.append(
-        "For every result computed in this run that describes a stationary state (stable, marginal, "
-        "not converged with its best estimate and error, or metastable with no escaped path): V2 = Kc tau_p vV (d<V^2>/dt = 0) and "
-        "Pin = m gamma v2 + Kv vV (power balance), each within 4 combined error bars of the "
-        "result's own errors (exact: relative floor 1e-12)."
-    )
-    excluded = []
-    for h, method, r in ctx.cache.results():
-        escaped = r.info.get("escape_fraction") != 0
-        if r.status is Status.UNSTABLE or (r.status is Status.METASTABLE and escaped) or r.V2 is None:
-            # No stationary state (a metastable one that no path left counts as quasi-stationary):
-            # the identities are properties of a stationary state, so they do not apply.
-            excluded.append(f"{method} at {describe(h)} ({r.status.value})")
-            continue
-        label = describe(h) + (f", {r.status.value}" if not r.ok else "")
-        sec.checks += guarded(f"identities [{method}] {label}", sec.title,
-                              lambda h=h, r=r, label=label: identity_checks(label, r, h, sec.title))
-    if excluded:
-        sec.text.append("Not checked (no stationary state, so the identities do not apply): "
-                        + "; ".join(excluded) + ".")
-    sec.tables.append(results_table(ctx))
-    methods = {m for _, m, _ in ctx.cache.results()}
-    sec.checks += [skipped(f"identities [{m}]", sec.title, f"no {m!r} result was computed in this run "
-                           "(solver not available)") for m in METHODS if m not in methods]
-    return sec
 
 
 def _announce(ctx: Context, modules: Sequence[str | Callable[[Context], Section]]) -> list[str]:
@@ -118,48 +66,43 @@ def _announce(ctx: Context, modules: Sequence[str | Callable[[Context], Section]
     return problems
 
 
-def _run_steps(ctx: Context, plan: list, order: list[int], done: dict[int, Section],
+def _run_steps(ctx: Context, plan: list[Step], order: list[int], done: dict[int, Section],
                progress: Callable[[str], None] | None, finished: Callable[[Section], None] | None) -> None:
+    """Run ``plan[i]`` for each ``i`` of ``order`` into ``done[i]``, each section stamped with its wall
+    and processor time (:func:`cpu_time`: the worker process's time counts in the section it was
+    used in) and handed to ``finished``."""
     for i in order:
-        module, title = plan[i]
+        target, title = plan[i].target, plan[i].title
         if progress:
             progress(title)
         t0, c0 = time.perf_counter(), cpu_time(ctx.cache)
         holder: list[Section] = []
 
-        def step(module: str | Callable[[Context], Section] = module) -> list:
-            if isinstance(module, str):
-                name, _, func = module.partition(":")
+        def step(target: str | Callable[[Context], Section] = target) -> list:
+            if isinstance(target, str):
+                name, _, func = target.partition(":")
                 fn = getattr(importlib.import_module(name), func or "run")
             else:
-                fn = module
+                fn = target
             holder.append(fn(ctx))
             return []
 
         crash = guarded(title, title, step)
-        sec = holder[0] if holder else Section(str(module).rsplit(".", 1)[-1], title)
+        sec = holder[0] if holder else Section(str(target).rsplit(".", 1)[-1], title)
         sec.title = title
         sec.checks += crash
-        done[i] = _finish(sec, t0, c0, finished, ctx.cache)
-
-
-def _finish(sec: Section, t0: float, c0: float, finished: Callable[[Section], None] | None,
-            cache: SolveCache | None = None) -> Section:
-    """Stamp the section's wall and processor time since ``t0``, ``c0`` (:func:`cpu_time` of
-    ``cache``: the worker process's time counts in the section it was used in) and hand it to
-    ``finished``."""
-    sec.seconds = time.perf_counter() - t0
-    sec.cpu_seconds = cpu_time(cache) - c0
-    if finished:
-        finished(sec)
-    return sec
+        sec.seconds = time.perf_counter() - t0
+        sec.cpu_seconds = cpu_time(ctx.cache) - c0
+        if finished:
+            finished(sec)
+        done[i] = sec
 
 
 def validate(
     quick: bool = False,
     out: Path | str = "validation_report",
     seed: int = 2017,
-    steps: Sequence[tuple[str | Callable[[Context], Section], str]] | None = None,
+    steps: Sequence[Step | tuple] | None = None,
     progress: Callable[[str], None] | None = None,
     bench: Path | str | None = None,
     finished: Callable[[Section], None] | None = None,
@@ -174,13 +117,13 @@ def validate(
         Output folder, created if needed.
     seed : int
         Base seed of the Monte Carlo runs, >= 0.
-    steps : sequence of (module or callable, title), optional
-        The steps to run (default :data:`STEPS`); ``"module"`` means its ``run(ctx) -> Section``,
-        ``"module:function"`` that function.
+    steps : sequence of :class:`~validation.sections.Step`, optional
+        The steps to run, in the report's order (default :data:`~validation.sections.SECTIONS`); a
+        plain ``(target, title)`` runs in that order too.
     progress : callable, optional
         Called with the title of each step before it starts.
     bench : path, optional
-        Folder written by ``python -m validation.studies.fpe --out DIR`` (and the other
+        Folder written by ``python -m validation.studies.fpe.bench --out DIR`` (and the other
         benchmark modules): their exhaustive results are included in the report. The
         report's own benchmark section always runs the short benchmarks.
     finished : callable, optional
@@ -208,14 +151,10 @@ def validate(
         "machine": f"{platform.machine()}, {os.cpu_count()} cores, Python {platform.python_version()}",
         "Monte Carlo seed": str(seed),
     })
-    plan = list(STEPS if steps is None else steps)
-    # Cheap, exact-heavy steps run first so that a slow solver cannot crowd them out of the quick
-    # budget; the report keeps the reading order of ``plan``.
-    first = RUN_FIRST if quick else RUN_FIRST_FULL
-    order = sorted(range(len(plan)), key=lambda i: (first.index(plan[i][0]) if plan[i][0] in first
-                                                     else len(first), i))
+    plan = [Step(*s) for s in (SECTIONS if steps is None else steps)]
+    order = sorted(range(len(plan)), key=lambda i: (plan[i].quick if quick else plan[i].full, i))
     c_start = cpu_time(ctx.cache)
-    problems = _announce(ctx, [plan[i][0] for i in order])
+    problems = _announce(ctx, [plan[i].target for i in order])
     if problems:
         report.meta["announcing solves failed (the steps solved them themselves)"] = "; ".join(problems)
     done: dict[int, Section] = {}
@@ -228,10 +167,6 @@ def validate(
             f"{ctx.cache.announced} announced, {ctx.cache.prefetched} used; this process waited for them "
             f"{ctx.cache.waited:.1f} s in all")
     report.sections += [done[i] for i in range(len(plan))]
-    if progress:
-        progress("Identities")
-    t0, c0 = time.perf_counter(), cpu_time()
-    report.sections.append(_finish(_identities(ctx), t0, c0, finished))
     if ctx.cache.dropped:
         report.meta["solver options not supported (dropped)"] = "; ".join(
             f"{m}: {', '.join(sorted(o))}" for m, o in ctx.cache.dropped.items())
@@ -249,7 +184,8 @@ QUICK_MIN_RAN = 0.9
 def exit_code(report: Report, quick: bool) -> int:
     """1 if a check failed, if a full run skipped any check (nothing may go unchecked there),
     or if a quick run skipped more than 1 - :data:`QUICK_MIN_RAN` of its checks (a quick run
-    may skip a few for its time budget, and says how many and which)."""
+    may skip a few for its time budget, and says how many and which); else 0. Recorded checks
+    and findings do not fail a run: the summary counts them apart from the passes."""
     if report.failed:
         return 1
     n_skip, n_all = len(report.skipped), len(report.checks)
@@ -260,17 +196,17 @@ def exit_code(report: Report, quick: bool) -> int:
 
 def run_cli(quick: bool = False, out: Path | str = "validation_report", seed: int = 2017,
             progress: bool = True, bench: Path | str | None = None) -> int:
-    """Run :func:`validate` over :data:`STEPS`, print the pass/fail summary.
+    """Run :func:`validate` over :data:`~validation.sections.SECTIONS`, print the pass/fail summary.
 
     Returns the exit code (:func:`exit_code`): 1 if any check failed or, in a full run, was
     skipped; else 0.
     """
-    steps = STEPS
+    steps = SECTIONS
     bar = None
     if progress:
         from tqdm import tqdm
 
-        bar = tqdm(total=len(steps) + 1, desc="validate", unit="step", file=sys.stderr)
+        bar = tqdm(total=len(steps), desc="validate", unit="step", file=sys.stderr)
     started: list[str] = []
 
     def tick(title: str) -> None:
@@ -283,8 +219,10 @@ def run_cli(quick: bool = False, out: Path | str = "validation_report", seed: in
     def step_done(sec: Section) -> None:
         failed = sum(c.outcome.value == "FAIL" for c in sec.checks)
         found = sum(c.outcome.value == "FINDING" for c in sec.checks)
+        kept = sum(c.outcome.value == "RECORDED" for c in sec.checks)
         line = (f"{time.perf_counter() - t0:7.1f} s  {sec.title}: {sec.seconds:.1f} s ({sec.cpu_seconds:.0f} CPU-s), "
                 f"{len(sec.checks)} checks"
+                + (f", {kept} recorded" if kept else "")
                 + (f", {found} finding{'' if found == 1 else 's'}" if found else "")
                 + (f", {failed} FAILED" if failed else ""))
         if bar is not None:

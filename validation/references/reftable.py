@@ -12,13 +12,30 @@ come from the same solver).
 cases: about an hour on 2 cores) and stamps each with the commit; it refuses to run on a tree
 with uncommitted changes to the code (:data:`CODE`), so that every stamp names code one can
 check out. ``--only LABEL ...`` recomputes some cases and keeps the others, ``--stale`` those
-that are stale (:func:`staleness`: stamped with an uncommitted tree, or older than the latest
-commit that changed the solver they use), ``--list`` shows every case with its state.
+that are stale (:func:`staleness`), ``--list`` shows every case with its state.
+
+**When an entry is stale.** A solver's code changes often without its results changing (a
+restructuring holds them bit for bit: ``tests/validation/references/test_seeded.py``), so a
+change of code does not make an entry stale; a change of results does. An entry is current when
+
+1. its stamp is a commit of this history (not an uncommitted tree);
+2. its system and settings are its case's in :data:`CASES` (the time guards ``max_seconds`` and
+   ``max_time`` excepted when the entry reached its tolerance or stopped before either the
+   recorded or the case's guard: it did not meet them);
+3. no commit after its stamp changed the seeded results of its solver
+   (:data:`validation.references.seeded.PATH`, rewritten only when a solver's results change
+   deliberately, by ``python -m validation.references.seeded --write``); and
+4. if its stamp is older than the seeded-results file, no commit between the two changed its
+   solver's code (:data:`CODE`): before that file, a code change was the only record.
+
+The seeded cases are the promise: a change of results that none of them sees is not seen here
+either.
 """
 
 from __future__ import annotations
 
 import argparse
+import functools
 import json
 import math
 import subprocess
@@ -31,8 +48,8 @@ from typing import Any
 
 from fpe_harvester import Harvester, Stats, Status, solve
 
-__all__ = ["RefCase", "CASES", "CODE", "PATH", "KINK_PATH", "load", "lookup", "as_stats", "recorded_kink",
-           "recorded_mc", "compute", "compare", "staleness", "UncommittedError", "main"]
+__all__ = ["RefCase", "CASES", "CODE", "PATH", "KINK_PATH", "SEEDED", "GUARDS", "load", "lookup", "as_stats",
+           "recorded_kink", "recorded_mc", "compute", "compare", "staleness", "stale_note", "UncommittedError", "main"]
 
 #: Where the table lives.
 PATH = Path(__file__).parent / "data" / "reference_values.json"
@@ -125,20 +142,89 @@ def _commit(method: str) -> str:
     return _git("rev-parse", "--short", "HEAD")
 
 
-def staleness(entry: dict[str, Any] | None, method: str) -> str | None:
-    """Why ``entry`` must be regenerated, or None if it is current: missing, stamped with an
-    uncommitted tree or an unknown commit, or older than a commit that changed the code its
-    ``method`` uses (:data:`CODE`)."""
+#: The seeded-results file (:mod:`validation.references.seeded`), relative to the repository.
+SEEDED = "validation/references/data/seeded_results.json"
+#: Options that only guard a run's time: not settings of an entry that reached its tolerance.
+GUARDS = ("max_seconds", "max_time", "progress")
+
+
+@functools.lru_cache(maxsize=None)
+def _git_read(*args: str) -> str:
+    """:func:`_git` for read-only queries, remembered for the process (history does not change
+    under a validation run)."""
+    return _git(*args)
+
+
+def _seeded_changed(commit: str, method: str) -> bool:
+    """Whether ``commit`` changed the seeded results of ``method`` (a case present before and after
+    whose numbers differ; Fokker--Planck beyond the file's relative tolerance)."""
+    from .seeded import FPE_RTOL
+
+    def cases(rev: str) -> dict[str, dict[str, Any]]:
+        try:
+            data = json.loads(_git_read("show", f"{rev}:{SEEDED}"))
+        except (RuntimeError, json.JSONDecodeError):
+            return {}
+        return {c["label"]: c["numbers"] for c in data.get("cases", []) if c.get("method") == method}
+
+    before, after = cases(f"{commit}^"), cases(commit)
+    for label in before.keys() & after.keys():
+        for q, old in before[label].items():
+            new = after[label].get(q)
+            if method == "mc" or old is None or new is None:
+                if old != new:
+                    return True
+            elif abs(float(new) - float(old)) > FPE_RTOL * max(abs(float(old)), 1e-300):
+                return True
+    return False
+
+
+def staleness(entry: dict[str, Any] | None, method: str, case: RefCase | None = None) -> str | None:
+    """Why ``entry`` must be regenerated, or None if it is current (the rule of the module
+    docstring; ``case`` gives the settings it must have, when known)."""
     if entry is None:
         return "missing"
     commit = str(entry.get("commit", ""))
     if not commit or "+" in commit or commit == "unknown":
         return f"stamped {commit!r}: not a commit"
     try:
-        newer = _git("log", "--format=%h", f"{commit}..HEAD", "--", *CODE[method])
+        _git_read("cat-file", "-e", f"{commit}^{{commit}}")
     except RuntimeError:
         return f"commit {commit} is not in this repository's history"
-    return f"{len(newer.split())} later commit(s) changed its code ({newer.split()[0]}, ...)" if newer else None
+    if case is not None:
+        if entry.get("system") != case.system:
+            return f"its system {entry.get('system')} is not its case's {case.system}"
+        opts = entry.get("options", {})
+        took = float(entry.get("seconds", math.inf))
+        # a guard is no setting of an entry that reached its tolerance or stopped well before it
+        guards = [k for k in GUARDS if k == "progress" or entry.get("status") == "stable"
+                  or took < min(float(opts.get(k, math.inf)), float(case.options.get(k, math.inf)))]
+        mine = {k: v for k, v in opts.items() if k not in guards}
+        wanted = {k: v for k, v in case.options.items() if k not in guards}
+        if mine != wanted:
+            return f"its settings {mine} are not its case's {wanted}"
+    changed = [c for c in _git_read("log", "--format=%h", f"{commit}..HEAD", "--", SEEDED).split()
+               if _seeded_changed(c, method)]
+    if changed:
+        return f"the seeded {method} results changed after it ({', '.join(changed)})"
+    first = _git_read("log", "--format=%h", "--diff-filter=A", "--", SEEDED).split()
+    if first:
+        older = _git_read("log", "--format=%h", f"{commit}..{first[-1]}", "--", *CODE[method]).split()
+        if older:
+            return (f"{len(older)} commit(s) changed its solver's code before the seeded results were recorded "
+                    f"({older[0]}, ...)")
+    return None
+
+
+def stale_note(entry: dict[str, Any], method: str, label: str | None = None) -> str:
+    """``""`` for a current entry, else ``"; STALE: <why>"`` for a report's detail (a table entry
+    is looked up by ``label`` among :data:`CASES` for its settings)."""
+    case = next((c for c in CASES if c.label == label), None)
+    try:
+        why = staleness(entry, method, case)
+    except (RuntimeError, OSError) as exc:  # no git here (an installed copy): say so
+        why = f"staleness unknown ({exc})"
+    return f"; STALE: {why}" if why else ""
 
 
 def compute(case: RefCase) -> dict[str, Any]:
@@ -187,7 +273,8 @@ def as_stats(entry: dict[str, Any], status: Status | None = None) -> Stats:
     values = {q: entry[q] for q in ("eta", "V2", "Pin")} | {q + "_err": entry[q + "_err"] for q in ("eta", "V2", "Pin")}
     return Stats(**values, status=status or Status(entry["status"]), method=entry["method"],
                  message=f"reference table '{entry['label']}' ({entry['status']}, {entry['date']}, commit "
-                         f"{entry['commit']}, seed {entry['options'].get('seed')}): {entry['message']}")
+                         f"{entry['commit']}, seed {entry['options'].get('seed')}): {entry['message']}"
+                         + stale_note(entry, entry["method"], entry["label"]))
 
 
 def recorded_kink(a: float) -> dict[str, Any] | None:
@@ -196,6 +283,15 @@ def recorded_kink(a: float) -> dict[str, Any] | None:
     if not KINK_PATH.exists():
         return None
     return json.loads(KINK_PATH.read_text()).get(f"a{a:g}")
+
+
+def _kink_stale_note() -> str:
+    """:func:`stale_note` for the kink's long runs, stamped by the last commit that wrote their file."""
+    try:
+        stamp = _git_read("log", "-1", "--format=%h", "--", str(KINK_PATH.relative_to(_ROOT))).strip()
+    except (RuntimeError, OSError, ValueError) as exc:
+        return f"; staleness unknown ({exc})"
+    return stale_note({"commit": stamp}, "mc")
 
 
 def recorded_mc(h: Harvester) -> Stats | None:
@@ -208,7 +304,7 @@ def recorded_mc(h: Harvester) -> Stats | None:
             return None
         return Stats(status=Status.STABLE, method="mc", eta=d["eta"], eta_err=d["eta_err"],
                      message=f"long run in validation/references/data/kink_mc_reference_values.json (seed {d.get('seed')}): "
-                             f"{d['message']}",
+                             f"{d['message']}" + _kink_stale_note(),
                      V2=d["V2"], V2_err=d["V2_err"], Pin=d["Pin"], Pin_err=d["Pin_err"])
     entry = lookup(h, "mc")
     return None if entry is None else as_stats(entry, Status.STABLE)
@@ -224,6 +320,7 @@ def compare(label: str, r: Stats, sigmas: float = 4.0, path: Path = PATH) -> lis
         why = "missing" if entry is None else f"without an error ({entry.get('status')}: {entry.get('message')})"
         return [(f"reference table: {label}", False, f"entry {why} (python -m validation.references.reftable)")]
     out = []
+    note = stale_note(entry, entry["method"], label)
     for q in ("eta", "V2", "Pin"):
         v, e = r.value(q)
         ref, ref_e = entry[q], entry[q + "_err"] or 0.0
@@ -235,7 +332,7 @@ def compare(label: str, r: Stats, sigmas: float = 4.0, path: Path = PATH) -> lis
         out.append((f"reference table: {label}: {q}", ok,
                     f"{v:.8g} +- {e:.2g} vs table {ref:.8g} +- {ref_e:.2g} ({entry['method']}, {entry['status']}, "
                     f"{entry['date']}, "
-                    f"commit {entry['commit']}): |diff| = {abs(v - ref):.2g} vs {sigmas:g} x {comb:.2g}"))
+                    f"commit {entry['commit']}): |diff| = {abs(v - ref):.2g} vs {sigmas:g} x {comb:.2g}{note}"))
     return out
 
 
@@ -253,7 +350,7 @@ def main(argv: list[str] | None = None) -> int:
     labels = [c.label for c in CASES]
     if args.list:
         for c in CASES:
-            why = staleness(table.get(c.label), c.method)
+            why = staleness(table.get(c.label), c.method, c)
             print(f"{c.label:40s} {table.get(c.label, {}).get('seconds', '-'):>7} s  {why or 'current'}")
         return 0
     unknown = sorted(set(args.only or ()) - set(labels))
@@ -262,7 +359,7 @@ def main(argv: list[str] | None = None) -> int:
               file=sys.stderr)
         return 2
     todo = [c for c in CASES if (not args.only or c.label in args.only)
-            and (not args.stale or staleness(table.get(c.label), c.method))]
+            and (not args.stale or staleness(table.get(c.label), c.method, c))]
     try:
         for c in {c.method for c in todo}:
             _commit(c)

@@ -1,15 +1,14 @@
-"""Cross-checks between the three solvers and against the exact identities.
+"""Cross-checks between the three solvers.
 
 * exact vs Monte Carlo on harmonic rings (N = 1, 2, 3, 5);
-* Fokker--Planck vs Monte Carlo on single nonlinear units (n x a grid);
+* Fokker--Planck vs Monte Carlo on single nonlinear units (n x a grid), except where Fokker--Planck
+  declines (its domain rule): there, and at the strong kink (n = 1 and 1.25, a = 2) in any case,
+  the product's Monte Carlo vs the exact-flow construction (:mod:`validation.comparisons.strongkink`);
 * Fokker--Planck vs exact on the harmonic unit (n = 2);
-* the Fourier-mode exact solution vs a dense 4N x 4N Lyapunov solve (scipy) for small N;
-* the stationary identities (docs/model.md §2) for every result computed in this run:
+* the Fourier-mode exact solution vs a dense 4N x 4N Lyapunov solve (scipy) for small N.
 
-.. math::
-
-    \\langle V^2\\rangle = K_c\\tau_p\\langle vV\\rangle,\\qquad
-    P_{in} = m\\gamma\\langle v^2\\rangle + K_v\\langle vV\\rangle.
+The stationary identities of every result computed in the run are the closing section's
+(:mod:`validation.sections.identities`).
 
 Each comparison of a quantity ``q`` passes when
 :math:`|q_1 - q_2| \\le 4\\sqrt{\\delta_1^2 + \\delta_2^2} + \\text{floor}` (see
@@ -27,10 +26,10 @@ from fpe_harvester.model import Harvester
 from fpe_harvester.result import Stats, Status
 
 from ..harness.checks import CheckResult, Context, agree, expect
-from ..harness.report import Section, Table
+from ..harness.report import Section
+from ..comparisons.strongkink import STRONG_CAP, STRONG_KINK, declines, mc_vs_flow
 
-__all__ = ["run", "identity_checks", "describe", "results_table", "HARMONIC_RINGS", "NONLINEAR_GRID",
-           "QUICK_NONLINEAR", "MAX_REL_TOL"]
+__all__ = ["run", "HARMONIC_RINGS", "NONLINEAR_GRID", "QUICK_NONLINEAR", "MAX_REL_TOL"]
 
 #: (N, k) of the harmonic rings compared with Monte Carlo (a = 0.5; all inside the stable range).
 HARMONIC_RINGS = ((1, 0.0), (2, -0.15), (3, -0.25), (5, -0.2))
@@ -66,30 +65,6 @@ def _compare(label: str, r1: Stats, r2: Stats, *, quick: bool, floor: float = 0.
                        + ": no stationary number to cross-check") for q in names]
     return [agree(f"{label}: {q}", _SECTION, *r1.value(q), *r2.value(q), floor=floor,
                   rel_floor=rel_floor, max_rel_tol=MAX_REL_TOL[quick], note=note) for q in names]
-
-
-def identity_checks(label: str, r: Stats, h: Harvester, section: str = _SECTION) -> list[CheckResult]:
-    """The two stationary identities (docs/model.md §2) on one result, within its errors.
-
-    A result that lacks ``vV`` or ``v2`` fails: the identities are every solver's self-check.
-    """
-    p = h.params
-    floor = 1e-12 if r.method == "exact" else 0.0
-    if r.vV is None or r.v2 is None or r.V2 is None or r.Pin is None:
-        return [expect(f"identities [{r.method}] {label}", section, False,
-                       f"result lacks V2/Pin/vV/v2 (V2={r.V2}, Pin={r.Pin}, vV={r.vV}, v2={r.v2}); "
-                       f"status {r.status.value}")]
-    e = lambda x: 0.0 if x is None else x  # noqa: E731
-    rhs1 = p.Kc * p.tau_p * r.vV
-    rhs1_err = p.Kc * p.tau_p * e(r.vV_err)
-    rhs2 = p.m * p.gamma * r.v2 + p.Kv * r.vV
-    rhs2_err = math.hypot(p.m * p.gamma * e(r.v2_err), p.Kv * e(r.vV_err))
-    return [
-        agree(f"identities [{r.method}] {label}: V2 = Kc tau_p vV", section, r.V2, r.V2_err, rhs1, rhs1_err,
-              rel_floor=floor),
-        agree(f"identities [{r.method}] {label}: Pin = m gamma v2 + Kv vV", section, r.Pin, r.Pin_err, rhs2,
-              rhs2_err, rel_floor=floor),
-    ]
 
 
 #: Share of the cap that 4 error bars of a Monte Carlo run may take before it is solved again tighter.
@@ -164,15 +139,29 @@ def table_checks(ctx: Context) -> list[CheckResult]:
 
 
 def _kink_density(ctx: Context, sec: Section) -> list[CheckResult]:
-    """The kink's (x, v) density near its trap, Fokker-Planck against Monte Carlo
-    (:mod:`validation.sections.kinkdensity`); quick mode a = 0.5 only."""
-    from .kinkdensity import FPE_TOL, kink_density_figure
+    """The kink's (x, v) density near its trap (:mod:`validation.comparisons.kinkdensity`): Monte Carlo
+    against Fokker-Planck, or, where Fokker-Planck declines the unit (a = 2), against the exact-flow
+    Monte Carlo (:mod:`validation.comparisons.strongkink`); quick mode a = 0.5 only."""
+    from ..comparisons.kinkdensity import FPE_TOL, ShellDensity, kink_density_figure, shell_area
+    from ..comparisons.strongkink import flow, shells
 
-    ctx.require("fpe", "mc")
+    a_values = (0.5,) if ctx.quick else (0.5, 2.0)
+    ctx.require("mc", *(("fpe",) if any(declines(Harvester.build(a=a, n=1.0)) is None for a in a_values) else ()))
     # the run's Fokker-Planck result of each kink (shared with "fpe vs mc" when the tolerances match)
     # tells whether the solver converges, so a failed solve is not repeated for the figure
     solved = lambda h: ctx.solve(h, "fpe", tol=FPE_TOL)  # noqa: E731
-    fig, lines = kink_density_figure(ctx.out, ctx.quick, (0.5,) if ctx.quick else (0.5, 2.0), solved)
+
+    def second(h: Harvester) -> ShellDensity | None:
+        if declines(h) is None:
+            return None
+        r = flow(ctx, h)
+        frac, err = shells(r)
+        edges = np.asarray(r.info["edges"])
+        dA = np.diff(shell_area(edges, h.a, h.params.m))
+        return ShellDensity(edges, frac / dA, err / dA, f"exact-flow Monte Carlo, {r.info['settings']['paths']} "
+                                                         f"paths x {r.info['t_run']:g}, h = {r.info['settings']['step']:g}")
+
+    fig, lines = kink_density_figure(ctx.out, ctx.quick, a_values, solved, second)
     sec.figures.append(fig)
     return [expect(label, _SECTION, ok, detail) for label, ok, detail in lines]
 
@@ -242,8 +231,17 @@ def run(ctx: Context) -> Section:
                                 lambda N=N, k=k: _exact_vs_mc(ctx, N, k))
     for a in fpe_a:
         sec.checks += ctx.check(f"fpe vs exact: a = {a:g}", _SECTION, lambda a=a: _fpe_vs_exact(ctx, a))
+    declined = {(n, a): why for n, a in grid if (why := declines(Harvester.build(a=a, n=n)))}
     for n, a in grid:
-        sec.checks += ctx.check(f"fpe vs mc: n = {n:g}, a = {a:g}", _SECTION, lambda n=n, a=a: _fpe_vs_mc(ctx, n, a))
+        if (n, a) not in declined:
+            sec.checks += ctx.check(f"fpe vs mc: n = {n:g}, a = {a:g}", _SECTION,
+                                    lambda n=n, a=a: _fpe_vs_mc(ctx, n, a))
+    sec.text.append(_strong_text(ctx, declined))
+    if not ctx.quick:
+        for n, a in dict.fromkeys([*declined, *STRONG_KINK]):
+            why = f"Fokker-Planck declines this unit: {declined[(n, a)]}" if (n, a) in declined else ""
+            sec.checks += ctx.check(f"mc vs exact-flow mc: n = {n:g}, a = {a:g}", _SECTION,
+                                    lambda n=n, a=a, why=why: mc_vs_flow(ctx, n, a, _SECTION, why))
     sec.checks += ctx.check("kink density near the trap", _SECTION, lambda: _kink_density(ctx, sec))
     sec.checks += ctx.check("reference table", _SECTION, lambda: table_checks(ctx))
     for prefix in ("exact vs mc", "fpe vs mc"):
@@ -255,11 +253,31 @@ def run(ctx: Context) -> Section:
 
 def prefetch(ctx: Context) -> None:
     """Announce this step's Fokker--Planck solves (:meth:`Context.prefetch`): the harmonic units
-    against the exact solver, then the grid of single units (the kink density figure reuses them)."""
+    against the exact solver, then the grid of single units Fokker--Planck does not decline (the
+    kink density figure reuses them)."""
     for a in _FPE_VS_EXACT_A[ctx.quick]:
         ctx.prefetch(Harvester.build(a=a, n=2.0), "fpe", tol=_FPE_VS_EXACT_TOL[ctx.quick])
     for n, a in QUICK_NONLINEAR if ctx.quick else NONLINEAR_GRID:
-        ctx.prefetch(Harvester.build(a=a, n=n), "fpe")
+        h = Harvester.build(a=a, n=n)
+        if declines(h) is None:
+            ctx.prefetch(h, "fpe")
+
+
+def _strong_text(ctx: Context, declined: dict[tuple[float, float], str]) -> str:
+    """The strong-kink paragraph: where Fokker--Planck declines, and the Monte Carlo rows."""
+    said = ("Fokker-Planck declines " + "; ".join(f"n = {n:g}, a = {a:g} ({why})" for (n, a), why in declined.items())
+            + ": those units are checked by the two Monte Carlo constructions below, not by Fokker-Planck. "
+            if declined else "Fokker-Planck declines none of the grid's units. ")
+    if ctx.quick:
+        return said + "The strong-kink rows (two Monte Carlo constructions) run in the full run only."
+    return (said + "**The strong kink** (n, a) in "
+            f"{sorted(set(STRONG_KINK) | set(declined))}: the product's Monte Carlo (settings above) against the "
+            "exact-flow Monte Carlo of validation/references/exactflow.py, a second construction sharing no integrator "
+            "code with it (exact Gaussian transitions of the linear flow; for n = 1 the kink's force exact on each side, "
+            "crossings located on the conditional-mean path; for n > 1 the discrete-gradient force), whose errors add "
+            "its step bias bound measured by python -m validation.studies.kink.exactflow_bias. Each row passes when "
+            f"|a - b| <= 4 sqrt(err_a^2 + err_b^2), that tolerance at most {STRONG_CAP:.0%} of the value: below the "
+            "~8 % bias of a scheme that steps over the kink's crossings at a = 2 (docs/model.md).")
 
 
 def systematic_offset(checks: list[CheckResult]) -> str:
@@ -284,29 +302,3 @@ def systematic_offset(checks: list[CheckResult]) -> str:
     return (f"{pos} of {n} differences are positive (two-sided sign-test p = {p:.2g}); mean normalized "
             f"difference {zbar:+.2f} (in units of the combined error), RMS {math.sqrt(sum(x * x for x in z) / len(z)):.2f}"
             + (". The signs suggest a common offset smaller than the stated errors." if p < 0.01 else "."))
-
-
-def _fmt(v: float | None, e: float | None) -> str:
-    if v is None:
-        return "-"
-    return f"{v:.6g}" if not e else f"{v:.6g} +- {e:.2g}"
-
-
-def describe(h: Harvester) -> str:
-    """Short label of a harvester: a, n, N, k and the parameters that differ from the defaults."""
-    from fpe_harvester.model import Params
-
-    base = Params().to_dict()
-    extra = ", ".join(f"{k}={v:g}" for k, v in h.params.to_dict().items() if v != base[k])
-    return f"a={h.a:g}, n={h.n:g}, N={h.N}, k={h.k:.6g}" + (f", {extra}" if extra else "")
-
-
-def results_table(ctx: Context) -> Table:
-    """Every result solved in this run, with its status, errors and solver time."""
-    rows = []
-    for h, method, r in ctx.cache.results():
-        t = r.info.get("wall_time", r.info.get("seconds"))
-        rows.append((describe(h), method, r.status.value, _fmt(*r.value("eta")), _fmt(*r.value("V2")),
-                     _fmt(*r.value("Pin")), f"{t:.3g}" if isinstance(t, (int, float)) else "-"))
-    return Table("Every result computed in this run", ("system", "method", "status", "eta", "V2", "Pin",
-                                                       "solver time [s]"), rows)

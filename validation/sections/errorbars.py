@@ -3,7 +3,7 @@
 Every number the library returns for a nonlinear system carries an error estimate. This step
 checks those estimates against actual errors:
 
-* **Monte Carlo** (:func:`validation.sections.coverage.mc_coverage`): many results with independent
+* **Monte Carlo** (:func:`validation.comparisons.coverage.mc_coverage`): many results with independent
   seeds against another solver (exact for harmonic rings, Fokker--Planck ten times tighter
   for single nonlinear units; an independent run ten times tighter only where no other
   solver answers); the fractions of results within 1, 2, 3 reported standard errors of the
@@ -38,7 +38,7 @@ __all__ = ["run", "FpeCase", "QUICK_FPE", "FULL_FPE", "fpe_bounds"]
 _SECTION = "Error bars"
 #: Monte Carlo results per coverage case in quick mode (the full run: the coverage default): 3 x 20
 #: = 60 per quantity. Bars 1.5x too small then fail with probability 0.68, 2x too wide 0.994
-#: (:func:`validation.sections.coverage.detection`; the full run's 104: 0.92 and 1), and the typical
+#: (:func:`validation.comparisons.coverage.detection`; the full run's 104: 0.92 and 1), and the typical
 #: sample of either fails (at 48, the fewest with probability 0.5, that of bars 1.5x too small
 #: still passes: the binomial limits move in steps of 1/count).
 _QUICK_MC_RUNS = 20
@@ -223,6 +223,8 @@ def fpe_bounds(ctx: Context, cases: tuple[FpeCase, ...]) -> list[Bound]:
             ref = _fpe_reference(ctx, case)
         if ref.status is not Status.STABLE or ref.eta is None:
             raise RuntimeError(f"reference for {case.label} is {ref.status.value}: {ref.message}")
+        stale = ref.message.find("STALE: ")
+        name = case.reference_name + (f" ({ref.message[stale:]})" if stale >= 0 else "")
         for tol in case.tols:
             opts = case.options()
             if opts:  # a weight object: solved outside the run's cache (its key must be hashable)
@@ -239,7 +241,7 @@ def fpe_bounds(ctx: Context, cases: tuple[FpeCase, ...]) -> list[Bound]:
                     raise RuntimeError(f"{case.label}, tol {tol:g}: no {q} to compare")
                 out.append(Bound(case.label, tol, float(e if e is not None else math.inf), abs(v - vr),
                                  float(er or 0.0), r.status.value, float(r.info["seconds"]), float(r.eta),
-                                 REF_SIGMAS if case.reference == "mc" else 1.0, case.reference_name, q))
+                                 REF_SIGMAS if case.reference == "mc" else 1.0, name, q))
     return out
 
 
@@ -279,7 +281,7 @@ def _fpe_checks(ctx: Context, sec: Section) -> list[CheckResult]:
 
 
 def _mc_checks(ctx: Context, sec: Section) -> list[CheckResult]:
-    from .coverage import ALPHA, MISSCALED, NORMAL_COVERAGE, coverage_checks, detection, mc_coverage, min_results
+    from ..comparisons.coverage import ALPHA, MISSCALED, NORMAL_COVERAGE, coverage_checks, detection, mc_coverage, min_results
 
     ctx.require("mc")
     res = mc_coverage(quick=ctx.quick, runs=_QUICK_MC_RUNS if ctx.quick else None, seed=ctx.seed)
@@ -288,8 +290,10 @@ def _mc_checks(ctx: Context, sec: Section) -> list[CheckResult]:
     for q, f in res["fractions"].items():
         table.rows.append((q, *(f"{x:.3f}" for x in f), str(res["count"])))
     table.rows.append(("normal", *(f"{x:.3f}" for x in NORMAL_COVERAGE), "-"))
-    table.note = ("Cases: " + "; ".join(f"{c['label']} (reference {c['reference_method']}, median "
-                                         f"relative error {c['median_rel_err_eta']:.1e}, {c['wall_s']:.0f} s)"
+    table.note = ("Cases: " + "; ".join(f"{c['label']} (reference {c['reference_method']}"
+                                         + (f", STALE reference-table entry: {c['reference_stale']}"
+                                            if c["reference_stale"] else "")
+                                         + f", median relative error {c['median_rel_err_eta']:.1e}, {c['wall_s']:.0f} s)"
                                          for c in res["cases"] if "unusable_reference" not in c)
                   + f". Each quantity is checked on its own, against the binomial limits of the normal "
                     f"coverage for the number of results (two-sided probability {ALPHA:g} per fraction).")

@@ -139,7 +139,8 @@ def fallback_check(label: str, scene: Any, rows: list[Any]) -> list[CheckResult]
     """The points solved twice (Fokker--Planck missed its tolerance, Monte Carlo was tried):
     counted, and where both solvers gave numbers, held to agree on every observable of the
     scene within :data:`FALLBACK_SIGMAS` combined error bars (a missing error bar counts as 0,
-    so it can only make the check stricter). No check when no point was solved twice.
+    so it can only make the check stricter). No check when no point was solved twice; a SKIP
+    when points were solved twice but no value came from both solvers (nothing compared).
 
     The other solver's numbers come from the row's ``info["fallback"]``
     (:func:`fpe_harvester.scenes.run_scene` records them).
@@ -160,7 +161,12 @@ def fallback_check(label: str, scene: Any, rows: list[Any]) -> list[CheckResult]
                       n_sigma=FALLBACK_SIGMAS)
             if not c.passed:
                 off.append(f"({where}) {q}: {row.method} vs {other['method']} {c.detail}")
-    return [expect(f"{label}: points solved by both Fokker-Planck and Monte Carlo agree", _SECTION, not off,
+    name = f"{label}: points solved by both Fokker-Planck and Monte Carlo agree"
+    if compared == 0:
+        return [skipped(name, _SECTION, f"{len(twice)} of {len(rows)} points missed the Fokker-Planck tolerance and "
+                        f"were tried with Monte Carlo ({kept_mc} kept Monte Carlo's numbers), but no value came from "
+                        "both solvers: nothing compared")]
+    return [expect(name, _SECTION, not off,
                    f"{len(twice)} of {len(rows)} points missed the Fokker-Planck tolerance and were tried with "
                    f"Monte Carlo ({kept_mc} kept Monte Carlo's numbers); {compared} values given by both solvers "
                    f"compared within {FALLBACK_SIGMAS:g} combined error bars; outside: {'; '.join(off[:3]) or 'none'}")]

@@ -1,23 +1,25 @@
-"""Benchmarks and design studies: one module per study, each runnable on its own with
-``python -m validation.studies.<name> [--quick] [--out DIR]``, writing ``<STEM>.json`` and
-``<STEM>.png`` (:mod:`.cli` is their shared command line and output).
+"""Benchmarks and design studies, by subject: one module per study, each runnable on its own with
+``python -m validation.studies.<subject>.<name> [--quick] [--out DIR]``, writing ``<STEM>.json``
+and ``<STEM>.png`` (:mod:`.cli` is their shared command line and output; :data:`.cli.DATA` the
+folder of their recorded runs, ``validation/data``).
 
-* benchmarks, error against wall time, whose short versions the report's benchmark section runs
-  (:mod:`validation.sections.benchmarks`): :mod:`.exact` (against scipy's dense Lyapunov solve),
-  :mod:`.fpe` (Fokker--Planck; :mod:`.kink` and :mod:`.xmesh` are its kink and x-mesh parts) and
-  :mod:`.montecarlo` (which runs the Monte Carlo studies below in one go); :mod:`.xvspeed` times
-  the level solves of the Fokker--Planck scheme ``"xv"`` against a base commit;
-* Monte Carlo design studies: :mod:`.mc_rng`, :mod:`.mc_throughput`, :mod:`.mc_equal_error`,
-  :mod:`.mc_bias`, :mod:`.mc_tau`, :mod:`.mc_steep`, :mod:`.mc_controls`, :mod:`.mc_martingale`,
-  :mod:`.mc_policy`, :mod:`.mc_boundary`, :mod:`.mc_kink_dt`;
-* the kink (n = 1): :mod:`.kinkstudy` (its time-step law) and :mod:`.kinkref` (an independent
-  reference scheme with exact crossings);
-* the strong kink's candidate discretization: :mod:`.xvw` (DG in (x, v, V) with V graded toward
-  0, discrete ordinates in xi; measured, not a product scheme), its W = V - K_c x variant
-  :mod:`.xvw_w` and its hybrid :mod:`.xvw_hybrid` (Hermite functions in V on the bulk's
-  (x, v) elements, the V mesh on the trap's; also the force of 1 < n).
+* :mod:`.exact`: the exact solver's benchmark (:mod:`.exact.bench`);
+* :mod:`.fpe`: Fokker--Planck, its benchmark (:mod:`.fpe.bench`, with its kink and x-mesh parts
+  :mod:`.fpe.kink` and :mod:`.fpe.xmesh`), the level solves of scheme ``"xv"`` against a base
+  commit (:mod:`.fpe.xvspeed`) and the measured domain (:mod:`.fpe.domain`);
+* :mod:`.mc`: Monte Carlo, its benchmark (:mod:`.mc.bench`, which runs the design studies of the
+  folder in one go) and each design study on its own;
+* :mod:`.kink`: the kink n = 1 in Monte Carlo: its time-step law (:mod:`.kink.timestep`), an
+  independent reference scheme with exact crossings (:mod:`.kink.reference`) and the exact-flow
+  construction's bias (:mod:`.kink.exactflow_bias`);
+* :mod:`.prototypes`: discretizations measured and not adopted (the strong kink's DG scheme in
+  (x, v, V), :mod:`.prototypes.xvw`);
+* every solver at once: :mod:`.work_precision` (error against wall time, beside the baselines);
+  the physics beyond the paper: :mod:`.coupling` (rings made stable by cubic bonds).
 
-The modules are imported when run, not here.
+The report's benchmark section (:mod:`validation.sections.benchmarks`) runs the short versions of
+the three benchmarks and draws the recorded work-precision diagrams. The modules are imported
+when run, not here.
 """
 
 from __future__ import annotations

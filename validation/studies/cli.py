@@ -15,7 +15,11 @@ from collections.abc import Callable, Sequence
 from pathlib import Path
 from typing import Any
 
-__all__ = ["bench_main", "save_benchmark", "run_study", "study_runner", "axes_plot"]
+__all__ = ["DATA", "bench_main", "save_benchmark", "run_study", "study_runner", "axes_plot"]
+
+#: The folder of the studies' recorded runs (``--out validation/data``) that the report and the
+#: docs read.
+DATA = Path(__file__).resolve().parents[1] / "data"
 
 
 def save_benchmark(res: dict, out: Path | str | None, stem: str, plot: Callable[[dict, Path], None]) -> None:

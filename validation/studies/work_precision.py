@@ -45,7 +45,7 @@ from typing import Any
 import numpy as np
 
 from fpe_harvester import Harvester, solve
-from validation.studies.cli import bench_main, save_benchmark
+from validation.studies.cli import DATA, bench_main, save_benchmark
 
 __all__ = ["STEM", "RECORDED", "COMMAND", "CAPTION", "CASES", "METHODS", "SOLVERS", "DECADES", "MC_OPTIONS",
            "reference", "fpe_tols", "kink_agreement", "harmonic", "ladder", "run", "draw", "plot", "span",
@@ -54,7 +54,7 @@ __all__ = ["STEM", "RECORDED", "COMMAND", "CAPTION", "CASES", "METHODS", "SOLVER
 #: Name of the written ``.json`` and ``.png``.
 STEM = "work_precision"
 #: The recorded full run that the report and the docs site draw.
-RECORDED = Path(__file__).resolve().parents[1] / "data" / f"{STEM}.json"
+RECORDED = DATA / f"{STEM}.json"
 #: The command that writes :data:`RECORDED` again.
 COMMAND = "python -m validation.studies.work_precision --out validation/data"
 #: What the figure shows.

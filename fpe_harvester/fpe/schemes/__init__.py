@@ -15,10 +15,24 @@ from .xv.scheme import XVScheme
 if TYPE_CHECKING:
     from ..settings import Settings
 
-__all__ = ["SCHEMES", "resolve_scheme"]
+__all__ = ["SCHEMES", "SCHEME_CHOICES", "check_settings", "resolve_scheme"]
 
 #: The schemes by name.
 SCHEMES: dict[str, Scheme] = {"x": XScheme(), "xv": XVScheme()}
+
+#: The values ``scheme=`` accepts: ``"auto"`` and the names of the registered schemes.
+SCHEME_CHOICES = ("auto", *SCHEMES)
+
+
+def check_settings(settings: Settings) -> Settings:
+    """``settings`` if its scheme is ``"auto"`` or a registered one and every scheme accepts
+    its options (:meth:`~fpe_harvester.fpe.protocol.Scheme.check`), else ParameterError."""
+    if settings.scheme not in SCHEME_CHOICES:
+        raise ParameterError(f"scheme must be one of {', '.join(map(repr, SCHEME_CHOICES))}, "
+                             f"got {settings.scheme!r} (type {type(settings.scheme).__name__})")
+    for scheme in SCHEMES.values():
+        scheme.check(settings)
+    return settings
 
 
 def resolve_scheme(h: Harvester, settings: Settings) -> Scheme:
@@ -29,6 +43,7 @@ def resolve_scheme(h: Harvester, settings: Settings) -> Scheme:
     (:meth:`~fpe_harvester.fpe.protocol.Scheme.preferred`): ``"xv"`` for 1 <= n < 2 (for
     1 < n < 2 only without an x-mesh setting), else ``"x"``.
     """
+    check_settings(settings)
     if settings.scheme == "auto":
         ranked = sorted(SCHEMES.values(), key=lambda s: -s.priority)
         scheme = next(s for s in ranked if not s.refusal(h) and s.preferred(h, settings))

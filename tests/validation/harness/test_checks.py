@@ -9,7 +9,6 @@ import pytest
 
 from fpe_harvester import Harvester, MethodNotAvailableError, ParameterError, Stats, solve
 from validation.harness.checks import Outcome, SolveCache, agree, expect, guarded
-from validation.sections.crosscheck import identity_checks
 
 
 def test_agree_passes_within_the_stated_tolerance():
@@ -83,18 +82,6 @@ def test_solve_cache_reuses_results_and_drops_unknown_options():
     assert r1 is r2
     assert cache.dropped == {"exact": {"tol"}}
     assert len(cache.results()) == 1
-
-
-def test_identities_pass_on_exact_and_fail_on_a_wrong_result():
-    h = Harvester.build(a=0.5, n=2, N=3, k=-0.25)
-    r = solve(h, "exact")
-    assert all(c.outcome is Outcome.PASS for c in identity_checks("h", r, h))
-    bad = Stats.from_moments(V2=r.V2 * 1.01, Pin=r.Pin, R=1.0, V2_err=r.V2 * 1e-3, v2=r.v2, v2_err=0.0,
-                             vV=r.vV, vV_err=0.0, method="mc")
-    outcomes = [c.outcome for c in identity_checks("h", bad, h)]
-    assert outcomes == [Outcome.FAIL, Outcome.PASS]
-    lacking = Stats.from_moments(V2=r.V2, Pin=r.Pin, R=1.0, method="mc")
-    assert [c.outcome for c in identity_checks("h", lacking, h)] == [Outcome.FAIL]
 
 
 def test_context_skips_checks_past_the_quick_budget(tmp_path):

@@ -9,6 +9,10 @@ import validation.harness.runner as runner
 from fpe_harvester.cli import build_parser, main
 from validation.harness.checks import expect
 from validation.harness.report import Section
+from validation.sections import SECTIONS, Step
+
+#: The closing section: the identities of every result of the run (none here: one skip per solver).
+IDENTITIES = SECTIONS[-1]
 
 
 def _passing(ctx):
@@ -41,6 +45,23 @@ def _finding(ctx):
     return sec
 
 
+def _recording(ctx):
+    from validation.harness.checks import recorded
+
+    sec = Section("rec", "Recorded step")
+    sec.checks.append(recorded("old data", "Recorded step", True, "two decades", source="validation/data/x.json",
+                               command="python -m validation.studies.x --out validation/data"))
+    return sec
+
+
+def _raising_check(ctx):
+    """A step whose one check raises inside the run's guard: a FAIL with its reason, the step goes on."""
+    sec = Section("raise", "Raising check")
+    sec.checks += ctx.check("explodes", "Raising check", lambda: 1 / 0)
+    sec.checks.append(expect("after it", "Raising check", True, "still ran"))
+    return sec
+
+
 def _skipping(ctx):
     from validation.harness.checks import skipped
 
@@ -50,7 +71,7 @@ def _skipping(ctx):
 
 
 def test_validate_writes_both_reports(tmp_path):
-    rep = runner.validate(quick=True, out=tmp_path, steps=[(_passing, "Passing step")])
+    rep = runner.validate(quick=True, out=tmp_path, steps=[(_passing, "Passing step"), IDENTITIES])
     assert not rep.failed
     assert (tmp_path / "report.md").is_file() and (tmp_path / "report.html").is_file()
     assert "Passing step" in (tmp_path / "report.md").read_text()
@@ -63,7 +84,7 @@ def test_validate_writes_both_reports(tmp_path):
 
 def test_a_quick_run_fails_when_too_few_checks_ran(tmp_path):
     """1 check ran and 3 were skipped: 25 % ran, below QUICK_MIN_RAN."""
-    rep = runner.validate(quick=True, out=tmp_path, steps=[(_few_passing, "Few checks")])
+    rep = runner.validate(quick=True, out=tmp_path, steps=[(_few_passing, "Few checks"), IDENTITIES])
     assert not rep.failed and len(rep.skipped) == 3
     assert runner.exit_code(rep, quick=True) == 1
     rep.sections[0].checks += [expect(f"more {i}", "Few checks", True, "ok") for i in range(26)]
@@ -104,28 +125,37 @@ def test_cli_arguments():
     (((_passing, "Passing step"), (_skipping, "Skipping step")), True, 0),
     (((_passing, "Passing step"), (_skipping, "Skipping step")), False, 1),
     (((_passing, "Passing step"), (_finding, "Finding step")), True, 0),
+    (((_passing, "Passing step"), (_recording, "Recorded step")), True, 0),
+    (((_passing, "Passing step"), (_raising_check, "Raising check")), True, 1),
 ])
 def test_cli_exit_code(monkeypatch, tmp_path, capsys, steps, quick, code):
     """A failure fails any run; a skip fails the full run, and a quick run names every skip."""
-    monkeypatch.setattr(runner, "STEPS", steps)
+    monkeypatch.setattr(runner, "SECTIONS", (*steps, IDENTITIES))
     assert main(["validate", *(["--quick"] if quick else []), "--no-progress", "--out", str(tmp_path)]) == code
     captured = capsys.readouterr()
     out = captured.out
     assert "passed" in out and "report.md" in out
     # each step's wall time is printed as soon as it ends (a long full run shows where it is)
     assert all(f"{title}: " in captured.err for _, title in steps)
-    assert ("1 FAILED" in captured.err) == any(title == "Failing step" for _, title in steps)
+    assert ("1 FAILED" in captured.err) == any(title in ("Failing step", "Raising check") for _, title in steps)
     assert (tmp_path / "report.html").is_file()
     if any(title == "Skipping step" for _, title in steps):
-        assert "SKIP     never ran" in out and "check(s) SKIPPED" in out
+        assert "SKIP      never ran" in out and "check(s) SKIPPED" in out
+    if any(title == "Recorded step" for _, title in steps):
+        assert "RECORDED  old data" in out and "40 passed, 1 recorded, 0 findings, 0 failed, 3 skipped" in out
+        assert "validation/data/x.json, written by python -m validation.studies.x" in out
+        assert "1 checks, 1 recorded" in captured.err
+    if any(title == "Raising check" for _, title in steps):
+        assert "FAIL      explodes" in out and "ZeroDivisionError" in out
+        assert "41 passed, 0 recorded, 0 findings, 1 failed, 3 skipped" in out
     if any(title == "Finding step" for _, title in steps):
-        assert "FINDING  paper off" in out and "40 passed, 1 finding, 0 failed, 3 skipped" in out
+        assert "FINDING   paper off" in out and "40 passed, 0 recorded, 1 finding, 0 failed, 3 skipped" in out
         assert "Finding step: " in captured.err and "1 checks, 1 finding" in captured.err
         assert ("a quick run fails below 90%" in out) == quick
 
 
 def test_cli_negative_seed_is_a_clean_error(monkeypatch, tmp_path, capsys):
-    monkeypatch.setattr(runner, "STEPS", ())
+    monkeypatch.setattr(runner, "SECTIONS", ())
     assert main(["validate", "--seed", "-3", "--no-progress", "--out", str(tmp_path)]) == 2
     assert "seed" in capsys.readouterr().err
 
@@ -144,7 +174,39 @@ def test_module_steps_are_imported_and_a_missing_one_fails(tmp_path):
 
 def test_report_keeps_the_plan_order(tmp_path):
     rep = runner.validate(out=tmp_path, steps=[(_failing, "Failing step"), (_passing, "Passing step")])
-    assert [s.title for s in rep.sections][:2] == ["Failing step", "Passing step"]
+    assert [s.title for s in rep.sections] == ["Failing step", "Passing step"]
+
+
+@pytest.mark.parametrize("quick", [True, False])
+def test_steps_run_in_their_mode_s_order_and_read_in_the_table_s(tmp_path, quick):
+    ran = []
+
+    def step(name):
+        def run(ctx):
+            ran.append(name)
+            return Section(name, name)
+        return run
+
+    plan = [Step(step("a"), "a", quick=2, full=1), Step(step("b"), "b", quick=1, full=3),
+            Step(step("c"), "c", quick=3, full=2)]
+    rep = runner.validate(quick=quick, out=tmp_path, steps=plan)
+    assert ran == (["b", "a", "c"] if quick else ["a", "c", "b"])
+    assert [s.title for s in rep.sections] == ["a", "b", "c"]
+
+
+def test_the_sections_table_names_each_section_once_and_the_identities_last():
+    import importlib
+
+    targets = [s.target for s in SECTIONS]
+    assert len(set(targets)) == len(targets) and len({s.title for s in SECTIONS}) == len(SECTIONS)
+    for s in SECTIONS:
+        name, _, func = s.target.partition(":")
+        assert callable(getattr(importlib.import_module(name), func or "run")), s.target
+    # the identities read every result the other sections computed: they run last in both modes
+    for mode in ("quick", "full"):
+        assert max(SECTIONS, key=lambda s: getattr(s, mode)) is IDENTITIES
+        assert sorted(getattr(s, mode) for s in SECTIONS).count(getattr(IDENTITIES, mode)) == 1
+    assert IDENTITIES.target == "validation.sections.identities"
 
 
 def test_python_m_validation_unwritable_out_is_a_one_line_error(capsys):

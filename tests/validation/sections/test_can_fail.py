@@ -206,3 +206,58 @@ def test_a_monte_carlo_run_too_wide_for_the_cap_is_solved_again_tighter(tmp_path
     assert calls[1]["max_time"] == 4 * full["max_time"]
     calls.clear()
     assert mc_within_cap(Fake(quick=True, out=tmp_path, cache=SolveCache()), H) is not None and len(calls) == 1
+
+
+def test_benchmark_checks_say_what_their_short_run_compared():
+    """A benchmark module counts a check only for what it compared: the exact solver's errors
+    against its references, Fokker-Planck's error bars against its own tighter runs; the Monte
+    Carlo benchmark compares nothing (timings) and counts none."""
+    from validation.studies.exact import bench as exact
+    from validation.studies.fpe import bench as fpe
+    from validation.studies.mc import bench as montecarlo
+
+    good = {"single_call_eta_rel_error": 2e-16, "rational_check": {"eta_rel_error": 0.0},
+            "fourier_vs_dense": [{"fourier_eta_rel_error": 4e-16}]}
+    assert [ok for _, ok, _ in exact.report_checks(good)] == [True, True, True]
+    bad = {**good, "fourier_vs_dense": [{"fourier_eta_rel_error": 1e-9}]}
+    assert [ok for _, ok, _ in exact.report_checks(bad)] == [True, True, False]
+    runs = {"cases": {"n=3": {"runs": {"1e-3": {"bounds_actual": True}, "1e-5": {}}},
+                      "n=8": {"runs": {"1e-3": {"bounds_actual": False}}}}}
+    ((label, ok, detail),) = fpe.report_checks(runs)
+    assert not ok and "1 of 2" in detail and "n=8 tol 1e-3" in detail and "convergence" in label
+    assert montecarlo.report_checks({}) == []
+
+
+def test_the_live_best_ring_check_uses_a_tolerance_well_below_its_effect():
+    """The best ring's recorded gain over the single unit is the effect: the live check (ring and
+    unit both solved in the run) passes only when the live gain exceeds 4 combined errors and that
+    tolerance is at most a quarter of the effect; a ring no better than the unit fails."""
+    from types import SimpleNamespace
+
+    from validation.sections import beyond
+
+    best = {"k_opt": -0.136, "k3": 0.003, "eta_max": 0.6753, "eta_max_err": 0.0007}
+    res = {"a": 0.5, "N": 3, "unit_eta": 0.6103}
+    gain = 0.065
+    asked = {}
+
+    def solve(h, method, **opts):
+        if h.N == 1:
+            if method == "fpe":  # a Fokker-Planck run short of its tolerance: Monte Carlo answers instead
+                return Stats(eta=0.61, eta_err=0.05 if fpe_fails else 6e-4, method="fpe",
+                             status=Status.NOT_CONVERGED if fpe_fails else Status.STABLE)
+            return Stats(eta=0.6106, eta_err=opts["tol"] * 0.6106, status=Status.STABLE, method="mc")
+        asked.update(opts)
+        eta = ring
+        return Stats(eta=eta, eta_err=opts["tol"] * eta, status=Status.STABLE, method="mc")
+
+    ctx = SimpleNamespace(mc_options={"tol": 0.02, "max_time": 4.0}, solve=solve)
+    ring, fpe_fails = 0.667, False
+    (ok,) = beyond._best_ring_live(ctx, res, best, gain)
+    assert ok.passed and asked["tol"] < 0.02 and "recorded gain 0.065" in ok.detail and "(fpe)" in ok.detail
+    fpe_fails = True
+    (ok,) = beyond._best_ring_live(ctx, res, best, gain)
+    assert ok.passed and "(mc)" in ok.detail
+    ring = 0.6106
+    (off,) = beyond._best_ring_live(ctx, res, best, gain)
+    assert off.outcome is Outcome.FAIL

@@ -32,7 +32,7 @@ def test_points_solved_twice_are_counted_and_must_agree_within_three_combined_ba
     assert "1 kept Monte Carlo's numbers" in check.detail
 
 
-def test_a_solver_without_numbers_is_counted_not_compared():
+def test_points_solved_twice_without_a_value_from_both_compare_nothing_and_are_a_skip():
     rows = [_row(0, 0.5, 0.001, {"eta": None, "eta_err": None, "V2": None, "V2_err": None})]
     (check,) = fallback_check("fig", SCENE, rows)
-    assert check.passed and "1 of 1 points" in check.detail and "0 values" in check.detail
+    assert check.outcome.value == "SKIP" and "1 of 1 points" in check.detail and "nothing compared" in check.detail

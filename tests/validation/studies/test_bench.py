@@ -62,7 +62,7 @@ def test_validate_refuses_a_missing_bench_folder(tmp_path, capsys):
 def test_xmesh_series_converges_on_both_meshes_and_plots(tmp_path):
     """The x-mesh benchmark's fixed-M series (M = 4, small meshes): the error against the
     reference falls with the elements on both meshes, and the figure is written."""
-    from validation.studies import xmesh
+    from validation.studies.fpe import xmesh
 
     series = xmesh.mesh_series(4, (4, 8, 16))
     for mesh in xmesh.MESHES:
@@ -76,27 +76,27 @@ def test_montecarlo_bench_runs_a_subset_of_its_studies(tmp_path):
     """Studies not asked for are listed as not run, and the plot is drawn without them."""
     import pytest
 
-    from validation.studies import montecarlo
+    from validation.studies.mc import bench
 
-    res = montecarlo.run(quick=True, out=tmp_path, studies=("rng",))
+    res = bench.run(quick=True, out=tmp_path, studies=("rng",))
     assert "note" in res["equal_error"] and "note" in res["kink_dt"]
-    assert (tmp_path / f"{montecarlo.STEM}.png").exists()
+    assert (tmp_path / f"{bench.STEM}.png").exists()
     with pytest.raises(ValueError, match="studies must be among"):
-        montecarlo.run(quick=True, studies=("no such study",))
+        bench.run(quick=True, studies=("no such study",))
 
 
 def test_each_monte_carlo_study_is_a_module_the_benchmark_runs():
     """Every study of the Monte Carlo benchmark comes from a study module with its own
-    ``run``, ``STEM`` and ``draw`` (so ``python -m validation.studies.<name>`` writes it alone)."""
+    ``run``, ``STEM`` and ``draw`` (so ``python -m validation.studies.mc.<name>`` writes it alone)."""
     import importlib
 
-    from validation.studies import montecarlo
+    from validation.studies.mc import bench
 
-    modules = {importlib.import_module(fn.__module__) for fn in montecarlo.STUDIES.values()
-               if fn.__module__ != montecarlo.__name__}
+    modules = {importlib.import_module(fn.__module__) for fn in bench.STUDIES.values()
+               if fn.__module__ != bench.__name__}
     assert len(modules) == 11
     for mod in modules:
-        assert mod.__name__.startswith("validation.studies.mc_")
+        assert mod.__name__.startswith("validation.studies.mc.")
         assert callable(mod.run) and callable(mod.draw) and mod.STEM.startswith("bench_montecarlo_")
 
 
@@ -104,12 +104,11 @@ def test_recorded_policy_and_martingale_runs_draw(tmp_path):
     """The recorded full runs in validation/data have the shape their study's figure reads."""
     import json
 
-    from validation.studies import mc_martingale, mc_policy
-    from validation.studies.cli import axes_plot
+    from validation.studies.cli import DATA, axes_plot
+    from validation.studies.mc import martingale, policy
 
-    data = Path(__file__).parents[3] / "validation" / "data"
-    policy = json.loads((data / "bench_montecarlo_policy.json").read_text())
-    axes_plot(mc_policy.draw)(policy, tmp_path / "policy.png")
-    rows = json.loads((data / "bench_montecarlo_martingale_rows.json").read_text())
-    axes_plot(mc_martingale.draw)(rows, tmp_path / "martingale.png")
+    recorded = json.loads((DATA / "bench_montecarlo_policy.json").read_text())
+    axes_plot(policy.draw)(recorded, tmp_path / "policy.png")
+    rows = json.loads((DATA / "bench_montecarlo_martingale_rows.json").read_text())
+    axes_plot(martingale.draw)(rows, tmp_path / "martingale.png")
     assert (tmp_path / "policy.png").stat().st_size > 0 and (tmp_path / "martingale.png").stat().st_size > 0

@@ -105,7 +105,7 @@ def test_summary_rows_and_figure(tmp_path):
 def test_the_report_draws_the_recorded_diagrams_and_fails_thin_or_quick_data(tmp_path, monkeypatch):
     import json
 
-    from validation.harness.checks import Context, SolveCache
+    from validation.harness.checks import Context, Outcome, SolveCache
     from validation.harness.report import Section
     from validation.sections import benchmarks
 
@@ -116,22 +116,25 @@ def test_the_report_draws_the_recorded_diagrams_and_fails_thin_or_quick_data(tmp
     ctx = Context(quick=True, out=tmp_path, cache=SolveCache())
     sec = Section("b", "B")
     thin, spans = benchmarks._work_precision(ctx, sec)
-    assert thin.passed and spans.passed and sec.figures[0].path.exists()
+    # committed data, not this run: RECORDED (never PASS), naming the file and its command
+    assert thin.outcome is Outcome.RECORDED and spans.outcome is Outcome.RECORDED and sec.figures[0].path.exists()
+    assert thin.source == "validation/data/work_precision.json" and thin.command == wp.COMMAND
+    assert "self-convergence" in sec.tables[0].note
     assert sec.tables[0].title.startswith("Work-precision") and "smallest span 2.7 decades" in spans.detail
     # a solver's curve over less than two decades of resolved error fails the second check only,
     # unless it reaches its reference's own error (it then shows all the reference resolves)
     res["cases"]["kink_a1"]["curves"][0]["reference"]["rel_err"] = 1e-4
     recorded.write_text(json.dumps(res))
     thin, spans = benchmarks._work_precision(ctx, Section("b", "B"))
-    assert thin.passed and spans.passed and "reference's error: kink n = 1, a = 1: fpe 1.7;" in spans.detail
+    assert thin.outcome is spans.outcome is Outcome.RECORDED and "reference's error: kink n = 1, a = 1: fpe 1.7;" in spans.detail
     res["cases"]["kink_a1"]["curves"][0]["points"][-1]["error"] = 2e-4
     recorded.write_text(json.dumps(res))
     thin, spans = benchmarks._work_precision(ctx, Section("b", "B"))
-    assert thin.passed and not spans.passed and "above it: kink n = 1, a = 1: fpe 1.4" in spans.detail
+    assert thin.outcome is Outcome.RECORDED and spans.outcome is Outcome.FAIL and "above it: kink n = 1, a = 1: fpe 1.4" in spans.detail
     res["cases"]["ring_n3"]["curves"][0]["points"] = res["cases"]["ring_n3"]["curves"][0]["points"][:1]
     recorded.write_text(json.dumps(res))
     thin, _ = benchmarks._work_precision(ctx, Section("b", "B"))
-    assert not thin.passed and "(1 points)" in thin.detail
+    assert thin.outcome is Outcome.FAIL and "(1 points)" in thin.detail
     recorded.unlink()
     assert not benchmarks._work_precision(ctx, Section("b", "B"))[0].passed
 

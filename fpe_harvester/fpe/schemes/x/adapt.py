@@ -178,9 +178,8 @@ class AdaptiveHermiteDG(Discretization):
     def max_degree(self, size: int) -> int:
         """What the uniform mesh with this mesh's longest elements carries: the node map's
         elements per half, doubled for every step that bisected all elements. Marked
-        bisections do not count: measured at n = 8, a = 2, 8 elements per half adapted to
-        10 carry M = 12 (eta 0.4204528, 1.3e-5 off) but not M = 14 (0.4199858, 1.1e-3 off),
-        although 1.5 x 10 elements would allow it."""
+        bisections do not count: an adapted mesh carries the degree of its longest elements,
+        not of its element count (docs/methods.md, Fokker-Planck design notes)."""
         n = min(size, self.base.half_elements) + self.base.layers
         s = self.base.half_elements
         while s < size:

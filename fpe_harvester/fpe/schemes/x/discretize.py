@@ -47,15 +47,12 @@ __all__ = ["Whitening", "Level", "solve_level", "assemble_level", "hierarchy_mat
 CURVED_TAU = 10.0
 
 #: Highest Hermite degree per element of the half mesh. Beyond it the levels are not
-#: resolved and may be wrong while looking physical. Measured on 8 elements per half: M = 16
-#: gives eta 0.4004351 for 0.4003794 (n = 6, a = 2; M = 14 there: 0.4003764) and 0.4722403
-#: for 0.4722554 (n = 8, a = 0.5), M = 18 gives 0.2002 for 0.2069 (n = 1.5, a = 2) and
-#: 0.4463 for 0.44656 (n = 8, a = 1); M = 12 is within the mesh error in every case.
+#: resolved and may be wrong while looking physical (docs/methods.md, Fokker-Planck design notes).
 DEGREES_PER_ELEMENT = 1.5
 
 #: What a user can do when no level of scheme x gives an error estimate.
 ADVICE = ("the Hermite expansion around the equivalent harmonic unit does not resolve this "
-          "density; use method='mc', or fix M and half_elements to inspect the levels")
+          "density; use method='mc', or fix M and elements to inspect the levels")
 
 
 @dataclass(frozen=True)
@@ -108,23 +105,14 @@ class Whitening:
         """Weight of harvester ``h``: conditional on x or marginal.
 
         ``conditional=None`` picks the measured better choice: conditional for
-        :math:`2 \\le n \\le 4`, marginal otherwise. Measured at a = 0.5, tol = 1e-4: n = 2
-        is exact at M = 2 with the conditional weight; n = 3 has a 4x smaller Hermite error
-        at every M (2.8 s against 3.3 s); n = 1, 1.5, 4 are the same either way; for n = 8
-        the conditional weight makes the Hermite sequence irregular (M = 14 and 88 s against
-        M = 12 and 36 s) because a mean linear in x is a poor guess at steep walls; for the
-        kink (n = 1, a = 2) it turns an unphysical low level into a wild sequence.
+        :math:`2 \\le n \\le 4`, marginal otherwise (a mean linear in x is a poor guess at
+        steep walls and at a strong kink).
 
         ``curved`` centres xi on :math:`b_\\xi U'(x)/\\kappa` instead of :math:`b_\\xi x`
         (``curve``; n > 2 only, and then the weight is conditional unless ``conditional=False``).
-        ``None`` picks it for slow noise, :math:`\\tau \\ge` :data:`CURVED_TAU`. Measured at
-        a = 0.5, tol 1e-4 (solver time on 2 loaded cores): n = 3 at tau = 10, 30, 100 converges
-        with it in 5.4, 4.6 and 11 s (M = 10-12, 16 elements) against 24 s, 23 s and
-        not converged after 108 s (error 9.6e-3) with the centre linear in x; n = 6 at tau = 100
-        in 67 s against an error of 1.1 with the marginal weight. At tau = 1 the two centres give
-        the same eta (n = 3, 4, 6: within 4e-6) and the linear one stays the default: the curved
-        one's error estimate missed the actual error once there (n = 4: 1.2e-6 reported, 3.9e-6
-        against the 1e-8 reference).
+        ``None`` picks it for slow noise, :math:`\\tau \\ge` :data:`CURVED_TAU`, where xi is
+        quasi-static and follows the force; at tau = 1 both centres give the same eta and the
+        linear one stays the default (docs/methods.md, Fokker-Planck design notes).
         """
         kappa, P = equivalent_harmonic(h)
         x2 = float(P[0, 0])
@@ -168,9 +156,9 @@ class Whitening:
         """Effective temperature :math:`T_{eff} = \\kappa\\langle x^2\\rangle`."""
         return self.kappa * self.x2
 
-    def domain(self, h: Harvester, theta: float) -> float:
-        """Half-width L with :math:`U(L) = \\Theta T_{eff}`."""
-        return (theta * self.temperature / h.a) ** (1.0 / h.n)
+    def half_width(self, h: Harvester, domain: float) -> float:
+        """Half-width L of the x domain with :math:`U(L) = \\Theta T_{eff}`, :math:`\\Theta` = ``domain``."""
+        return (domain * self.temperature / h.a) ** (1.0 / h.n)
 
 
 def hierarchy_matrices(h: Harvester, M: int, w: Whitening) -> tuple[HermiteBasis, np.ndarray, sp.csr_matrix,

@@ -61,8 +61,8 @@ class XMesh:
         Potential exponent, >= 1 (shape of the wall term).
     scale : float
         Bulk length scale :math:`\\ell > 0` (e.g. :math:`\\sqrt{\\langle x^2\\rangle}`).
-    theta : float
-        :math:`\\Theta = U(L)/T_{eff} > 0`.
+    domain : float
+        Domain factor :math:`\\Theta = U(L)/T_{eff} > 0`.
     wall : float
         Weight ``w >= 0`` of the wall term (0: uniform in x apart from the grading).
     grading : float
@@ -79,7 +79,7 @@ class XMesh:
 
     Examples
     --------
-    >>> m = XMesh(2.0, 4, n=2.0, scale=1.0, theta=1.0, wall=0.0)
+    >>> m = XMesh(2.0, 4, n=2.0, scale=1.0, domain=1.0, wall=0.0)
     >>> m.nodes().round(2).tolist()
     [-2.0, -1.5, -1.0, -0.5, 0.0, 0.5, 1.0, 1.5, 2.0]
     """
@@ -88,7 +88,7 @@ class XMesh:
     half_elements: int
     n: float = 2.0
     scale: float = 1.0
-    theta: float = 30.0
+    domain: float = 30.0
     wall: float = 0.25
     grading: float = 1.0
     layers: int = 0
@@ -101,7 +101,7 @@ class XMesh:
         object.__setattr__(self, "half_elements", check_int("half_elements", self.half_elements, low=1))
         object.__setattr__(self, "n", check_real("n", self.n, low=1.0))
         object.__setattr__(self, "scale", check_real("scale", self.scale, low=0.0, low_open=True))
-        object.__setattr__(self, "theta", check_real("theta", self.theta, low=0.0, low_open=True))
+        object.__setattr__(self, "domain", check_real("domain", self.domain, low=0.0, low_open=True))
         object.__setattr__(self, "wall", check_real("wall", self.wall, low=0.0))
         object.__setattr__(self, "grading", check_real("grading", self.grading, low=1.0, high=6.0))
         object.__setattr__(self, "layers", check_int("layers", self.layers, low=0, high=60))
@@ -121,7 +121,7 @@ class XMesh:
     def half_nodes(self) -> np.ndarray:
         """The nodes in :math:`[0, L]` (the mesh is their mirror image and themselves)."""
         xf = np.linspace(0.0, self.L, 4001)
-        sf = xf / self.scale + self.wall * self.theta * (xf / self.L) ** self.n
+        sf = xf / self.scale + self.wall * self.domain * (xf / self.L) ** self.n
         t = np.linspace(0.0, 1.0, self.half_elements + 1) ** self.grading
         half = np.interp(t * sf[-1], sf, xf)
         half[0], half[-1] = 0.0, self.L
@@ -169,7 +169,7 @@ class XMesh:
 
         Examples
         --------
-        >>> m = XMesh(2.0, 2, n=2.0, scale=1.0, theta=1.0, wall=0.0)
+        >>> m = XMesh(2.0, 2, n=2.0, scale=1.0, domain=1.0, wall=0.0)
         >>> r = m.refined(np.array([False, True]))
         >>> r.half_nodes().tolist(), r.size
         ([0.0, 1.0, 1.5, 2.0], 4)

@@ -12,8 +12,7 @@ from typing import TYPE_CHECKING
 
 from ....errors import ParameterError
 from ....model import Harvester
-from ...protocol import Discretization, Scheme
-from ...refine import Plan
+from ...protocol import Discretization, RefinementPlan, Scheme
 from .adapt import AdaptiveHermiteDG
 from .discretize import HermiteDG, Whitening
 from .mesh import XMesh
@@ -27,11 +26,7 @@ __all__ = ["XScheme", "XMeshRule", "default_plan", "resolve_mesh", "MESHES", "OR
 #: The x meshes (see :func:`resolve_mesh`).
 MESHES = ("auto", "algebraic", "geometric", "adaptive")
 
-#: DG order unless given. P4 was measured as an alternative at tol = 1e-4 and is not a
-#: robust gain: n = 8 took 21 s (16 P4 elements) against 37 s (32 P3) at a = 0.5 but 51 s
-#: against 16 s at a = 2; for n = 1.5, 3, 4 (a = 0.5) P4 is 30-50 % slower (timings of the
-#: earlier one-sweep block solver). P2 is no gain for the kink either: n = 1, a = 0.5,
-#: tol = 1e-3 took 50 s (M = 16, 32 elements) against 22 s with P3 (twisted solver).
+#: DG order unless given (P2 and P4 measured no robust gain: docs/methods.md, Fokker-Planck design notes).
 ORDER = 3
 
 #: Geometric layers toward x = 0 of the ``"geometric"`` mesh and their ratio. Measured for
@@ -47,7 +42,7 @@ def resolve_mesh(h: Harvester, mesh: str) -> str:
     ``"auto"`` is ``"algebraic"``: for 1 < n < 2 it measured at least as accurate per
     unknown as the geometric one (see :class:`XMeshRule`), and the element-wise
     refinement (``"adaptive"``, any n) did not measure faster overall (see
-    :mod:`validation.studies.fpe`). For n >= 2 the mesh is graded toward the walls only and
+    :mod:`validation.studies.fpe.bench`). For n >= 2 the mesh is graded toward the walls only and
     ``"algebraic"`` names that mesh; ``"geometric"`` is refused.
     """
     _check_mesh_name(mesh)
@@ -71,8 +66,8 @@ class XMeshRule:
 
     Attributes
     ----------
-    theta : float
-        Domain factor :math:`U(L)/T_{eff}`.
+    domain : float
+        Domain factor :math:`\\Theta = U(L)/T_{eff}`.
     grading : float
         Mesh grading toward x = 0.
     wall : float
@@ -83,46 +78,42 @@ class XMeshRule:
         Ratio of successive geometric layers, in (0, 1).
     """
 
-    theta: float = 30.0
+    domain: float = 30.0
     grading: float = 1.0
     wall: float = 0.1
     layers: int = 0
     ratio: float = GEOMETRIC_RATIO
 
     @classmethod
-    def of(cls, h: Harvester, mesh: str = "auto", theta: float = 30.0) -> XMeshRule:
+    def of(cls, h: Harvester, mesh: str = "auto", domain: float = 30.0) -> XMeshRule:
         """Smooth potentials (n >= 2) on a mesh graded toward the walls, n < 2 (kink or
         non-smooth force at 0) graded toward 0.
 
         ``mesh`` (n < 2 only, :func:`resolve_mesh`): ``"algebraic"`` grades the nodes like
         :math:`t^{2.5}` toward 0; ``"geometric"`` keeps the bulk uniform (:math:`\\beta = 1`)
         and splits the element at 0 into :data:`GEOMETRIC_LAYERS` layers of ratio
-        :data:`GEOMETRIC_RATIO`, with Gauss--Jacobi quadrature of the force there. Measured for
-        n = 1.5, a = 1 (relative eta change to a mesh twice as fine, fixed M): the algebraic
-        mesh with 16 elements per half is within 3e-9 at M = 8 to 14; the geometric one with
-        16 bulk elements and 4-8 layers 1.5e-6 (the uniform bulk dominates once 2 layers are
-        there). The Hermite sequence in M is the same on both meshes: what limits 1 < n < 2 is
-        the Hermite expansion in (v, V, xi), not the mesh.
+        :data:`GEOMETRIC_RATIO`, with Gauss--Jacobi quadrature of the force there. For
+        1 < n < 2 what limits the accuracy is the Hermite expansion in (v, V, xi), not the mesh
+        (docs/methods.md, Fokker-Planck design notes).
         """
         geometric = resolve_mesh(h, mesh) == "geometric"
-        return cls(theta=theta, grading=2.5 if h.n < 2.0 and not geometric else 1.0, wall=0.1,
+        return cls(domain=domain, grading=2.5 if h.n < 2.0 and not geometric else 1.0, wall=0.1,
                    layers=GEOMETRIC_LAYERS if geometric else 0, ratio=GEOMETRIC_RATIO)
 
     def build(self, h: Harvester, w: Whitening, half_elements: int) -> XMesh:
         """The mesh for ``h``: domain :math:`U(L) = \\Theta T_{eff}` of the weight ``w``,
         ``half_elements`` elements per half."""
-        return XMesh(w.domain(h, self.theta), half_elements, n=h.n, scale=math.sqrt(w.x2), theta=self.theta,
+        return XMesh(w.half_width(h, self.domain), half_elements, n=h.n, scale=math.sqrt(w.x2), domain=self.domain,
                      wall=self.wall, grading=self.grading, layers=self.layers, ratio=self.ratio)
 
 
-def default_plan(h: Harvester, settings: Settings) -> Plan:
-    """The refinement of scheme ``"x"``: from M = 4 on 8 elements per half (or the given
-    ``M``, ``half_elements`` or ``elements``; fixed when both M and the mesh are given)."""
+def default_plan(h: Harvester, settings: Settings) -> RefinementPlan:
+    """The refinement of scheme ``"x"``: from M = 4 on 16 elements, 8 per half (or the given
+    ``M`` or ``elements``; fixed when both are given). Its mesh knob ``size`` is the
+    elements per half."""
     resolve_mesh(h, settings.mesh)
-    size = settings.half_elements
-    if size is None and settings.elements is not None:
-        size = settings.elements // 2
-    return Plan(M=4 if settings.M is None else settings.M, size=8 if size is None else size,
+    size = None if settings.elements is None else settings.elements // 2
+    return RefinementPlan(M=4 if settings.M is None else settings.M, size=8 if size is None else size,
                 fixed=settings.M is not None and size is not None, max_M=settings.max_M,
                 max_dofs=settings.max_dofs, max_seconds=settings.max_seconds, max_gb=settings.max_gb)
 
@@ -143,13 +134,13 @@ class XScheme(Scheme):
         if settings.weight is not None and not isinstance(settings.weight, Whitening):
             raise ParameterError(f"weight must be a Whitening or None, got {type(settings.weight).__name__}")
 
-    def plan(self, h: Harvester, settings: Settings) -> Plan:
+    def plan(self, h: Harvester, settings: Settings) -> RefinementPlan:
         return default_plan(h, settings)
 
-    def build(self, h: Harvester, settings: Settings, plan: Plan, tol: float, deadline: float | None
+    def build(self, h: Harvester, settings: Settings, plan: RefinementPlan, tol: float, deadline: float | None
               ) -> Discretization:
         w = Whitening.of(h) if settings.weight is None else settings.weight
-        base = XMeshRule.of(h, settings.mesh, settings.theta).build(h, w, plan.size)
+        base = XMeshRule.of(h, settings.mesh, settings.domain).build(h, w, plan.size)
         order = ORDER if settings.order is None else settings.order
         if resolve_mesh(h, settings.mesh) == "adaptive":
             return AdaptiveHermiteDG(h, base, order, w)

@@ -1,10 +1,12 @@
 """Scheme ``"xv"``: DG in (x, v) graded toward the trap, Hermite functions of (V, xi)
-(:mod:`.kink` the level, :mod:`.modesolve` its preconditioner, :mod:`.kinkdisc` the refinement family, :mod:`.scheme` the plan
-and the registry entry)."""
+(:mod:`.hierarchy` the frame, the Hermite hierarchy and the plane's matrices, :mod:`.kink` the
+level, :mod:`.modesolve` its preconditioner, :mod:`.kinkdisc` the refinement family,
+:mod:`.scheme` the plan and the registry entry)."""
 
 from __future__ import annotations
 
-from .kink import KinkFrame, KinkLevel, solve_kink_level
+from .hierarchy import KinkFrame
+from .kink import KinkLevel, solve_kink_level
 from .kinkdisc import KinkDG, KinkSettings, kink_domain
 from .scheme import XVScheme
 

@@ -4,17 +4,14 @@
 Hermite degree M in (V, xi) in steps of 2, and the DG degree p on a fixed (x, v) mesh
 (``size`` s = 1, 2, 4, ...: :math:`p = p_0 + \\log_2 s`; one refinement step raises p by
 one). The mesh is graded geometrically toward the trap, deep enough that the layers do not
-limit the accuracy (measured, M = 8: four layers of ratio 0.3 against six change eta by
-3e-9 at a = 1 and 1e-7 at a = 2, three against four by 7e-7 at a = 1), so the error left
-to the mesh is that of the polynomials, which p measures: at a = 1 raising p from 3 to 4
-moved eta by 8e-6, cutting every rectangle in four by 9e-6, at 1.6 and 4 times the
-unknowns. It is built in three steps (:meth:`KinkDG.build`):
+limit the accuracy, so the error left to the mesh is that of the polynomials, which p
+measures (docs/methods.md, Fokker-Planck design notes). It is built in three steps (:meth:`KinkDG.build`):
 
 1. **First guess of the moments** from the equivalent harmonic unit
    (:func:`~...hermite.equivalent_harmonic`), which for a strong kink is poor (a = 2: it gives
    :math:`\\langle v^2\\rangle = 0.005` for 0.018).
 2. **Pilot**: one level at M = 4 on the base mesh with the frame of the first guess; its
-   moments give the frame of the refinement (:meth:`~.kink.KinkFrame.from_moments`) and the
+   moments give the frame of the refinement (:meth:`~.hierarchy.KinkFrame.from_moments`) and the
    domain. The Hermite weight matters at a = 2: widening it fourfold made the M = 8 level
    unphysical (V2 < 0), so the weight is the pilot's covariance, not a safe multiple of it.
 3. **Domain** (:func:`kink_domain`): large enough that the outflow through its edge is
@@ -33,7 +30,8 @@ from ....model import Harvester
 from ...hermite import equivalent_harmonic
 from ...plane import PlaneMesh
 from ...protocol import Discretization
-from .kink import GMRES_GIGABYTES, GMRES_RESTART, CoarseCorrection, KinkFrame, KinkLevel, solve_kink_level
+from .hierarchy import KinkFrame
+from .kink import GMRES_GIGABYTES, GMRES_RESTART, CoarseCorrection, KinkLevel, solve_kink_level
 
 __all__ = ["KinkDG", "kink_domain", "KinkSettings", "COARSE_DEGREE", "CHECK_CEILING"]
 
@@ -43,25 +41,18 @@ COARSE_DEGREE = 2
 #: Weight of V widened WIDEN_V times when the kink is strong against the drive
 #: (a / sd(F) > TRAPPING_WIDEN). Trapped units have V close to 0 while running ones reach
 #: V ~ K_c tau_p v: the pilot's variance of V is too narrow for the running ones when many
-#: are trapped. Measured (defaults), M = 8 / 10 / 12 / 14: a = 1 (a / sd(F) = 1.1) with the
-#: pilot's variance needs 94 / 75 / 428 / >1500 GMRES iterations, twice it 67 / 69 / 112 /
-#: 135 at the same eta to 2e-5 (0.407520, 0.407573, 0.407549, 0.407530); a = 0.5
-#: (a / sd(F) = 0.57) converges in M faster with the pilot's variance (eta 0.610303 from
-#: M = 8, against 0.610285 at M = 12 with twice it) and needs no more than 77 iterations.
+#: are trapped; widening it keeps GMRES converging at a = 1 (a / sd(F) = 1.1), while at a = 0.5
+#: (0.57) the pilot's variance converges faster in M (docs/methods.md, Fokker-Planck design notes).
 TRAPPING_WIDEN, WIDEN_V = 0.8, 2.0
 
-#: GMRES stops at a relative residual of GMRES_TOL times the tolerance on eta. Measured
-#: (a = 1, M = 10, from the M = 8 level): eta is the same to 1e-10 at residuals 1e-5 ... 1e-8,
-#: with 53, 52, 74 and 68 iterations.
+#: GMRES stops at a relative residual of GMRES_TOL times the tolerance on eta (eta does not
+#: move at tighter residuals: docs/methods.md, Fokker-Planck design notes).
 GMRES_TOL = 1e-2
 
 #: GMRES iteration budget of a level: GMRES_GROWTH times the most any earlier level of the same
-#: solve needed, at least GMRES_FLOOR and at most GMRES_MAXITER. Measured (defaults, every
-#: level of the solves of n in {1, 1.25, 1.5, 1.75} x a in {0.5, 1, 2} at tol 5e-3 and 1e-3,
-#: and n = 1, a = 1 to M = 16 at 1e-4): a level that converges needs 25-123 iterations, the
-#: highest levels at 1e-4 up to 235, growing slowly with M; the levels that do not converge
-#: (n = 1, a = 2 at M = 8; n = 1.25, a = 2 at its last level) jump from <= 123 to > 1400 and
-#: ran to the old fixed budget of 1500 (44 s of the 52 s the a = 2 solve took to fail).
+#: solve needed, at least GMRES_FLOOR and at most GMRES_MAXITER: a level that converges needs
+#: tens to a few hundred iterations, growing slowly with M, one the expansion does not
+#: resolve jumps past a thousand (docs/methods.md, Fokker-Planck design notes).
 GMRES_FLOOR, GMRES_GROWTH, GMRES_MAXITER = 600, 4, 1500
 
 #: Highest Hermite degree of a mesh check (:attr:`KinkDG.check_ceiling`).
@@ -90,7 +81,7 @@ class KinkSettings:
     order : int
         DG degree in x and v.
     shifted, xshifted : bool
-        Centre the (V, xi) weight on the regression on v, on x (:class:`~.kink.KinkFrame`).
+        Centre the (V, xi) weight on the regression on v, on x (:class:`~.hierarchy.KinkFrame`).
     """
 
     layers: int = 4
@@ -111,9 +102,8 @@ def kink_domain(h: Harvester, v2: float, sF: float) -> tuple[float, float]:
     :math:`(F - a)/(m\\gamma)`, so :math:`L_v = \\max(4.5\\,s_F/(m\\gamma), 8\\sqrt{\\langle v^2\\rangle})`
     with :math:`s_F` the standard deviation of F. A unit at speed :math:`L_v` climbs the
     potential by :math:`m L_v^2/2`, and a thermal tail reaches :math:`a L_x = 30\\,m\\langle v^2\\rangle`:
-    :math:`L_x = \\max(m L_v^2/(2a), 30\\,m\\langle v^2\\rangle/a)`. Measured (defaults): a = 2
-    with :math:`L_x = 1.5, L_v = 2` loses mass through the edge (identity residual 8e-3);
-    with 4 and 4 the residuals are 1e-6.
+    :math:`L_x = \\max(m L_v^2/(2a), 30\\,m\\langle v^2\\rangle/a)`: a narrower domain loses mass
+    through its edge, which the identity residuals show.
     """
     p = h.params
     Lv = max(4.5 * sF / (p.m * p.gamma), 8.0 * math.sqrt(v2))
@@ -124,7 +114,7 @@ def kink_domain(h: Harvester, v2: float, sF: float) -> tuple[float, float]:
 
 def _drive_sd(h: Harvester, mo: dict[str, float]) -> float:
     """Standard deviation of the drive :math:`F = \\sigma\\xi - K_v V` from V2 and Pin
-    (:math:`\\langle V\\xi\\rangle` by the identity of :meth:`~.kink.KinkFrame.from_moments`)."""
+    (:math:`\\langle V\\xi\\rangle` by the identity of :meth:`~.hierarchy.KinkFrame.from_moments`)."""
     p = h.params
     vxi = mo["Pin"] / p.sigma
     Vxi = p.Kc * vxi / (1.0 / p.tau_p + 1.0 / p.tau)
@@ -149,11 +139,9 @@ class KinkDG(Discretization):
                    "the law of V is multi-scale: trapped units near V = 0, running ones far out); use "
                    "method='mc', or fix M to inspect the levels")
     work_exponents: tuple[float, float] = (1.0, 2.0)
-    #: The mesh error hardly depends on M (a = 1, p = 3 against 4: 1.4e-5 at M = 6, 1.7e-5
-    #: at M = 14, 16, 18 and 20; p = 4 against 5: 1.7e-6 at M = 16), so the mesh is checked
-    #: at a low degree (at most CHECK_CEILING), and the first check, at M = 6, decides the
-    #: refinement at once (``refine_early``): checks at M - 4 and the high levels of a mesh
-    #: that the later check rejected were 400 of the 850 s of n = 1, a = 1 at tol 1e-4.
+    #: The mesh error hardly depends on M, so the mesh is checked at a low degree (at most
+    #: CHECK_CEILING), and the first check, at M = 6, decides the refinement at once
+    #: (``refine_early``; docs/methods.md, Fokker-Planck design notes).
     mesh_check_degree: int = 4
     refine_early: bool = True
     _coarse: dict[int, CoarseCorrection] = field(default_factory=dict, repr=False, compare=False)

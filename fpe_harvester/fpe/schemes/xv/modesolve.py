@@ -23,37 +23,15 @@ SuperLU) and applies one forward block Gauss--Seidel sweep over the groups:
 i.e. the exact solve of A's block lower triangle, up to the coupling of the two modes of a
 group by :math:`K_k`. The groups are swept chain by chain
 (:math:`\\beta_2` ascending), and within a chain from the slowest mode (smallest
-:math:`|\\lambda|`) outward. Measured at n = 1, a = 1, degree 4 (coarse correction of
-degree 2, each level from the same lower level):
-
-- M = 16 from M = 14: 117 GMRES iterations with the groups solved independently (block
-  Jacobi, the preconditioner before), 47 with the sweep in chain order, 43 in chain and
-  :math:`|\\lambda|` order, 74 with the chains descending, 83 with a symmetric sweep (forward
-  then backward), 62 in the groups' index order;
-- M = 20 from M = 18 (8.3e5 unknowns): 134 iterations in 44.7 CPU-s against 92 in 37.1 (a
-  sweep costs about 1.3 block Jacobi steps: the coupling products are small dense ones).
-
-The counts move by tens of per cent with rounding-level changes of the starting level (the
-residual plateaus between 1e-5 and 1e-6), so compare whole refinements: at n = 1, a = 1,
-1e-4 the levels of degree 4 took 62, 66, 94, 117, 109, 134 iterations (M = 10-20) before,
-26-33, 28-40, 40-46, 46-74, 91-93, 92-113 in two runs with the sweep.
-
-With ``threads=2`` the two halves of the modes are swept concurrently, the second without
-the coupling to the first: one sweep at M = 16 took 0.29 s of wall time against 0.48 s
-(loaded machine), but the refinement above needed more iterations (M = 20: 155, past the
-restart length, against 92) and more CPU time (158 against 140 CPU-s), so one thread is the
-default (:data:`~.kink.SWEEP_THREADS`).
+:math:`|\\lambda|`) outward, the order that measured fewest iterations; one thread is the
+default (:data:`~.kink.SWEEP_THREADS`): two halves swept concurrently save wall time per
+sweep but cost iterations and CPU time.
 
 Why not sweeps in (x, v) (upwind block Gauss--Seidel over the elements, in place of each
-group's LU): on the half plane the transport of one mode is acyclic (x moves with the sign
-of v, v toward the node :math:`v^*` where the mode's speed changes sign), so one sweep in
-flow order solves it exactly, but the mirror inflow at x = 0 closes the rotation's cycle.
-Breaking it (the inflow from the previous sweep; each sweep an exact solve of the half plane,
-here by SuperLU) was measured at M = 14 from M = 12: 374, 260 and 161 GMRES iterations with
-1, 2 and 3 sweeps (59, 52 and 43 CPU-s) against 94 with the exact group solves (15 CPU-s).
-Closing the cycle exactly instead (a Schur complement on the mirror traces) would give the
-group solves' iterations at about their arithmetic: SuperLU's factors of a group hold only
-1.6 times the entries of the group's matrix (degree 4, M = 16).
+group's LU): on the half plane the transport of one mode is acyclic, so one sweep in flow
+order solves it exactly, but the mirror inflow at x = 0 closes the rotation's cycle, and
+breaking it (the inflow from the previous sweep) costs far more iterations than the exact
+group solves. The measurements: docs/methods.md, Fokker-Planck design notes.
 """
 
 from __future__ import annotations
@@ -67,7 +45,7 @@ import scipy.sparse as sp
 import scipy.sparse.linalg as spla
 
 if TYPE_CHECKING:
-    from .kink import KinkHierarchy, KinkPlane
+    from .hierarchy import KinkHierarchy, KinkPlane
 
 __all__ = ["ModePreconditioner", "mode_groups"]
 
@@ -140,9 +118,8 @@ class ModePreconditioner:
     def _factor(grp: np.ndarray, T: list[sp.csr_matrix], pl: KinkPlane, hi: KinkHierarchy) -> Any:
         """SuperLU of the group's block: the modes' transport and their own coupling
         coefficients, and the parity between them. The coupling of the two modes by
-        :math:`K_k` is left to the sweep's residual (measured at n = 1, a = 1, degree 4,
-        M = 16: factoring it into the block doubled the factors' entries, the factorization
-        and solve times, for 69 GMRES iterations against 74)."""
+        :math:`K_k` is left to the sweep's residual: factoring it into the block doubles the
+        factors for a few per cent fewer iterations (docs/methods.md, Fokker-Planck design notes)."""
         blocks: list[list[Any]] = [[hi.Pm[r, c] * pl.S_S for c in grp] for r in grp]
         for k, r in enumerate(grp):
             blocks[k][k] = (blocks[k][k] + T[r] + hi.K0m[r, r] * pl.S_K0 + hi.K1m[r, r] * pl.S_K1

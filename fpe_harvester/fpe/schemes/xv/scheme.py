@@ -10,8 +10,7 @@ from __future__ import annotations
 from typing import TYPE_CHECKING
 
 from ....model import Harvester
-from ...protocol import Discretization, Scheme
-from ...refine import Plan
+from ...protocol import Discretization, RefinementPlan, Scheme
 from .kinkdisc import KinkDG, KinkSettings
 
 if TYPE_CHECKING:
@@ -24,11 +23,11 @@ __all__ = ["XVScheme", "default_plan", "MAX_DOFS"]
 MAX_DOFS = 6_000_000
 
 
-def default_plan(h: Harvester, settings: Settings) -> Plan:
-    """The refinement of scheme ``"xv"``: from M = 4 on the base mesh (size 1, DG degree 3;
-    the size raises the degree by log2 of it, at most 8); a given ``M`` alone fixes the level."""
-    return Plan(M=4 if settings.M is None else settings.M,
-                size=1 if settings.half_elements is None else settings.half_elements,
+def default_plan(h: Harvester, settings: Settings) -> RefinementPlan:
+    """The refinement of scheme ``"xv"``: from M = 4 on the base mesh (size 1, the DG degree
+    ``order``; the refinement's mesh knob ``size`` raises the degree by log2 of it, at most 8);
+    a given ``M`` alone fixes the level."""
+    return RefinementPlan(M=4 if settings.M is None else settings.M, size=1,
                 fixed=settings.M is not None, max_M=settings.max_M, max_size=8,
                 max_dofs=max(settings.max_dofs, MAX_DOFS), max_seconds=settings.max_seconds,
                 max_gb=settings.max_gb)
@@ -38,11 +37,8 @@ class XVScheme(Scheme):
     """DG in (x, v), Hermite functions of (V, xi): 1 <= n < 2, the choice of
     ``scheme="auto"`` there unless an option of scheme ``"x"`` or its mesh knob is given.
 
-    Measured for 1 < n < 2 at tol = 1e-4 (one run, ``python -m validation.studies.fpe
-    --schemes``, 45 s budget): ``"xv"`` converges in 7 of the 9 cases n in {1.25, 1.5, 1.75}
-    x a in {0.5, 1, 2} (4.7-10.5 s), ``"x"`` in 4 (1.1-12.7 s; n = 1.25 at every a and
-    n = 1.5 at a = 1, 2 not in 25-30 s); where both converge ``"x"`` is faster at n = 1.75,
-    a <= 1 (1.1 and 2.9 s against 4.7 and 5.7 s). The two agree within their error bars in all 9.
+    For 1 < n < 2 it converges in more cases than scheme ``"x"`` and the two agree within
+    their error bars where both do (docs/methods.md, Fokker-Planck design notes).
     """
 
     name = "xv"
@@ -56,13 +52,13 @@ class XVScheme(Scheme):
                 f"got n = {h.n!r}; use scheme='x' or 'auto'")
 
     def preferred(self, h: Harvester, settings: Settings) -> bool:
-        x_settings = any(settings.given(name) for name in ("mesh", "weight", "half_elements", "elements"))
+        x_settings = any(settings.given(name) for name in ("mesh", "weight", "elements"))
         return h.n == 1.0 or (1.0 < h.n < 2.0 and not x_settings)
 
-    def plan(self, h: Harvester, settings: Settings) -> Plan:
+    def plan(self, h: Harvester, settings: Settings) -> RefinementPlan:
         return default_plan(h, settings)
 
-    def build(self, h: Harvester, settings: Settings, plan: Plan, tol: float, deadline: float | None
+    def build(self, h: Harvester, settings: Settings, plan: RefinementPlan, tol: float, deadline: float | None
               ) -> Discretization:
         # 1 < n < 2 has no trap at the origin: one core element per axis (measured at
         # a = 1, tol 1e-4: n = 1.5 eta 0.3878655 in 22 s against 0.3878575 +- 1.4e-5 in
