@@ -42,7 +42,7 @@ from validation.references.reftable import load
 from validation.studies.cli import axes_plot, save_benchmark
 
 __all__ = ["STEM", "ROW_CASES", "TODAY", "GENERATOR_SET", "generator_rows", "generator_coverage",
-           "generator_timings", "TIMING_CASES", "draw", "run"]
+           "generator_timings", "timing_run", "TIMING_CASES", "draw", "run"]
 
 #: Name of the written ``.json`` and ``.png``.
 STEM = "bench_montecarlo_generator"
@@ -197,28 +197,35 @@ TIMING_CASES = ((1.0, 2.0, 1, 0.0, 1e-3, 7, "mc n = 1, a = 2"), (1.25, 2.0, 1, 0
                 (3.0, 0.5, 3, -0.5, 1e-4, 7, "mc n = 3, N = 3, a = 0.5, k = -0.5"))
 
 
+def timing_run(n: float, a: float, N: int, k: float, tol: float, seed: int, ref_label: str | None,
+               generator: bool) -> dict[str, Any]:
+    """One end-to-end solve of a :data:`TIMING_CASES` case with or without the generator controls:
+    CPU seconds (all threads), wall seconds, the result and its distance to the reference in
+    combined error bars."""
+    h = Harvester.build(n=n, a=a, N=N, k=k)
+    t0, w0 = time.process_time(), time.perf_counter()
+    r = solve(h, "mc", seed=seed, tol=tol, generator=generator, max_time=7200.0, progress=False)
+    i = r.info
+    row = {"cpu_s": time.process_time() - t0, "wall_s": time.perf_counter() - w0, "eta": r.eta,
+           "eta_err": r.eta_err, "status": r.status.value, "replicas": i["replicas"], "paths": i["paths"],
+           "dt": i["dt"], "control_set": i["control_set"], "vr_eta": i["variance_reduction"],
+           "restarts": i["plan_notes"].get("restarts"), "generator": i["plan_notes"].get("generator")}
+    if ref_label is not None:
+        ref = load()[ref_label]
+        row["z_vs_reference"] = (r.eta - ref["eta"]) / math.hypot(r.eta_err, ref["eta_err"])
+    return row
+
+
 def generator_timings(quick: bool) -> dict[str, Any]:
     """The solver with the generator controls (default) and without (``generator=False``, today's
-    behaviour) on :data:`TIMING_CASES` (quick: at 10x the tolerance), one after the other per case:
-    CPU seconds (all threads), wall seconds, threads, the result and its distance to the reference
-    in combined error bars."""
+    behaviour) on :data:`TIMING_CASES` (quick: at 10x the tolerance), one after the other per case
+    (:func:`timing_run`)."""
     out = {}
     for n, a, N, k, tol, seed, ref_label in TIMING_CASES:
         tol = tol * 10 if quick else tol
-        h = Harvester.build(n=n, a=a, N=N, k=k)
-        ref = load()[ref_label] if ref_label else None
         row: dict[str, Any] = {"tol": tol, "seed": seed, "reference": ref_label}
         for label, gen in (("new", True), ("today", False)):
-            t0, w0 = time.process_time(), time.perf_counter()
-            r = solve(h, "mc", seed=seed, tol=tol, generator=gen, max_time=7200.0, progress=False)
-            i = r.info
-            row[label] = {"cpu_s": time.process_time() - t0, "wall_s": time.perf_counter() - w0, "eta": r.eta,
-                          "eta_err": r.eta_err, "status": r.status.value, "replicas": i["replicas"],
-                          "paths": i["paths"], "dt": i["dt"], "control_set": i["control_set"],
-                          "vr_eta": i["variance_reduction"], "restarts": i["plan_notes"].get("restarts"),
-                          "generator": i["plan_notes"].get("generator")}
-            if ref is not None:
-                row[label]["z_vs_reference"] = (r.eta - ref["eta"]) / math.hypot(r.eta_err, ref["eta_err"])
+            row[label] = timing_run(n, a, N, k, tol, seed, ref_label, gen)
         row["cpu_ratio_today_over_new"] = row["today"]["cpu_s"] / row["new"]["cpu_s"]
         out[_case(n, a, N, k)] = row
     return {"threads": default_threads(), **out}
