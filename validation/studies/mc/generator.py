@@ -25,6 +25,7 @@ writes ``bench_montecarlo_generator.json`` and ``.png`` (the recorded full runs:
 from __future__ import annotations
 
 import argparse
+import functools
 import json
 import math
 import time
@@ -38,11 +39,12 @@ from fpe_harvester.errors import ParameterError
 from fpe_harvester.parallel import default_threads
 from montecarlo import MonteCarlo, estimate, simulate
 from montecarlo.harmonic import twin_expectations
+from validation.references.exactflow import FlowSettings, solve_flow
 from validation.references.reftable import load
 from validation.studies.cli import axes_plot, save_benchmark
 
 __all__ = ["STEM", "ROW_CASES", "TODAY", "GENERATOR_SET", "generator_rows", "generator_coverage",
-           "generator_timings", "timing_run", "TIMING_CASES", "draw", "run"]
+           "generator_timings", "timing_run", "TIMING_CASES", "FLOW_REFERENCE", "flow_reference", "draw", "run"]
 
 #: Name of the written ``.json`` and ``.png``.
 STEM = "bench_montecarlo_generator"
@@ -191,10 +193,23 @@ def generator_coverage(quick: bool) -> dict[str, Any]:
     return out
 
 
-#: End-to-end cases: (n, a, N, k, tol, seed, reference label).
-TIMING_CASES = ((1.0, 2.0, 1, 0.0, 1e-3, 7, "mc n = 1, a = 2"), (1.25, 2.0, 1, 0.0, 1e-3, 7, None),
+#: End-to-end cases: (n, a, N, k, tol, seed, reference: a label of the reference table, or
+#: "exactflow" for :func:`flow_reference`).
+TIMING_CASES = ((1.0, 2.0, 1, 0.0, 1e-3, 7, "mc n = 1, a = 2"), (1.25, 2.0, 1, 0.0, 1e-3, 7, "exactflow"),
                 (1.0, 0.5, 1, 0.0, 1e-4, 7, "fpe n = 1, a = 0.5"), (3.0, 0.5, 1, 0.0, 1e-4, 7, "fpe n = 3, a = 0.5"),
                 (3.0, 0.5, 3, -0.5, 1e-4, 7, "mc n = 3, N = 3, a = 0.5, k = -0.5"))
+
+
+#: Settings of the exact-flow reference (:mod:`validation.references.exactflow`) at n = 1.25, a = 2,
+#: where the reference table has no value: 0.05 % on eta (its step bias bound included).
+FLOW_REFERENCE = {"step": 0.02, "w_trap": 0.0, "paths": 64, "t_run": 4000.0, "seed": 11}
+
+
+@functools.lru_cache(maxsize=None)
+def flow_reference(n: float, a: float) -> dict[str, float]:
+    """eta and its error from the exact-flow construction at :data:`FLOW_REFERENCE` (cached)."""
+    r = solve_flow(Harvester.build(n=n, a=a), FlowSettings(**FLOW_REFERENCE))
+    return {"eta": r.eta, "eta_err": r.eta_err}
 
 
 def timing_run(n: float, a: float, N: int, k: float, tol: float, seed: int, ref_label: str | None,
@@ -211,7 +226,7 @@ def timing_run(n: float, a: float, N: int, k: float, tol: float, seed: int, ref_
            "dt": i["dt"], "control_set": i["control_set"], "vr_eta": i["variance_reduction"],
            "restarts": i["plan_notes"].get("restarts"), "generator": i["plan_notes"].get("generator")}
     if ref_label is not None:
-        ref = load()[ref_label]
+        ref = flow_reference(n, a) if ref_label == "exactflow" else load()[ref_label]
         row["z_vs_reference"] = (r.eta - ref["eta"]) / math.hypot(r.eta_err, ref["eta_err"])
     return row
 
