@@ -103,6 +103,10 @@ def stationary_covariances(lin: Harvester, dt: float, step: str = "frozen") -> n
     (spectral radius >= 1).
     """
     M, _, Q, _ = step_matrices(lin, dt, step)
+    if not (np.all(np.isfinite(M)) and np.all(np.isfinite(Q))):
+        raise ParameterError(f"the harmonic twin (stiffness {2 * lin.a:g}, k = {lin.k:g}) has a step at dt = {dt:g} "
+                             f"beyond double precision (its matrix exponential overflows): rescale the model so that "
+                             f"a and |k| are of moderate size")
     out = np.empty_like(M)
     for q in range(lin.N):
         rho = float(np.max(np.abs(np.linalg.eigvals(M[q]))))
@@ -183,7 +187,10 @@ def twin_expectations(lin: Harvester, dt: float, n: float = 2.0, step: str = "fr
 
 
 def initial_cholesky(lin: Harvester, dt: float, step: str = "frozen") -> np.ndarray:
-    """Lower Cholesky factor (4N x 4N) of the twin ring's stationary law before a step.
+    """A factor L (4N x 4N, L L^T = C) of the twin ring's stationary covariance C before a step.
+
+    The lower Cholesky factor; where C is singular to round-off, the factor of its positive
+    semi-definite part (same law).
 
     State ordered unit by unit, (x_j, v_j, V_j, xi_j). The unit-space covariance is the
     block-circulant :math:`C_{jl} = N^{-1}\\sum_q P_q \\cos(2\\pi q (j - l)/N)`.
@@ -199,7 +206,13 @@ def initial_cholesky(lin: Harvester, dt: float, step: str = "frozen") -> np.ndar
         for l in range(N):
             C[4 * j:4 * j + 4, 4 * l:4 * l + 4] = blocks[(j - l) % N]
     C = 0.5 * (C + C.T)
-    return np.linalg.cholesky(C)
+    try:
+        return np.linalg.cholesky(C)
+    except np.linalg.LinAlgError:
+        # Singular to round-off (a subnormal K_c leaves <V^2> = 0): any L with L L^T = C samples
+        # the same law, so take the factor of C's positive semi-definite part.
+        w, U = np.linalg.eigh(C)
+        return U * np.sqrt(np.clip(w, 0.0, None))
 
 
 def linearized_stiffness(h: Harvester, xdU: float | None = None, x2: float | None = None) -> float | None:

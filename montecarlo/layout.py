@@ -11,8 +11,9 @@ module-level integer as a constant, so ``pp[P_SIGMA]`` is the same machine code 
     m, gamma, K_v, K_c, tau_p, sigma, the coupling k, a, n; ``P_STIFFNESS`` the stiffness c kept
     inside the exactly integrated linear flow (:func:`montecarlo.coefficients.linear_stiffness`);
     ``P_THRESHOLD`` the escape amplitude; ``P_XI_VAR`` the stationary variance D/tau of xi;
-    ``P_KINK_RULE`` the kink's rule for swings shorter than the step
-    (:data:`montecarlo._kink.AVERAGE` or ``HOLD``); ``P_KINK_FORCE`` the strength :math:`an` of
+    ``P_KINK_RULE`` the kink's rule for swings shorter than the step, the number of full swings
+    that must fit in the time left before they are averaged (:data:`montecarlo._kink.AVERAGE`;
+    ``HOLD`` = 0, never); ``P_KINK_FORCE`` the strength :math:`an` of
     the part :math:`-an\\,\\mathrm{sign}(x)` of the force that the kink's flow integrates exactly
     (0 for the other on-site kinds); the bi-Laplacian and cubic couplings k4 and k3 (0 for a
     single unit, like k).

@@ -102,7 +102,7 @@ def simulate(
         with ``start="rest"`` a twin starts at rest too, and its expectations are then not
         those of :attr:`Ensemble.twin_mean` during the transient.
     kink_rule : {"average", "hold"}
-        Kink treatment only: swings much shorter than the step are advanced by the averaged map
+        Kink treatment only: swings shorter than a few steps are advanced by the averaged map
         of their amplitude (``"average"``), or followed until 64 crossings in one step and the
         unit then held at rest (``"hold"``, a time-step artifact kept to compare with;
         :data:`montecarlo.coefficients.KINK_RULES`).

@@ -40,6 +40,7 @@ from fpe_harvester.model import Harvester
 from fpe_harvester.parallel import default_threads
 from fpe_harvester.result import Stats, Status
 from fpe_harvester.solvers import Capabilities, Tolerance
+from fpe_harvester.wide import SMALLEST_NORMAL
 
 from .coefficients import onsite_kind
 from .controls.generator import GENERATOR
@@ -117,6 +118,22 @@ def _common_random_numbers(solver: MonteCarlo, h: Harvester, replicas: int) -> d
     return {"dt": plan.dt, "t_burn": plan.t_burn, "t_run": plan.t_run,
             "paths": max(2, round(plan.paths * 16 / replicas)), "control": False,
             "min_replicas": replicas, "max_replicas": replicas, "tol": 0.999}
+
+
+def _check_range(est: Estimate, h: Harvester) -> None:
+    """Raise :class:`ParameterError` when V2, Pin or eta left the normal double range.
+
+    Every parameter is > 0, so each is > 0 in exact arithmetic; a mean of 0 (or a subnormal or
+    infinite one) means the parameters' scales under- or overflow double precision (a subnormal
+    K_c makes V2 ~ K_c^2 = 0), and no relative error exists for it.
+    """
+    bad = {q: est.mean[q] for q in ("V2", "Pin", "eta")
+           if est.replicas and not SMALLEST_NORMAL <= abs(est.mean[q]) < math.inf}
+    if bad:
+        what = ", ".join(f"{q} = {v:.3g}" for q, v in bad.items())
+        raise ParameterError(f"the Monte Carlo estimate has {what}: the parameters' scales (a = {h.a:g}, "
+                             f"{', '.join(f'{k} = {v:g}' for k, v in h.params.to_dict().items())}) put it "
+                             f"outside double precision; rescale the problem (docs/model.md §5)")
 
 
 @dataclass(frozen=True)
@@ -512,6 +529,7 @@ class MonteCarlo:
             ens = self._run(h, plan, self.min_replicas, 0)
             bar.update(ens.replicas)
             est = estimate(ens, h)
+            _check_range(est, h)
             plan, first = self._generator_plan(h, plan, ens, est)
             if first:
                 restarts.append("generator")

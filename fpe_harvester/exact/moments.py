@@ -152,12 +152,14 @@ def balanced_lyapunov(A: np.ndarray, Q: np.ndarray) -> np.ndarray:
 
     import scipy.linalg
 
-    B, (scale, _) = scipy.linalg.matrix_balance(A, permute=False, separate=True)
     with warnings.catch_warnings():
         warnings.simplefilter("error", RuntimeWarning)
         try:
+            # balancing itself fails on a stiffness near the smallest doubles (kappa = 1e-21)
+            with np.errstate(all="raise"):
+                B, (scale, _) = scipy.linalg.matrix_balance(A, permute=False, separate=True)
             Xb = scipy.linalg.solve_continuous_lyapunov(B, -(Q / scale[:, None]) / scale[None, :])
-        except RuntimeWarning as exc:
+        except (RuntimeWarning, FloatingPointError) as exc:
             raise np.linalg.LinAlgError(f"Lyapunov equation too ill-conditioned to solve: {exc}") from exc
     return Xb * scale[:, None] * scale[None, :]
 
@@ -216,9 +218,16 @@ def closure_mismatch(h: Harvester, log_kappa: float) -> float:
     (:func:`fpe_harvester.fpe.hermite.equivalent_harmonic`) and the Monte Carlo twin
     (:func:`montecarlo.harmonic.linearized_stiffness`) both solve it.
     """
-    kappa = math.exp(log_kappa)
-    kap = kappa + h.coupling_stiffness() if h.N > 1 else np.array([kappa])
-    s2 = float(np.mean(mode_moments(kap, h.params)["x2"]))
+    if log_kappa > 709.0:  # kappa beyond the largest double: x is at rest to double precision
+        s2 = 0.0
+    else:
+        kappa = math.exp(log_kappa)
+        kap = kappa + h.coupling_stiffness() if h.N > 1 else np.array([kappa])
+        s2 = float(np.mean(mode_moments(kap, h.params)["x2"]))
     n, a = h.n, h.a
     c_n = a * n * 2.0 ** (n / 2) * math.gamma((n + 1) / 2) / math.sqrt(math.pi)
-    return math.log(c_n) + (0.5 * n - 1.0) * math.log(s2) - log_kappa
+    e = 0.5 * n - 1.0
+    if e != 0.0 and not 0.0 < s2 < math.inf:
+        # s^2 under- or overflows at this kappa (a = 1e144): the mismatch's limit, by its sign
+        return math.inf if (e < 0.0) == (s2 == 0.0) else -math.inf
+    return math.log(c_n) + (e * math.log(s2) if e != 0.0 else 0.0) - log_kappa

@@ -267,6 +267,8 @@ def equivalent_harmonic(h: Harvester) -> tuple[float, np.ndarray]:
 _SEARCH_DECADES = 40.0
 _FLAT_STEP = 1e-4
 _FLAT_GAP = 0.01
+#: ln of the largest stiffness the search tries (below the largest double, ~709.8).
+_LOG_MAX = 700.0
 
 
 def _equivalent_log_stiffness(mismatch: Callable[[float], float], start: float,
@@ -277,7 +279,7 @@ def _equivalent_log_stiffness(mismatch: Callable[[float], float], start: float,
     stay finite there); see :func:`equivalent_harmonic` for the fallback.
     """
     # Infimum of mu: reached (to _FLAT_STEP) at the far end of the window only when n = 1.
-    far = start + _SEARCH_DECADES
+    far = min(start + _SEARCH_DECADES, _LOG_MAX)
     m_far = mismatch(far)
     flat = abs(mismatch(far - 2.0) - m_far) < _FLAT_STEP
     # Stop at the root, or where mu comes within _FLAT_GAP of a flat infimum if that is

@@ -38,7 +38,7 @@ from fpe_harvester.errors import ParameterError, check_real
 from fpe_harvester.parallel import default_threads
 from montecarlo.coefficients import physical_vector, step_coefficients
 from montecarlo.estimate import student_factor
-from montecarlo.layout import KIND_KINK
+from montecarlo.layout import KIND_KINK, P_SIZE
 from montecarlo.steps.frozen import N_TAYLOR, d_step
 
 __all__ = ["reference_run", "summarize", "draw", "main", "MOMENTS"]
@@ -334,7 +334,7 @@ def reference_run(a: float, *, delta: float = 1e-3, schemes: tuple = ((20, "aver
     ed = _eigen_data(h)
     Ks = np.array([K for K, _ in schemes], dtype=np.int64)
     cfs = np.array([step_coefficients(h, K * delta) for K, _ in schemes]).reshape(len(schemes), -1)
-    pps = np.array([physical_vector(h, 1e300, rule) for _, rule in schemes]).reshape(len(schemes), 14)
+    pps = np.array([physical_vector(h, 1e300, rule) for _, rule in schemes]).reshape(len(schemes), P_SIZE)
     nburn = int(round(t_burn / delta))
     nrun = int(round(t_run / delta))
     stride = max(1, int(round(sample_every / delta)))
