@@ -18,10 +18,11 @@ from numba import njit
 
 from ._kernels import _check_escape, _clamp_start, _kick_force, _live, _measure, _start
 from ._kink import N_TAYLOR
+from .controls.generator import gen_close, gen_measure
 from .controls.martingale import MG_DIST, mg_measure, n_state
 from .controls.twin import measure_twin
-from .layout import (C_RING_STEPS, CF_H, CF_XI_DECAY, KIND_LINEAR, N_COUNTERS, N_MOM, P_A, P_N, P_THRESHOLD,
-                     P_XI_VAR, ROWS)
+from .layout import (C_RING_STEPS, CF_H, CF_XI_DECAY, KIND_LINEAR, N_COUNTERS, N_MOM, P_A, P_KV, P_N, P_SIGMA,
+                     P_THRESHOLD, P_XI_VAR, ROWS)
 from .steps import Stepper
 from .steps.dispatch import advance, compose, noise, normals, step, twin_xi
 
@@ -86,6 +87,10 @@ class Setup(NamedTuple):
     n_ctl: int = 0
     mg_at: int = 0
     n_mg: int = 0
+    gen_at: int = 0
+    n_gen: int = 0
+    gen_kink: bool = False
+    gen_every: int = 1
 
 
 class Sums(NamedTuple):
@@ -148,6 +153,28 @@ def _init_levels(s, f, c, cc, t) -> None:
 
 
 @njit(cache=True, nogil=True)
+def _copy_noise(src, dst) -> None:
+    """``dst[:] = src`` for the (nz, N, P) noise arrays, element by element (a slice copy compiles
+    numba's shape-checking copy per dimension)."""
+    for r in range(src.shape[0]):
+        for j in range(src.shape[1]):
+            for p in range(src.shape[2]):
+                dst[r, j, p] = src[r, j, p]
+
+
+@njit(cache=True, nogil=True)
+def _gen_point(s, g_fine, g_upd, gen_points, x, v, V, xi, w, gst, gacc, first, cf, pp):
+    """Add a generator point every ``s.gen_every`` fine steps of the measured window; returns the
+    points taken and the xi updates since the last point, both after this step."""
+    if g_fine % s.gen_every != 0:
+        return gen_points, g_upd
+    dec = cf[CF_XI_DECAY] ** g_upd
+    gen_measure(x, v, V, xi, w, gst, gacc, first, gen_points > 0, dec, pp[P_XI_VAR] * (1.0 - dec * dec), s.gen_kink,
+                pp[P_A], pp[P_SIGMA], pp[P_KV])
+    return gen_points + 1, 0
+
+
+@njit(cache=True, nogil=True)
 def _run(tag, gen, s, out) -> None:
     """The loop of :func:`run_chunk`, compiled once per stepper ``tag``."""
     # every array is a local of its own: reading them out of tuples inside the loop cost 5-20 %
@@ -186,6 +213,12 @@ def _run(tag, gen, s, out) -> None:
     xi0 = np.zeros((N, P))
     mg_points = 0  # martingale points taken (an int: a bool flag compiled mg_measure twice)
     n_upd = 0  # xi updates of the fine level since the last martingale point
+    use_gen = s.n_gen > 0
+    gacc = out.ctl[:, s.gen_at:s.gen_at + s.n_gen]
+    gst = np.zeros((4, N, P if use_gen else 0))
+    # generator points taken, xi updates of the fine level since the last one, fine steps of the
+    # measured window so far
+    gen_points = g_upd = g_fine = 0
     h = cf_c[CF_H] if coupled else cf_f[CF_H]
     _start(gen, s.chol, math.sqrt(pp[P_XI_VAR]), xf, vf, Vf, xif)
     _clamp_start(xf, kind, pp, h)
@@ -213,6 +246,7 @@ def _run(tag, gen, s, out) -> None:
             ee = e1 if sub == 0 else e2
             noise(tag, cf_f, zz, ee)
             n_upd += 1
+            g_upd += 1
             step(tag, xf, vf, Vf, xif, Ff, sf, pf, ee, cf_f, pp, kind, xm, fext, cs, rbm, rbx, w, counters, gen)
             if twin:
                 noise(tag, cf_t, zz, et)
@@ -223,6 +257,10 @@ def _run(tag, gen, s, out) -> None:
                 step(tag, xc, vc, Vc, xic, Fc, sc, pc, ec, cf_c, pp, kind, xm, fext, cs, rbm, rbx, w, counters, gen)
                 _check_escape(xc, vc, Vc, xic, Fc, sc, w, thr, t_end, esc)
             _check_escape(xf, vf, Vf, xif, Ff, sf, w, thr, t_end - (0.5 * h if coupled and sub == 0 else 0.0), esc)
+            if use_gen and it >= nburn:
+                gen_points, g_upd = _gen_point(s, g_fine, g_upd, gen_points, xf, vf, Vf, xif, w, gst, gacc, first,
+                                               cf_f, pp)
+                g_fine += 1
             if meas:
                 counts[0] += _measure(xf, vf, Vf, xif, sf, Ff, w, cf_f, pp, kind, sums[0], pf)
                 if use_mg and sub == 0:
@@ -252,7 +290,6 @@ def _run(tag, gen, s, out) -> None:
                 counts[3] += _measure(xcc, vcc, Vcc, xicc, scc, Fcc, w, cf_cc, pp, kind, sums[3], pcc)
             advance(tag, xicc, ecc, cf_cc)
         elif third:
-            for r in range(nz):
-                for j in range(N):
-                    for p in range(P):
-                        ec0[r, j, p] = ec[r, j, p]
+            _copy_noise(ec, ec0)
+    if use_gen:
+        gen_close(gacc)

@@ -33,13 +33,14 @@ import math
 from dataclasses import dataclass, field
 
 import numpy as np
+from threadpoolctl import ThreadpoolController
 
 from fpe_harvester.errors import ParameterError
 from fpe_harvester.model import Harvester
 
 from .coefficients import onsite_kind
-from .controls.regression import regression_estimate
-from .controls.sets import CONTROL_SETS, choose_controls, control_columns
+from .controls.regression import crossfit_estimate, regression_estimate
+from .controls.sets import CONTROL_SETS, SetColumns, choose_controls, control_columns
 from .ensemble import Ensemble
 from .layout import KIND_KINK
 
@@ -59,6 +60,9 @@ BIAS_ORDER = {"smooth": 2.0, "nonsmooth": 2.0}
 #: bounds the true remaining error (tests/montecarlo/test_extrapolate.py; docs/methods.md, "Why
 #: the settings are what they are").
 RESIDUAL_RULE = (3.0, 1.0)
+
+#: The controls of a regression: (C, their exact means mu, cross-fitted).
+Controls = tuple[np.ndarray, np.ndarray, bool]
 
 #: Observables estimated from the replica moments (``eta`` is derived from V2 and Pin).
 _NAMES = ("V2", "Pin", "v2", "vV", "x2", "stuck")
@@ -199,6 +203,21 @@ def estimate(e: Ensemble, h: Harvester, order: float | None = None, control: boo
         Report the Richardson extrapolation (needs three levels,
         :func:`montecarlo.simulate` ``third_level``). None: whenever the ensemble has three.
     """
+    # the regressions' matrices are small (replicas x controls): BLAS threads only contend, and on
+    # a loaded machine made a cross-fitted estimate 20-200x slower
+    with _blas().limit(limits=1, user_api="blas"):
+        return _estimate(e, h, order, control, controls, extrapolate)
+
+
+@functools.cache
+def _blas() -> ThreadpoolController:
+    """The BLAS thread-pool controller, made once (making one scans the loaded libraries)."""
+    return ThreadpoolController()
+
+
+def _estimate(e: Ensemble, h: Harvester, order: float | None, control: bool | None, controls: str | None,
+              extrapolate: bool | None) -> Estimate:
+    """:func:`estimate`'s body."""
     if controls is not None and controls not in CONTROL_SETS:
         raise ParameterError(f"controls must be None or one of {tuple(CONTROL_SETS)}, got {controls!r} "
                              f"(type {type(controls).__name__})")
@@ -242,9 +261,8 @@ def estimate(e: Ensemble, h: Harvester, order: float | None = None, control: boo
     Y = Ff + scale * (Ff - coarse[valid]) if extrapolate else Ff
     chosen = "none"
     if use:
-        chosen = choose_controls({name: cols[0].shape[1] for name, cols in sets.items()})
-        C, C_first, mu = sets[chosen]
-        mean, cov, plain_cov = _regression(Y, C, mu)
+        chosen, (mean, cov, plain_cov) = _choose(sets, Y, R)
+        C, C_first, mu, crossfit = sets[chosen]
         for i, name in enumerate(_NAMES):
             if cov[i, i] > 0:
                 reduction[name] = float(plain_cov[i, i] / cov[i, i])
@@ -256,25 +274,24 @@ def estimate(e: Ensemble, h: Harvester, order: float | None = None, control: boo
     if use and est_se["eta"] > 0:
         reduction["eta"] = (_ratio(mean, plain_cov, R)[1] / est_se["eta"]) ** 2
     zero = dict.fromkeys(_NAMES + ("eta",), 0.0)
-    controls_used = (C, mu) if use else (None, None)
+    controls_used = (C, mu, crossfit) if use else None
     bias, bias_se = dict(zero), dict(zero)
     if coarse is not None:
         # e(h) = C h^p gives fine - coarse = (1 - 2^p) e(h/2); the controls are the fine
         # level's (the twin runs at the fine step only)
-        bias, bias_se = _scaled_difference(coarse[valid] - Ff, *controls_used, mean, R, scale)
+        bias, bias_se = _scaled_difference(coarse[valid] - Ff, controls_used, mean, R, scale)
     residual, residual_se = dict(zero), dict(zero)
     if coarsest is not None:
         # R(2dt) - R(dt) with R(h) = F(h/2) + scale (F(h/2) - F(h)); the remaining error c dt^q of
         # R(dt) is that difference / (2^q - 1)
         Fc, Fcc = coarse[valid], coarsest[valid]
         D = (1.0 + 2.0 * scale) * Fc - scale * Fcc - (1.0 + scale) * Ff
-        residual, residual_se = _scaled_difference(D, *controls_used, mean, R,
-                                                   1.0 / (2.0 ** RESIDUAL_RULE[0] - 1.0))
+        residual, residual_se = _scaled_difference(D, controls_used, mean, R, 1.0 / (2.0 ** RESIDUAL_RULE[0] - 1.0))
     # the twin's own first-half-minus-whole difference has mean 0 (it is stationary): the
     # control for the system's, which a transient would shift
-    drift, drift_se = _scaled_difference(first[valid] - Ff, (C_first - C) if use else None,
-                                         np.zeros(C.shape[1]) if use else None, mean, R, 1.0)
-    second = _second_pass(e, h, valid, extrapolate, scale, controls_used, (C_first - C) if use else None)
+    drift_controls = (C_first - C, np.zeros(C.shape[1]), crossfit) if use else None
+    drift, drift_se = _scaled_difference(first[valid] - Ff, drift_controls, mean, R, 1.0)
+    second = _second_pass(e, h, valid, extrapolate, scale, controls_used, drift_controls)
     for out, part in zip((est_mean, est_se, bias, bias_se, residual, residual_se, drift, drift_se), second):
         out["d2"] = part
     p = h.params
@@ -285,6 +302,32 @@ def estimate(e: Ensemble, h: Harvester, order: float | None = None, control: boo
         identity_V2=_mean_se(r1), identity_power=_mean_se(r2), drift=drift, drift_se=drift_se,
         reduction=reduction, control=use, controls=chosen, extrapolated=bool(extrapolate),
         residual=residual, residual_se=residual_se)
+
+
+def _choose(sets: dict[str, SetColumns], Y: np.ndarray, R: float) -> tuple[str, tuple[np.ndarray, ...]]:
+    """The set to use (:func:`choose_controls`) and its regression (:func:`_regression`).
+
+    A cross-fitted set (many controls) is kept only where its variance of eta is below that of
+    the richest in-sample set: with heavy-tailed replicas (short runs of the strong kink) its
+    fit can add more variance than it removes. Both variances come from hundreds of replicas
+    (:func:`montecarlo.controls.regression.crossfit_dof`), so the choice's preference for an
+    underestimated variance is a few per cent of it (the coverage: docs/methods.md, "Generator
+    controls").
+    """
+    chosen = choose_controls({name: cols.C.shape[1] for name, cols in sets.items()})
+    fit = _regression(Y, *_controls(sets[chosen]))
+    plain = {name: cols.C.shape[1] for name, cols in sets.items() if not cols.crossfit}
+    if not sets[chosen].crossfit or not plain:
+        return chosen, fit
+    other = choose_controls(plain)
+    other_fit = _regression(Y, *_controls(sets[other]))
+    if _ratio(other_fit[0], other_fit[1], R)[1] < _ratio(fit[0], fit[1], R)[1]:
+        return other, other_fit
+    return chosen, fit
+
+
+def _controls(cols: SetColumns) -> Controls:
+    return cols.C, cols.mu, cols.crossfit
 
 
 @functools.cache
@@ -303,28 +346,25 @@ def student_factor(dof: int) -> float:
 
 
 def _second_pass(e: Ensemble, h: Harvester, valid: np.ndarray, extrapolate: bool, scale: float,
-                 controls: tuple[np.ndarray | None, np.ndarray | None],
-                 drift_controls: np.ndarray | None) -> tuple[float, ...]:
+                 controls: Controls | None, drift_controls: Controls | None) -> tuple[float, ...]:
     """The :data:`_SECOND` observables' last entry (``d2``) as :func:`estimate` treats the first
     pass's: mean, standard error, bias and its error, residual and its error, drift and its
     error (0 where a level is missing)."""
     levels = [_per_replica(e, h, i, _SECOND)[valid] if i < e.levels else None for i in range(3)]
     Ff, coarse, coarsest = levels
     Y = Ff + scale * (Ff - coarse) if extrapolate else Ff
-    C, mu = controls
-    mean, cov = _plain(Y) if C is None else _regression(Y, C, mu)[:2]
+    mean, cov = _plain(Y) if controls is None else _regression(Y, *controls)[:2]
     name, R = _SECOND[-1], h.params.R
     out = [float(mean[-1]), math.sqrt(max(float(cov[-1, -1]), 0.0)), 0.0, 0.0, 0.0, 0.0]
     if coarse is not None:
-        b, b_se = _scaled_difference(coarse - Ff, C, mu, mean, R, scale, _SECOND)
+        b, b_se = _scaled_difference(coarse - Ff, controls, mean, R, scale, _SECOND)
         out[2:4] = b[name], b_se[name]
     if coarsest is not None:
         D = (1.0 + 2.0 * scale) * coarse - scale * coarsest - (1.0 + scale) * Ff
-        r, r_se = _scaled_difference(D, C, mu, mean, R, 1.0 / (2.0 ** RESIDUAL_RULE[0] - 1.0), _SECOND)
+        r, r_se = _scaled_difference(D, controls, mean, R, 1.0 / (2.0 ** RESIDUAL_RULE[0] - 1.0), _SECOND)
         out[4:6] = r[name], r_se[name]
     first = _per_replica(e, h, -1, _SECOND)[valid]
-    d, d_se = _scaled_difference(first - Ff, drift_controls, None if C is None else np.zeros(C.shape[1]),
-                                 mean, R, 1.0, _SECOND)
+    d, d_se = _scaled_difference(first - Ff, drift_controls, mean, R, 1.0, _SECOND)
     return (*out, d[name], d_se[name])
 
 
@@ -336,27 +376,29 @@ def _plain(Y: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     return mean, Yc.T @ Yc / (n - 1) / n * student_factor(n - 1) ** 2
 
 
-def _regression(Y: np.ndarray, C: np.ndarray, mu: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Regression mean of Y with controls C (expectation mu), its Student-scaled covariance,
+def _regression(Y: np.ndarray, C: np.ndarray, mu: np.ndarray,
+                crossfit: bool = False) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Regression mean of Y with controls C (expectation mu; cross-fitted with ``crossfit``,
+    :func:`montecarlo.controls.regression.crossfit_estimate`), its Student-scaled covariance,
     and the Student-scaled covariance of the plain mean (for the variance-reduction factor)."""
-    reg = regression_estimate(Y, C, mu)
+    reg = (crossfit_estimate if crossfit else regression_estimate)(Y, C, mu)
     n = Y.shape[0]
     return reg.mean, reg.cov * student_factor(reg.dof) ** 2, reg.plain_cov * student_factor(n - 1) ** 2
 
 
-def _scaled_difference(D: np.ndarray, C: np.ndarray | None, mu: np.ndarray | None, mean: np.ndarray, R: float,
-                       factor: float, names: tuple[str, ...] = _NAMES) -> tuple[dict[str, float], dict[str, float]]:
+def _scaled_difference(D: np.ndarray, controls: Controls | None, mean: np.ndarray, R: float, factor: float,
+                       names: tuple[str, ...] = _NAMES) -> tuple[dict[str, float], dict[str, float]]:
     """Mean and standard error of a per-replica difference between levels or windows, times
-    ``factor``, per observable and for eta (to first order): the regression on the controls
-    ``C`` (expectation ``mu``) when given, the plain mean otherwise.
+    ``factor``, per observable and for eta (to first order): the regression on the ``controls``
+    (C, their expectation mu, cross-fitted or not) when given, the plain mean otherwise.
 
     No choice between the two by their estimated variances: that choice favours whichever
     variance happens to be underestimated (docs/methods.md, "Why the settings are what they are").
     """
-    if C is None:
+    if controls is None:
         d_mean, d_cov = _plain(D)
     else:
-        d_mean, d_cov, _ = _regression(D, C, mu)
+        d_mean, d_cov, _ = _regression(D, *controls)
     value = {name: float(d_mean[i]) * factor for i, name in enumerate(names)}
     se = {name: math.sqrt(max(float(d_cov[i, i]), 0.0)) * factor for i, name in enumerate(names)}
     b, b_se = _linear_eta(d_mean, d_cov, mean, R)

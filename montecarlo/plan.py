@@ -118,6 +118,9 @@ class RunPlan:
         Slowest relaxation time behind ``t_burn`` (:func:`montecarlo.plan.relaxation_time`).
     notes : dict
         How each choice was made.
+    generator : bool
+        Whether the path loop accumulates the generator controls
+        (:mod:`montecarlo.controls.generator`).
     """
 
     dt: float
@@ -128,3 +131,4 @@ class RunPlan:
     start: str
     relaxation_time: float
     notes: dict[str, Any]
+    generator: bool = False

@@ -57,6 +57,7 @@ def simulate(
     step: str = "auto",
     controls: tuple[str, ...] = (),
     third_level: bool = False,
+    generator_every: float = 0.0,
 ) -> Ensemble:
     """Simulate independent replicas of ``h`` and return their raw moment sums.
 
@@ -121,6 +122,11 @@ def simulate(
         ``("martingale",)``: sums of basis functions of the state times the noise drawn after it,
         with mean exactly 0 (:mod:`montecarlo.controls.martingale`). The simulated paths are the
         same with or without them. The twin is asked for by ``twin``.
+    generator_every : float
+        Time between the points of the generator control (``"generator"`` in ``controls``,
+        :mod:`montecarlo.controls.generator`), >= 0, rounded to whole steps of level 0 (at least
+        one); the default 0 takes every step. Longer intervals cost less per step and remove
+        less variance (docs/methods.md, "Generator controls").
     third_level : bool
         With ``richardson``, also run level 2 at ``2 dt`` on the same noise (two coarse
         increments composed exactly), so that two Richardson extrapolations, from
@@ -141,7 +147,8 @@ def simulate(
     c = _check(h, dt=dt, paths=paths, replicas=replicas, t_burn=t_burn, t_run=t_run, seed=seed,
                richardson=richardson, threshold=threshold, chunk=chunk, threads=threads,
                first_replica=first_replica, sample_every=sample_every, twin=twin, start=start,
-               kink_rule=kink_rule, kind=kind, step=step, controls=controls, third_level=third_level)
+               kink_rule=kink_rule, kind=kind, step=step, controls=controls, third_level=third_level,
+               generator_every=generator_every)
     stepper, setup, twin_mean = _coefficients(h, c)
     ss = np.random.SeedSequence(c.seed)
     sizes = _chunks(c.paths, c.chunk)
@@ -167,7 +174,8 @@ def simulate(
         seed_entropy=int(ss.entropy) if c.seed is None else c.seed,
         first_replica=c.first_replica,
         notes={"threads": c.threads, "chunk": c.chunk, "onsite_kind": setup.kind,
-               "sample_stride": setup.stride, "kink_rule": c.kink_rule, "step": stepper.name},
+               "sample_stride": setup.stride, "kink_rule": c.kink_rule, "step": stepper.name,
+               **({"generator_stride": setup.gen_every} if setup.n_gen else {})},
         twin_kappa=c.twin,
         twin_mean=twin_mean,
         start=c.start,
@@ -199,12 +207,14 @@ class _Checked(NamedTuple):
     step: str
     controls: tuple[str, ...]
     third_level: bool
+    generator_every: float
 
 
 def _check(h: Harvester, *, dt: float, paths: int, replicas: int, t_burn: float, t_run: float,
            seed: int | None, richardson: bool, threshold: float, chunk: int, threads: int | None,
            first_replica: int, sample_every: float, twin: float | None, start: str, kink_rule: str,
-           kind: int | None, step: str, controls: tuple[str, ...], third_level: bool) -> _Checked:
+           kind: int | None, step: str, controls: tuple[str, ...], third_level: bool,
+           generator_every: float) -> _Checked:
     """Validate :func:`simulate`'s arguments (raises :class:`ParameterError`)."""
     if not isinstance(h, Harvester):
         raise ParameterError(f"h must be a Harvester, got {h!r} (type {type(h).__name__})")
@@ -220,6 +230,7 @@ def _check(h: Harvester, *, dt: float, paths: int, replicas: int, t_burn: float,
     if seed is not None:
         seed = check_int("seed", seed, low=0)
     sample_every = check_real("sample_every", sample_every, low=0.0)
+    generator_every = check_real("generator_every", generator_every, low=0.0)
     if kink_rule not in KINK_RULES:
         raise ParameterError(f"kink_rule must be one of {sorted(KINK_RULES)}, got {kink_rule!r} "
                              f"(type {type(kink_rule).__name__})")
@@ -252,7 +263,7 @@ def _check(h: Harvester, *, dt: float, paths: int, replicas: int, t_burn: float,
         raise ParameterError(f"twin: the {stepper.name} step has no harmonic twin; use twin=None")
     return _Checked(dt, paths, replicas, t_burn, t_run, seed, bool(richardson), threshold, chunk, threads,
                     first_replica, sample_every, twin, start, kink_rule, kind, stepper.name, tuple(controls),
-                    third_level and bool(richardson))
+                    third_level and bool(richardson), generator_every)
 
 
 def _coefficients(h: Harvester, c: _Checked) -> tuple[Stepper, Setup, dict[str, float]]:
@@ -280,7 +291,7 @@ def _coefficients(h: Harvester, c: _Checked) -> tuple[Stepper, Setup, dict[str, 
     for name in c.controls:
         setup = setup._replace(**CONTROLS[name].loop_fields(h, n_ctl))
         n_ctl += len(CONTROLS[name].sums(h))
-    setup = setup._replace(n_ctl=n_ctl)
+    setup = setup._replace(n_ctl=n_ctl, gen_every=max(1, int(round(c.generator_every / dt_f))))
     return stepper, setup, twin_mean
 
 

@@ -43,7 +43,9 @@ from fpe_harvester.solvers import Capabilities, Tolerance
 from fpe_harvester.wide import SMALLEST_NORMAL
 
 from .coefficients import onsite_kind
+from .controls.generator import GENERATOR
 from .controls.martingale import MARTINGALE
+from .controls.twin import TWIN_MOMENTS
 from .ensemble import Ensemble
 from .estimate import Estimate, estimate
 from .harmonic import linearized_stiffness, natural_amplitude
@@ -89,6 +91,17 @@ _RUN_PER_BURN = 3.0
 _T_RUN, _T_RUN_MART = 100.0, 400.0
 _T_RUN_MART_TOL = 1e-3
 
+
+#: The generator controls (:mod:`montecarlo.controls.generator`) are added, after the first batch,
+#: to a single unit whose plain relative variance of eta per unit of path time (the variance of a
+#: replica's eta over eta^2, times its paths and t_run) is at least ``_GEN_RELVAR``: where the twin
+#: and martingale controls leave much of it (the strong kink), the generator's reduce eta's
+#: variance 2-10x more; elsewhere 1.0-1.6x, which fewer paths per replica would eat up
+#: (docs/methods.md, "Generator controls"). The run restarts with them when it is long enough for
+#: their fit, ``_GEN_FIT`` replicas per control at ``_GEN_MIN_PATHS`` paths, given a variance
+#: reduction of at least ``_GEN_VR`` (the least measured where the rule adds them); the paths per
+#: replica aim at ``_GEN_REPLICAS`` replicas per control.
+_GEN_RELVAR, _GEN_VR, _GEN_FIT, _GEN_REPLICAS, _GEN_MIN_PATHS = 2.4, 40.0, 4.0, 8.0, 2
 
 #: A confined system's escape threshold is at least this many natural amplitudes
 #: (:func:`~montecarlo.harmonic.natural_amplitude`), and at least 100.
@@ -212,6 +225,13 @@ class MonteCarlo:
         ring) and use them as control variates, alone or with the twin's: the richest set the
         replicas allow (:func:`montecarlo.controls.choose_controls`). The default ``t_run`` is then 400
         instead of 100 when ``tol <= 1e-3``. Default True.
+    generator : bool
+        Let the solver add the generator controls (:mod:`montecarlo.controls.generator`: the
+        martingale form of the generator applied to a degree-4 basis, cross-fitted) where the
+        first batch shows they pay: a single unit whose eta is noisy per unit of path time (the
+        strong kink), in a run long enough for their fit; the run then restarts with them and
+        fewer paths per replica (``info["plan_notes"]["generator"]`` says why or why not).
+        Needs ``martingale`` and ``control``. Default True.
     extrapolate : bool
         With ``richardson``: run a third level at ``2 dt`` and report the Richardson extrapolation
         from ``(dt, dt/2)``, with :math:`(|D| + D_{se})/7` in quadrature in the error, D the
@@ -259,6 +279,7 @@ class MonteCarlo:
     step: str = "auto"
     martingale: bool = True
     extrapolate: bool = False
+    generator: bool = True
 
     def __post_init__(self) -> None:
         if self.seed is not None:
@@ -284,7 +305,7 @@ class MonteCarlo:
         if self.step not in STEP_NAMES:
             raise ParameterError(f"step must be one of {STEP_NAMES}, got {self.step!r} "
                                  f"(type {type(self.step).__name__})")
-        for flag in ("progress", "richardson", "control", "martingale", "extrapolate"):
+        for flag in ("progress", "richardson", "control", "martingale", "extrapolate", "generator"):
             value = getattr(self, flag)
             optional = flag == "progress"
             if not isinstance(value, bool) and not (optional and value is None):
@@ -441,8 +462,9 @@ class MonteCarlo:
                         t_run=plan.t_run, seed=self.seed, richardson=self.richardson,
                         threshold=self.threshold(h), threads=self.threads, first_replica=first,
                         twin=plan.twin, start=plan.start, step=self.step,
-                        controls=(MARTINGALE.name,) if self.martingale else (),
-                        third_level=self.extrapolate)
+                        controls=((MARTINGALE.name,) + ((GENERATOR.name,) if plan.generator else ())
+                                  if self.martingale else ()),
+                        third_level=self.extrapolate, generator_every=0.0)
 
     def _restart_reason(self, h: Harvester, plan: RunPlan, est: Estimate) -> tuple[str, RunPlan] | None:
         """After a batch: a finer step or a longer burn-in, if the data ask for one.
@@ -471,6 +493,35 @@ class MonteCarlo:
             return "t_burn", dataclasses.replace(plan, t_burn=t_burn, t_run=t_run, paths=paths)
         return None
 
+    def _generator_plan(self, h: Harvester, plan: RunPlan, ens: Ensemble, est: Estimate) -> tuple[RunPlan, int]:
+        """After the first batch: the plan with the generator controls and the paths per replica
+        for their fit, and the replicas of its first batch (half those it is expected to need),
+        where they pay (see ``generator`` and ``_GEN_RELVAR``); else the plan with a note why
+        not, and 0."""
+        def note(why: str, first: int = 0, **changes: Any) -> tuple[RunPlan, int]:
+            return dataclasses.replace(plan, notes={**plan.notes, "generator": why}, **changes), first
+
+        if not (self.generator and self.martingale and self.control) or plan.generator:
+            return plan, 0
+        if h.N > 1:
+            return note("not used: a ring (measured: no gain over the twin and martingale controls)")
+        eta = est.mean["eta"]
+        if not (est.replicas >= 2 and math.isfinite(eta) and eta != 0.0 and est.se["eta"] > 0):
+            return note("not used: no estimate of eta's variance from the first batch")
+        relvar = (est.se["eta"] / eta) ** 2 * est.reduction.get("eta", 1.0) * est.replicas * ens.paths * ens.t_run
+        if relvar < _GEN_RELVAR:
+            return note(f"not used: plain relative variance of eta {relvar:.3g} per unit path time, below "
+                        f"{_GEN_RELVAR:g}")
+        controls = len(GENERATOR.sums(h)) + len(MARTINGALE.sums(h)) + (len(TWIN_MOMENTS) if plan.twin else 0)
+        need = relvar / (_GEN_VR * (0.9 * self.tol) ** 2 * plan.t_run)  # paths to reach tol with them
+        paths = self.paths or max(_GEN_MIN_PATHS, min(plan.paths, int(need / (_GEN_REPLICAS * controls))))
+        if need / paths < _GEN_FIT * controls:
+            return note(f"not used: the run (about {need:.3g} paths with them) is too short for the fit of "
+                        f"{controls} controls ({_GEN_FIT * controls:.0f} replicas of {paths} paths)")
+        first = min(self.max_replicas, max(self.min_replicas, round(0.5 * need / paths)))
+        return note(f"used: plain relative variance of eta {relvar:.3g} per unit path time; about {need:.3g} "
+                    f"paths, {paths} per replica", first, generator=True, paths=paths)
+
     def run(self, h: Harvester, plan: RunPlan | None = None) -> tuple[Ensemble, Estimate, bool, RunPlan]:
         """Adaptive replica loop; returns the ensemble, its estimate, whether tol was met, the plan."""
         from tqdm import tqdm
@@ -489,6 +540,12 @@ class MonteCarlo:
             ens = self._run(h, plan, self.min_replicas, 0)
             bar.update(ens.replicas)
             est = _estimate(ens, h)
+            plan, first = self._generator_plan(h, plan, ens, est)
+            if first:
+                restarts.append("generator")
+                ens = self._run(h, plan, first, 0)
+                bar.update(ens.replicas)
+                est = _estimate(ens, h)
             met = False
             while True:
                 # the bias or a transient may only show once enough replicas resolve it:

@@ -37,10 +37,15 @@ class Control:
         Whether the path loop accumulates sums for it when it is named in ``simulate(...,
         controls=...)`` (:meth:`sums`); False for a control that reads what the ensemble holds
         anyway (the twin's moments, the martingale's end-of-window terms).
+    crossfit : bool
+        Whether a set that contains this control is fitted by cross-fitting
+        (:func:`montecarlo.controls.regression.crossfit_estimate`) instead of the in-sample
+        regression: True for a control of many columns.
     """
 
     name: str = ""
     accumulated: bool = False
+    crossfit: bool = False
 
     def sums(self, h: Harvester) -> tuple[str, ...]:
         """Names of the per-replica sums the path loop accumulates for this control on ``h``, in

@@ -13,24 +13,25 @@ in :mod:`montecarlo._loop`.
 
 from __future__ import annotations
 
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, NamedTuple
 
 import numpy as np
 
 from fpe_harvester.errors import ParameterError
 
 from .base import Control
+from .generator import GENERATOR
 from .martingale import BOUNDARY, MARTINGALE
-from .regression import enough_dof
+from .regression import FOLDS, crossfit_dof, enough_dof
 from .twin import TWIN
 
 if TYPE_CHECKING:
     from ..ensemble import Ensemble
 
-__all__ = ["CONTROLS", "CONTROL_SETS", "control_columns", "choose_controls"]
+__all__ = ["CONTROLS", "CONTROL_SETS", "SetColumns", "control_columns", "choose_controls"]
 
 #: Controls by name, in the order of their columns in a set.
-CONTROLS: dict[str, Control] = {c.name: c for c in (TWIN, MARTINGALE, BOUNDARY)}
+CONTROLS: dict[str, Control] = {c.name: c for c in (TWIN, MARTINGALE, BOUNDARY, GENERATOR)}
 
 #: Candidate sets of control variates: name -> the controls it joins. The order breaks ties in
 #: :func:`choose_controls`.
@@ -40,30 +41,56 @@ CONTROL_SETS: dict[str, tuple[str, ...]] = {
     "martingale+twin": ("martingale", "twin"),
     "martingale+boundary": ("martingale", "boundary"),
     "martingale+boundary+twin": ("martingale", "boundary", "twin"),
+    "martingale+generator": ("martingale", "generator"),
+    "martingale+twin+generator": ("martingale", "twin", "generator"),
+    "martingale+boundary+generator": ("martingale", "boundary", "generator"),
+    "martingale+boundary+twin+generator": ("martingale", "boundary", "twin", "generator"),
 }
 
 
-def control_columns(e: Ensemble, valid: np.ndarray, which: str, n: int) -> tuple | None:
-    """Controls of the candidate set ``which``: (C, C over the first half, mu), or None where the
-    set is not available (a control missing, an escaped path, too few replicas ``n`` for
-    :func:`montecarlo.controls.regression.enough_dof`)."""
+class SetColumns(NamedTuple):
+    """The columns of a candidate set for the regression.
+
+    Attributes
+    ----------
+    C, first : ndarray (R, p)
+        The controls per replica over the measured window and over its first half.
+    mu : ndarray (p,)
+        Their exact means.
+    crossfit : bool
+        Fit by cross-fitting (some control of the set asks for it, :attr:`Control.crossfit`).
+    """
+
+    C: np.ndarray
+    first: np.ndarray
+    mu: np.ndarray
+    crossfit: bool
+
+
+def control_columns(e: Ensemble, valid: np.ndarray, which: str, n: int) -> SetColumns | None:
+    """Controls of the candidate set ``which``, or None where the set is not available (a control
+    missing, an escaped path, too few replicas ``n`` for
+    :func:`montecarlo.controls.regression.enough_dof`, or with cross-fitting for every fold's fit,
+    :func:`~montecarlo.controls.regression.crossfit_dof`)."""
     if e.escaped_fraction() > 0.0:
         return None
     cols: list[np.ndarray] = []
     first: list[np.ndarray] = []
     mu: list[float] = []
+    crossfit = False
     for name, control in CONTROLS.items():
         if name not in CONTROL_SETS[which]:
             continue
+        crossfit |= control.crossfit
         part = control.columns(e, valid)
         if part is None:
             return None
         cols += part[0]
         first += part[1]
         mu += part[2]
-    if not enough_dof(n, len(cols)):
+    if not (crossfit_dof(n, len(cols)) and n >= 2 * FOLDS if crossfit else enough_dof(n, len(cols))):
         return None
-    return np.column_stack(cols), np.column_stack(first), np.array(mu)
+    return SetColumns(np.column_stack(cols), np.column_stack(first), np.array(mu), crossfit)
 
 
 def choose_controls(sizes: dict[str, int]) -> str:

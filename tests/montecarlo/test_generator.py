@@ -1,0 +1,128 @@
+"""Generator controls: mean exactly 0 for any force, cross-fitting unbiased, exact values met, the
+solver's choice."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+from scipy.stats import binom, chi2
+
+from fpe_harvester import Harvester, solve
+from montecarlo import estimate, simulate
+from montecarlo.controls.generator import GENERATOR, basis_names
+from montecarlo.controls.regression import FOLDS, crossfit_estimate, regression_estimate
+from montecarlo.controls.sets import control_columns
+from montecarlo.harmonic import twin_expectations
+
+
+@pytest.mark.parametrize("system, step", [
+    ({"a": 2.0, "n": 1.0}, "frozen"),
+    ({"a": 0.5, "n": 4.0, "N": 3, "k": -0.2, "k3": 0.5, "k4": 0.02}, "frozen"),
+    ({"a": 0.5, "n": 3.0, "tau": 1e-4}, "joint"),
+])
+def test_generator_sums_have_mean_zero_and_leave_the_paths_unchanged(system: dict, step: str) -> None:
+    # the kink, a ring with cubic and bi-Laplacian coupling, the joint step: the force never
+    # enters the martingale form, so every sum has mean 0 at any step (chi^2 of the z-scores of
+    # all of them, whole window and first half, against its 0.1 % tail)
+    h = Harvester.build(**system)
+    dt = 0.02 if step == "joint" else 0.05
+    kw = dict(dt=dt, paths=2, replicas=160, t_burn=5.0, t_run=30.0, seed=9, step=step, richardson=True)
+    e = simulate(h, controls=("martingale", "generator"), **kw)
+    off = simulate(h, controls=("martingale",), **kw)
+    assert np.array_equal(e.sums, off.sums) and np.array_equal(e.counts, off.counts)
+    assert e.ctl_names["generator"] == GENERATOR.sums(h)
+    for half in (False, True):
+        g = e.control_sums("generator", first_half=half)
+        z = np.array([g[n].mean() / (g[n].std(ddof=1) / math.sqrt(e.replicas)) for n in e.ctl_names["generator"]])
+        assert np.all(np.isfinite(z))
+        assert float(z @ z) < chi2.ppf(0.999, z.size), dict(zip(e.ctl_names["generator"], z.round(2)))
+
+
+def test_the_kink_gets_the_hinge_terms() -> None:
+    assert len(basis_names(kink=False)) == 65 and len(basis_names(kink=True)) == 80
+    assert GENERATOR.sums(Harvester.build(a=2.0, n=1.0)) == basis_names(kink=True)
+    assert GENERATOR.sums(Harvester.build(a=2.0, n=1.25)) == basis_names(kink=False)
+
+
+def test_crossfitted_error_bars_cover_where_the_in_sample_fit_is_biased(rng) -> None:
+    # a response nonlinear in 40 controls, 96 replicas: the in-sample regression's intercept
+    # picks up the fitted noise (biased towards the sample mean); every cross-fitted value has
+    # the exact mean, and its error bar covers 68 % / 95 % within binomial limits over 400 draws
+    p, R, draws = 40, 96, 400
+    z = []
+    for _ in range(draws):
+        C = rng.standard_normal((R, p))
+        Y = 1.0 + C[:, :1] + 0.5 * (C[:, 1:2] ** 2 - 1.0) + 0.3 * rng.standard_normal((R, 1))
+        r = crossfit_estimate(Y, C, np.zeros(p))
+        z.append((r.mean[0] - 1.0) / math.sqrt(r.cov[0, 0]))
+    z = np.abs(np.array(z))
+    for k, nominal in ((1.0, 0.6827), (2.0, 0.9545)):
+        lo, hi = binom.ppf([0.001, 0.999], draws, nominal) / draws
+        assert lo <= (z < k).mean() <= hi, (k, (z < k).mean())
+
+
+def test_crossfitting_is_the_least_squares_fit_of_each_fold(rng) -> None:
+    # the folds' fits from the whole Gram matrix equal a direct fit on each fold's complement
+    R, p = 160, 7
+    C = rng.standard_normal((R, p)) + 3.0
+    Y = np.column_stack([C @ rng.standard_normal(p), C[:, 0] ** 2]) + rng.standard_normal((R, 2))
+    r = crossfit_estimate(Y, C, np.full(p, 3.0))
+    fold = np.arange(R) % FOLDS
+    Z = np.empty_like(Y)
+    for k in range(FOLDS):
+        fit = fold != k
+        B = regression_estimate(Y[fit], C[fit], np.full(p, 3.0)).coef
+        Z[~fit] = Y[~fit] - (C[~fit] - 3.0) @ B.T
+    np.testing.assert_allclose(r.mean, Z.mean(axis=0), rtol=1e-12)
+    assert r.dof == R - 1
+
+
+@pytest.mark.parametrize("N, k", [(1, 0.0), (3, -0.2)])
+def test_generator_estimate_meets_the_exact_harmonic_values(N: int, k: float) -> None:
+    # harmonic unit and ring at a coarse step: the scheme's own expectation is known exactly
+    # (discrete Lyapunov), so a bias of the cross-fitted generator set would show
+    h = Harvester.build(a=0.5, N=N, k=k)
+    dt = 0.2
+    e = simulate(h, dt=dt, paths=2, replicas=320, t_burn=30.0, t_run=100.0, seed=21, start="twin",
+                 controls=("martingale", "generator"), step="frozen")
+    est = estimate(e, h, controls="martingale+boundary+generator")
+    # the harmonic ring's Poisson solution is in the martingale basis already: the estimate's own
+    # choice keeps the in-sample set, whose variance is smaller
+    assert estimate(e, h).controls == "martingale+boundary"
+    disc = twin_expectations(h, dt)
+    assert abs(est.mean["V2"] - disc["V2"]) < 4 * est.se["V2"]
+    assert abs(est.mean["Pin"] - disc["vxi"]) < 4 * est.se["Pin"]
+    assert abs(est.mean["eta"] - disc["V2"] / disc["vxi"]) < 4 * est.se["eta"]
+
+
+def test_generator_set_needs_replicas_for_every_fold() -> None:
+    # 95 controls (martingale and generator sums of the kink): every fold's fit of 15/16 of the
+    # replicas must leave max(12, p) residual degrees of freedom, so 204 replicas at least
+    h = Harvester.build(a=2.0, n=1.0)
+    e = simulate(h, dt=0.05, paths=2, replicas=204, t_burn=2.0, t_run=5.0, seed=4,
+                 controls=("martingale", "generator"))
+    valid = np.ones(e.replicas, dtype=bool)
+    assert len(e.ctl_names["generator"]) + len(e.ctl_names["martingale"]) - 11 == 95  # bd_* are the boundary's
+    assert control_columns(e, valid, "martingale+generator", 204).C.shape == (204, 95)
+    assert control_columns(e, valid, "martingale+generator", 203) is None
+    assert control_columns(e, valid, "martingale+generator", 204).crossfit
+    assert not control_columns(e, valid, "martingale", 204).crossfit
+
+
+def test_solver_adds_the_generator_where_it_pays() -> None:
+    # the strong kink: eta is noisy per unit path time (plain relative variance ~50), so a run
+    # long enough for the fit restarts with the generator controls (whether the estimate then
+    # keeps them is its own choice: at t_run = 20 the replicas are too heavy-tailed for their fit);
+    # n = 3 (~0.5) keeps today's set
+    opts = dict(seed=3, t_run=20.0, t_burn=5.0, min_replicas=32, progress=False)
+    kink = solve(Harvester.build(a=2.0, n=1.0), "mc", tol=3e-3, paths=2, max_replicas=320, **opts)
+    assert kink.info["plan_notes"]["generator"].startswith("used")
+    assert kink.info["plan_notes"]["restarts"][0] == "generator"
+    assert kink.info["paths"] == 2 and kink.info["replicas"] == 320
+    smooth = solve(Harvester.build(a=0.5, n=3.0), "mc", tol=1e-3, max_replicas=64, **opts)
+    assert smooth.info["plan_notes"]["generator"].startswith("not used: plain relative variance")
+    assert "generator" not in smooth.info["control_set"]
+    off = solve(Harvester.build(a=2.0, n=1.0), "mc", tol=3e-3, paths=2, max_replicas=64, generator=False, **opts)
+    assert "generator" not in off.info["plan_notes"] and "generator" not in off.info["control_set"]
