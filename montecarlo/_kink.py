@@ -26,9 +26,10 @@ from .layout import (C_AVERAGED, C_CROSSINGS, C_EXHAUSTED, C_SLOW, CF_E, CF_G, C
 #: that must fit in the time left of a step before the averaged map of their crossing speed,
 #: w -> w exp(-gamma r/3) (:func:`_average_swing`), advances them from wherever the unit is on its
 #: arc; the model's swings never stop (docs/model.md §3). AVERAGE (default) averages swings
-#: whose period is below four steps; HOLD (0) never averages: it follows them until MAX_EVENTS
+#: once four full swings fit in the time left (a looser threshold, a quarter swing, put 5 % too
+#: much density on the innermost energy shell at a = 2: docs/methods.md); HOLD (0) never averages: it follows them until MAX_EVENTS
 #: crossings in one step and then holds the unit at rest, a time-step artifact kept to compare with.
-AVERAGE = 0.25
+AVERAGE = 4.0
 HOLD = 0.0
 MAX_EVENTS = 64
 N_SAMPLE = 8

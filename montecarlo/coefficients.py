@@ -42,14 +42,14 @@ ONSITE_NAMES = {
     KIND_LINEAR: "harmonic on-site force inside the exact linear flow",
     KIND_KICK: "Strang kicks kick(h/2) linear-flow(h) kick(h/2) of -U'(x)",
     KIND_KINK: "exact piecewise-linear flow of the kink force -a n sign(x) with located zero crossings, "
-    "swings shorter than four steps advanced by the averaged map of their amplitude "
+    "swings once four fit in the time left of a step advanced by the averaged map of their amplitude "
     "(w -> w exp(-gamma t/3)), and (n > 1) Strang kicks of the remainder -U'(x) + a n sign(x)",
 }
 
 #: The kink's rules for swings shorter than the step, by the value the kernels read
 #: (``pp[P_KINK_RULE]``, :data:`montecarlo._kink.AVERAGE`): the number of full swings that must fit in
 #: the time left of a step before their averaged map takes over. ``"average"`` (default) averages
-#: swings whose period is below four steps; ``"hold"`` (0) never averages: it follows them until
+#: swings once four full swings fit in the time left; ``"hold"`` (0) never averages: it follows them until
 #: 64 crossings in one step and then holds the unit at rest (a time-step artifact, kept to compare with).
 KINK_RULES = {"average": AVERAGE, "hold": HOLD}
 
