@@ -203,16 +203,17 @@ def staleness(entry: dict[str, Any] | None, method: str, case: RefCase | None = 
         wanted = {k: v for k, v in case.options.items() if k not in guards}
         if mine != wanted:
             return f"its settings {mine} are not its case's {wanted}"
-    changed = [c for c in _git_read("log", "--format=%h", f"{commit}..HEAD", "--", SEEDED).split()
-               if _seeded_changed(c, method)]
-    if changed:
-        return f"the seeded {method} results changed after it ({', '.join(changed)})"
+    # the earlier cause first: code changed before any seeded result could tell whether it moved
     first = _git_read("log", "--format=%h", "--diff-filter=A", "--", SEEDED).split()
     if first:
         older = _git_read("log", "--format=%h", f"{commit}..{first[-1]}", "--", *CODE[method]).split()
         if older:
             return (f"{len(older)} commit(s) changed its solver's code before the seeded results were recorded "
                     f"({older[0]}, ...)")
+    changed = [c for c in _git_read("log", "--format=%h", f"{commit}..HEAD", "--", SEEDED).split()
+               if _seeded_changed(c, method)]
+    if changed:
+        return f"the seeded {method} results changed after it ({', '.join(changed)})"
     return None
 
 
