@@ -206,7 +206,8 @@ def run_cli(quick: bool = False, out: Path | str = "validation_report", seed: in
     if progress:
         from tqdm import tqdm
 
-        bar = tqdm(total=len(steps), desc="validate", unit="step", file=sys.stderr)
+        bar = tqdm(total=len(steps), desc="validate", unit="step", file=sys.stderr,
+                   disable=None)  # drawn only on a terminal, as the solvers' bars
     started: list[str] = []
 
     def tick(title: str) -> None:
