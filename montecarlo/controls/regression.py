@@ -92,6 +92,17 @@ class Regression:
         return np.diag(self.plain_cov) / np.diag(self.cov)
 
 
+def _arrays(Y, C, mu) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Y (R, q), C (R, p) and mu (p,) as float arrays, or :class:`ParameterError` naming the shapes."""
+    Y = np.asarray(Y, dtype=float)
+    C = np.asarray(C, dtype=float)
+    mu = np.asarray(mu, dtype=float)
+    if Y.ndim != 2 or C.ndim != 2 or C.shape[0] != Y.shape[0] or mu.shape != (C.shape[1],):
+        raise ParameterError(f"shapes must be Y (R, q), C (R, p), mu (p,); got {Y.shape}, {C.shape}, "
+                             f"{mu.shape}")
+    return Y, C, mu
+
+
 def regression_estimate(Y: np.ndarray, C: np.ndarray, mu: np.ndarray) -> Regression:
     """Regression (control-variate) estimate of the mean of ``Y`` over replicas.
 
@@ -113,12 +124,7 @@ def regression_estimate(Y: np.ndarray, C: np.ndarray, mu: np.ndarray) -> Regress
     >>> bool(abs(r.mean[0] - 2.0) < 4 * np.sqrt(r.cov[0, 0])), bool(r.reduction[0] > 100)
     (True, True)
     """
-    Y = np.asarray(Y, dtype=float)
-    C = np.asarray(C, dtype=float)
-    mu = np.asarray(mu, dtype=float)
-    if Y.ndim != 2 or C.ndim != 2 or C.shape[0] != Y.shape[0] or mu.shape != (C.shape[1],):
-        raise ParameterError(f"shapes must be Y (R, q), C (R, p), mu (p,); got {Y.shape}, {C.shape}, "
-                             f"{mu.shape}")
+    Y, C, mu = _arrays(Y, C, mu)
     R, p = C.shape
     dof = R - p - 1
     if dof < 1:
@@ -179,12 +185,7 @@ def crossfit_estimate(Y: np.ndarray, C: np.ndarray, mu: np.ndarray, folds: int =
     >>> bool(abs(r.mean[0] - 2.0) < 4 * np.sqrt(r.cov[0, 0])), bool(r.reduction[0] > 100)
     (True, True)
     """
-    Y = np.asarray(Y, dtype=float)
-    C = np.asarray(C, dtype=float)
-    mu = np.asarray(mu, dtype=float)
-    if Y.ndim != 2 or C.ndim != 2 or C.shape[0] != Y.shape[0] or mu.shape != (C.shape[1],):
-        raise ParameterError(f"shapes must be Y (R, q), C (R, p), mu (p,); got {Y.shape}, {C.shape}, "
-                             f"{mu.shape}")
+    Y, C, mu = _arrays(Y, C, mu)
     R = Y.shape[0]
     if R < 2 * folds:
         raise ParameterError(f"cross-fitting needs at least 2 replicas per fold, got R = {R} for {folds} folds")
