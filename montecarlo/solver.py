@@ -10,14 +10,16 @@ that the budget cannot cover even at :data:`FASTEST_UNIT_STEPS` (a burn-in of a 
 system can take minutes) is not started: the result is ``NOT_CONVERGED`` without numbers, and
 the message gives the budget it would need.
 
-Time step: with ``extrapolate`` (opt-in) three coupled levels ``dt/2, dt, 2 dt`` run on the same
-noise and the reported numbers are the Richardson extrapolation from ``(dt, dt/2)``; its error
-adds the bound of :data:`montecarlo.estimate.RESIDUAL_RULE` on the remaining bias, and ``dt``
-(automatic: twice the old start) is halved only when that bound, resolved, takes more than a
-third of ``tol``. By default (``extrapolate=False``) the fine level is reported with its
+Time step, two policies. With extrapolation three coupled levels ``dt/2, dt, 2 dt`` run on the
+same noise and the reported numbers are the Richardson extrapolation from ``(dt, dt/2)``; its
+error adds the bound of :data:`montecarlo.estimate.RESIDUAL_RULE` on the remaining bias, and
+``dt`` (automatic: twice the halving policy's start) is halved only when that bound, resolved,
+takes more than a third of ``tol``. With the halving policy the fine level is reported with its
 Richardson bias estimate in the error, and an automatic ``dt`` is halved whenever that bias takes
-more than a third of ``tol``. Extrapolation is faster at tight tolerances but not the default:
-outside its asymptotic range its error bars do not hold (docs/methods.md, "Error estimate").
+more than a third of ``tol``. ``extrapolate=None`` (default) picks the extrapolation at tight
+tolerances (``tol <= 1e-3``) where the stepper's bias is known to be asymptotic (the frozen step
+on a smooth force), the halving policy elsewhere: outside its asymptotic range the
+extrapolation's error bars do not hold (docs/methods.md, "Error estimate").
 After each batch the burn-in is doubled when the first half of the measured window differs
 significantly from the whole (a transient left over); a halving or a doubling restarts the
 ensemble.
@@ -49,6 +51,7 @@ from .controls.twin import TWIN_MOMENTS
 from .ensemble import Ensemble
 from .estimate import Estimate, estimate
 from .harmonic import linearized_stiffness, natural_amplitude
+from .layout import KIND_KINK
 from .plan import FALLBACK_NOTE, RunPlan, burn_in, relaxation_time
 from .report import DRIFT_SHARE, DRIFT_SIGMAS, result
 from .simulate import simulate
@@ -71,6 +74,14 @@ _START_ABOVE_MIN = 10.0
 #: reported extrapolation's remaining error is of higher order (docs/methods.md, "Why the
 #: settings are what they are").
 _EXTRAPOLATE_COARSER = 2.0
+#: ``extrapolate=None`` picks the extrapolation at tol <= this where the stepper allows it (the
+#: frozen step on a smooth force, :meth:`~montecarlo.steps.base.Stepper.extrapolates`): there the
+#: halving rule restarts the ensemble at least once (each halving ~2x the cost) and the
+#: extrapolation reached tol 1e-4 1.8-3.7x faster (the n = 3 unit and ring, n = 1.5), with error
+#: bars that held over 20 seeds at tol 1e-3. Not at looser tol, where the stiff stress case
+#: (m = 1e-3, tol 1e-2) showed its bound failing at the coarse starting step, nor with the joint
+#: step (tau = 1e-4: Pin 6.9 errors off at tol 1e-3; docs/methods.md, "Error estimate").
+_EXTRAPOLATE_TOL = 1e-3
 #: Restarts allowed for a longer burn-in (the drift that triggers one: :data:`montecarlo.report.DRIFT_SIGMAS`).
 _BURN_RESTARTS = 3
 #: Tolerance from which the automatic paths per replica drop from 64 to 16.
@@ -102,6 +113,18 @@ _T_RUN_MART_TOL = 1e-3
 #: reduction of at least ``_GEN_VR`` (the least measured where the rule adds them); the paths per
 #: replica aim at ``_GEN_REPLICAS`` replicas per control.
 _GEN_RELVAR, _GEN_VR, _GEN_FIT, _GEN_REPLICAS, _GEN_MIN_PATHS = 2.4, 40.0, 4.0, 8.0, 2
+#: Time between the generator's points (:func:`montecarlo.simulate`'s ``generator_every``): at
+#: n = 1, a = 2 (600 replicas of 6 paths, fine dt 0.005) every 2 and every 4 fine steps removed as
+#: much variance as every step (variance reduction of eta 30.7 and 29.3 against 29.8) at 0.92x and
+#: 0.88x its wall time.
+_GEN_EVERY = 0.02
+#: The strong kink (the kink treatment with a plain relative variance of eta of at least
+#: ``_STRONG_KINK_RELVAR`` per unit path time: n = 1, a = 2 has 76, a = 1 has 3.3) restarts with the
+#: generator controls at half the starting step when tol < ``_STRONG_KINK_FINER_TOL``: its bias at
+#: the starting step is 0.06 % of eta (n = 1, a = 2, coarse dt 0.02: 7.5e-5 +- 2.5e-5; a = 1:
+#: 0.005 %), more than a third of such a tol, so the halving rule would restart there anyway,
+#: after a batch of hundreds of replicas (docs/methods.md, "Generator controls").
+_STRONG_KINK_RELVAR, _STRONG_KINK_FINER_TOL = 20.0, 1.8e-3
 
 #: A confined system's escape threshold is at least this many natural amplitudes
 #: (:func:`~montecarlo.harmonic.natural_amplitude`), and at least 100.
@@ -232,14 +255,18 @@ class MonteCarlo:
         strong kink), in a run long enough for their fit; the run then restarts with them and
         fewer paths per replica (``info["plan_notes"]["generator"]`` says why or why not).
         Needs ``martingale`` and ``control``. Default True.
-    extrapolate : bool
-        With ``richardson``: run a third level at ``2 dt`` and report the Richardson extrapolation
-        from ``(dt, dt/2)``, with :math:`(|D| + D_{se})/7` in quadrature in the error, D the
-        difference of the extrapolations from ``(2 dt, dt)`` and ``(dt, dt/2)``
+    extrapolate : bool or None
+        True, with ``richardson``: run a third level at ``2 dt`` and report the Richardson
+        extrapolation from ``(dt, dt/2)``, with :math:`(|D| + D_{se})/7` in quadrature in the
+        error, D the difference of the extrapolations from ``(2 dt, dt)`` and ``(dt, dt/2)``
         (:data:`montecarlo.estimate.RESIDUAL_RULE`); ``info["extrapolated"]``,
         ``info["residual_eta"]``. False: the halving policy (fine level reported, its bias
-        estimate in the error). Default False: the extrapolation's bound failed in two stress
-        cases outside its asymptotic range (see the module docstring).
+        estimate in the error). None (default): the solver picks (:meth:`extrapolates`) the
+        extrapolation at ``tol <= 1e-3`` with an automatic ``dt`` where the stepper allows it (the
+        frozen step on a smooth on-site force: n = 3 ring to 1e-4 3.7x faster), else the halving
+        policy: outside its asymptotic range (the kink; the joint step at tau = 1e-4; a stiff
+        m = 1e-3 at the coarse steps of a loose tol) the extrapolation's bound failed (see the
+        module docstring).
 
     Examples
     --------
@@ -278,7 +305,7 @@ class MonteCarlo:
     control: bool = True
     step: str = "auto"
     martingale: bool = True
-    extrapolate: bool = False
+    extrapolate: bool | None = None
     generator: bool = True
 
     def __post_init__(self) -> None:
@@ -307,7 +334,7 @@ class MonteCarlo:
                                  f"(type {type(self.step).__name__})")
         for flag in ("progress", "richardson", "control", "martingale", "extrapolate", "generator"):
             value = getattr(self, flag)
-            optional = flag == "progress"
+            optional = flag in ("progress", "extrapolate")
             if not isinstance(value, bool) and not (optional and value is None):
                 choices = "True, False or None" if optional else "True or False"
                 raise ParameterError(f"{flag} must be {choices}, got {value!r} "
@@ -323,7 +350,7 @@ class MonteCarlo:
         averaged step's tau <= 1e-4 and the frozen step's dt <= tau), or the automatic ``dt`` would
         have to start within ``_START_ABOVE_MIN`` of its finest step."""
         try:
-            stepper, dt = resolve_step(h, self.step, self.dt, scale=self._dt_scale())
+            stepper, dt = resolve_step(h, self.step, self.dt, scale=self._dt_scale(h))
         except ParameterError as err:
             return str(err)
         if self.dt is None and dt < _START_ABOVE_MIN * _DT_MIN:
@@ -361,7 +388,7 @@ class MonteCarlo:
             raise ParameterError(f"a = {h.a!r}: Monte Carlo needs the unit stiffness 2a in the double "
                                  f"range, a <= {0.5 * sys.float_info.max:.6g}")
         seed = 0 if self.seed is None else self.seed
-        stepper, dt = resolve_step(h, self.step, self.dt, scale=self._dt_scale())
+        stepper, dt = resolve_step(h, self.step, self.dt, scale=self._dt_scale(h))
         notes: dict[str, Any] = {}
         harmonic = classify(h)[0] if h.is_linear else None
         twin = None
@@ -441,9 +468,26 @@ class MonteCarlo:
             f"{plan.relaxation_time:.3g}), which needs at least {need:.3g} s: raise max_time above "
             f"that, or give t_burn. No statistics."))
 
-    def _dt_scale(self) -> float:
+    def extrapolates(self, h: Harvester) -> bool:
+        """Whether the run of ``h`` reports the Richardson extrapolation (three levels): ``extrapolate``
+        if given; None picks it at ``tol`` <= :data:`_EXTRAPOLATE_TOL` with an automatic ``dt`` where
+        the stepper it starts with allows it (:meth:`~montecarlo.steps.base.Stepper.extrapolates`:
+        the frozen step on a smooth on-site force)."""
+        if not self.richardson:
+            return False
+        if self.extrapolate is not None:
+            return self.extrapolate
+        if self.dt is not None or self.tol > _EXTRAPOLATE_TOL:
+            return False
+        try:
+            stepper, _ = resolve_step(h, self.step, None, scale=_EXTRAPOLATE_COARSER)
+        except ParameterError:
+            return False
+        return stepper.extrapolates(h, onsite_kind(h))
+
+    def _dt_scale(self, h: Harvester) -> float:
         """Factor on the steppers' automatic starting steps: coarser with extrapolation."""
-        return _EXTRAPOLATE_COARSER if self.extrapolate and self.richardson else 1.0
+        return _EXTRAPOLATE_COARSER if self.extrapolates(h) else 1.0
 
     def _default_run(self) -> float:
         return _T_RUN_MART if self.martingale and self.tol <= _T_RUN_MART_TOL else _T_RUN
@@ -464,7 +508,7 @@ class MonteCarlo:
                         twin=plan.twin, start=plan.start, step=self.step,
                         controls=((MARTINGALE.name,) + ((GENERATOR.name,) if plan.generator else ())
                                   if self.martingale else ()),
-                        third_level=self.extrapolate, generator_every=0.0)
+                        third_level=self.extrapolates(h), generator_every=_GEN_EVERY)
 
     def _restart_reason(self, h: Harvester, plan: RunPlan, est: Estimate) -> tuple[str, RunPlan] | None:
         """After a batch: a finer step or a longer burn-in, if the data ask for one.
@@ -519,8 +563,14 @@ class MonteCarlo:
             return note(f"not used: the run (about {need:.3g} paths with them) is too short for the fit of "
                         f"{controls} controls ({_GEN_FIT * controls:.0f} replicas of {paths} paths)")
         first = min(self.max_replicas, max(self.min_replicas, round(0.5 * need / paths)))
-        return note(f"used: plain relative variance of eta {relvar:.3g} per unit path time; about {need:.3g} "
-                    f"paths, {paths} per replica", first, generator=True, paths=paths)
+        why = f"used: plain relative variance of eta {relvar:.3g} per unit path time; about {need:.3g} paths, " \
+              f"{paths} per replica"
+        dt = plan.dt
+        if (self.dt is None and self.richardson and onsite_kind(h) == KIND_KINK and relvar >= _STRONG_KINK_RELVAR
+                and self.tol < _STRONG_KINK_FINER_TOL and dt / 2 >= _DT_MIN):
+            dt /= 2
+            why += f"; dt halved to {dt:g} with them (the strong kink's bias at the starting step exceeds a third of tol)"
+        return note(why, first, generator=True, paths=paths, dt=dt)
 
     def run(self, h: Harvester, plan: RunPlan | None = None) -> tuple[Ensemble, Estimate, bool, RunPlan]:
         """Adaptive replica loop; returns the ensemble, its estimate, whether tol was met, the plan."""

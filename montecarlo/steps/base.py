@@ -116,6 +116,12 @@ class Stepper:
         (:attr:`preference`)."""
         return True
 
+    def extrapolates(self, h: Harvester, kind: int) -> bool:
+        """Whether the solver's ``extrapolate=None`` may report the Richardson extrapolation with this
+        stepper for ``h`` (on-site treatment ``kind``): where its time-step bias was measured to be
+        in the asymptotic range (order 2, then 3) from twice its starting step. Default False."""
+        return False
+
     def start_dt(self, h: Harvester, kind: int, scale: float) -> float:
         """The coarse step at which an automatic ``dt`` starts: ``scale`` times :attr:`dt_start`
         (the solver's ``scale`` is 2 with extrapolation)."""

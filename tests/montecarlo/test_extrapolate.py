@@ -74,14 +74,32 @@ def test_extrapolated_solve_is_unbiased_where_the_fine_level_is_not() -> None:
     assert abs(r.eta - exact) < 3 * r.eta_err, (r.eta, exact, r.eta_err)
 
 
-def test_halving_policy_is_the_default_and_reports_the_fine_level() -> None:
+def test_halving_policy_is_the_default_at_loose_tol_and_reports_the_fine_level() -> None:
     h = Harvester.build(a=0.5, N=3, k=-0.2)
     new = MonteCarlo(seed=1, tol=1e-2, progress=False, extrapolate=True).plan(h)
     old = MonteCarlo(seed=1, tol=1e-2, progress=False).plan(h)
-    assert new.dt == 2 * old.dt and MonteCarlo().extrapolate is False
+    assert new.dt == 2 * old.dt and MonteCarlo().extrapolate is None
+    assert not MonteCarlo(tol=1e-2).extrapolates(h)
     r = solve(h, MonteCarlo(seed=1, tol=1e-2, progress=False, t_run=20.0))
     assert not r.info["extrapolated"] and r.info["dt_coarsest"] is None
     assert r.eta_err == pytest.approx(math.hypot(r.info["eta_standard_error"], r.info["bias_eta"]))
+
+
+def test_the_solver_picks_extrapolation_only_where_it_was_measured_to_hold() -> None:
+    # tight tol, automatic dt, frozen step on a smooth force: extrapolation (its steps twice as
+    # coarse); the kink, the joint step (tau < 10 dt), an explicit dt, a loose tol or an explicit
+    # choice: as asked or the halving policy
+    ring, unit = Harvester.build(a=0.5, n=3, N=3, k=-0.5), Harvester.build(a=0.5, n=3)
+    tight = MonteCarlo(tol=1e-3, progress=False)
+    assert tight.extrapolates(ring) and tight.extrapolates(unit)
+    assert tight.plan(unit).dt == 2 * MonteCarlo(tol=1e-3, extrapolate=False).plan(unit).dt
+    assert not tight.extrapolates(Harvester.build(a=2.0, n=1))
+    assert not tight.extrapolates(Harvester.build(a=0.5, n=3, tau=1e-4))
+    assert not MonteCarlo(tol=1e-3, dt=0.01).extrapolates(unit)
+    assert not MonteCarlo(tol=2e-3).extrapolates(unit)
+    assert not MonteCarlo(tol=1e-3, extrapolate=False).extrapolates(unit)
+    assert MonteCarlo(tol=1e-2, extrapolate=True).extrapolates(Harvester.build(a=2.0, n=1))
+    assert not MonteCarlo(tol=1e-3, richardson=False).extrapolates(unit)
 
 
 def test_extrapolate_errors() -> None:
@@ -91,7 +109,7 @@ def test_extrapolate_errors() -> None:
         estimate(e, h, extrapolate=True)
     with pytest.raises(ParameterError, match="third_level must be True or False, got 1"):
         simulate(h, dt=0.1, paths=4, replicas=1, t_run=1.0, richardson=True, third_level=1)
-    with pytest.raises(ParameterError, match="extrapolate must be True or False"):
+    with pytest.raises(ParameterError, match="extrapolate must be True, False or None"):
         MonteCarlo(extrapolate="yes")
     # without Richardson there is no third level
     e1 = simulate(h, dt=0.1, paths=4, replicas=2, t_burn=1.0, t_run=5.0, seed=1, third_level=True)

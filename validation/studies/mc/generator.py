@@ -15,11 +15,14 @@ Three parts:
   a = 0.5 and 1, the reference table's values to 1e-5 or better), the reference table's long run at
   the strong kink (n = 1, a = 2), the exact discrete values of the harmonic unit and ring;
 * :func:`generator_timings` -- the solver end to end with and without the generator controls
-  (``generator=False``, today's behaviour), CPU and wall time, for the cases of the issue.
+  (``generator=False``), CPU and wall time, for the cases of the issue;
+* :func:`solver_timings` -- the solver end to end as it runs by default on the same cases, and
+  where it picks the Richardson extrapolation also with the halving policy.
 
-``python -m validation.studies.mc.generator [--quick] [--out DIR] [--part rows|coverage|timings]``
-writes ``bench_montecarlo_generator.json`` and ``.png`` (the recorded full runs:
-``validation/data/bench_montecarlo_generator_*.json``).
+``python -m validation.studies.mc.generator [--quick] [--out DIR] [--part rows|coverage|timings|solver]
+[--case LABEL ...]`` writes ``bench_montecarlo_generator.json`` and ``.png`` (the recorded full runs:
+``validation/data/bench_montecarlo_generator_*.json``); ``--case`` restricts the coverage part to
+those labels of :data:`COVERAGE`.
 """
 
 from __future__ import annotations
@@ -179,12 +182,16 @@ def _coverage_case(system: dict[str, Any], ref_label: str, replicas: int, paths:
             "median_vr_eta": float(np.median([v for v in vr if v]))}
 
 
-def generator_coverage(quick: bool) -> dict[str, Any]:
+def generator_coverage(quick: bool, only: tuple[str, ...] = ()) -> dict[str, Any]:
     """Coverage of the controlled error bars over seeds (24; quick: 6 of the cheap cases): the
     fine level minus its Richardson bias estimate against the reference, in units of the standard
-    error, the bias estimate's error and the reference's in quadrature."""
+    error, the bias estimate's error and the reference's in quadrature. ``only``: these labels of
+    :data:`COVERAGE` (default all)."""
     seeds = 6 if quick else 24
-    cases = {k: v for k, v in COVERAGE.items() if not quick or "a2" not in k}
+    unknown = set(only) - set(COVERAGE)
+    if unknown:
+        raise ParameterError(f"case must be among {sorted(COVERAGE)}, got {sorted(unknown)}")
+    cases = {k: v for k, v in COVERAGE.items() if (not quick or "a2" not in k) and (not only or k in only)}
     out: dict[str, Any] = {"nominal": {"within_1": 0.6827, "within_2": 0.9545}}
     for label, (system, ref, replicas, paths, t_run) in cases.items():
         t0 = time.perf_counter()
@@ -213,13 +220,13 @@ def flow_reference(n: float, a: float) -> dict[str, float]:
 
 
 def timing_run(n: float, a: float, N: int, k: float, tol: float, seed: int, ref_label: str | None,
-               generator: bool) -> dict[str, Any]:
-    """One end-to-end solve of a :data:`TIMING_CASES` case with or without the generator controls:
-    CPU seconds (all threads), wall seconds, the result and its distance to the reference in
-    combined error bars."""
+               generator: bool, **options: Any) -> dict[str, Any]:
+    """One end-to-end solve of a :data:`TIMING_CASES` case with or without the generator controls
+    (and any other solver ``options``): CPU seconds (all threads), wall seconds, the result and its
+    distance to the reference in combined error bars."""
     h = Harvester.build(n=n, a=a, N=N, k=k)
     t0, w0 = time.process_time(), time.perf_counter()
-    r = solve(h, "mc", seed=seed, tol=tol, generator=generator, max_time=7200.0, progress=False)
+    r = solve(h, "mc", seed=seed, tol=tol, generator=generator, max_time=7200.0, progress=False, **options)
     i = r.info
     row = {"cpu_s": time.process_time() - t0, "wall_s": time.perf_counter() - w0, "eta": r.eta,
            "eta_err": r.eta_err, "status": r.status.value, "replicas": i["replicas"], "paths": i["paths"],
@@ -246,6 +253,24 @@ def generator_timings(quick: bool) -> dict[str, Any]:
     return {"threads": default_threads(), **out}
 
 
+def solver_timings(quick: bool) -> dict[str, Any]:
+    """The solver as it runs by default on :data:`TIMING_CASES` (quick: at 10x the tolerance), and
+    where it picks the Richardson extrapolation (``extrapolate=None``) also with the halving policy
+    (``extrapolate=False``) right after it, for the ratio measured in one run."""
+    out = {}
+    for n, a, N, k, tol, seed, ref_label in TIMING_CASES:
+        tol = tol * 10 if quick else tol
+        row: dict[str, Any] = {"tol": tol, "seed": seed, "reference": ref_label}
+        row["default"] = timing_run(n, a, N, k, tol, seed, ref_label, True)
+        h = Harvester.build(n=n, a=a, N=N, k=k)
+        row["default"]["extrapolated"] = MonteCarlo(tol=tol).extrapolates(h)
+        if row["default"]["extrapolated"]:
+            row["halving"] = timing_run(n, a, N, k, tol, seed, ref_label, True, extrapolate=False)
+            row["wall_ratio_halving_over_default"] = row["halving"]["wall_s"] / row["default"]["wall_s"]
+        out[_case(n, a, N, k)] = row
+    return {"threads": default_threads(), **out}
+
+
 def draw(res: dict[str, Any], ax: Any) -> None:
     """Variance reduction of eta per row: today's set and the generator's (the estimate's choice)."""
     rows = {k: v for k, v in res.get("rows", {}).items() if isinstance(v, dict) and "today" in v}
@@ -259,28 +284,32 @@ def draw(res: dict[str, Any], ax: Any) -> None:
     ax.legend(fontsize=7)
 
 
-_PARTS = {"rows": generator_rows, "coverage": generator_coverage, "timings": generator_timings}
+_PARTS = {"rows": generator_rows, "coverage": generator_coverage, "timings": generator_timings,
+          "solver": solver_timings}
 
 
-def run(quick: bool = False, out: Path | str | None = None, parts: tuple[str, ...] = tuple(_PARTS)) -> dict[str, Any]:
-    """The ``parts`` of this study (default all); writes ``{STEM}.json`` and ``.png`` into ``out``."""
+def run(quick: bool = False, out: Path | str | None = None, parts: tuple[str, ...] = tuple(_PARTS),
+        cases: tuple[str, ...] = ()) -> dict[str, Any]:
+    """The ``parts`` of this study (default all; ``cases``: the coverage part's labels, default
+    all); writes ``{STEM}.json`` and ``.png`` into ``out``."""
     t0 = time.perf_counter()
     res: dict[str, Any] = {"quick": quick, "threads": default_threads()}
     for part in parts:
-        res[part] = _PARTS[part](quick)
+        res[part] = generator_coverage(quick, cases) if part == "coverage" else _PARTS[part](quick)
     res["wall_s"] = time.perf_counter() - t0
     save_benchmark(res, out, STEM, axes_plot(draw))
     return res
 
 
 def main(argv: list[str] | None = None) -> dict[str, Any]:
-    """``python -m validation.studies.mc.generator [--quick] [--out DIR] [--part NAME ...]``."""
+    """``python -m validation.studies.mc.generator [--quick] [--out DIR] [--part NAME ...] [--case LABEL ...]``."""
     p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     p.add_argument("--quick", action="store_true")
     p.add_argument("--out", default=None)
     p.add_argument("--part", nargs="*", choices=tuple(_PARTS), default=list(_PARTS))
+    p.add_argument("--case", nargs="*", choices=tuple(COVERAGE), default=[])
     args = p.parse_args(argv)
-    res = run(args.quick, args.out, tuple(args.part))
+    res = run(args.quick, args.out, tuple(args.part), tuple(args.case))
     print(json.dumps(res, indent=1, default=str))
     return res
 
