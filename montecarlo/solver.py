@@ -76,11 +76,9 @@ _START_ABOVE_MIN = 10.0
 _EXTRAPOLATE_COARSER = 2.0
 #: ``extrapolate=None`` picks the extrapolation at tol <= this where the stepper allows it (the
 #: frozen step on a smooth force, :meth:`~montecarlo.steps.base.Stepper.extrapolates`): there the
-#: halving rule restarts the ensemble at least once (each halving ~2x the cost) and the
-#: extrapolation reached tol 1e-4 1.8-3.7x faster (the n = 3 unit and ring, n = 1.5), with error
-#: bars that held over 20 seeds at tol 1e-3. Not at looser tol, where the stiff stress case
-#: (m = 1e-3, tol 1e-2) showed its bound failing at the coarse starting step, nor with the joint
-#: step (tau = 1e-4: Pin 6.9 errors off at tol 1e-3; docs/methods.md, "Error estimate").
+#: halving rule restarts the ensemble at least once, each time at ~2x the cost, while the
+#: extrapolation's error bars held over seeds; at a looser tol its coarse starting step can lie
+#: outside the asymptotic range, where its bound fails (docs/methods.md, "Error estimate").
 _EXTRAPOLATE_TOL = 1e-3
 #: Restarts allowed for a longer burn-in (the drift that triggers one: :data:`montecarlo.report.DRIFT_SIGMAS`).
 _BURN_RESTARTS = 3
@@ -113,17 +111,15 @@ _T_RUN_MART_TOL = 1e-3
 #: reduction of at least ``_GEN_VR`` (the least measured where the rule adds them); the paths per
 #: replica aim at ``_GEN_REPLICAS`` replicas per control.
 _GEN_RELVAR, _GEN_VR, _GEN_FIT, _GEN_REPLICAS, _GEN_MIN_PATHS = 2.4, 40.0, 4.0, 8.0, 2
-#: Time between the generator's points (:func:`montecarlo.simulate`'s ``generator_every``): at
-#: n = 1, a = 2 (600 replicas of 6 paths, fine dt 0.005) every 2 and every 4 fine steps removed as
-#: much variance as every step (variance reduction of eta 30.7 and 29.3 against 29.8) at 0.92x and
-#: 0.88x its wall time.
+#: Time between the generator's points (:func:`montecarlo.simulate`'s ``generator_every``): as
+#: much variance removed as at every step, at less cost (docs/methods.md, "Generator controls").
 _GEN_EVERY = 0.02
 #: The strong kink (the kink treatment with a plain relative variance of eta of at least
-#: ``_STRONG_KINK_RELVAR`` per unit path time: n = 1, a = 2 has 76, a = 1 has 3.3) restarts with the
-#: generator controls at half the starting step when tol < ``_STRONG_KINK_FINER_TOL``: its bias at
-#: the starting step is 0.06 % of eta (n = 1, a = 2, coarse dt 0.02: 7.5e-5 +- 2.5e-5; a = 1:
-#: 0.005 %), more than a third of such a tol, so the halving rule would restart there anyway,
-#: after a batch of hundreds of replicas (docs/methods.md, "Generator controls").
+#: ``_STRONG_KINK_RELVAR`` per unit path time) restarts with the generator controls at half the
+#: starting step when tol < ``_STRONG_KINK_FINER_TOL``: its time-step bias at the starting step,
+#: about 0.06 % of eta at n = 1, a = 2, exceeds a third of such a tol, so the halving rule would
+#: restart there anyway, after a batch of hundreds of replicas (docs/methods.md, "Generator
+#: controls").
 _STRONG_KINK_RELVAR, _STRONG_KINK_FINER_TOL = 20.0, 1.8e-3
 
 #: A confined system's escape threshold is at least this many natural amplitudes
@@ -263,10 +259,9 @@ class MonteCarlo:
         ``info["residual_eta"]``. False: the halving policy (fine level reported, its bias
         estimate in the error). None (default): the solver picks (:meth:`extrapolates`) the
         extrapolation at ``tol <= 1e-3`` with an automatic ``dt`` where the stepper allows it (the
-        frozen step on a smooth on-site force: n = 3 ring to 1e-4 3.7x faster), else the halving
-        policy: outside its asymptotic range (the kink; the joint step at tau = 1e-4; a stiff
-        m = 1e-3 at the coarse steps of a loose tol) the extrapolation's bound failed (see the
-        module docstring).
+        frozen step on a smooth on-site force), else the halving policy: outside its asymptotic
+        range (the kink, the joint step at short tau, a stiff unit at the coarse steps of a loose
+        tol) the extrapolation's bound fails (see the module docstring).
 
     Examples
     --------

@@ -241,10 +241,8 @@ class FrozenStep(Stepper):
         return kind != KIND_KINK or h.params.tau >= dt
 
     def extrapolates(self, h: Harvester, kind: int) -> bool:
-        """Smooth on-site forces only: at the strong kink the bias in dt is not asymptotic at the
-        coarser steps (n = 1, a = 2: the extrapolation needed 1.9x the replicas of the halving
-        rule's finer step); on smooth units and rings its error bars held over 20 seeds at tol 1e-3
-        (docs/methods.md, "Error estimate")."""
+        """Smooth on-site forces only: at the kink the bias in dt is not yet asymptotic at the
+        extrapolation's coarser steps (docs/methods.md, "Error estimate")."""
         return kind != KIND_KINK
 
     def start_dt(self, h: Harvester, kind: int, scale: float) -> float:
