@@ -43,6 +43,7 @@ __all__ = [
     "initial_cholesky",
     "linearized_stiffness",
     "natural_amplitude",
+    "double_range_error",
 ]
 
 
@@ -96,11 +97,20 @@ def step_matrices(lin: Harvester, dt: float, step: str = "frozen"
     return stepper.twin_matrices(lin, dt)
 
 
+def double_range_error(h: Harvester, what: str) -> ParameterError:
+    """The error for a system whose parameters' scales put ``what`` outside double precision
+    (every parameter listed, so that the user sees which one to rescale)."""
+    given = ", ".join(f"{k} = {v:g}" for k, v in h.params.to_dict().items())
+    return ParameterError(f"{what}: the parameters' scales (a = {h.a:g}, {given}) put it outside double "
+                          f"precision; rescale the problem (docs/model.md §5)")
+
+
 def stationary_covariances(lin: Harvester, dt: float, step: str = "frozen") -> np.ndarray:
     """Stationary covariance (N, 4, 4) of each mode's state before a step (discrete Lyapunov).
 
     Raises :class:`ParameterError` when some mode of the discrete recursion is not stable
-    (spectral radius >= 1).
+    (spectral radius >= 1), or when the covariance leaves the double range (sigma = 1e155 makes
+    <v^2> ~ sigma^2 overflow).
     """
     M, _, Q, _ = step_matrices(lin, dt, step)
     if not (np.all(np.isfinite(M)) and np.all(np.isfinite(Q))):
@@ -114,7 +124,12 @@ def stationary_covariances(lin: Harvester, dt: float, step: str = "frozen") -> n
             raise ParameterError(
                 f"the harmonic twin (stiffness {2 * lin.a:g}, k = {lin.k:g}) has no stationary "
                 f"law at dt = {dt:g}: mode {q} has spectral radius {rho:.6g} >= 1")
-        out[q] = _discrete_lyapunov(M[q], Q, q)
+        try:
+            with np.errstate(over="raise", invalid="raise"):
+                out[q] = _discrete_lyapunov(M[q], Q, q)
+        except (FloatingPointError, ValueError) as exc:
+            raise double_range_error(lin, f"the harmonic twin's stationary covariance (mode {q}) overflows "
+                                          f"({exc})") from exc
     return out
 
 
@@ -130,10 +145,12 @@ def _discrete_lyapunov(M: np.ndarray, Q: np.ndarray, q: int) -> np.ndarray:
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", scipy.linalg.LinAlgWarning)
         P = scipy.linalg.solve_discrete_lyapunov(M, Q)
+    if not np.all(np.isfinite(P)):
+        raise FloatingPointError("the solution is not finite")
     d = np.sqrt(np.abs(np.diag(P)))
     scale = np.outer(d, d)
     resid = np.abs(M @ P @ M.T + Q - P)
-    if not (np.all(np.isfinite(P)) and np.all(resid <= 1e-8 * scale + 1e-300)):
+    if not np.all(resid <= 1e-8 * scale + 1e-300):
         raise ParameterError(f"the harmonic twin's stationary covariance (mode {q}) could not be solved "
                              f"accurately (largest scaled residual {np.max(resid / (scale + 1e-300)):.3g})")
     return P

@@ -50,7 +50,7 @@ from .controls.martingale import MARTINGALE
 from .controls.twin import TWIN_MOMENTS
 from .ensemble import Ensemble
 from .estimate import Estimate, estimate
-from .harmonic import linearized_stiffness, natural_amplitude
+from .harmonic import double_range_error, linearized_stiffness, natural_amplitude
 from .layout import KIND_KINK
 from .plan import FALLBACK_NOTE, RunPlan, burn_in, relaxation_time
 from .report import DRIFT_SHARE, DRIFT_SIGMAS, result
@@ -151,9 +151,7 @@ def _estimate(ens: Ensemble, h: Harvester) -> Estimate:
     makes the variance of V2 ~ sigma^8 overflow), and no relative error exists for it.
     """
     def refuse(what: str) -> ParameterError:
-        given = ", ".join(f"{k} = {v:g}" for k, v in h.params.to_dict().items())
-        return ParameterError(f"the Monte Carlo estimate has {what}: the parameters' scales (a = {h.a:g}, "
-                              f"{given}) put it outside double precision; rescale the problem (docs/model.md §5)")
+        return double_range_error(h, f"the Monte Carlo estimate has {what}")
 
     try:
         with np.errstate(over="raise"):

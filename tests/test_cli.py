@@ -91,6 +91,11 @@ def test_bad_arguments_exit_2_one_line(capsys, argv, match):
         (["stats", "--n", "3", "--opt", "foo=1"], "invalid option for method 'fpe': no option 'foo'; valid options: tol"),
         (["stats", "--N", "3", "--k", "-inf"], "k must be finite"),
         (["stats", "--N", "5000000", "--method", "exact"], r"N must be in \[1, 4194304\]"),
+        # found by the long fuzz: the twin's <v^2> ~ sigma^2 beyond the double range
+        (["stats", "--param", "sigma=1e157", "--method", "mc", "--opt", "max_time=0.2"],
+         r"stationary covariance .* overflows .* sigma = 1e\+157.* outside double precision"),
+        (["stats", "--param", "sigma=1e155", "--method", "mc", "--opt", "max_time=0.2"],
+         r"stationary covariance .* sigma = 1e\+155.* outside double precision"),
         (["validate", "--out", "/dev/null/x"], "--out '/dev/null/x': cannot create the output folder"),
         (["scene", "run", "fig4_eta_vs_k_harmonic", "--out", "/dev/null/x"], "--out '/dev/null/x': cannot create"),
     ],
