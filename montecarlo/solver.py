@@ -384,7 +384,7 @@ class MonteCarlo:
                                  f"range, a <= {0.5 * sys.float_info.max:.6g}")
         seed = 0 if self.seed is None else self.seed
         stepper, dt = resolve_step(h, self.step, self.dt, scale=self._dt_scale(h))
-        notes: dict[str, Any] = {}
+        notes: dict[str, Any] = {"time_step": self._policy_note(h)}
         harmonic = classify(h)[0] if h.is_linear else None
         twin = None
         if harmonic is not None:
@@ -479,6 +479,24 @@ class MonteCarlo:
         except ParameterError:
             return False
         return stepper.extrapolates(h, onsite_kind(h))
+
+    def _policy_note(self, h: Harvester) -> str:
+        """Which time-step policy the run of ``h`` takes, and why (``info["plan_notes"]["time_step"]``)."""
+        if not self.richardson:
+            return "fine level only (richardson=False): no time-step bias estimate"
+        name = "Richardson extrapolation" if self.extrapolates(h) else "halving policy"
+        if self.extrapolate is not None:
+            return f"{name} (extrapolate={self.extrapolate})"
+        if self.dt is not None:
+            return f"{name}: an explicit dt"
+        if self.tol > _EXTRAPOLATE_TOL:
+            return f"{name}: tol > {_EXTRAPOLATE_TOL:g}"
+        try:
+            stepper = resolve_step(h, self.step, None, scale=_EXTRAPOLATE_COARSER)[0].name
+        except ParameterError:
+            stepper = self.step
+        allows = "allows it" if self.extrapolates(h) else "does not allow it for this on-site force"
+        return f"{name}: tol <= {_EXTRAPOLATE_TOL:g} and the {stepper} step {allows}"
 
     def _dt_scale(self, h: Harvester) -> float:
         """Factor on the steppers' automatic starting steps: coarser with extrapolation."""

@@ -93,6 +93,7 @@ def test_the_solver_picks_extrapolation_only_where_it_was_measured_to_hold() -> 
     tight = MonteCarlo(tol=1e-3, progress=False)
     assert tight.extrapolates(ring) and tight.extrapolates(unit)
     assert tight.plan(unit).dt == 2 * MonteCarlo(tol=1e-3, extrapolate=False).plan(unit).dt
+    assert tight.plan(unit).notes["time_step"] == "Richardson extrapolation: tol <= 0.001 and the frozen step allows it"
     assert not tight.extrapolates(Harvester.build(a=2.0, n=1))
     assert not tight.extrapolates(Harvester.build(a=0.5, n=3, tau=1e-4))
     assert not MonteCarlo(tol=1e-3, dt=0.01).extrapolates(unit)
