@@ -100,8 +100,8 @@ def coverage(z: np.ndarray) -> dict[str, float]:
             "within_1": float((abs(z) < 1).mean()), "within_2": float((abs(z) < 2).mean()), "count": int(z.size)}
 
 
-def _solve(h: Harvester, seed: int, tol: float) -> Any:
-    return solve(h, MonteCarlo(seed=seed, tol=tol, threads=1, batch=2, progress=False))
+def _solve(h: Harvester, seed: int, tol: float, t_burn: float | None = None) -> Any:
+    return solve(h, MonteCarlo(seed=seed, tol=tol, threads=1, batch=2, progress=False, t_burn=t_burn))
 
 
 def white_rows(seeds: int, case: int | None = None, first: int = 1) -> list[dict[str, Any]]:
@@ -125,15 +125,16 @@ def white_rows(seeds: int, case: int | None = None, first: int = 1) -> list[dict
     return rows
 
 
-def ring_rows(seeds: int, case: int | None = None, first: int = 1) -> list[dict[str, Any]]:
+def ring_rows(seeds: int, case: int | None = None, first: int = 1,
+              t_burn: float | None = None) -> list[dict[str, Any]]:
     """The seed-to-seed spread of eta against the reported errors on rings without an exact value
-    (or on case number ``case``)."""
+    (or on case number ``case``), with the automatic burn-in or a fixed ``t_burn``."""
     rows = []
     for label, kw, tol in RING_CASES if case is None else RING_CASES[case:case + 1]:
         h = Harvester.build(**kw)
         runs, t0 = [], time.perf_counter()
         for seed in range(first, first + seeds):
-            s = _solve(h, seed, tol)
+            s = _solve(h, seed, tol, t_burn)
             i = s.info
             runs.append({"eta": s.eta, "eta_err": s.eta_err, "se": i["eta_standard_error"],
                          "bias": i["bias_eta"], "replicas": i["replicas"], "paths": i["paths"],
@@ -144,7 +145,7 @@ def ring_rows(seeds: int, case: int | None = None, first: int = 1) -> list[dict[
         # z against the mean of the other seeds (their mean's own error in quadrature)
         loo = np.array([(eta[i] - np.delete(eta, i).mean()) for i in range(eta.size)])
         z = loo / np.sqrt(err**2 + (spread**2) / (eta.size - 1))
-        row = {"case": label, "tol": tol, "wall_s": time.perf_counter() - t0, "mean_eta": float(eta.mean()),
+        row = {"case": label, "tol": tol, "t_burn": t_burn, "wall_s": time.perf_counter() - t0, "mean_eta": float(eta.mean()),
                "spread": spread, "median_err": float(np.median(err)), "spread_over_err": spread / float(np.median(err)),
                "eta": coverage(z), "runs": runs}
         print(label, {k: v for k, v in row.items() if k != "runs"}, flush=True)
@@ -158,9 +159,10 @@ def main(argv: list[str] | None = None) -> dict:
     ap.add_argument("--seeds", type=int, default=20)
     ap.add_argument("--case", type=int, default=None, help="only this case (index) of the part")
     ap.add_argument("--label", default="current")
+    ap.add_argument("--t-burn", type=float, default=None, help="fixed burn-in (part ring)")
     ap.add_argument("--out", default=str(DATA))
     a = ap.parse_args(argv)
-    rows = white_rows(a.seeds, a.case) if a.part == "white" else ring_rows(a.seeds, a.case)
+    rows = white_rows(a.seeds, a.case) if a.part == "white" else ring_rows(a.seeds, a.case, t_burn=a.t_burn)
     path = DATA.__class__(a.out) / f"{STEM}.json"
     data = json.loads(path.read_text()) if path.exists() else {}
     data.setdefault(a.part, {}).setdefault(a.label, [])
