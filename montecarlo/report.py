@@ -15,14 +15,14 @@ from fpe_harvester.exact import growth_rate, k_di
 from fpe_harvester.model import Harvester
 from fpe_harvester.result import Stats, Status
 
-from .coefficients import ONSITE_NAMES, onsite_kind
+from .coefficients import ONSITE_NAMES, linear_stiffness, onsite_kind
 from .ensemble import Ensemble
 from .estimate import Estimate, bias_order
 from .layout import KIND_KINK
 from .plan import RunPlan, burn_in
 from .steps import STEPPERS
 
-__all__ = ["result", "DRIFT_SIGMAS", "DRIFT_SHARE"]
+__all__ = ["result", "unresolved_pin", "DRIFT_SIGMAS", "DRIFT_SHARE"]
 
 _RNG = "numpy Generator(PCG64) drawn inside numba, one SeedSequence child per (replica, chunk)"
 #: The burn-in drift (eta over the first half of the measured window minus the whole) that
@@ -63,13 +63,37 @@ def result(h: Harvester, ens: Ensemble, est: Estimate, met: bool, plan: RunPlan,
 
 
 
+def unresolved_pin(h: Harvester, est: Estimate, step: str, dt: float) -> float:
+    """Bound on the part of Pin that the joint step cannot see where xi decorrelates within a
+    step (tau < dt), added to Pin's error in quadrature.
+
+    In the stationary state :math:`(1 + \\gamma\\tau)\\langle v\\xi\\rangle = \\sigma D/m
+    - (\\tau/m)\\langle \\partial_x f\\, v\\xi\\rangle - (\\tau K_v/m)\\langle V\\xi\\rangle` (Ito on
+    :math:`v\\xi` and :math:`f\\xi`, f the force on the unit): the forces left out of the step's
+    linear flow (the kicks and the neighbours' force, held over the step) shift Pin by
+    :math:`\\approx\\tau^2\\sigma^2D\\kappa/m^2`, :math:`\\kappa` their stiffness. The step's
+    estimator of :math:`v\\xi` (:func:`montecarlo.steps.joint._d_step_joint`) is the linear
+    flow's at tau << dt, nearly a constant over replicas, so this term is no part of its spread.
+    :math:`\\kappa` is bounded by the virial stiffness :math:`m\\langle v^2\\rangle/\\langle x^2\\rangle`
+    (the total stiffness, equal to it for a harmonic unit at K_v = 0) minus the flow's, plus the coupling's
+    largest mode stiffness :math:`4|k| + 16|k_4|`. Zero for the other steps and for tau >= dt.
+    """
+    p = h.params
+    if step != "joint" or p.tau >= dt or not est.mean["x2"] > 0.0:
+        return 0.0
+    kappa = abs(p.m * est.mean["v2"] / est.mean["x2"] - linear_stiffness(h)) + 4.0 * abs(h.k) + 16.0 * abs(h.k4)
+    return p.tau**2 * p.sigma**2 * p.D * kappa / p.m**2
+
+
 def _stats(h: Harvester, est: Estimate, info: dict[str, Any], name: str) -> Stats:
     """The numbers: each mean with its total error (standard error and systematic term)."""
     mean, se = est.mean, est.se
     tot = est.total_error
     info["eta_standard_error"] = se["eta"]
+    info["Pin_unresolved"] = unresolved_pin(h, est, info["step"], info["dt"])
     return Stats.from_moments(
-        V2=mean["V2"], Pin=mean["Pin"], R=h.params.R, V2_err=tot("V2"), Pin_err=tot("Pin"),
+        V2=mean["V2"], Pin=mean["Pin"], R=h.params.R, V2_err=tot("V2"),
+        Pin_err=math.hypot(tot("Pin"), info["Pin_unresolved"]),
         cov_V2_Pin=est.cov_V2_Pin, eta_err=tot("eta"), v2=mean["v2"],
         v2_err=tot("v2"), vV=mean["vV"], vV_err=tot("vV"), x2=mean["x2"], x2_err=tot("x2"),
         d2=mean["d2"] if h.N > 1 else None, d2_err=tot("d2") if h.N > 1 else None, method=name, info=info)
