@@ -260,8 +260,9 @@ class MonteCarlo:
         estimate in the error). None (default): the solver picks (:meth:`extrapolates`) the
         extrapolation at ``tol <= 1e-3`` with an automatic ``dt`` where the stepper allows it (the
         frozen step on a smooth on-site force), else the halving policy: outside its asymptotic
-        range (the kink, the joint step at short tau, a stiff unit at the coarse steps of a loose
-        tol) the extrapolation's bound fails (see the module docstring).
+        range (the kink, a stiff unit at the coarse steps of a loose tol) the extrapolation's bound
+        fails, and for the joint and averaged steps its error bars are not measured over seeds (see
+        the module docstring).
 
     Examples
     --------
