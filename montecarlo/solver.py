@@ -385,7 +385,7 @@ class MonteCarlo:
                                  f"range, a <= {0.5 * sys.float_info.max:.6g}")
         seed = 0 if self.seed is None else self.seed
         stepper, dt = resolve_step(h, self.step, self.dt, scale=self._dt_scale(h))
-        notes: dict[str, Any] = {"time_step": self._policy_note(h)}
+        notes: dict[str, Any] = {"time_step": self._policy(h)[1]}
         harmonic = classify(h)[0] if h.is_linear else None
         twin = None
         if harmonic is not None:
@@ -469,35 +469,28 @@ class MonteCarlo:
         if given; None picks it at ``tol`` <= :data:`_EXTRAPOLATE_TOL` with an automatic ``dt`` where
         the stepper it starts with allows it (:meth:`~montecarlo.steps.base.Stepper.extrapolates`:
         the frozen step on a smooth on-site force)."""
+        return self._policy(h)[0]
+
+    def _policy(self, h: Harvester) -> tuple[bool, str]:
+        """:meth:`extrapolates` and why, in words (``info["plan_notes"]["time_step"]``)."""
+        def say(extrapolated: bool, why: str) -> tuple[bool, str]:
+            return extrapolated, ("Richardson extrapolation" if extrapolated else "halving policy") + why
+
         if not self.richardson:
-            return False
+            return False, "fine level only (richardson=False): no time-step bias estimate"
         if self.extrapolate is not None:
-            return self.extrapolate
-        if self.dt is not None or self.tol > _EXTRAPOLATE_TOL:
-            return False
+            return say(self.extrapolate, f" (extrapolate={self.extrapolate})")
+        if self.dt is not None:
+            return say(False, ": an explicit dt")
+        if self.tol > _EXTRAPOLATE_TOL:
+            return say(False, f": tol > {_EXTRAPOLATE_TOL:g}")
         try:
             stepper, _ = resolve_step(h, self.step, None, scale=_EXTRAPOLATE_COARSER)
         except ParameterError:
-            return False
-        return stepper.extrapolates(h, onsite_kind(h))
-
-    def _policy_note(self, h: Harvester) -> str:
-        """Which time-step policy the run of ``h`` takes, and why (``info["plan_notes"]["time_step"]``)."""
-        if not self.richardson:
-            return "fine level only (richardson=False): no time-step bias estimate"
-        name = "Richardson extrapolation" if self.extrapolates(h) else "halving policy"
-        if self.extrapolate is not None:
-            return f"{name} (extrapolate={self.extrapolate})"
-        if self.dt is not None:
-            return f"{name}: an explicit dt"
-        if self.tol > _EXTRAPOLATE_TOL:
-            return f"{name}: tol > {_EXTRAPOLATE_TOL:g}"
-        try:
-            stepper = resolve_step(h, self.step, None, scale=_EXTRAPOLATE_COARSER)[0].name
-        except ParameterError:
-            stepper = self.step
-        allows = "allows it" if self.extrapolates(h) else "does not allow it for this on-site force"
-        return f"{name}: tol <= {_EXTRAPOLATE_TOL:g} and the {stepper} step {allows}"
+            return say(False, f": tol <= {_EXTRAPOLATE_TOL:g} but no stepper serves the coarser start")
+        allowed = stepper.extrapolates(h, onsite_kind(h))
+        return say(allowed, f": tol <= {_EXTRAPOLATE_TOL:g} and the {stepper.name} step "
+                            + ("allows it" if allowed else "does not allow it for this on-site force"))
 
     def _dt_scale(self, h: Harvester) -> float:
         """Factor on the steppers' automatic starting steps: coarser with extrapolation."""
