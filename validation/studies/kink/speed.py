@@ -63,6 +63,16 @@ PERIOD_EDGES = np.array([0.25, 0.5, 1.0, 2.0, 4.0, 8.0, 16.0, 32.0, 64.0, np.inf
 MAX_COUNT = 9
 
 
+@njit(cache=True, nogil=True)
+def _one_unit():
+    """The arrays one unit's :func:`montecarlo.steps.frozen.d_step` takes, N = P = 1: x, v, V, xi,
+    F, xm, f (zeros), stuck (False), the live weight w (1), the counters and the Taylor scratch."""
+    x, v, V, xi, F, xm, f = np.zeros((1, 1)), np.zeros((1, 1)), np.zeros((1, 1)), np.zeros((1, 1)), np.zeros((1, 1)), \
+        np.zeros((1, 1)), np.zeros((1, 1))
+    return (x, v, V, xi, F, xm, f, np.zeros((1, 1), dtype=np.bool_), np.ones(1), np.zeros(N_COUNTERS, dtype=np.int64),
+            np.zeros((3, N_TAYLOR + 1)))
+
+
 # not cached: numba's cache would keep a stale copy of the production kernel it calls
 @njit(nogil=True)
 def _census(gen, P, nburn, nrun, cf, pp, hist, periods, totals, cap, cap_every):
@@ -72,12 +82,7 @@ def _census(gen, P, nburn, nrun, cf, pp, hist, periods, totals, cap, cap_every):
     unit-steps, slow unit-steps, crossings by the swing's period at the start (last row: untrapped);
     ``totals``: unit-steps, slow, crossings, averaged, trapped, near rest; ``cap`` (n, 5): every
     ``cap_every``-th slow and fast unit-step's start (x, v, V, f, slow)."""
-    x, v, V, xi, F, xm, f = np.zeros((1, 1)), np.zeros((1, 1)), np.zeros((1, 1)), np.zeros((1, 1)), np.zeros((1, 1)), \
-        np.zeros((1, 1)), np.zeros((1, 1))
-    st = np.zeros((1, 1), dtype=np.bool_)
-    w = np.ones(1)
-    cnt = np.zeros(N_COUNTERS, dtype=np.int64)
-    cs = np.zeros((3, N_TAYLOR + 1))
+    x, v, V, xi, F, xm, f, st, w, cnt, cs = _one_unit()
     xs, vs, Vs, xis = np.zeros(P), np.zeros(P), np.zeros(P), np.zeros(P)
     for p in range(P):
         xis[p] = math.sqrt(pp[P_XI_VAR]) * gen.standard_normal()
@@ -161,12 +166,7 @@ def census(a: float, dt: float, *, paths: int = 256, t_run: float = 200.0, t_bur
 def _time_flow(cap, cf, pp, reps):
     """The frozen step (:func:`montecarlo.steps.frozen.d_step`, one unit) once per captured start,
     ``reps`` times over the sample."""
-    x, v, V, xi, F, xm, f = np.zeros((1, 1)), np.zeros((1, 1)), np.zeros((1, 1)), np.zeros((1, 1)), np.zeros((1, 1)), \
-        np.zeros((1, 1)), np.zeros((1, 1))
-    st = np.zeros((1, 1), dtype=np.bool_)
-    w = np.ones(1)
-    cnt = np.zeros(N_COUNTERS, dtype=np.int64)
-    cs = np.zeros((3, N_TAYLOR + 1))
+    x, v, V, xi, F, xm, f, st, w, cnt, cs = _one_unit()
     acc = 0.0
     for _ in range(reps):
         for i in range(cap.shape[0]):
