@@ -66,6 +66,12 @@ class Setup(NamedTuple):
     mg_at, n_mg : int
         The martingale sums' first column in it and their number
         (:func:`montecarlo.controls.martingale.basis_names`; 0 without them).
+    gen_at, n_gen, gen_kink, gen_every : int, int, bool, int
+        The generator sums' first column and number, whether they carry the kink's hinge terms,
+        and the fine steps between their points (:mod:`montecarlo.controls.generator`).
+    groups : int
+        Replicas in this chunk: its P paths are ``groups`` replicas of P / groups consecutive
+        paths each, every sum kept per replica (P a multiple of it).
     """
 
     P: int
@@ -91,6 +97,7 @@ class Setup(NamedTuple):
     n_gen: int = 0
     gen_kink: bool = False
     gen_every: int = 1
+    groups: int = 1
 
 
 class Sums(NamedTuple):
@@ -98,19 +105,20 @@ class Sums(NamedTuple):
 
     Attributes
     ----------
-    sums : (ROWS, N_MOM) ndarray
-        Sums over measured unit-steps of the moments :data:`montecarlo.layout.MOMENTS`: fine
-        level, coarse level, fine level over the first half of the measured steps, coarsest.
-    counts : (ROWS,) ndarray
-        Number of unit-steps summed per row.
+    sums : (G, ROWS, N_MOM) ndarray
+        Per replica of the chunk (:attr:`Setup.groups`), sums over measured unit-steps of the
+        moments :data:`montecarlo.layout.MOMENTS`: fine level, coarse level, fine level over the
+        first half of the measured steps, coarsest.
+    counts : (G, ROWS) ndarray
+        Number of unit-steps summed per replica and row.
     esc_time : (P,) ndarray
         Time at which path p first had some |x_j| > threshold, or -1.
     counters : (N_COUNTERS,) int64 ndarray
         Kink statistics and the number of ring steps taken, all levels (``C_*`` of
         :mod:`montecarlo.layout`).
-    ctl : (2, n_ctl) ndarray
-        The accumulated controls' sums on the fine level over the measured window and its first
-        half (:attr:`Setup.n_ctl`).
+    ctl : (G, 2, n_ctl) ndarray
+        Per replica, the accumulated controls' sums on the fine level over the measured window and
+        its first half (:attr:`Setup.n_ctl`).
     """
 
     sums: np.ndarray
@@ -120,11 +128,12 @@ class Sums(NamedTuple):
     ctl: np.ndarray
 
     @staticmethod
-    def zeros(P: int, n_ctl: int) -> Sums:
-        """Empty accumulators for a chunk of P paths with ``n_ctl`` control columns."""
-        return Sums(np.zeros((ROWS, N_MOM)), np.zeros(ROWS), np.empty(P),
+    def zeros(P: int, n_ctl: int, groups: int = 1) -> Sums:
+        """Empty accumulators for a chunk of P paths in ``groups`` replicas with ``n_ctl`` control
+        columns."""
+        return Sums(np.zeros((groups, ROWS, N_MOM)), np.zeros((groups, ROWS)), np.empty(P),
                     np.zeros(N_COUNTERS, dtype=np.int64),
-                    np.zeros((2, n_ctl)))
+                    np.zeros((groups, 2, n_ctl)))
 
 
 def run_chunk(gen: np.random.Generator, stepper: Stepper, s: Setup, out: Sums) -> None:
@@ -183,7 +192,8 @@ def _run(tag, gen, s, out) -> None:
     third = s.third and coupled
     cf_f, cf_c, cf_cc, cf_t, pp, pp_t = s.cf_f, s.cf_c, s.cf_cc, s.cf_t, s.pp, s.pp_t
     sums, counts, counters, esc = out.sums, out.counts, out.counters, out.esc_time
-    mg = out.ctl[:, s.mg_at:s.mg_at + s.n_mg]
+    G = s.groups
+    mg = out.ctl[:, :, s.mg_at:s.mg_at + s.n_mg]
     thr = pp[P_THRESHOLD]
     # every level's arrays (x, v, V, xi, F, pvx; stuck) allocated here one by one: returned in
     # tuples by a helper, they made the loop copy about twice the array fields before every
@@ -209,12 +219,12 @@ def _run(tag, gen, s, out) -> None:
     use_mg = s.n_mg > 0
     phi = np.zeros((n_state(N) if use_mg else 0, N, P))
     n_bd = s.n_mg - n_state(N) - min(N // 2, MG_DIST) - 1 if use_mg else 0
-    g_bd, gprev_bd = np.zeros(max(n_bd, 0)), np.zeros(max(n_bd, 0))
+    g_bd, gprev_bd = np.zeros((G, max(n_bd, 0))), np.zeros((G, max(n_bd, 0)))
     xi0 = np.zeros((N, P))
     mg_points = 0  # martingale points taken (an int: a bool flag compiled mg_measure twice)
     n_upd = 0  # xi updates of the fine level since the last martingale point
     use_gen = s.n_gen > 0
-    gacc = out.ctl[:, s.gen_at:s.gen_at + s.n_gen]
+    gacc = out.ctl[:, :, s.gen_at:s.gen_at + s.n_gen]
     gst = np.zeros((4, N, P if use_gen else 0))
     # generator points taken, xi updates of the fine level since the last one, fine steps of the
     # measured window so far
@@ -262,7 +272,7 @@ def _run(tag, gen, s, out) -> None:
                                                cf_f, pp)
                 g_fine += 1
             if meas:
-                counts[0] += _measure(xf, vf, Vf, xif, sf, Ff, w, cf_f, pp, kind, sums[0], pf)
+                _measure(xf, vf, Vf, xif, sf, Ff, w, cf_f, pp, kind, sums, 0, counts, pf)
                 if use_mg and sub == 0:
                     dec = cf_f[CF_XI_DECAY] ** n_upd
                     mg_measure(xf, vf, Vf, xif, w, pp[P_A], pp[P_N], phi, xi0, mg, first, mg_points > 0, dec,
@@ -270,13 +280,13 @@ def _run(tag, gen, s, out) -> None:
                     mg_points += 1
                     n_upd = 0
                 if twin:
-                    measure_twin(xt, vt, Vt, xit, w, cf_t, sums[0], pp[P_N], pt)
+                    measure_twin(xt, vt, Vt, xit, w, cf_t, sums, 0, pp[P_N], pt)
                 if first:
-                    counts[2] += _measure(xf, vf, Vf, xif, sf, Ff, w, cf_f, pp, kind, sums[2], pf)
+                    _measure(xf, vf, Vf, xif, sf, Ff, w, cf_f, pp, kind, sums, 2, counts, pf)
                     if twin:
-                        measure_twin(xt, vt, Vt, xit, w, cf_t, sums[2], pp[P_N], pt)
+                        measure_twin(xt, vt, Vt, xit, w, cf_t, sums, 2, pp[P_N], pt)
                 if coupled and sub == 1:
-                    counts[1] += _measure(xc, vc, Vc, xic, sc, Fc, w, cf_c, pp, kind, sums[1], pc)
+                    _measure(xc, vc, Vc, xic, sc, Fc, w, cf_c, pp, kind, sums, 1, counts, pc)
             advance(tag, xif, ee, cf_f)
         if coupled:
             advance(tag, xic, ec, cf_c)
@@ -287,7 +297,7 @@ def _run(tag, gen, s, out) -> None:
                  gen)
             _check_escape(xcc, vcc, Vcc, xicc, Fcc, scc, w, thr, t_end, esc)
             if it >= nburn and ((it - nburn) // 2) % cc_stride == 0:
-                counts[3] += _measure(xcc, vcc, Vcc, xicc, scc, Fcc, w, cf_cc, pp, kind, sums[3], pcc)
+                _measure(xcc, vcc, Vcc, xicc, scc, Fcc, w, cf_cc, pp, kind, sums, 3, counts, pcc)
             advance(tag, xicc, ecc, cf_cc)
         elif third:
             _copy_noise(ec, ec0)

@@ -121,6 +121,8 @@ class RunPlan:
     generator : bool
         Whether the path loop accumulates the generator controls
         (:mod:`montecarlo.controls.generator`).
+    group : int
+        Replicas per task of :func:`montecarlo.simulate` (1: a task per replica).
     """
 
     dt: float
@@ -132,3 +134,4 @@ class RunPlan:
     relaxation_time: float
     notes: dict[str, Any]
     generator: bool = False
+    group: int = 1

@@ -58,6 +58,7 @@ def simulate(
     controls: tuple[str, ...] = (),
     third_level: bool = False,
     generator_every: float = 0.0,
+    group: int = 1,
 ) -> Ensemble:
     """Simulate independent replicas of ``h`` and return their raw moment sums.
 
@@ -69,7 +70,7 @@ def simulate(
         Time step, > 0. With ``richardson=True`` the ensemble runs at ``dt/2`` (level 0)
         and at ``dt`` (level 1) on the same Brownian paths.
     paths : int
-        Paths (rings) per replica, >= 2.
+        Paths (rings) per replica, >= 1.
     replicas : int
         Number of independent replicas, >= 1.
     t_burn, t_run : float
@@ -82,7 +83,7 @@ def simulate(
     threshold : float
         Escape amplitude, > 0: a path stops at its first ``|x_j| > threshold``.
     chunk : int
-        Paths per random stream / task, >= 1.
+        Paths per random stream / task, >= 1 (a replica of more paths is split into chunks).
     threads : int or None
         Worker threads (default: the usable CPUs). Results do not depend on it.
     first_replica : int
@@ -132,6 +133,12 @@ def simulate(
         increments composed exactly), so that two Richardson extrapolations, from
         ``(dt, dt/2)`` and from ``(2 dt, dt)``, can be compared (:func:`montecarlo.estimate`);
         it adds a quarter of level 0's steps. Ignored without ``richardson``.
+    group : int
+        Replicas per task, >= 1. With more than one, a task runs ``group`` whole replicas
+        (``group * paths`` paths, ``paths <= chunk``) on one random stream, seeded by its first
+        replica: a kernel call then steps more paths (cheaper per path-step at small ``paths``),
+        while every replica keeps sums of its own (more, smaller replicas for the cross-fitted
+        controls). The default 1 gives each replica its own streams; results depend on ``group``.
 
     Returns
     -------
@@ -148,15 +155,14 @@ def simulate(
                richardson=richardson, threshold=threshold, chunk=chunk, threads=threads,
                first_replica=first_replica, sample_every=sample_every, twin=twin, start=start,
                kink_rule=kink_rule, kind=kind, step=step, controls=controls, third_level=third_level,
-               generator_every=generator_every)
+               generator_every=generator_every, group=group)
     stepper, setup, twin_mean = _coefficients(h, c)
     ss = np.random.SeedSequence(c.seed)
-    sizes = _chunks(c.paths, c.chunk)
-    tasks = [(r, k) for r in range(c.replicas) for k in range(len(sizes))]
+    tasks = _tasks(c)
     t0 = time.perf_counter()
-    results = _run_tasks(stepper, setup, ss, c.first_replica, sizes, tasks, c.threads)
+    results = _run_tasks(stepper, setup, ss, c.first_replica, tasks, c.threads)
     wall = time.perf_counter() - t0
-    sums, counts, esc_times, counters, ctl = _merge(results, tasks, sizes, c)
+    sums, counts, esc_times, counters, ctl = _merge(results, tasks, c)
     levels = 3 if c.third_level else 2 if c.richardson else 1
     dt = c.dt
     return Ensemble(
@@ -175,6 +181,7 @@ def simulate(
         first_replica=c.first_replica,
         notes={"threads": c.threads, "chunk": c.chunk, "onsite_kind": setup.kind,
                "sample_stride": setup.stride, "kink_rule": c.kink_rule, "step": stepper.name,
+               **({"replicas_per_task": c.group} if c.group > 1 else {}),
                **({"generator_stride": setup.gen_every} if setup.n_gen else {})},
         twin_kappa=c.twin,
         twin_mean=twin_mean,
@@ -208,23 +215,28 @@ class _Checked(NamedTuple):
     controls: tuple[str, ...]
     third_level: bool
     generator_every: float
+    group: int
 
 
 def _check(h: Harvester, *, dt: float, paths: int, replicas: int, t_burn: float, t_run: float,
            seed: int | None, richardson: bool, threshold: float, chunk: int, threads: int | None,
            first_replica: int, sample_every: float, twin: float | None, start: str, kink_rule: str,
            kind: int | None, step: str, controls: tuple[str, ...], third_level: bool,
-           generator_every: float) -> _Checked:
+           generator_every: float, group: int) -> _Checked:
     """Validate :func:`simulate`'s arguments (raises :class:`ParameterError`)."""
     if not isinstance(h, Harvester):
         raise ParameterError(f"h must be a Harvester, got {h!r} (type {type(h).__name__})")
     dt = check_real("dt", dt, low=0.0, low_open=True)
-    paths = check_int("paths", paths, low=2)
+    paths = check_int("paths", paths, low=1)
     replicas = check_int("replicas", replicas, low=1)
     t_burn = check_real("t_burn", t_burn, low=0.0)
     t_run = check_real("t_run", t_run, low=0.0, low_open=True)
     threshold = check_real("threshold", threshold, low=0.0, low_open=True)
     chunk = check_int("chunk", chunk, low=1)
+    group = check_int("group", group, low=1)
+    if group > 1 and paths > chunk:
+        raise ParameterError(f"group > 1 needs whole replicas per task: paths ({paths}) <= chunk ({chunk}), "
+                             f"got group = {group}")
     threads = default_threads() if threads is None else check_int("threads", threads, low=1)
     first_replica = check_int("first_replica", first_replica, low=0)
     if seed is not None:
@@ -263,7 +275,7 @@ def _check(h: Harvester, *, dt: float, paths: int, replicas: int, t_burn: float,
         raise ParameterError(f"twin: the {stepper.name} step has no harmonic twin; use twin=None")
     return _Checked(dt, paths, replicas, t_burn, t_run, seed, bool(richardson), threshold, chunk, threads,
                     first_replica, sample_every, twin, start, kink_rule, kind, stepper.name, tuple(controls),
-                    third_level and bool(richardson), generator_every)
+                    third_level and bool(richardson), generator_every, group)
 
 
 def _coefficients(h: Harvester, c: _Checked) -> tuple[Stepper, Setup, dict[str, float]]:
@@ -295,22 +307,38 @@ def _coefficients(h: Harvester, c: _Checked) -> tuple[Stepper, Setup, dict[str, 
     return stepper, setup, twin_mean
 
 
-def _chunks(paths: int, chunk: int) -> list[int]:
-    full, rest = divmod(paths, chunk)
-    return [chunk] * full + ([rest] if rest else [])
+class _Task(NamedTuple):
+    """One task of :func:`simulate`: replicas ``r0 .. r0 + groups - 1`` (their paths
+    ``p0 .. p0 + P - 1`` when one replica is split into chunks, ``chunk`` the chunk's index)."""
+
+    r0: int
+    chunk: int
+    groups: int
+    p0: int
+    P: int
+
+
+def _tasks(c: _Checked) -> list[_Task]:
+    """Every replica split into chunks of ``c.chunk`` paths, or ``c.group`` whole replicas per task."""
+    if c.group > 1:
+        return [_Task(r0, 0, min(c.group, c.replicas - r0), 0, min(c.group, c.replicas - r0) * c.paths)
+                for r0 in range(0, c.replicas, c.group)]
+    full, rest = divmod(c.paths, c.chunk)
+    sizes = [c.chunk] * full + ([rest] if rest else [])
+    starts = np.concatenate([[0], np.cumsum(sizes)])
+    return [_Task(r, k, 1, int(starts[k]), size) for r in range(c.replicas) for k, size in enumerate(sizes)]
 
 
 def _run_tasks(stepper: Stepper, setup: Setup, ss: np.random.SeedSequence, first_replica: int,
-               sizes: list[int], tasks: list[tuple[int, int]], threads: int) -> list[Sums]:
-    """Run every (replica, chunk) task on a thread pool, each on its own random stream
-    ``SeedSequence(seed, spawn_key=(replica, chunk))``."""
+               tasks: list[_Task], threads: int) -> list[Sums]:
+    """Run every task on a thread pool, each on its own random stream
+    ``SeedSequence(seed, spawn_key=(first replica, chunk))``."""
 
-    def work(task: tuple[int, int]) -> Sums:
-        r, k = task
-        child = np.random.SeedSequence(ss.entropy, spawn_key=(first_replica + r, k))
+    def work(task: _Task) -> Sums:
+        child = np.random.SeedSequence(ss.entropy, spawn_key=(first_replica + task.r0, task.chunk))
         gen = np.random.Generator(np.random.PCG64(child))
-        out = Sums.zeros(sizes[k], setup.n_ctl)
-        run_chunk(gen, stepper, setup._replace(P=sizes[k]), out)
+        out = Sums.zeros(task.P, setup.n_ctl, task.groups)
+        run_chunk(gen, stepper, setup._replace(P=task.P, groups=task.groups), out)
         return out
 
     if threads == 1 or len(tasks) == 1:
@@ -319,8 +347,7 @@ def _run_tasks(stepper: Stepper, setup: Setup, ss: np.random.SeedSequence, first
         return list(pool.map(work, tasks))
 
 
-def _merge(results: list[Sums], tasks: list[tuple[int, int]], sizes: list[int],
-           c: _Checked) -> tuple[np.ndarray, ...]:
+def _merge(results: list[Sums], tasks: list[_Task], c: _Checked) -> tuple[np.ndarray, ...]:
     """Per-replica sums, counts, escape times (inf: none), summed counters and control sums
     from the chunks' outputs (rows of the levels in :attr:`Ensemble.sums`'s order)."""
     levels = 3 if c.third_level else 2 if c.richardson else 1
@@ -329,12 +356,13 @@ def _merge(results: list[Sums], tasks: list[tuple[int, int]], sizes: list[int],
     counts = np.zeros((c.replicas, levels + 1))
     esc_times = np.full((c.replicas, c.paths), np.inf)
     counters = np.zeros(N_COUNTERS, dtype=np.int64)
-    ctl = np.zeros((c.replicas, 2, results[0].ctl.shape[1]))
-    offsets = np.concatenate([[0], np.cumsum(sizes)])
-    for (r, k), out in zip(tasks, results):
+    ctl = np.zeros((c.replicas, 2, results[0].ctl.shape[2]))
+    for t, out in zip(tasks, results):
+        r = slice(t.r0, t.r0 + t.groups)
         ctl[r] += out.ctl
-        sums[r] += out.sums[rows]
-        counts[r] += out.counts[rows]
-        esc_times[r, offsets[k]:offsets[k + 1]] = np.where(out.esc_time >= 0.0, out.esc_time, np.inf)
+        sums[r] += out.sums[:, rows]
+        counts[r] += out.counts[:, rows]
+        esc = np.where(out.esc_time >= 0.0, out.esc_time, np.inf)
+        esc_times[r, t.p0:t.p0 + t.P // t.groups] = esc.reshape(t.groups, t.P // t.groups)
         counters += out.counters
     return sums, counts, esc_times, counters, ctl

@@ -105,12 +105,16 @@ _T_RUN_MART_TOL = 1e-3
 #: to a single unit whose plain relative variance of eta per unit of path time (the variance of a
 #: replica's eta over eta^2, times its paths and t_run) is at least ``_GEN_RELVAR``: where the twin
 #: and martingale controls leave much of it (the strong kink), the generator's reduce eta's
-#: variance 2-10x more; elsewhere 1.0-1.6x, which fewer paths per replica would eat up
-#: (docs/methods.md, "Generator controls"). The run restarts with them when it is long enough for
-#: their fit, ``_GEN_FIT`` replicas per control at ``_GEN_MIN_PATHS`` paths, given a variance
-#: reduction of at least ``_GEN_VR`` (the least measured where the rule adds them); the paths per
-#: replica aim at ``_GEN_REPLICAS`` replicas per control.
-_GEN_RELVAR, _GEN_VR, _GEN_FIT, _GEN_REPLICAS, _GEN_MIN_PATHS = 2.4, 40.0, 4.0, 8.0, 2
+#: variance 2-10x more; elsewhere 1.0-1.6x (docs/methods.md, "Generator controls"). The run
+#: restarts with them when it is long enough for their fit, ``_GEN_FIT`` replicas per control,
+#: given a variance reduction of at least ``_GEN_VR`` (the least measured where the rule adds
+#: them). Paths per replica: one, or as few as keep the replicas the run is expected to need below
+#: ``_GEN_MAX_REPLICAS``; a task of :func:`montecarlo.simulate` then runs whole replicas, about
+#: ``_GEN_TASK_PATHS`` paths (a kernel call over 48 paths costs 0.62x per path-step what it costs
+#: over 6, and the fit's variance reduction depends on the simulated time, not on how it is split
+#: into replicas: docs/methods.md, "Generator controls").
+_GEN_RELVAR, _GEN_VR, _GEN_FIT = 2.4, 40.0, 4.0
+_GEN_MAX_REPLICAS, _GEN_TASK_PATHS = 4096, 48
 #: Time between the generator's points (:func:`montecarlo.simulate`'s ``generator_every``): as
 #: much variance removed as at every step, at less cost (docs/methods.md, "Generator controls").
 _GEN_EVERY = 0.02
@@ -139,6 +143,12 @@ def _common_random_numbers(solver: MonteCarlo, h: Harvester, replicas: int) -> d
             "paths": max(2, round(plan.paths * 16 / replicas)), "control": False,
             "min_replicas": replicas, "max_replicas": replicas, "tol": 0.999,
             "extrapolate": solver.extrapolates(h)}
+
+
+def _group(paths: int) -> int:
+    """Replicas of ``paths`` paths per task in a run with the generator controls: about
+    ``_GEN_TASK_PATHS`` paths per task."""
+    return max(1, _GEN_TASK_PATHS // paths)
 
 
 def _estimate(ens: Ensemble, h: Harvester) -> Estimate:
@@ -515,7 +525,7 @@ class MonteCarlo:
                         twin=plan.twin, start=plan.start, step=self.step,
                         controls=((MARTINGALE.name,) + ((GENERATOR.name,) if plan.generator else ())
                                   if self.martingale else ()),
-                        third_level=self.extrapolates(h), generator_every=_GEN_EVERY)
+                        third_level=self.extrapolates(h), generator_every=_GEN_EVERY, group=plan.group)
 
     def _restart_reason(self, h: Harvester, plan: RunPlan, est: Estimate) -> tuple[str, RunPlan] | None:
         """After a batch: a finer step or a longer burn-in, if the data ask for one.
@@ -541,7 +551,8 @@ class MonteCarlo:
             t_burn = 2.0 * plan.t_burn
             t_run = plan.t_run if self.t_run is not None else max(plan.t_run, _RUN_PER_BURN * t_burn)
             paths = self.paths or self._auto_paths(t_burn, t_run)
-            return "t_burn", dataclasses.replace(plan, t_burn=t_burn, t_run=t_run, paths=paths)
+            return "t_burn", dataclasses.replace(plan, t_burn=t_burn, t_run=t_run, paths=paths,
+                                                 group=_group(paths) if plan.generator else 1)
         return None
 
     def _generator_plan(self, h: Harvester, plan: RunPlan, ens: Ensemble, est: Estimate) -> tuple[RunPlan, int]:
@@ -565,7 +576,8 @@ class MonteCarlo:
                         f"{_GEN_RELVAR:g}")
         controls = len(GENERATOR.sums(h)) + len(MARTINGALE.sums(h)) + (len(TWIN_MOMENTS) if plan.twin else 0)
         need = relvar / (_GEN_VR * (0.9 * self.tol) ** 2 * plan.t_run)  # paths to reach tol with them
-        paths = self.paths or max(_GEN_MIN_PATHS, min(plan.paths, int(need / (_GEN_REPLICAS * controls))))
+        paths = self.paths or max(1, min(plan.paths, math.ceil(need / _GEN_MAX_REPLICAS)))
+        group = _group(paths)
         if need / paths < _GEN_FIT * controls:
             return note(f"not used: the run (about {need:.3g} paths with them) is too short for the fit of "
                         f"{controls} controls ({_GEN_FIT * controls:.0f} replicas of {paths} paths)")
@@ -577,7 +589,7 @@ class MonteCarlo:
                 and self.tol < _STRONG_KINK_FINER_TOL and dt / 2 >= _DT_MIN):
             dt /= 2
             why += f"; dt halved to {dt:g} with them (the strong kink's bias at the starting step exceeds a third of tol)"
-        return note(why, first, generator=True, paths=paths, dt=dt)
+        return note(why, first, generator=True, paths=paths, dt=dt, group=group)
 
     def run(self, h: Harvester, plan: RunPlan | None = None) -> tuple[Ensemble, Estimate, bool, RunPlan]:
         """Adaptive replica loop; returns the ensemble, its estimate, whether tol was met, the plan."""

@@ -97,55 +97,55 @@ def basis_names(kink: bool) -> tuple[str, ...]:
 
 
 @njit(cache=True, nogil=True, inline="always")
-def _add(acc, row: int, k: int, value: float) -> int:
-    acc[row, k] += value
+def _add(acc, rep: int, row: int, k: int, value: float) -> int:
+    acc[rep, row, k] += value
     return k + 1
 
 
 @njit(cache=True, nogil=True)
-def _unit(acc, row: int, x: float, v: float, V: float, s: float, eta: float, e2: float, kink: bool,
+def _unit(acc, rep: int, row: int, x: float, v: float, V: float, s: float, eta: float, e2: float, kink: bool,
           a: float, sig: float, kv: float) -> None:
     """Add one unit's basis functions at its state (x, v, V, s = xi) at the interval's start, times
-    its innovation ``eta`` (and ``e2`` = eta^2 - var for ``he2``), to ``acc[row]``."""
+    its innovation ``eta`` (and ``e2`` = eta^2 - var for ``he2``), to ``acc[rep, row]``."""
     z = (x, v, V, s)
-    k = _add(acc, row, 0, eta)
+    k = _add(acc, rep, row, 0, eta)
     for i in range(4):
-        k = _add(acc, row, k, z[i] * eta)
+        k = _add(acc, rep, row, k, z[i] * eta)
     for i in range(4):
         for j in range(i, 4):
-            k = _add(acc, row, k, z[i] * z[j] * eta)
+            k = _add(acc, rep, row, k, z[i] * z[j] * eta)
     for i in range(4):
         for j in range(i, 4):
             zij = z[i] * z[j] * eta
             for l in range(j, 4):
-                k = _add(acc, row, k, zij * z[l])
-    k = _add(acc, row, k, e2)
+                k = _add(acc, rep, row, k, zij * z[l])
+    k = _add(acc, rep, row, k, e2)
     for i in range(4):
-        k = _add(acc, row, k, z[i] * e2)
+        k = _add(acc, rep, row, k, z[i] * e2)
     for i in range(4):
         for j in range(i, 4):
-            k = _add(acc, row, k, z[i] * z[j] * e2)
+            k = _add(acc, rep, row, k, z[i] * z[j] * e2)
     ax = abs(x) * eta
     sx = (1.0 if x > 0.0 else -1.0 if x < 0.0 else 0.0) * eta
-    k = _add(acc, row, k, ax * s)
-    k = _add(acc, row, k, ax * s * s)
-    k = _add(acc, row, k, sx * s)
-    k = _add(acc, row, k, sx * s * s)
+    k = _add(acc, rep, row, k, ax * s)
+    k = _add(acc, rep, row, k, ax * s * s)
+    k = _add(acc, rep, row, k, sx * s)
+    k = _add(acc, rep, row, k, sx * s * s)
     for u in (v, V):
-        k = _add(acc, row, k, sx * u)
-        k = _add(acc, row, k, sx * u * s)
-        k = _add(acc, row, k, sx * u * s * s)
-    k = _add(acc, row, k, ax)
+        k = _add(acc, rep, row, k, sx * u)
+        k = _add(acc, rep, row, k, sx * u * s)
+        k = _add(acc, rep, row, k, sx * u * s * s)
+    k = _add(acc, rep, row, k, ax)
     for u in (v, V):
-        k = _add(acc, row, k, ax * u)
-        k = _add(acc, row, k, ax * u * s)
+        k = _add(acc, rep, row, k, ax * u)
+        k = _add(acc, rep, row, k, ax * u * s)
     if kink:
         F = sig * s - kv * V
         for c in HINGE_KNOTS:
             r = max(F - c * a, 0.0) * eta
-            k = _add(acc, row, k, r)
+            k = _add(acc, rep, row, k, r)
             for i in range(4):
-                k = _add(acc, row, k, r * z[i])
+                k = _add(acc, rep, row, k, r * z[i])
 
 
 @njit(cache=True, nogil=True)
@@ -156,20 +156,23 @@ def gen_measure(x, v, V, xi, w, st, acc, first: bool, started: bool, decay: floa
 
     Unit j's innovation is :math:`\\eta_j = \\xi_j - e^{-\\Delta/\\tau}\\xi_j^{(0)}` (``decay``;
     ``st`` (4, N, P) holds (x, v, V, xi) at the previous point), with conditional mean 0 and
-    variance ``var``; the basis at the previous point times it goes to ``acc[1]`` while in the
-    first half of the window (``first``), else to ``acc[0]`` (:func:`gen_close` adds the first
-    half into the whole). Then the state is kept in ``st``. Live paths only (``w``).
+    variance ``var``; the basis at the previous point times it goes to ``acc[r, 1]`` while in the
+    first half of the window (``first``), else to ``acc[r, 0]`` (:func:`gen_close` adds the first
+    half into the whole), r the replica of the path (``acc`` (G, 2, columns): G replicas of P / G
+    consecutive paths). Then the state is kept in ``st``. Live paths only (``w``).
     """
     N, P = x.shape
+    per = P // acc.shape[0]
     row = 1 if first else 0
     if started:
         for p in range(P):
             if w[p] == 0.0:
                 continue
+            rep = p // per
             for j in range(N):
                 eta = xi[j, p] - decay * st[3, j, p]
-                _unit(acc, row, st[0, j, p], st[1, j, p], st[2, j, p], st[3, j, p], eta, eta * eta - var, kink,
-                      a, sig, kv)
+                _unit(acc, rep, row, st[0, j, p], st[1, j, p], st[2, j, p], st[3, j, p], eta, eta * eta - var,
+                      kink, a, sig, kv)
     # element loops, not slice copies (numba's shape-checked copy per dimension)
     for j in range(N):
         for p in range(P):
@@ -178,9 +181,11 @@ def gen_measure(x, v, V, xi, w, st, acc, first: bool, started: bool, decay: floa
 
 @njit(cache=True, nogil=True)
 def gen_close(acc) -> None:
-    """After the loop: the whole window's sums are the second half's plus the first half's."""
-    for k in range(acc.shape[1]):
-        acc[0, k] += acc[1, k]
+    """After the loop: the whole window's sums are the second half's plus the first half's, per
+    replica (``acc`` (G, 2, columns))."""
+    for r in range(acc.shape[0]):
+        for k in range(acc.shape[2]):
+            acc[r, 0, k] += acc[r, 1, k]
 
 
 class GeneratorControl(Control):

@@ -103,13 +103,19 @@ def n_state(N: int) -> int:
 
 @njit(cache=True, nogil=True)
 def _boundary(x, v, V, xi, w, n, g) -> None:
-    """g[k] = sum over units and live paths of the k-th end-of-window function at this state."""
+    """g[r, k] = sum over units and live paths of replica r of the k-th end-of-window function at
+    this state (``g`` (G, K): G replicas of P / G consecutive paths)."""
     N, P = x.shape
+    G = g.shape[0]
+    per = P // G
     D = min(N // 2, MG_DIST)
-    g[:] = 0.0
+    for r in range(G):
+        for k in range(g.shape[1]):
+            g[r, k] = 0.0
     for p in range(P):
         if w[p] == 0.0:
             continue
+        r = p // per
         for j in range(N):
             a0 = (x[j, p], v[j, p], V[j, p], xi[j, p])
             for d in range(D + 1):
@@ -119,8 +125,8 @@ def _boundary(x, v, V, xi, w, n, g) -> None:
                     a, b = BD_PAIRS[i]
                     val = a0[a] * b0[b] + a0[b] * b0[a] if a != b or d > 0 else a0[a] * a0[a]
                     # lag d > 0 visits each unordered pair of units once per j (twice for d = N/2)
-                    g[10 * d + i] += 0.5 * val if d > 0 else val
-            g[10 * (D + 1)] += abs(x[j, p]) ** n
+                    g[r, 10 * d + i] += 0.5 * val if d > 0 else val
+            g[r, 10 * (D + 1)] += abs(x[j, p]) ** n
 
 
 @njit(cache=True, nogil=True)
@@ -169,46 +175,52 @@ def mg_measure(x, v, V, xi, w, a, n, phi, xi0, acc, first: bool, started: bool, 
     :math:`\\eta_j = \\xi_j - e^{-\\Delta/\\tau}\\xi_j^{(0)}` (``decay``; ``xi0`` holds xi at the
     previous measured step), the exponentially weighted sum of the normals drawn since, with
     conditional mean 0 and variance ``var`` = :math:`(D/\\tau)(1 - e^{-2\\Delta/\\tau})` whatever
-    happened to x, v, V: acc[0, k] += sum over units and paths of phi[k] eta (k < K),
-    acc[0, K + d] += sum of :math:`\\eta_j\\eta_{j+d}/var - \\delta_{d0}` over live paths,
-    the same into acc[1] while in the first half of the window; the end-of-window functions'
-    change since the previous point goes to acc[:, K + D + 1:] (``g``, ``gprev`` scratch). Then
-    the basis is evaluated at the current state (:func:`mg_phi`) and xi is kept in ``xi0``.
-    Nothing is done per step.
+    happened to x, v, V: acc[r, 0, k] += sum over units and paths of replica r of phi[k] eta
+    (k < K), acc[r, 0, K + d] += sum of :math:`\\eta_j\\eta_{j+d}/var - \\delta_{d0}` over its live
+    paths, the same into acc[r, 1] while in the first half of the window; the end-of-window
+    functions' change since the previous point goes to acc[r, :, K + D + 1:] (``g``, ``gprev``
+    (G, K') scratch). ``acc`` is (G, 2, columns): the P paths are G replicas of P / G consecutive
+    paths. Then the basis is evaluated at the current state (:func:`mg_phi`) and xi is kept in
+    ``xi0``. Nothing is done per step.
     """
     K, N, P = phi.shape
+    G = acc.shape[0]
+    per = P // G
     D = min(N // 2, MG_DIST)
     o = K + D + 1
     _boundary(x, v, V, xi, w, n, g)
     if started:
-        for k in range(g.size):
-            acc[0, o + k] += g[k] - gprev[k]
-            if first:
-                acc[1, o + k] += g[k] - gprev[k]
-        for k in range(K):
-            s = 0.0
-            for j in range(N):
-                for p in range(P):
-                    s += phi[k, j, p] * (xi[j, p] - decay * xi0[j, p])
-            acc[0, k] += s
-            if first:
-                acc[1, k] += s
-        for d in range(D + 1):
-            s = 0.0
-            for p in range(P):
-                if w[p] == 0.0:
-                    continue
+        for r in range(G):
+            p0, p1 = r * per, (r + 1) * per
+            for k in range(g.shape[1]):
+                acc[r, 0, o + k] += g[r, k] - gprev[r, k]
+                if first:
+                    acc[r, 1, o + k] += g[r, k] - gprev[r, k]
+            for k in range(K):
+                s = 0.0
                 for j in range(N):
-                    l = (j + d) % N
-                    s += (xi[j, p] - decay * xi0[j, p]) * (xi[l, p] - decay * xi0[l, p]) / var
-                    if d == 0:
-                        s -= 1.0
-            acc[0, K + d] += s
-            if first:
-                acc[1, K + d] += s
+                    for p in range(p0, p1):
+                        s += phi[k, j, p] * (xi[j, p] - decay * xi0[j, p])
+                acc[r, 0, k] += s
+                if first:
+                    acc[r, 1, k] += s
+            for d in range(D + 1):
+                s = 0.0
+                for p in range(p0, p1):
+                    if w[p] == 0.0:
+                        continue
+                    for j in range(N):
+                        l = (j + d) % N
+                        s += (xi[j, p] - decay * xi0[j, p]) * (xi[l, p] - decay * xi0[l, p]) / var
+                        if d == 0:
+                            s -= 1.0
+                acc[r, 0, K + d] += s
+                if first:
+                    acc[r, 1, K + d] += s
     # element loops, not slice copies: those compile numba's shape-checked copy per dimension
-    for k in range(g.size):
-        gprev[k] = g[k]
+    for r in range(G):
+        for k in range(g.shape[1]):
+            gprev[r, k] = g[r, k]
     mg_phi(x, v, V, xi, w, a, n, phi)
     for j in range(N):
         for p in range(P):
