@@ -114,7 +114,7 @@ _T_RUN_MART_TOL = 1e-3
 #: over 6, and the fit's variance reduction depends on the simulated time, not on how it is split
 #: into replicas: docs/methods.md, "Generator controls").
 _GEN_RELVAR, _GEN_VR, _GEN_FIT = 2.4, 40.0, 4.0
-_GEN_MAX_REPLICAS, _GEN_TASK_PATHS = 4096, 48
+_GEN_MAX_REPLICAS, _GEN_TASK_PATHS = 8192, 48
 #: Time between the generator's points (:func:`montecarlo.simulate`'s ``generator_every``): as
 #: much variance removed as at every step, at less cost (docs/methods.md, "Generator controls").
 _GEN_EVERY = 0.02

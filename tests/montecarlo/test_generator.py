@@ -8,7 +8,7 @@ import math
 
 import numpy as np
 import pytest
-from scipy.stats import binom, chi2
+from scipy.stats import binom, chi2, norm
 
 from fpe_harvester import Harvester, solve
 from montecarlo import MonteCarlo, estimate, simulate
@@ -25,24 +25,29 @@ from montecarlo.harmonic import twin_expectations
 ])
 def test_generator_sums_have_mean_zero_and_leave_the_paths_unchanged(system: dict, step: str) -> None:
     # the kink, a ring with cubic and bi-Laplacian coupling, the joint step: the force never
-    # enters the martingale form, so every sum has mean 0 at any step (chi^2 of the z-scores of
-    # all of them, whole window and first half, against its 0.1 % tail)
+    # enters the martingale form, so every sum has mean 0 at any step. The sums are strongly
+    # correlated (neighbouring hinge knots, monomials sharing factors), so the sum of their squared
+    # z-scores is not chi^2-distributed: each z-score, whole window and first half, against the
+    # 0.1 % family-wise (Bonferroni) bound, on 800 one-path replicas in tasks of 24 (also several
+    # replicas per task), each long enough (t_run = 60) for its sums to be near normal
     h = Harvester.build(**system)
     dt = 0.02 if step == "joint" else 0.05
-    kw = dict(dt=dt, paths=2, replicas=160, t_burn=5.0, t_run=30.0, seed=9, step=step, richardson=True)
+    kw = dict(dt=dt, paths=1, replicas=800, group=24, t_burn=20.0, t_run=60.0, seed=9, step=step, richardson=True)
     e = simulate(h, controls=("martingale", "generator"), **kw)
     off = simulate(h, controls=("martingale",), **kw)
     assert np.array_equal(e.sums, off.sums) and np.array_equal(e.counts, off.counts)
-    assert e.ctl_names["generator"] == GENERATOR.sums(h)
+    names = e.ctl_names["generator"]
+    assert names == GENERATOR.sums(h)
+    bound = norm.isf(0.001 / (2 * 2 * len(names)))
     for half in (False, True):
         g = e.control_sums("generator", first_half=half)
-        z = np.array([g[n].mean() / (g[n].std(ddof=1) / math.sqrt(e.replicas)) for n in e.ctl_names["generator"]])
+        z = np.array([g[n].mean() / (g[n].std(ddof=1) / math.sqrt(e.replicas)) for n in names])
         assert np.all(np.isfinite(z))
-        assert float(z @ z) < chi2.ppf(0.999, z.size), dict(zip(e.ctl_names["generator"], z.round(2)))
+        assert np.abs(z).max() < bound, dict(zip(names, z.round(2)))
 
 
 def test_the_kink_gets_the_hinge_terms() -> None:
-    assert len(basis_names(kink=False)) == 65 and len(basis_names(kink=True)) == 80
+    assert len(basis_names(kink=False)) == 65 and len(basis_names(kink=True)) == 110
     assert GENERATOR.sums(Harvester.build(a=2.0, n=1.0)) == basis_names(kink=True)
     assert GENERATOR.sums(Harvester.build(a=2.0, n=1.25)) == basis_names(kink=False)
 
@@ -99,17 +104,17 @@ def test_generator_estimate_meets_the_exact_harmonic_values(N: int, k: float) ->
 
 
 def test_generator_set_needs_replicas_for_every_fold() -> None:
-    # 95 controls (martingale and generator sums of the kink): every fold's fit of 15/16 of the
-    # replicas must leave max(12, p) residual degrees of freedom, so 204 replicas at least
+    # 125 controls (martingale and generator sums of the kink): every fold's fit of 15/16 of the
+    # replicas must leave max(12, p) residual degrees of freedom, so 268 replicas at least
     h = Harvester.build(a=2.0, n=1.0)
-    e = simulate(h, dt=0.05, paths=2, replicas=204, t_burn=2.0, t_run=5.0, seed=4,
+    e = simulate(h, dt=0.05, paths=2, replicas=268, t_burn=2.0, t_run=5.0, seed=4,
                  controls=("martingale", "generator"))
     valid = np.ones(e.replicas, dtype=bool)
-    assert len(e.ctl_names["generator"]) + len(e.ctl_names["martingale"]) - 11 == 95  # bd_* are the boundary's
-    assert control_columns(e, valid, "martingale+generator", 204).C.shape == (204, 95)
-    assert control_columns(e, valid, "martingale+generator", 203) is None
-    assert control_columns(e, valid, "martingale+generator", 204).crossfit
-    assert not control_columns(e, valid, "martingale", 204).crossfit
+    assert len(e.ctl_names["generator"]) + len(e.ctl_names["martingale"]) - 11 == 125  # bd_* are the boundary's
+    assert control_columns(e, valid, "martingale+generator", 268).C.shape == (268, 125)
+    assert control_columns(e, valid, "martingale+generator", 267) is None
+    assert control_columns(e, valid, "martingale+generator", 268).crossfit
+    assert not control_columns(e, valid, "martingale", 268).crossfit
 
 
 def test_solver_adds_the_generator_where_it_pays() -> None:

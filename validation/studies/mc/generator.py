@@ -133,25 +133,32 @@ def _summary(z: list[float]) -> dict[str, Any]:
             "rms_z": float(np.sqrt(np.mean(a**2))), "max_abs_z": float(a.max()), "z": [round(float(v), 3) for v in z]}
 
 
-#: Coverage cases: label -> (system, reference label of the table or "exact", replicas, paths, t_run).
-COVERAGE = {
+#: Coverage cases: label -> (system, reference label of the table or "exact", replicas, paths, t_run,
+#: and optionally the run's settings that differ from the plan's: ``dt``, ``group`` (replicas per
+#: task), ``generator_every``).
+COVERAGE: dict[str, tuple[Any, ...]] = {
     "n3_a0.5_vs_fpe": ({"n": 3.0, "a": 0.5}, "fpe n = 3, a = 0.5", 256, 4, 400.0),
     "n1.5_a0.5_vs_fpe": ({"n": 1.5, "a": 0.5}, "fpe n = 1.5, a = 0.5", 256, 4, 400.0),
     "n1_a0.5_vs_fpe": ({"n": 1.0, "a": 0.5}, "fpe n = 1, a = 0.5", 256, 4, 400.0),
     "n1_a1_vs_fpe": ({"n": 1.0, "a": 1.0}, "fpe n = 1, a = 1", 256, 4, 400.0),
     "n1_a2_vs_long_run": ({"n": 1.0, "a": 2.0}, "mc n = 1, a = 2", 512, 2, 200.0),
+    # the solver's own layout at tol 1e-3: one-path replicas in tasks of 48, generator points every
+    # 0.02, coarse step 0.01
+    "n1_a2_solver_layout": ({"n": 1.0, "a": 2.0}, "mc n = 1, a = 2", 1536, 1, 400.0,
+                            {"dt": 0.01, "group": 48, "generator_every": 0.02}),
     "harmonic_unit_vs_exact": ({"a": 0.5}, "exact", 256, 2, 100.0),
     "harmonic_ring_vs_exact": ({"a": 0.5, "N": 3, "k": -0.2}, "exact", 256, 2, 100.0),
 }
 
 
 def _coverage_case(system: dict[str, Any], ref_label: str, replicas: int, paths: int, t_run: float,
-                   seeds: int) -> dict[str, Any]:
+                   seeds: int, settings: dict[str, Any] | None = None) -> dict[str, Any]:
     """z-scores over seeds of the estimate's own choice and of the generator set forced."""
     h = Harvester.build(**system)
     harmonic = ref_label == "exact"
     plan = MonteCarlo(seed=1, tol=1e-3, extrapolate=False).plan(h)
-    dt = 0.2 if harmonic else plan.dt
+    settings = dict(settings or {})
+    dt = settings.pop("dt", 0.2 if harmonic else plan.dt)
     if harmonic:
         exact = twin_expectations(h, dt)  # the frozen step's own discrete law: no time-step bias
         ref, ref_err = exact["V2"] / exact["vxi"], 0.0
@@ -163,7 +170,7 @@ def _coverage_case(system: dict[str, Any], ref_label: str, replicas: int, paths:
     for s in range(seeds):
         e = simulate(h, dt=dt, paths=paths, replicas=replicas, t_burn=30.0 if harmonic else plan.t_burn, t_run=t_run,
                      seed=7000 + s, twin=None if harmonic else plan.twin, start="twin", richardson=not harmonic,
-                     step="frozen", controls=("martingale", "generator"))
+                     step="frozen", controls=("martingale", "generator"), **settings)
         forced = "martingale+boundary+generator" if harmonic else GENERATOR_SET
         for label, which in (("auto", None), ("forced", forced)):
             try:
@@ -177,7 +184,7 @@ def _coverage_case(system: dict[str, Any], ref_label: str, replicas: int, paths:
                 chosen.append(est.controls)
                 vr.append(est.reduction.get("eta"))
     return {"reference_eta": ref, "reference_err": ref_err, "replicas": replicas, "paths": paths, "t_run": t_run,
-            "auto": _summary(z["auto"]), "forced": _summary(z["forced"]),
+            "dt": dt, **settings, "auto": _summary(z["auto"]), "forced": _summary(z["forced"]),
             "auto_sets": {c: chosen.count(c) for c in set(chosen)},
             "median_vr_eta": float(np.median([v for v in vr if v]))}
 
@@ -193,9 +200,9 @@ def generator_coverage(quick: bool, only: tuple[str, ...] = ()) -> dict[str, Any
         raise ParameterError(f"case must be among {sorted(COVERAGE)}, got {sorted(unknown)}")
     cases = {k: v for k, v in COVERAGE.items() if (not quick or "a2" not in k) and (not only or k in only)}
     out: dict[str, Any] = {"nominal": {"within_1": 0.6827, "within_2": 0.9545}}
-    for label, (system, ref, replicas, paths, t_run) in cases.items():
+    for label, (system, ref, replicas, paths, t_run, *settings) in cases.items():
         t0 = time.perf_counter()
-        out[label] = {**_coverage_case(system, ref, replicas, paths, t_run, seeds),
+        out[label] = {**_coverage_case(system, ref, replicas, paths, t_run, seeds, *settings),
                       "bench_wall_s": time.perf_counter() - t0}
     return out
 
