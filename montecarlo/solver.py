@@ -258,8 +258,9 @@ class MonteCarlo:
         Let the solver add the generator controls (:mod:`montecarlo.controls.generator`: the
         martingale form of the generator applied to a degree-4 basis, cross-fitted) where the
         first batch shows they pay: a single unit whose eta is noisy per unit of path time (the
-        strong kink), in a run long enough for their fit; the run then restarts with them and
-        fewer paths per replica (``info["plan_notes"]["generator"]`` says why or why not).
+        strong kink), in a run long enough for their fit; the run then restarts with them, with
+        replicas of one path (or a few) run as several whole replicas per task of about 48 paths
+        (``info["plan_notes"]["generator"]`` says why or why not).
         Needs ``martingale`` and ``control``. Default True.
     extrapolate : bool or None
         True, with ``richardson``: run a third level at ``2 dt`` and report the Richardson
@@ -583,7 +584,7 @@ class MonteCarlo:
                         f"{controls} controls ({_GEN_FIT * controls:.0f} replicas of {paths} paths)")
         first = min(self.max_replicas, max(self.min_replicas, round(0.5 * need / paths)))
         why = f"used: plain relative variance of eta {relvar:.3g} per unit path time; about {need:.3g} paths, " \
-              f"{paths} per replica"
+              f"{paths} per replica, {group} replicas per task"
         dt = plan.dt
         if (self.dt is None and self.richardson and onsite_kind(h) == KIND_KINK and relvar >= _STRONG_KINK_RELVAR
                 and self.tol < _STRONG_KINK_FINER_TOL and dt / 2 >= _DT_MIN):

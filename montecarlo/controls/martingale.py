@@ -63,7 +63,7 @@ if TYPE_CHECKING:
     from ..ensemble import Ensemble
 
 __all__ = ["MARTINGALE", "BOUNDARY", "MartingaleControl", "BoundaryControl", "BOUNDARY_TAIL", "MG_DIST",
-           "NL_NAMES", "basis_names", "lags", "n_state", "mg_measure", "stationary_window",
+           "NL_NAMES", "basis_names", "lags", "n_state", "mg_measure", "mg_measure_groups", "stationary_window",
            "poisson_controls"]
 
 #: Tail probability of the test (Hotelling's T^2 against chi^2) that the end-of-window terms
@@ -103,6 +103,28 @@ def n_state(N: int) -> int:
 
 @njit(cache=True, nogil=True)
 def _boundary(x, v, V, xi, w, n, g) -> None:
+    """g[k] = sum over units and live paths of the k-th end-of-window function at this state."""
+    N, P = x.shape
+    D = min(N // 2, MG_DIST)
+    g[:] = 0.0
+    for p in range(P):
+        if w[p] == 0.0:
+            continue
+        for j in range(N):
+            a0 = (x[j, p], v[j, p], V[j, p], xi[j, p])
+            for d in range(D + 1):
+                l = (j + d) % N
+                b0 = (x[l, p], v[l, p], V[l, p], xi[l, p])
+                for i in range(len(BD_PAIRS)):
+                    a, b = BD_PAIRS[i]
+                    val = a0[a] * b0[b] + a0[b] * b0[a] if a != b or d > 0 else a0[a] * a0[a]
+                    # lag d > 0 visits each unordered pair of units once per j (twice for d = N/2)
+                    g[10 * d + i] += 0.5 * val if d > 0 else val
+            g[10 * (D + 1)] += abs(x[j, p]) ** n
+
+
+@njit(cache=True, nogil=True)
+def _boundary_groups(x, v, V, xi, w, n, g) -> None:
     """g[r, k] = sum over units and live paths of replica r of the k-th end-of-window function at
     this state (``g`` (G, K): G replicas of P / G consecutive paths)."""
     N, P = x.shape
@@ -175,12 +197,68 @@ def mg_measure(x, v, V, xi, w, a, n, phi, xi0, acc, first: bool, started: bool, 
     :math:`\\eta_j = \\xi_j - e^{-\\Delta/\\tau}\\xi_j^{(0)}` (``decay``; ``xi0`` holds xi at the
     previous measured step), the exponentially weighted sum of the normals drawn since, with
     conditional mean 0 and variance ``var`` = :math:`(D/\\tau)(1 - e^{-2\\Delta/\\tau})` whatever
+    happened to x, v, V: acc[0, k] += sum over units and paths of phi[k] eta (k < K),
+    acc[0, K + d] += sum of :math:`\\eta_j\\eta_{j+d}/var - \\delta_{d0}` over live paths,
+    the same into acc[1] while in the first half of the window; the end-of-window functions'
+    change since the previous point goes to acc[:, K + D + 1:] (``g``, ``gprev`` scratch). Then
+    the basis is evaluated at the current state (:func:`mg_phi`) and xi is kept in ``xi0``.
+    Nothing is done per step.
+    """
+    K, N, P = phi.shape
+    D = min(N // 2, MG_DIST)
+    o = K + D + 1
+    _boundary(x, v, V, xi, w, n, g)
+    if started:
+        for k in range(g.size):
+            acc[0, o + k] += g[k] - gprev[k]
+            if first:
+                acc[1, o + k] += g[k] - gprev[k]
+        for k in range(K):
+            s = 0.0
+            for j in range(N):
+                for p in range(P):
+                    s += phi[k, j, p] * (xi[j, p] - decay * xi0[j, p])
+            acc[0, k] += s
+            if first:
+                acc[1, k] += s
+        for d in range(D + 1):
+            s = 0.0
+            for p in range(P):
+                if w[p] == 0.0:
+                    continue
+                for j in range(N):
+                    l = (j + d) % N
+                    s += (xi[j, p] - decay * xi0[j, p]) * (xi[l, p] - decay * xi0[l, p]) / var
+                    if d == 0:
+                        s -= 1.0
+            acc[0, K + d] += s
+            if first:
+                acc[1, K + d] += s
+    # element loops, not slice copies: those compile numba's shape-checked copy per dimension
+    for k in range(g.size):
+        gprev[k] = g[k]
+    mg_phi(x, v, V, xi, w, a, n, phi)
+    for j in range(N):
+        for p in range(P):
+            xi0[j, p] = xi[j, p]
+
+
+@njit(cache=True, nogil=True)
+def mg_measure_groups(x, v, V, xi, w, a, n, phi, xi0, acc, first: bool, started: bool, decay: float,
+               var: float, g: np.ndarray, gprev: np.ndarray) -> None:
+    """At a measured step: close the interval since the previous one (unless this is the first)
+    and start the next.
+
+    The interval's noise of unit j is the innovation of its xi,
+    :math:`\\eta_j = \\xi_j - e^{-\\Delta/\\tau}\\xi_j^{(0)}` (``decay``; ``xi0`` holds xi at the
+    previous measured step), the exponentially weighted sum of the normals drawn since, with
+    conditional mean 0 and variance ``var`` = :math:`(D/\\tau)(1 - e^{-2\\Delta/\\tau})` whatever
     happened to x, v, V: acc[r, 0, k] += sum over units and paths of replica r of phi[k] eta
     (k < K), acc[r, 0, K + d] += sum of :math:`\\eta_j\\eta_{j+d}/var - \\delta_{d0}` over its live
     paths, the same into acc[r, 1] while in the first half of the window; the end-of-window
     functions' change since the previous point goes to acc[r, :, K + D + 1:] (``g``, ``gprev``
     (G, K') scratch). ``acc`` is (G, 2, columns): the P paths are G replicas of P / G consecutive
-    paths. Then the basis is evaluated at the current state (:func:`mg_phi`) and xi is kept in
+    paths (:func:`mg_measure` is the same for one replica). Then the basis is evaluated at the current state (:func:`mg_phi`) and xi is kept in
     ``xi0``. Nothing is done per step.
     """
     K, N, P = phi.shape
@@ -188,7 +266,7 @@ def mg_measure(x, v, V, xi, w, a, n, phi, xi0, acc, first: bool, started: bool, 
     per = P // G
     D = min(N // 2, MG_DIST)
     o = K + D + 1
-    _boundary(x, v, V, xi, w, n, g)
+    _boundary_groups(x, v, V, xi, w, n, g)
     if started:
         for r in range(G):
             p0, p1 = r * per, (r + 1) * per

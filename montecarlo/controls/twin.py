@@ -21,7 +21,7 @@ from .base import Columns, Control
 if TYPE_CHECKING:
     from ..ensemble import Ensemble
 
-__all__ = ["TWIN_MOMENTS", "TWIN", "TwinControl", "measure_twin"]
+__all__ = ["TWIN_MOMENTS", "TWIN", "TwinControl", "measure_twin", "measure_twin_groups"]
 
 #: The twin's measured moments (the ``t_`` entries of :data:`montecarlo.layout.MOMENTS`):
 #: second moments, then fourth moments and :math:`|x|^n` (n the system's exponent).
@@ -48,10 +48,51 @@ TWIN = TwinControl()
 
 
 @njit(cache=True, nogil=True)
-def measure_twin(x, v, V, xi, w, cf, acc, row, nn, pvx) -> None:
+def measure_twin(x, v, V, xi, w, cf, acc, nn, pvx) -> None:
+    """Add the twin's moments (:data:`TWIN_MOMENTS`, ``nn`` the system's n) to their slots of
+    ``acc`` (``t_*`` of :data:`montecarlo.layout.MOMENTS`).
+
+    Second moments and a few fourth moments and :math:`|x|^n`: the twin is Gaussian, so
+    each has an exactly known mean (:func:`montecarlo.harmonic.twin_expectations`), and the
+    higher ones follow the nonlinear system's amplitude-dependent response better.
+    """
+    N, P = x.shape
+    half = cf[CF_XI_HALF]
+    s = np.zeros(11)
+    for j in range(N):
+        for p in range(P):
+            wp = w[p]
+            xx, vv, VV = x[j, p] * x[j, p], v[j, p] * v[j, p], V[j, p] * V[j, p]
+            vxi = v[j, p] * xi[j, p]
+            ax = abs(x[j, p])
+            s[0] += wp * VV
+            s[1] += wp * v[j, p] * V[j, p]
+            s[2] += wp * vv
+            s[3] += wp * xx
+            s[4] += wp * vxi
+            s[5] += wp * xx * xx
+            s[6] += wp * xx * VV
+            s[7] += wp * xx * vv
+            s[8] += wp * (ax if nn == 1.0 else ax**nn)
+            s[9] += wp * VV * vv
+            s[10] += wp * VV * vxi
+    if cf[CF_PVX] == 1.0:
+        s[4] = 0.0
+        for j in range(N):
+            for p in range(P):
+                s[4] += w[p] * pvx[j, p]
+    s[4] *= half
+    s[10] *= half
+    for i in range(11):
+        acc[M_TWIN + i] += s[i]
+
+
+@njit(cache=True, nogil=True)
+def measure_twin_groups(x, v, V, xi, w, cf, acc, row, nn, pvx) -> None:
     """Add the twin's moments (:data:`TWIN_MOMENTS`, ``nn`` the system's n) to their slots of
     ``acc[g, row]`` (``t_*`` of :data:`montecarlo.layout.MOMENTS`), g the replica of the path
-    (``acc`` (G, rows, moments): G replicas of P / G consecutive paths).
+    (``acc`` (G, rows, moments): G replicas of P / G consecutive paths; :func:`measure_twin` is the
+    same for one replica).
 
     Second moments and a few fourth moments and :math:`|x|^n`: the twin is Gaussian, so
     each has an exactly known mean (:func:`montecarlo.harmonic.twin_expectations`), and the
