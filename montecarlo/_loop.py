@@ -19,7 +19,7 @@ from numba import njit
 from ._kernels import _check_escape, _clamp_start, _kick_force, _live, _measure, _start, measure_groups
 from ._kink import N_TAYLOR
 from .controls.generator import gen_close, gen_measure
-from .controls.martingale import MG_DIST, mg_measure, mg_measure_groups, n_state
+from .controls.martingale import mg_measure, mg_measure_groups, n_state
 from .controls.twin import measure_twin, measure_twin_groups
 from .layout import (C_RING_STEPS, CF_H, CF_XI_DECAY, KIND_LINEAR, N_COUNTERS, N_MOM, P_A, P_KV, P_N, P_SIGMA,
                      P_THRESHOLD, P_XI_VAR, ROWS)
@@ -63,9 +63,10 @@ class Setup(NamedTuple):
     n_ctl : int
         Columns of the control accumulator ``Sums.ctl`` (the sums of every accumulated control,
         :class:`montecarlo.controls.base.Control`; 0 for none).
-    mg_at, n_mg : int
+    mg_at, n_mg, bd_at, n_bd : int
         The martingale sums' first column in it and their number
-        (:func:`montecarlo.controls.martingale.basis_names`; 0 without them).
+        (:func:`montecarlo.controls.martingale.basis_names`; 0 without them), and the same for
+        the end-of-window terms (:func:`~montecarlo.controls.martingale.boundary_names`).
     gen_at, n_gen, gen_kink, gen_every : int, int, bool, int
         The generator sums' first column and number, whether they carry the kink's hinge terms,
         and the fine steps between their points (:mod:`montecarlo.controls.generator`).
@@ -93,6 +94,8 @@ class Setup(NamedTuple):
     n_ctl: int = 0
     mg_at: int = 0
     n_mg: int = 0
+    bd_at: int = 0
+    n_bd: int = 0
     gen_at: int = 0
     n_gen: int = 0
     gen_kink: bool = False
@@ -192,13 +195,13 @@ def _twin_replicas(G, x, v, V, xi, w, cf, sums, row, nn, pvx) -> None:
 
 
 @njit(cache=True, nogil=True, inline="always")
-def _mg_replicas(G, x, v, V, xi, w, a, n, phi, xi0, acc, first, started, decay, var, g_bd, gprev_bd) -> None:
-    """The martingale sums into ``acc[g]`` per replica, with their end-of-window scratch ``g_bd``,
-    ``gprev_bd`` (G, terms) (as :func:`_measure_replicas`)."""
+def _mg_replicas(G, x, v, V, xi, w, a, n, phi, xi0, acc, bd, first, started, decay, var, g_bd, gprev_bd) -> None:
+    """The martingale sums into ``acc[g]`` and the end-of-window terms into ``bd[g]`` per
+    replica, with their scratch ``g_bd``, ``gprev_bd`` (G, terms) (as :func:`_measure_replicas`)."""
     if G == 1:
-        mg_measure(x, v, V, xi, w, a, n, phi, xi0, acc[0], first, started, decay, var, g_bd[0], gprev_bd[0])
+        mg_measure(x, v, V, xi, w, a, n, phi, xi0, acc[0], bd[0], first, started, decay, var, g_bd[0], gprev_bd[0])
     else:
-        mg_measure_groups(x, v, V, xi, w, a, n, phi, xi0, acc, first, started, decay, var, g_bd, gprev_bd)
+        mg_measure_groups(x, v, V, xi, w, a, n, phi, xi0, acc, bd, first, started, decay, var, g_bd, gprev_bd)
 
 
 @njit(cache=True, nogil=True)
@@ -222,7 +225,7 @@ def _run(tag, gen, s, out) -> None:
     third = s.third and coupled
     cf_f, cf_c, cf_cc, cf_t, pp, pp_t = s.cf_f, s.cf_c, s.cf_cc, s.cf_t, s.pp, s.pp_t
     sums, counts, counters, esc = out.sums, out.counts, out.counters, out.esc_time
-    mg = out.ctl[:, :, s.mg_at:s.mg_at + s.n_mg]
+    mg, bd = out.ctl[:, :, s.mg_at:s.mg_at + s.n_mg], out.ctl[:, :, s.bd_at:s.bd_at + s.n_bd]
     thr = pp[P_THRESHOLD]
     # every level's arrays (x, v, V, xi, F, pvx; stuck) allocated here one by one: returned in
     # tuples by a helper, they made the loop copy about twice the array fields before every
@@ -245,10 +248,9 @@ def _run(tag, gen, s, out) -> None:
     ec, ec0, ecc = np.zeros((nz, N, P)), np.zeros((nz, N, P)), np.zeros((nz, N, P))
     w = np.ones(P)
     esc[:] = -1.0
-    use_mg = s.n_mg > 0
-    phi = np.zeros((n_state(N) if use_mg else 0, N, P))
-    n_bd = s.n_mg - n_state(N) - min(N // 2, MG_DIST) - 1 if use_mg else 0
-    g_bd, gprev_bd = np.zeros((G, max(n_bd, 0))), np.zeros((G, max(n_bd, 0)))
+    use_mg = s.n_mg > 0 or s.n_bd > 0
+    phi = np.zeros((n_state(N) if s.n_mg > 0 else 0, N, P))
+    g_bd, gprev_bd = np.zeros((G, s.n_bd)), np.zeros((G, s.n_bd))
     xi0 = np.zeros((N, P))
     mg_points = 0  # martingale points taken (an int: a bool flag compiled mg_measure twice)
     n_upd = 0  # xi updates of the fine level since the last martingale point
@@ -304,7 +306,7 @@ def _run(tag, gen, s, out) -> None:
                 _measure_replicas(G, xf, vf, Vf, xif, sf, Ff, w, cf_f, pp, kind, sums, 0, counts, pf)
                 if use_mg and sub == 0:
                     dec = cf_f[CF_XI_DECAY] ** n_upd
-                    _mg_replicas(G, xf, vf, Vf, xif, w, pp[P_A], pp[P_N], phi, xi0, mg, first, mg_points > 0, dec,
+                    _mg_replicas(G, xf, vf, Vf, xif, w, pp[P_A], pp[P_N], phi, xi0, mg, bd, first, mg_points > 0, dec,
                                  pp[P_XI_VAR] * (1.0 - dec * dec), g_bd, gprev_bd)
                     mg_points += 1
                     n_upd = 0

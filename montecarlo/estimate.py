@@ -244,7 +244,7 @@ def _estimate(e: Ensemble, h: Harvester, order: float | None, control: bool | No
         raise ParameterError(
             f"control=True needs an ensemble with control variates ({controls or 'any set'}): a twin "
             f"started from its stationary law (start='twin') or accumulated controls "
-            f"(controls=('martingale',)), no escaped path and enough replicas; got twin {e.twin_kappa}, "
+            f"(controls=('martingale', 'boundary')), no escaped path and enough replicas; got twin {e.twin_kappa}, "
             f"start {e.start!r}, accumulated {tuple(e.ctl_names)}, escaped fraction "
             f"{e.escaped_fraction():g}, {n} replicas")
     use = bool(sets)

@@ -120,9 +120,10 @@ def simulate(
     controls : tuple of str
         Controls whose sums the path loop accumulates on level 0 (names of
         :data:`montecarlo.controls.CONTROLS` that are ``accumulated``; :attr:`Ensemble.ctl`), e.g.
-        ``("martingale",)``: sums of basis functions of the state times the noise drawn after it,
-        with mean exactly 0 (:mod:`montecarlo.controls.martingale`). The simulated paths are the
-        same with or without them. The twin is asked for by ``twin``.
+        ``("martingale", "boundary")``: sums of basis functions of the state times the noise drawn
+        after it, with mean exactly 0, and the end-of-window terms, with mean 0 for a stationary
+        window (:mod:`montecarlo.controls.martingale`). The simulated paths are the same with or
+        without them. The twin is asked for by ``twin``.
     generator_every : float
         Time between the points of the generator control (``"generator"`` in ``controls``,
         :mod:`montecarlo.controls.generator`), >= 0, rounded to whole steps of level 0 (at least

@@ -46,7 +46,7 @@ from fpe_harvester.wide import SMALLEST_NORMAL
 
 from .coefficients import onsite_kind
 from .controls.generator import GENERATOR
-from .controls.martingale import MARTINGALE
+from .controls.martingale import BOUNDARY, MARTINGALE
 from .controls.twin import TWIN_MOMENTS
 from .ensemble import Ensemble
 from .estimate import Estimate, estimate
@@ -97,6 +97,11 @@ _RUN_PER_BURN = 3.0
 #: g(Y_start) - g(Y_end), whose share of the variance falls like 1/t_run; the longer run pays
 #: only when many replicas are needed anyway, so it applies at tol <= _T_RUN_MART_TOL (the
 #: measurements: docs/methods.md, "Why the settings are what they are").
+#: A batch is sized for a relative error of ``_AIM * tol``: near 1 so that the run does not
+#: overshoot tol (at 0.9 it ran about 20 % more replicas than tol asked for), below it so that
+#: the run seldom needs one more, small batch for the last percent.
+_AIM = 0.97
+
 _T_RUN, _T_RUN_MART = 100.0, 400.0
 _T_RUN_MART_TOL = 1e-3
 
@@ -114,7 +119,7 @@ _T_RUN_MART_TOL = 1e-3
 #: over 6, and the fit's variance reduction depends on the simulated time, not on how it is split
 #: into replicas: docs/methods.md, "Generator controls").
 _GEN_RELVAR, _GEN_VR, _GEN_FIT = 2.4, 40.0, 4.0
-_GEN_MAX_REPLICAS, _GEN_TASK_PATHS = 8192, 48
+_GEN_MAX_REPLICAS, _GEN_TASK_PATHS = 8192, 192
 #: Time between the generator's points (:func:`montecarlo.simulate`'s ``generator_every``): as
 #: much variance removed as at every step, at less cost (docs/methods.md, "Generator controls").
 _GEN_EVERY = 0.02
@@ -125,6 +130,8 @@ _GEN_EVERY = 0.02
 #: restart there anyway, after a batch of hundreds of replicas (docs/methods.md, "Generator
 #: controls").
 _STRONG_KINK_RELVAR, _STRONG_KINK_FINER_TOL = 20.0, 1.8e-3
+#: One-path replicas of the strong kink's first batch (:meth:`MonteCarlo._first_batch`).
+_PILOT_REPLICAS = 128
 
 #: A confined system's escape threshold is at least this many natural amplitudes
 #: (:func:`~montecarlo.harmonic.natural_amplitude`), and at least 100.
@@ -519,14 +526,59 @@ class MonteCarlo:
     def _batch(self) -> int:
         return self.batch or self.threads or default_threads()
 
+    def _more_replicas(self, est: Estimate, R: int) -> int:
+        """Replicas to add to the ``R`` of ``est`` for an expected relative error of eta of
+        ``_AIM * tol`` at the end.
+
+        The standard error falls like 1/sqrt(R). The halving policy's bias estimate is a mean
+        over the replicas too: its square overestimates the squared bias by its variance, which
+        falls like 1/R, so the part that stays is bias^2 - bias_se^2 (at least 0), and bias_se^2
+        falls with the standard error's square (taken whole as staying, a fluctuation of two of
+        its standard errors doubled the run and then overshot tol: docs/methods.md, "Generator
+        controls"). An extrapolated value's systematic part, a bound, stays whole."""
+        eta = abs(est.mean["eta"])
+        falls = (est.se["eta"] / eta) ** 2
+        if est.extrapolated:
+            stays = (est.systematic("eta") / eta) ** 2
+        else:
+            bias, bias_se = est.bias["eta"] / eta, est.bias_se["eta"] / eta
+            stays = max(bias * bias - bias_se * bias_se, 0.0)
+            falls += bias_se * bias_se
+        budget = (_AIM * self.tol) ** 2 - stays
+        return math.ceil(R * falls / (budget if budget > 0 else (_AIM * self.tol) ** 2)) - R
+
+    def _tasks(self, replicas: int, group: int) -> tuple[int, int]:
+        """Replicas and replicas per task for a batch of about ``replicas`` in tasks of at most
+        ``group`` replicas (``group`` > 1): whole rounds of equal tasks on the threads, since a last
+        round with idle threads costs a whole task's time; fewer replicas than asked for by less
+        than one per task."""
+        if group <= 1:
+            return replicas, group
+        threads = self.threads or default_threads()
+        tasks = min(replicas, threads * -(-replicas // (threads * group)))
+        per_task = replicas // tasks
+        return tasks * per_task, per_task
+
+    def _controls(self, plan: RunPlan) -> tuple[str, ...]:
+        """The controls the path loop accumulates: the martingale sums and the end-of-window
+        terms; with the generator's sums, those and the end-of-window terms only (the generator's
+        functions hold the martingale's: at n = 1, a = 2 the set without the martingale sums
+        reduces eta's variance as much, and the path loop costs 4 % less; docs/methods.md,
+        "Generator controls")."""
+        if not self.martingale:
+            return ()
+        if plan.generator:
+            return (BOUNDARY.name, GENERATOR.name)
+        return (MARTINGALE.name, BOUNDARY.name)
+
     def _run(self, h: Harvester, plan: RunPlan, replicas: int, first: int) -> Ensemble:
+        replicas, group = self._tasks(replicas, plan.group)
         return simulate(h, dt=plan.dt, paths=plan.paths, replicas=replicas, t_burn=plan.t_burn,
                         t_run=plan.t_run, seed=self.seed, richardson=self.richardson,
                         threshold=self.threshold(h), threads=self.threads, first_replica=first,
                         twin=plan.twin, start=plan.start, step=self.step,
-                        controls=((MARTINGALE.name,) + ((GENERATOR.name,) if plan.generator else ())
-                                  if self.martingale else ()),
-                        third_level=self.extrapolates(h), generator_every=_GEN_EVERY, group=plan.group)
+                        controls=self._controls(plan),
+                        third_level=self.extrapolates(h), generator_every=_GEN_EVERY, group=group)
 
     def _restart_reason(self, h: Harvester, plan: RunPlan, est: Estimate) -> tuple[str, RunPlan] | None:
         """After a batch: a finer step or a longer burn-in, if the data ask for one.
@@ -556,6 +608,20 @@ class MonteCarlo:
                                                  group=_group(paths) if plan.generator else 1)
         return None
 
+    def _first_batch(self, h: Harvester, plan: RunPlan) -> tuple[RunPlan, int]:
+        """The first batch: ``plan`` and ``min_replicas``, or where the strong kink's restart with
+        the generator controls at half the step is likely (a single unit with the kink treatment,
+        tol < ``_STRONG_KINK_FINER_TOL``, automatic paths) ``_PILOT_REPLICAS`` one-path replicas in
+        tasks on the threads. That batch only measures eta's relative variance for the plan that
+        follows and is discarded either way: one-path replicas measure it at a ``plan.paths``-th
+        of the cost per replica, and four times as many of them more precisely (an overestimate
+        makes the generator's first batch overshoot tol; docs/methods.md, "Generator controls")."""
+        if not (self.generator and self.martingale and self.control and self.paths is None and h.N == 1
+                and onsite_kind(h) == KIND_KINK and self.tol < _STRONG_KINK_FINER_TOL and plan.paths > 1):
+            return plan, self.min_replicas
+        replicas = max(self.min_replicas, _PILOT_REPLICAS)
+        return dataclasses.replace(plan, paths=1, group=-(-replicas // (self.threads or default_threads()))), replicas
+
     def _generator_plan(self, h: Harvester, plan: RunPlan, ens: Ensemble, est: Estimate) -> tuple[RunPlan, int]:
         """After the first batch: the plan with the generator controls and the paths per replica
         for their fit, and the replicas of its first batch (half those it is expected to need),
@@ -575,8 +641,8 @@ class MonteCarlo:
         if relvar < _GEN_RELVAR:
             return note(f"not used: plain relative variance of eta {relvar:.3g} per unit path time, below "
                         f"{_GEN_RELVAR:g}")
-        controls = len(GENERATOR.sums(h)) + len(MARTINGALE.sums(h)) + (len(TWIN_MOMENTS) if plan.twin else 0)
-        need = relvar / (_GEN_VR * (0.9 * self.tol) ** 2 * plan.t_run)  # paths to reach tol with them
+        controls = len(GENERATOR.sums(h)) + len(BOUNDARY.sums(h)) + (len(TWIN_MOMENTS) if plan.twin else 0)
+        need = relvar / (_GEN_VR * (_AIM * self.tol) ** 2 * plan.t_run)  # paths to reach tol with them
         paths = self.paths or max(1, min(plan.paths, math.ceil(need / _GEN_MAX_REPLICAS)))
         group = _group(paths)
         if need / paths < _GEN_FIT * controls:
@@ -607,13 +673,16 @@ class MonteCarlo:
                    file=sys.stderr, disable=self.progress is False,
                    delay=0.0 if self.progress else 2.0, leave=False)
         with bar:
-            ens = self._run(h, plan, self.min_replicas, 0)
+            pilot, replicas = self._first_batch(h, plan)
+            measured_only = pilot is not plan
+            ens = self._run(h, pilot, replicas, 0)
             bar.update(ens.replicas)
             est = _estimate(ens, h)
             plan, first = self._generator_plan(h, plan, ens, est)
-            if first:
-                restarts.append("generator")
-                ens = self._run(h, plan, first, 0)
+            if first or measured_only:
+                # the generator's plan, or the pilot's one-path replicas were only a measurement
+                restarts.append("generator" if first else "pilot")
+                ens = self._run(h, plan, first or self.min_replicas, 0)
                 bar.update(ens.replicas)
                 est = _estimate(ens, h)
             met = False
@@ -647,9 +716,7 @@ class MonteCarlo:
                     break
                 elapsed = time.perf_counter() - start
                 per_rep = max(ens.wall_time, 1e-9) / R
-                budget = (0.9 * self.tol) ** 2 - (systematic / est.mean["eta"]) ** 2
-                target = 0.9 * self.tol if budget <= 0 else math.sqrt(budget)
-                want = math.ceil(R * (stat_rel / target) ** 2) - R
+                want = self._more_replicas(est, R)
                 batch = int(min(max(want, granule), R, self.max_replicas - R))
                 batch = min(batch, int((self.max_time - elapsed) / per_rep))
                 if batch < 1:

@@ -41,8 +41,11 @@ products :math:`a_j b_{j+d} + b_j a_{j+d}` of (x, v, V, xi), d = 0 .. D, and the
 :math:`|x_j|^n`, summed over units (accumulated as the telescoping sum of G's changes between
 measured points). They are the Poisson solution's boundary term, which the martingale sums
 leave; their mean is 0 only for a stationary window (exactly so for a harmonic ring started
-from its own law, up to the burn-in's remaining transient otherwise), so the estimator uses them
-only as a separate candidate set (:data:`montecarlo.controls.CONTROL_SETS`).
+from its own law, up to the burn-in's remaining transient otherwise), so they are a control of
+their own, :data:`BOUNDARY` (``simulate(..., controls=("martingale", "boundary"))``), admitted
+only where :func:`stationary_window` finds their means consistent with 0. The kernel
+(:func:`mg_measure`) accumulates either part alone: the solver's runs with the generator's sums
+(which hold the martingale's functions) take the end-of-window terms without the martingale sums.
 """
 
 from __future__ import annotations
@@ -63,7 +66,7 @@ if TYPE_CHECKING:
     from ..ensemble import Ensemble
 
 __all__ = ["MARTINGALE", "BOUNDARY", "MartingaleControl", "BoundaryControl", "BOUNDARY_TAIL", "MG_DIST",
-           "NL_NAMES", "basis_names", "lags", "n_state", "mg_measure", "mg_measure_groups", "stationary_window",
+           "NL_NAMES", "basis_names", "boundary_names", "lags", "n_state", "mg_measure", "mg_measure_groups", "stationary_window",
            "poisson_controls"]
 
 #: Tail probability of the test (Hotelling's T^2 against chi^2) that the end-of-window terms
@@ -87,12 +90,16 @@ def lags(N: int) -> int:
 
 def basis_names(N: int) -> tuple[str, ...]:
     """Names of the accumulated martingale controls for N units, in the kernel's order:
-    ``lin_<var>_<d>``, ``nl_<term>``, ``he_<d>``, then the end-of-window terms ``bd_<ab>_<d>``
-    and ``bd_U``."""
+    ``lin_<var>_<d>``, ``nl_<term>``, ``he_<d>``."""
     D = lags(N)
     lin = tuple(f"lin_{v}_{d}" for d in range(D + 1) for v in _LIN)
-    bd = tuple(f"bd_{_LIN[a]}{_LIN[b]}_{d}" for d in range(D + 1) for a, b in BD_PAIRS) + ("bd_U",)
-    return lin + tuple("nl_" + t for t in NL_NAMES) + tuple(f"he_{d}" for d in range(D + 1)) + bd
+    return lin + tuple("nl_" + t for t in NL_NAMES) + tuple(f"he_{d}" for d in range(D + 1))
+
+
+def boundary_names(N: int) -> tuple[str, ...]:
+    """Names of the accumulated end-of-window terms for N units, in the kernel's order:
+    ``bd_<ab>_<d>`` and ``bd_U``."""
+    return tuple(f"bd_{_LIN[a]}{_LIN[b]}_{d}" for d in range(lags(N) + 1) for a, b in BD_PAIRS) + ("bd_U",)
 
 
 @njit(cache=True, nogil=True)
@@ -188,7 +195,7 @@ def mg_phi(x, v, V, xi, w, a, n, phi) -> None:
 
 
 @njit(cache=True, nogil=True)
-def mg_measure(x, v, V, xi, w, a, n, phi, xi0, acc, first: bool, started: bool, decay: float,
+def mg_measure(x, v, V, xi, w, a, n, phi, xi0, acc, bd, first: bool, started: bool, decay: float,
                var: float, g: np.ndarray, gprev: np.ndarray) -> None:
     """At a measured step: close the interval since the previous one (unless this is the first)
     and start the next.
@@ -200,80 +207,75 @@ def mg_measure(x, v, V, xi, w, a, n, phi, xi0, acc, first: bool, started: bool, 
     happened to x, v, V: acc[0, k] += sum over units and paths of phi[k] eta (k < K),
     acc[0, K + d] += sum of :math:`\\eta_j\\eta_{j+d}/var - \\delta_{d0}` over live paths,
     the same into acc[1] while in the first half of the window; the end-of-window functions'
-    change since the previous point goes to acc[:, K + D + 1:] (``g``, ``gprev`` scratch). Then
-    the basis is evaluated at the current state (:func:`mg_phi`) and xi is kept in ``xi0``.
-    Nothing is done per step.
+    change since the previous point goes to bd (``g``, ``gprev`` scratch). Then the basis is
+    evaluated at the current state (:func:`mg_phi`) and xi is kept in ``xi0``. Either part is
+    skipped where its accumulator has no columns (the martingale sums ``acc``, the end-of-window
+    terms ``bd``). Nothing is done per step.
     """
     K, N, P = phi.shape
     D = min(N // 2, MG_DIST)
-    o = K + D + 1
-    _boundary(x, v, V, xi, w, n, g)
+    state = acc.shape[1] > 0
+    if g.size > 0:
+        _boundary(x, v, V, xi, w, n, g)
     if started:
         for k in range(g.size):
-            acc[0, o + k] += g[k] - gprev[k]
+            bd[0, k] += g[k] - gprev[k]
             if first:
-                acc[1, o + k] += g[k] - gprev[k]
-        for k in range(K):
-            s = 0.0
-            for j in range(N):
-                for p in range(P):
-                    s += phi[k, j, p] * (xi[j, p] - decay * xi0[j, p])
-            acc[0, k] += s
-            if first:
-                acc[1, k] += s
-        for d in range(D + 1):
-            s = 0.0
-            for p in range(P):
-                if w[p] == 0.0:
-                    continue
+                bd[1, k] += g[k] - gprev[k]
+        if state:
+            for k in range(K):
+                s = 0.0
                 for j in range(N):
-                    l = (j + d) % N
-                    s += (xi[j, p] - decay * xi0[j, p]) * (xi[l, p] - decay * xi0[l, p]) / var
-                    if d == 0:
-                        s -= 1.0
-            acc[0, K + d] += s
-            if first:
-                acc[1, K + d] += s
+                    for p in range(P):
+                        s += phi[k, j, p] * (xi[j, p] - decay * xi0[j, p])
+                acc[0, k] += s
+                if first:
+                    acc[1, k] += s
+            for d in range(D + 1):
+                s = 0.0
+                for p in range(P):
+                    if w[p] == 0.0:
+                        continue
+                    for j in range(N):
+                        l = (j + d) % N
+                        s += (xi[j, p] - decay * xi0[j, p]) * (xi[l, p] - decay * xi0[l, p]) / var
+                        if d == 0:
+                            s -= 1.0
+                acc[0, K + d] += s
+                if first:
+                    acc[1, K + d] += s
     # element loops, not slice copies: those compile numba's shape-checked copy per dimension
     for k in range(g.size):
         gprev[k] = g[k]
-    mg_phi(x, v, V, xi, w, a, n, phi)
-    for j in range(N):
-        for p in range(P):
-            xi0[j, p] = xi[j, p]
+    if state:
+        mg_phi(x, v, V, xi, w, a, n, phi)
+        for j in range(N):
+            for p in range(P):
+                xi0[j, p] = xi[j, p]
 
 
 @njit(cache=True, nogil=True)
-def mg_measure_groups(x, v, V, xi, w, a, n, phi, xi0, acc, first: bool, started: bool, decay: float,
-               var: float, g: np.ndarray, gprev: np.ndarray) -> None:
-    """At a measured step: close the interval since the previous one (unless this is the first)
-    and start the next.
-
-    The interval's noise of unit j is the innovation of its xi,
-    :math:`\\eta_j = \\xi_j - e^{-\\Delta/\\tau}\\xi_j^{(0)}` (``decay``; ``xi0`` holds xi at the
-    previous measured step), the exponentially weighted sum of the normals drawn since, with
-    conditional mean 0 and variance ``var`` = :math:`(D/\\tau)(1 - e^{-2\\Delta/\\tau})` whatever
-    happened to x, v, V: acc[r, 0, k] += sum over units and paths of replica r of phi[k] eta
-    (k < K), acc[r, 0, K + d] += sum of :math:`\\eta_j\\eta_{j+d}/var - \\delta_{d0}` over its live
-    paths, the same into acc[r, 1] while in the first half of the window; the end-of-window
-    functions' change since the previous point goes to acc[r, :, K + D + 1:] (``g``, ``gprev``
-    (G, K') scratch). ``acc`` is (G, 2, columns): the P paths are G replicas of P / G consecutive
-    paths (:func:`mg_measure` is the same for one replica). Then the basis is evaluated at the current state (:func:`mg_phi`) and xi is kept in
-    ``xi0``. Nothing is done per step.
-    """
+def mg_measure_groups(x, v, V, xi, w, a, n, phi, xi0, acc, bd, first: bool, started: bool, decay: float,
+                      var: float, g: np.ndarray, gprev: np.ndarray) -> None:
+    """:func:`mg_measure` for G replicas of P / G consecutive paths: ``acc`` (G, 2, K + D + 1) and
+    ``bd`` (G, 2, K') hold each replica's sums, ``g`` and ``gprev`` (G, K') its end-of-window
+    scratch (acc[r, 0, k] += sum over units and paths of replica r of phi[k] eta, and so on)."""
     K, N, P = phi.shape
     G = acc.shape[0]
     per = P // G
     D = min(N // 2, MG_DIST)
-    o = K + D + 1
-    _boundary_groups(x, v, V, xi, w, n, g)
+    state = acc.shape[2] > 0
+    if g.shape[1] > 0:
+        _boundary_groups(x, v, V, xi, w, n, g)
     if started:
         for r in range(G):
             p0, p1 = r * per, (r + 1) * per
             for k in range(g.shape[1]):
-                acc[r, 0, o + k] += g[r, k] - gprev[r, k]
+                bd[r, 0, k] += g[r, k] - gprev[r, k]
                 if first:
-                    acc[r, 1, o + k] += g[r, k] - gprev[r, k]
+                    bd[r, 1, k] += g[r, k] - gprev[r, k]
+            if not state:
+                continue
             for k in range(K):
                 s = 0.0
                 for j in range(N):
@@ -299,15 +301,16 @@ def mg_measure_groups(x, v, V, xi, w, a, n, phi, xi0, acc, first: bool, started:
     for r in range(G):
         for k in range(g.shape[1]):
             gprev[r, k] = g[r, k]
-    mg_phi(x, v, V, xi, w, a, n, phi)
-    for j in range(N):
-        for p in range(P):
-            xi0[j, p] = xi[j, p]
+    if state:
+        mg_phi(x, v, V, xi, w, a, n, phi)
+        for j in range(N):
+            for p in range(P):
+                xi0[j, p] = xi[j, p]
 
 
 class MartingaleControl(Control):
     """The martingale sums ``lin``, ``nl`` and ``he`` (mean 0 exactly, any start), accumulated by
-    the path loop (:func:`mg_measure`, with the end-of-window terms read by :data:`BOUNDARY`)."""
+    the path loop (:func:`mg_measure`)."""
 
     name = "martingale"
     accumulated = True
@@ -319,28 +322,38 @@ class MartingaleControl(Control):
         return {"mg_at": offset, "n_mg": len(basis_names(h.N))}
 
     def columns(self, e: Ensemble, valid: np.ndarray) -> Columns | None:
-        return _part(e, valid, False) if self.name in e.ctl_names else None
+        return _own(e, valid, self.name)
 
 
 class BoundaryControl(Control):
-    """The martingale sums' end-of-window terms (``bd_*``): mean 0 only for a stationary window,
-    so only where :func:`stationary_window` admits them."""
+    """The end-of-window terms ``bd_*`` (the change of quadratic functions of the state and of
+    :math:`|x|^n` over the measured window, accumulated by the path loop beside the martingale
+    sums, :func:`mg_measure`): mean 0 only for a stationary window, so only where
+    :func:`stationary_window` admits them."""
 
     name = "boundary"
+    accumulated = True
+
+    def sums(self, h: Harvester) -> tuple[str, ...]:
+        return boundary_names(h.N)
+
+    def loop_fields(self, h: Harvester, offset: int) -> dict[str, int]:
+        return {"bd_at": offset, "n_bd": len(boundary_names(h.N))}
 
     def columns(self, e: Ensemble, valid: np.ndarray) -> Columns | None:
-        if MARTINGALE.name not in e.ctl_names:
+        if self.name not in e.ctl_names or not stationary_window(e.control_sums(self.name), valid,
+                                                                   e.ctl_names[self.name]):
             return None
-        if not stationary_window(e.control_sums(MARTINGALE.name), valid, e.ctl_names[MARTINGALE.name]):
-            return None
-        return _part(e, valid, True)
+        return _own(e, valid, self.name)
 
 
-def _part(e: Ensemble, valid: np.ndarray, boundary: bool) -> Columns:
-    """The martingale accumulator's columns without (or only) the end-of-window terms."""
-    mg, mg_first = e.control_sums(MARTINGALE.name), e.control_sums(MARTINGALE.name, first_half=True)
-    names = [name for name in e.ctl_names[MARTINGALE.name] if name.startswith("bd_") == boundary]
-    return [mg[name][valid] for name in names], [mg_first[name][valid] for name in names], [0.0] * len(names)
+def _own(e: Ensemble, valid: np.ndarray, control: str) -> Columns | None:
+    """Every column ``control`` accumulated (exact means 0), or None where it was not."""
+    if control not in e.ctl_names:
+        return None
+    whole, first = e.control_sums(control), e.control_sums(control, first_half=True)
+    names = e.ctl_names[control]
+    return [whole[name][valid] for name in names], [first[name][valid] for name in names], [0.0] * len(names)
 
 
 #: The martingale control.
@@ -410,7 +423,7 @@ def poisson_controls(lin: Harvester, dt: float, names: tuple[str, ...]) -> dict[
     Returns
     -------
     dict
-        ``{"V2": w, "Pin": w}``, weight vectors over ``names``.
+        ``{"V2": w, "Pin": w}, weight vectors over ``names``.
     """
     import scipy.linalg
 

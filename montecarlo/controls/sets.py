@@ -1,8 +1,8 @@
 """The control variates' registry and the choice of a set: which columns a regression gets.
 
 A *control* (:class:`~montecarlo.controls.base.Control`) is one group of per-replica quantities
-with an exactly known mean: the harmonic twin's moments (:mod:`.twin`), the martingale sums
-(:mod:`.martingale`) and their end-of-window terms. :data:`CONTROLS` holds them by name;
+with an exactly known mean: the harmonic twin's moments (:mod:`.twin`), the martingale sums and
+the end-of-window terms (:mod:`.martingale`), the generator's sums (:mod:`.generator`). :data:`CONTROLS` holds them by name;
 :func:`montecarlo.simulate` lays out the path loop's accumulator from the ones it is asked to
 accumulate, and :func:`control_columns` reads a candidate set's columns from an ensemble.
 :data:`CONTROL_SETS` names the candidate combinations, and :func:`choose_controls` picks one
@@ -45,6 +45,8 @@ CONTROL_SETS: dict[str, tuple[str, ...]] = {
     "martingale+twin+generator": ("martingale", "twin", "generator"),
     "martingale+boundary+generator": ("martingale", "boundary", "generator"),
     "martingale+boundary+twin+generator": ("martingale", "boundary", "twin", "generator"),
+    "boundary+generator": ("boundary", "generator"),
+    "boundary+twin+generator": ("boundary", "twin", "generator"),
 }
 
 
@@ -106,7 +108,10 @@ def choose_controls(sizes: dict[str, int]) -> str:
     martingale+twin), and a set that contains another never has a larger residual variance in the
     population: the extra controls cost degrees of freedom only, which
     :func:`montecarlo.controls.regression.enough_dof` keeps within a factor 2 of variance. The two sets that
-    do not contain each other (martingale+twin, martingale+boundary) are ordered by size.
+    do not contain each other (martingale+twin, martingale+boundary) are ordered by size. A run
+    with the end-of-window terms and the generator's sums but no martingale sums (the solver's
+    with the generator, whose sums hold the martingale's) has boundary+generator within
+    boundary+twin+generator.
 
     >>> choose_controls({"twin": 11, "martingale": 15})
     'martingale'

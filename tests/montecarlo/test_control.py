@@ -175,7 +175,7 @@ def test_a_registered_control_reaches_the_estimate(monkeypatch) -> None:
     monkeypatch.setitem(sets.CONTROLS, "noise", _NoiseOnly())
     monkeypatch.setitem(sets.CONTROL_SETS, "noise", ("noise",))
     h = Harvester.build(a=0.5, n=3)
-    e = simulate(h, dt=0.05, paths=4, replicas=40, t_burn=5.0, t_run=20.0, seed=2, controls=("martingale",))
+    e = simulate(h, dt=0.05, paths=4, replicas=40, t_burn=5.0, t_run=20.0, seed=2, controls=("martingale", "boundary"))
     est = estimate(e, h, controls="noise")
     assert est.control and est.controls == "noise"
     with pytest.raises(ParameterError, match="needs an ensemble with control variates"):

@@ -124,7 +124,7 @@ def test_end_of_window_terms_make_a_harmonic_ring_nearly_exact() -> None:
     # agree with the exact solver to its (small) error bar
     h = Harvester.build(a=0.5, N=3, k=-0.2)
     e = simulate(h, dt=0.04, paths=2, replicas=120, t_burn=20.0, t_run=100.0, seed=8, start="twin",
-                 controls=("martingale",), richardson=True, third_level=True)
+                 controls=("martingale", "boundary"), richardson=True, third_level=True)
     est = estimate(e, h, controls="martingale+boundary")
     without = estimate(e, h, controls="martingale")
     assert est.reduction["eta"] > 1e3 > 10 * without.reduction["eta"]
@@ -142,9 +142,9 @@ def test_end_of_window_terms_are_refused_for_a_window_with_a_transient() -> None
     ok = []
     for t_burn in (5.0, 50.0):
         e = simulate(h, dt=0.1, paths=4, replicas=200, t_burn=t_burn, t_run=40.0, seed=8, richardson=True,
-                     controls=("martingale",))
-        ok.append(stationary_window(e.control_sums("martingale"), np.ones(e.replicas, dtype=bool),
-                                    e.ctl_names["martingale"]))
+                     controls=("martingale", "boundary"))
+        ok.append(stationary_window(e.control_sums("boundary"), np.ones(e.replicas, dtype=bool),
+                                    e.ctl_names["boundary"]))
     assert ok == [False, True]
 
 

@@ -33,8 +33,8 @@ def test_generator_sums_have_mean_zero_and_leave_the_paths_unchanged(system: dic
     h = Harvester.build(**system)
     dt = 0.02 if step == "joint" else 0.05
     kw = dict(dt=dt, paths=1, replicas=800, group=24, t_burn=20.0, t_run=60.0, seed=9, step=step, richardson=True)
-    e = simulate(h, controls=("martingale", "generator"), **kw)
-    off = simulate(h, controls=("martingale",), **kw)
+    e = simulate(h, controls=("martingale", "boundary", "generator"), **kw)
+    off = simulate(h, controls=("martingale", "boundary"), **kw)
     assert np.array_equal(e.sums, off.sums) and np.array_equal(e.counts, off.counts)
     names = e.ctl_names["generator"]
     assert names == GENERATOR.sums(h)
@@ -92,7 +92,7 @@ def test_generator_estimate_meets_the_exact_harmonic_values(N: int, k: float) ->
     h = Harvester.build(a=0.5, N=N, k=k)
     dt = 0.2
     e = simulate(h, dt=dt, paths=2, replicas=320, t_burn=30.0, t_run=100.0, seed=21, start="twin",
-                 controls=("martingale", "generator"), step="frozen")
+                 controls=("martingale", "boundary", "generator"), step="frozen")
     est = estimate(e, h, controls="martingale+boundary+generator")
     # the harmonic ring's Poisson solution is in the martingale basis already: the estimate's own
     # choice keeps the in-sample set, whose variance is smaller
@@ -108,9 +108,9 @@ def test_generator_set_needs_replicas_for_every_fold() -> None:
     # replicas must leave max(12, p) residual degrees of freedom, so 268 replicas at least
     h = Harvester.build(a=2.0, n=1.0)
     e = simulate(h, dt=0.05, paths=2, replicas=268, t_burn=2.0, t_run=5.0, seed=4,
-                 controls=("martingale", "generator"))
+                 controls=("martingale", "boundary", "generator"))
     valid = np.ones(e.replicas, dtype=bool)
-    assert len(e.ctl_names["generator"]) + len(e.ctl_names["martingale"]) - 11 == 125  # bd_* are the boundary's
+    assert len(e.ctl_names["generator"]) + len(e.ctl_names["martingale"]) == 125
     assert control_columns(e, valid, "martingale+generator", 268).C.shape == (268, 125)
     assert control_columns(e, valid, "martingale+generator", 267) is None
     assert control_columns(e, valid, "martingale+generator", 268).crossfit
@@ -140,7 +140,7 @@ def test_the_strong_kink_restarts_with_the_generator_at_half_the_step_only_at_ti
     # at a looser tol, or with an explicit dt, the step stays
     h = Harvester.build(a=2.0, n=1.0)
     e = simulate(h, dt=0.02, paths=4, replicas=32, t_burn=5.0, t_run=40.0, seed=5, richardson=True,
-                 controls=("martingale",))
+                 controls=("martingale", "boundary"))
     est = estimate(e, h)
 
     def replanned(**options) -> tuple:
@@ -156,3 +156,42 @@ def test_the_strong_kink_restarts_with_the_generator_at_half_the_step_only_at_ti
     assert first > 0 and new.generator and new.dt == dt
     dt, new, first = replanned(tol=1e-3, dt=0.02)
     assert new.generator and new.dt == 0.02
+
+
+def test_generator_batches_run_in_whole_rounds_of_equal_tasks() -> None:
+    # a last round with one thread idle costs a whole task's time: the batch is cut into an even
+    # number of equal tasks (two threads), of at most the plan's replicas per task, and loses less
+    # than one replica per task
+    mc = MonteCarlo(threads=2, progress=False)
+    assert mc._tasks(101, 1) == (101, 1)
+    for asked in (2, 3, 32, 383, 384, 385, 2613, 5000):
+        replicas, per_task = mc._tasks(asked, 192)
+        tasks = replicas // per_task
+        assert replicas == tasks * per_task and tasks % 2 == 0 and 1 <= per_task <= 192, asked
+        assert asked - tasks < replicas <= asked, asked
+
+
+def test_the_strong_kink_measures_its_variance_on_one_path_replicas() -> None:
+    # where the generator's restart is likely (the kink at tight tol, automatic paths) the first
+    # batch only measures eta's variance and is discarded: 128 one-path replicas; elsewhere the
+    # plan's own
+    kink = Harvester.build(a=2.0, n=1.0)
+    mc = MonteCarlo(tol=1e-3, threads=2, progress=False)
+    plan = dataclasses.replace(mc.plan(kink), paths=21)
+    pilot, replicas = mc._first_batch(kink, plan)
+    assert (pilot.paths, pilot.group, replicas) == (1, 64, 128) and not pilot.generator
+    for other in (MonteCarlo(tol=2e-3), MonteCarlo(tol=1e-3, paths=21), MonteCarlo(tol=1e-3, generator=False),
+                  MonteCarlo(tol=1e-3, martingale=False)):
+        assert other._first_batch(kink, plan) == (plan, 32)
+    smooth = Harvester.build(a=0.5, n=3.0)
+    assert mc._first_batch(smooth, plan) == (plan, 32)
+
+
+def test_a_pilot_without_the_generator_after_it_restarts_with_the_plan() -> None:
+    # the kink at a = 0.5 and tight tol: the one-path pilot finds eta's variance too small for the
+    # generator, and the run restarts in the plan's own layout
+    h = Harvester.build(a=0.5, n=1.0)
+    r = solve(h, "mc", tol=1e-3, seed=3, t_run=20.0, t_burn=5.0, min_replicas=32, max_replicas=64, progress=False)
+    assert r.info["plan_notes"]["generator"].startswith("not used"), r.info["plan_notes"]["generator"]
+    assert r.info["plan_notes"]["restarts"][0] == "pilot"
+    assert r.info["paths"] > 1 and "generator" not in r.info["control_set"]

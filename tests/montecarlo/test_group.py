@@ -13,12 +13,12 @@ from montecarlo import simulate
 
 @pytest.mark.parametrize("system, kw", [
     # the kink with every accumulated control and the coupled coarse level
-    ({"a": 2.0, "n": 1.0}, {"controls": ("martingale", "generator"), "richardson": True}),
+    ({"a": 2.0, "n": 1.0}, {"controls": ("martingale", "boundary", "generator"), "richardson": True}),
     # a ring with its twin and the coarsest level, martingale sums across units
-    ({"a": 0.5, "n": 3.0, "N": 3, "k": -0.5}, {"controls": ("martingale",), "richardson": True, "third_level": True,
+    ({"a": 0.5, "n": 3.0, "N": 3, "k": -0.5}, {"controls": ("martingale", "boundary"), "richardson": True, "third_level": True,
                                                "twin": 4.0}),
     # the joint step (its own v xi estimate)
-    ({"a": 0.5, "n": 3.0, "tau": 1e-4}, {"controls": ("martingale",), "step": "joint"}),
+    ({"a": 0.5, "n": 3.0, "tau": 1e-4}, {"controls": ("martingale", "boundary"), "step": "joint"}),
 ])
 def test_a_task_of_g_replicas_splits_the_sums_of_one_replica_of_g_paths(system: dict, kw: dict) -> None:
     # task (replica 0, chunk 0) draws the same normals whether it holds one replica of 6 paths or

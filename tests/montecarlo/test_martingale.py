@@ -24,7 +24,7 @@ def test_martingale_sums_have_mean_zero_and_leave_the_paths_unchanged(step: str)
     # left out
     h = Harvester.build(a=0.5, n=3, N=3, k=-0.5)
     kw = dict(dt=0.1, paths=4, replicas=200, t_burn=5.0, t_run=40.0, seed=8, step=step, richardson=True)
-    e = simulate(h, controls=("martingale",), **kw)
+    e = simulate(h, controls=("martingale", "boundary"), **kw)
     off = simulate(h, **kw)
     assert np.array_equal(e.sums, off.sums) and np.array_equal(e.counts, off.counts)
     assert e.ctl_names["martingale"] and off.ctl is None and not off.ctl_names
@@ -44,7 +44,7 @@ def test_poisson_control_of_a_harmonic_ring_removes_all_but_the_boundary_term() 
     h = Harvester.build(a=0.5, N=2, k=-0.1)
     dt = 0.04
     e = simulate(h, dt=dt, paths=2, replicas=40, t_burn=0.0, t_run=2000.0, seed=3, sample_every=0.0,
-                 start="twin", controls=("martingale",))
+                 start="twin", controls=("martingale", "boundary"))
     names = e.ctl_names["martingale"]
     w = poisson_controls(h, dt, names)
     C = np.column_stack([e.control_sums("martingale")[n] for n in names])
@@ -63,7 +63,7 @@ def test_martingale_estimate_is_unbiased_at_a_coarse_step() -> None:
     # the Richardson extrapolation must then meet the exact solver's continuous-time value
     h = Harvester.build(a=0.5, N=3, k=-0.2)
     dt = 0.2
-    e = simulate(h, dt=dt, paths=4, replicas=64, t_burn=30.0, t_run=400.0, seed=12, controls=("martingale",),
+    e = simulate(h, dt=dt, paths=4, replicas=64, t_burn=30.0, t_run=400.0, seed=12, controls=("martingale", "boundary"),
                  richardson=True, step="frozen")
     est = estimate(e, h, controls="martingale")
     disc = twin_expectations(h, dt / 2)
@@ -88,7 +88,7 @@ def test_martingale_error_bars_cover_the_exact_solution_over_seeds() -> None:
     z = []
     for seed in range(32):
         e = simulate(h, dt=dt, paths=2, replicas=48, t_burn=20.0, t_run=60.0, seed=100 + seed, start="twin",
-                     controls=("martingale",))
+                     controls=("martingale", "boundary"))
         est = estimate(e, h, controls="martingale")
         z.append(abs(est.mean["eta"] - eta) / est.se["eta"])
     z = np.array(z)
@@ -98,7 +98,7 @@ def test_martingale_error_bars_cover_the_exact_solution_over_seeds() -> None:
 
 def test_estimate_controls_argument() -> None:
     h = Harvester.build(a=0.5, n=3)
-    e = simulate(h, dt=0.05, paths=4, replicas=4, t_burn=1.0, t_run=2.0, seed=1, controls=("martingale",))
+    e = simulate(h, dt=0.05, paths=4, replicas=4, t_burn=1.0, t_run=2.0, seed=1, controls=("martingale", "boundary"))
     with pytest.raises(ParameterError, match="controls must be None or one of"):
         estimate(e, h, controls="poisson")
     with pytest.raises(ParameterError, match="needs an ensemble with control variates"):

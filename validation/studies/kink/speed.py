@@ -232,7 +232,7 @@ def throughput(mode: str, rounds: int, t_run: float, kappas: dict[float, float] 
              "kink_rule": rule}
         if mode == "solver":
             return {**k, "dt": 2 * dt, "richardson": True, "twin": kappas[a], "start": "twin",
-                    "controls": ("martingale",)}
+                    "controls": ("martingale", "boundary")}
         return {**k, "dt": dt}
 
     saved = dict(KINK_RULES)
@@ -273,7 +273,7 @@ def bias(a: float, dts: tuple[float, ...], rules: dict[str, float], *, reference
             for name in rules:
                 t0 = time.perf_counter()
                 e = simulate(h, dt=dt, paths=paths, replicas=replicas, t_burn=t_burn, t_run=t_run, seed=seed + i,
-                             richardson=True, twin=kappa, start="twin", controls=("martingale",), kink_rule=name)
+                             richardson=True, twin=kappa, start="twin", controls=("martingale", "boundary"), kink_rule=name)
                 est = estimate(e, h, order=1.0)  # order 1: bias = coarse - fine, the raw difference
                 m = e.moments(0)
                 per[name] = m["V2"] / m["vxi"]

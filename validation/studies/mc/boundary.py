@@ -45,7 +45,7 @@ def boundary_rows(quick: bool) -> dict[str, Any]:
             c0 = time.process_time()
             e = simulate(h, dt=plan.dt, paths=2, replicas=reps, t_burn=plan.t_burn, t_run=t_run, seed=21,
                          twin=plan.twin, start=plan.start, richardson=True, third_level=True,
-                         controls=("martingale",))
+                         controls=("martingale", "boundary"))
             row: dict[str, Any] = {"cpu_s": time.process_time() - c0, "dt": plan.dt, "t_burn": plan.t_burn}
             plain = estimate(e, h, control=False)
             for cs in CONTROL_SETS:

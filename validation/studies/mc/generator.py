@@ -70,7 +70,7 @@ def _cost_ratio(h: Harvester, plan: Any, quick: bool) -> float:
     for rep in range(4):
         for gen in (False, True):
             t0 = time.process_time()
-            simulate(h, controls=("martingale", "generator") if gen else ("martingale",), **kw)
+            simulate(h, controls=("martingale", "boundary", "generator") if gen else ("martingale", "boundary"), **kw)
             if rep:  # the first round compiles
                 times[gen].append(time.process_time() - t0)
     return float(np.median(times[True]) / np.median(times[False]))
@@ -89,7 +89,7 @@ def _row(n: float, a: float, N: int, k: float, replicas: int, paths: int, quick:
     plan = MonteCarlo(seed=1, tol=1e-3, extrapolate=False).plan(h)
     t0 = time.process_time()
     e = simulate(h, dt=plan.dt, paths=paths, replicas=replicas, t_burn=plan.t_burn, t_run=400.0, seed=11,
-                 twin=plan.twin, start=plan.start, richardson=True, controls=("martingale", "generator"),
+                 twin=plan.twin, start=plan.start, richardson=True, controls=("martingale", "boundary", "generator"),
                  generator_every=0.0)
     row: dict[str, Any] = {"n": n, "a": a, "N": N, "k": k, "replicas": replicas, "paths": paths, "t_run": 400.0,
                            "dt": plan.dt, "simulate_cpu_s": time.process_time() - t0}
@@ -170,7 +170,7 @@ def _coverage_case(system: dict[str, Any], ref_label: str, replicas: int, paths:
     for s in range(seeds):
         e = simulate(h, dt=dt, paths=paths, replicas=replicas, t_burn=30.0 if harmonic else plan.t_burn, t_run=t_run,
                      seed=7000 + s, twin=None if harmonic else plan.twin, start="twin", richardson=not harmonic,
-                     step="frozen", controls=("martingale", "generator"), **settings)
+                     step="frozen", controls=("martingale", "boundary", "generator"), **settings)
         forced = "martingale+boundary+generator" if harmonic else GENERATOR_SET
         for label, which in (("auto", None), ("forced", forced)):
             try:

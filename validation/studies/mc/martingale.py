@@ -62,7 +62,7 @@ def _martingale_row(h: Harvester, seed: int, quick: bool) -> dict[str, Any]:
               seed=seed, twin=plan.twin, start=plan.start)
     row: dict[str, Any] = {"twin_kappa": plan.twin, "dt": plan.dt, "t_burn": plan.t_burn, "t_run": t_run,
                            "replicas": reps, "paths": paths}
-    with_mg = simulate(h, controls=("martingale",), **kw)
+    with_mg = simulate(h, controls=("martingale", "boundary"), **kw)
     without = simulate(h, **kw)
     row.update(wall_martingale_s=with_mg.wall_time, wall_plain_s=without.wall_time,
                escape_fraction=with_mg.escaped_fraction())
@@ -124,7 +124,7 @@ def martingale_coverage(quick: bool) -> dict[str, Any]:
     z2 = []
     for s in range(seeds):
         e = simulate(h2, dt=0.1, paths=2, replicas=48, t_burn=20.0, t_run=100.0, seed=5000 + s, start="twin",
-                     controls=("martingale",))
+                     controls=("martingale", "boundary"))
         est = estimate(e, h2, controls="martingale")
         z2.append((est.mean["eta"] - eta2) / est.se["eta"])
     h3 = Harvester.build(a=0.5, n=3)
@@ -134,7 +134,7 @@ def martingale_coverage(quick: bool) -> dict[str, Any]:
     for s in range(seeds):
         e = simulate(h3, dt=plan.dt, paths=4, replicas=64, t_burn=plan.t_burn, t_run=200.0, seed=6000 + s,
                      twin=plan.twin, start="twin", richardson=True,
-                     controls=("martingale",))
+                     controls=("martingale", "boundary"))
         est = estimate(e, h3)
         vrf.append(est.reduction.get("eta"))
         z3.append((est.mean["eta"] - est.bias["eta"] - ref.eta)
