@@ -46,6 +46,7 @@ from fpe_harvester.wide import SMALLEST_NORMAL
 
 from .coefficients import onsite_kind
 from .controls.generator import GENERATOR
+from .controls import CONTROLS
 from .controls.martingale import BOUNDARY, MARTINGALE
 from .controls.twin import TWIN_MOMENTS
 from .ensemble import Ensemble
@@ -561,15 +562,13 @@ class MonteCarlo:
 
     def _controls(self, plan: RunPlan) -> tuple[str, ...]:
         """The controls the path loop accumulates: the martingale sums and the end-of-window
-        terms; with the generator's sums, those and the end-of-window terms only (the generator's
-        functions hold the martingale's: at n = 1, a = 2 the set without the martingale sums
-        reduces eta's variance as much, and the path loop costs 4 % less; docs/methods.md,
-        "Generator controls")."""
+        terms, and the generator's sums where the plan takes them. (The generator's functions
+        hold the martingale's, but without the martingale sums eta's variance reduction at
+        n = 1, a = 2 fell 5-10 % for a path loop 4 % cheaper: measured, docs/methods.md,
+        "Generator controls".)"""
         if not self.martingale:
             return ()
-        if plan.generator:
-            return (BOUNDARY.name, GENERATOR.name)
-        return (MARTINGALE.name, BOUNDARY.name)
+        return (MARTINGALE.name, BOUNDARY.name) + ((GENERATOR.name,) if plan.generator else ())
 
     def _run(self, h: Harvester, plan: RunPlan, replicas: int, first: int) -> Ensemble:
         replicas, group = self._tasks(replicas, plan.group)
@@ -641,7 +640,8 @@ class MonteCarlo:
         if relvar < _GEN_RELVAR:
             return note(f"not used: plain relative variance of eta {relvar:.3g} per unit path time, below "
                         f"{_GEN_RELVAR:g}")
-        controls = len(GENERATOR.sums(h)) + len(BOUNDARY.sums(h)) + (len(TWIN_MOMENTS) if plan.twin else 0)
+        controls = sum(len(CONTROLS[name].sums(h)) for name in self._controls(plan)) + \
+            (len(TWIN_MOMENTS) if plan.twin else 0) + len(GENERATOR.sums(h))
         need = relvar / (_GEN_VR * (_AIM * self.tol) ** 2 * plan.t_run)  # paths to reach tol with them
         paths = self.paths or max(1, min(plan.paths, math.ceil(need / _GEN_MAX_REPLICAS)))
         group = _group(paths)

@@ -44,8 +44,7 @@ leave; their mean is 0 only for a stationary window (exactly so for a harmonic r
 from its own law, up to the burn-in's remaining transient otherwise), so they are a control of
 their own, :data:`BOUNDARY` (``simulate(..., controls=("martingale", "boundary"))``), admitted
 only where :func:`stationary_window` finds their means consistent with 0. The kernel
-(:func:`mg_measure`) accumulates either part alone: the solver's runs with the generator's sums
-(which hold the martingale's functions) take the end-of-window terms without the martingale sums.
+(:func:`mg_measure`) accumulates either part alone or both.
 """
 
 from __future__ import annotations

@@ -45,8 +45,6 @@ CONTROL_SETS: dict[str, tuple[str, ...]] = {
     "martingale+twin+generator": ("martingale", "twin", "generator"),
     "martingale+boundary+generator": ("martingale", "boundary", "generator"),
     "martingale+boundary+twin+generator": ("martingale", "boundary", "twin", "generator"),
-    "boundary+generator": ("boundary", "generator"),
-    "boundary+twin+generator": ("boundary", "twin", "generator"),
 }
 
 
@@ -108,10 +106,7 @@ def choose_controls(sizes: dict[str, int]) -> str:
     martingale+twin), and a set that contains another never has a larger residual variance in the
     population: the extra controls cost degrees of freedom only, which
     :func:`montecarlo.controls.regression.enough_dof` keeps within a factor 2 of variance. The two sets that
-    do not contain each other (martingale+twin, martingale+boundary) are ordered by size. A run
-    with the end-of-window terms and the generator's sums but no martingale sums (the solver's
-    with the generator, whose sums hold the martingale's) has boundary+generator within
-    boundary+twin+generator.
+    do not contain each other (martingale+twin, martingale+boundary) are ordered by size.
 
     >>> choose_controls({"twin": 11, "martingale": 15})
     'martingale'

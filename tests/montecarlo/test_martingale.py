@@ -109,3 +109,19 @@ def test_estimate_controls_argument() -> None:
         simulate(h, dt=0.05, paths=4, replicas=1, t_run=2.0, controls=("twin",))
     assert enough_dof(24, 11) and not enough_dof(23, 11)
     assert enough_dof(41, 20) and not enough_dof(40, 20)
+
+
+def test_the_end_of_window_terms_accumulate_with_or_without_the_martingale_sums() -> None:
+    # boundary is a control of its own: alone it gives the very sums it gives beside the
+    # martingale's, and the martingale's are the same without it
+    h = Harvester.build(a=0.5, n=3, N=3, k=-0.5)
+    kw = dict(dt=0.05, paths=4, replicas=6, t_burn=2.0, t_run=10.0, seed=5)
+    both = simulate(h, controls=("martingale", "boundary"), **kw)
+    alone = simulate(h, controls=("boundary",), **kw)
+    mg = simulate(h, controls=("martingale",), **kw)
+    assert alone.ctl_names == {"boundary": both.ctl_names["boundary"]}
+    assert all(name.startswith("bd_") for name in alone.ctl_names["boundary"])
+    for half in (False, True):
+        for control, e in (("boundary", alone), ("martingale", mg)):
+            ref, got = both.control_sums(control, first_half=half), e.control_sums(control, first_half=half)
+            assert ref.keys() == got.keys() and all(np.array_equal(ref[k], got[k]) for k in ref)
