@@ -115,10 +115,11 @@ _T_RUN_MART_TOL = 1e-3
 #: restarts with them when it is long enough for their fit, ``_GEN_FIT`` replicas per control,
 #: given a variance reduction of at least ``_GEN_VR`` (the least measured where the rule adds
 #: them). Paths per replica: one, or as few as keep the replicas the run is expected to need below
-#: ``_GEN_MAX_REPLICAS``; a task of :func:`montecarlo.simulate` then runs whole replicas, about
-#: ``_GEN_TASK_PATHS`` paths (a kernel call over 48 paths costs 0.62x per path-step what it costs
-#: over 6, and the fit's variance reduction depends on the simulated time, not on how it is split
-#: into replicas: docs/methods.md, "Generator controls").
+#: ``_GEN_MAX_REPLICAS``; a task of :func:`montecarlo.simulate` then runs whole replicas, up to
+#: ``_GEN_TASK_PATHS`` paths, each batch in whole rounds of equal tasks on the threads
+#: (:meth:`MonteCarlo._tasks`; a kernel call over 48 paths costs 0.62x per path-step what it costs
+#: over 6, over 192 a further 0.91x, and the fit's variance reduction depends on the simulated time,
+#: not on how it is split into replicas: docs/methods.md, "Generator controls").
 _GEN_RELVAR, _GEN_VR, _GEN_FIT = 2.4, 40.0, 4.0
 _GEN_MAX_REPLICAS, _GEN_TASK_PATHS = 8192, 192
 #: Time between the generator's points (:func:`montecarlo.simulate`'s ``generator_every``): as
@@ -267,8 +268,11 @@ class MonteCarlo:
         martingale form of the generator applied to a degree-4 basis, cross-fitted) where the
         first batch shows they pay: a single unit whose eta is noisy per unit of path time (the
         strong kink), in a run long enough for their fit; the run then restarts with them, with
-        replicas of one path (or a few) run as several whole replicas per task of about 48 paths
-        (``info["plan_notes"]["generator"]`` says why or why not).
+        replicas of one path (or a few) run as several whole replicas per task of up to 192 paths
+        (``info["plan_notes"]["generator"]`` says why or why not). Where that restart is likely
+        (the kink at tol < 1.8e-3, automatic paths) the first batch is 128 one-path replicas that
+        only measure eta's variance (``"pilot"`` in ``info["plan_notes"]["restarts"]`` where the
+        run then continues in its own layout).
         Needs ``martingale`` and ``control``. Default True.
     extrapolate : bool or None
         True, with ``richardson``: run a third level at ``2 dt`` and report the Richardson
@@ -610,15 +614,15 @@ class MonteCarlo:
     def _first_batch(self, h: Harvester, plan: RunPlan) -> tuple[RunPlan, int]:
         """The first batch: ``plan`` and ``min_replicas``, or where the strong kink's restart with
         the generator controls at half the step is likely (a single unit with the kink treatment,
-        tol < ``_STRONG_KINK_FINER_TOL``, automatic paths) ``_PILOT_REPLICAS`` one-path replicas in
-        tasks on the threads. That batch only measures eta's relative variance for the plan that
+        tol < ``_STRONG_KINK_FINER_TOL``, automatic paths) ``_PILOT_REPLICAS`` one-path replicas
+        (within ``min_replicas .. max_replicas``) in tasks on the threads. That batch only measures eta's relative variance for the plan that
         follows and is discarded either way: one-path replicas measure it at a ``plan.paths``-th
         of the cost per replica, and four times as many of them more precisely (an overestimate
         makes the generator's first batch overshoot tol; docs/methods.md, "Generator controls")."""
         if not (self.generator and self.martingale and self.control and self.paths is None and h.N == 1
                 and onsite_kind(h) == KIND_KINK and self.tol < _STRONG_KINK_FINER_TOL and plan.paths > 1):
             return plan, self.min_replicas
-        replicas = max(self.min_replicas, _PILOT_REPLICAS)
+        replicas = min(self.max_replicas, max(self.min_replicas, _PILOT_REPLICAS))
         return dataclasses.replace(plan, paths=1, group=-(-replicas // (self.threads or default_threads()))), replicas
 
     def _generator_plan(self, h: Harvester, plan: RunPlan, ens: Ensemble, est: Estimate) -> tuple[RunPlan, int]:

@@ -263,7 +263,7 @@ def generator_timings(quick: bool) -> dict[str, Any]:
 #: Further seeds of the strong kink's end-to-end run (its wall time varies with the seed: the
 #: pilot's estimate of the variance sizes the batches, and the noisy bias estimate of the halving
 #: policy enters the error budget).
-STRONG_KINK_SEEDS = (8, 9, 10, 11, 12)
+STRONG_KINK_SEEDS = tuple(range(8, 19))
 
 
 def solver_timings(quick: bool) -> dict[str, Any]:
