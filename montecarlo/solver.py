@@ -98,13 +98,13 @@ _RUN_PER_BURN = 3.0
 #: g(Y_start) - g(Y_end), whose share of the variance falls like 1/t_run; the longer run pays
 #: only when many replicas are needed anyway, so it applies at tol <= _T_RUN_MART_TOL (the
 #: measurements: docs/methods.md, "Why the settings are what they are").
+_T_RUN, _T_RUN_MART = 100.0, 400.0
+_T_RUN_MART_TOL = 1e-3
+
 #: A batch is sized for a relative error of ``_AIM * tol``: near 1 so that the run does not
 #: overshoot tol (at 0.9 it ran about 20 % more replicas than tol asked for), below it so that
 #: the run seldom needs one more, small batch for the last percent.
 _AIM = 0.97
-
-_T_RUN, _T_RUN_MART = 100.0, 400.0
-_T_RUN_MART_TOL = 1e-3
 
 
 #: The generator controls (:mod:`montecarlo.controls.generator`) are added, after the first batch,
@@ -615,15 +615,17 @@ class MonteCarlo:
         """The first batch: ``plan`` and ``min_replicas``, or where the strong kink's restart with
         the generator controls at half the step is likely (a single unit with the kink treatment,
         tol < ``_STRONG_KINK_FINER_TOL``, automatic paths) ``_PILOT_REPLICAS`` one-path replicas
-        (within ``min_replicas .. max_replicas``) in tasks on the threads. That batch only measures eta's relative variance for the plan that
-        follows and is discarded either way: one-path replicas measure it at a ``plan.paths``-th
-        of the cost per replica, and four times as many of them more precisely (an overestimate
-        makes the generator's first batch overshoot tol; docs/methods.md, "Generator controls")."""
+        (within ``min_replicas .. max_replicas``) in tasks on the threads. That batch only
+        measures eta's relative variance for the plan that follows and is discarded either way:
+        one-path replicas measure it at a ``plan.paths``-th of the cost per replica, and four
+        times as many of them more precisely (an overestimate makes the generator's first batch
+        overshoot tol; docs/methods.md, "Generator controls")."""
         if not (self.generator and self.martingale and self.control and self.paths is None and h.N == 1
                 and onsite_kind(h) == KIND_KINK and self.tol < _STRONG_KINK_FINER_TOL and plan.paths > 1):
             return plan, self.min_replicas
         replicas = min(self.max_replicas, max(self.min_replicas, _PILOT_REPLICAS))
-        return dataclasses.replace(plan, paths=1, group=-(-replicas // (self.threads or default_threads()))), replicas
+        per_task = -(-replicas // (self.threads or default_threads()))
+        return dataclasses.replace(plan, paths=1, group=per_task), replicas
 
     def _generator_plan(self, h: Harvester, plan: RunPlan, ens: Ensemble, est: Estimate) -> tuple[RunPlan, int]:
         """After the first batch: the plan with the generator controls and the paths per replica

@@ -65,8 +65,8 @@ if TYPE_CHECKING:
     from ..ensemble import Ensemble
 
 __all__ = ["MARTINGALE", "BOUNDARY", "MartingaleControl", "BoundaryControl", "BOUNDARY_TAIL", "MG_DIST",
-           "NL_NAMES", "basis_names", "boundary_names", "lags", "n_state", "mg_measure", "mg_measure_groups", "stationary_window",
-           "poisson_controls"]
+           "NL_NAMES", "basis_names", "boundary_names", "lags", "n_state", "mg_measure", "mg_measure_groups",
+           "stationary_window", "poisson_controls"]
 
 #: Tail probability of the test (Hotelling's T^2 against chi^2) that the end-of-window terms
 #: have mean 0; where it fails the candidate sets with them are left out (:func:`stationary_window`).

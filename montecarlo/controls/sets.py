@@ -2,9 +2,10 @@
 
 A *control* (:class:`~montecarlo.controls.base.Control`) is one group of per-replica quantities
 with an exactly known mean: the harmonic twin's moments (:mod:`.twin`), the martingale sums and
-the end-of-window terms (:mod:`.martingale`), the generator's sums (:mod:`.generator`). :data:`CONTROLS` holds them by name;
-:func:`montecarlo.simulate` lays out the path loop's accumulator from the ones it is asked to
-accumulate, and :func:`control_columns` reads a candidate set's columns from an ensemble.
+the end-of-window terms (:mod:`.martingale`), the generator's sums (:mod:`.generator`).
+:data:`CONTROLS` holds them by name; :func:`montecarlo.simulate` lays out the path loop's
+accumulator from the ones it is asked to accumulate, and :func:`control_columns` reads a
+candidate set's columns from an ensemble.
 :data:`CONTROL_SETS` names the candidate combinations, and :func:`choose_controls` picks one
 without looking at the data. A new control is a module with its :class:`Control` object, one
 entry in :data:`CONTROLS`, the sets that use it and, if the path loop accumulates it, its call

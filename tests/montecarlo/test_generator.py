@@ -191,7 +191,8 @@ def test_a_pilot_without_the_generator_after_it_restarts_with_the_plan() -> None
     # the kink at a = 0.5 and tight tol: the one-path pilot finds eta's variance too small for the
     # generator, and the run restarts in the plan's own layout
     h = Harvester.build(a=0.5, n=1.0)
-    r = solve(h, "mc", tol=1e-3, seed=3, t_run=20.0, t_burn=5.0, min_replicas=32, max_replicas=64, progress=False)
+    r = solve(h, "mc", tol=1e-3, seed=3, t_run=20.0, t_burn=5.0, min_replicas=32, max_replicas=64,
+              progress=False)
     assert r.info["plan_notes"]["generator"].startswith("not used"), r.info["plan_notes"]["generator"]
     assert r.info["plan_notes"]["restarts"][0] == "pilot"
     assert r.info["paths"] > 1 and "generator" not in r.info["control_set"]
