@@ -108,31 +108,9 @@ def n_state(N: int) -> int:
 
 
 @njit(cache=True, nogil=True)
-def _boundary(x, v, V, xi, w, n, g) -> None:
-    """g[k] = sum over units and live paths of the k-th end-of-window function at this state."""
-    N, P = x.shape
-    D = min(N // 2, MG_DIST)
-    g[:] = 0.0
-    for p in range(P):
-        if w[p] == 0.0:
-            continue
-        for j in range(N):
-            a0 = (x[j, p], v[j, p], V[j, p], xi[j, p])
-            for d in range(D + 1):
-                l = (j + d) % N
-                b0 = (x[l, p], v[l, p], V[l, p], xi[l, p])
-                for i in range(len(BD_PAIRS)):
-                    a, b = BD_PAIRS[i]
-                    val = a0[a] * b0[b] + a0[b] * b0[a] if a != b or d > 0 else a0[a] * a0[a]
-                    # lag d > 0 visits each unordered pair of units once per j (twice for d = N/2)
-                    g[10 * d + i] += 0.5 * val if d > 0 else val
-            g[10 * (D + 1)] += abs(x[j, p]) ** n
-
-
-@njit(cache=True, nogil=True)
 def _boundary_groups(x, v, V, xi, w, n, g) -> None:
     """g[r, k] = sum over units and live paths of replica r of the k-th end-of-window function at
-    this state (``g`` (G, K): G replicas of P / G consecutive paths)."""
+    this state (``g`` (G, K): G replicas of P / G consecutive paths; one replica is G = 1)."""
     N, P = x.shape
     G = g.shape[0]
     per = P // G
@@ -215,7 +193,8 @@ def mg_measure(x, v, V, xi, w, a, n, phi, xi0, acc, bd, first: bool, started: bo
     D = min(N // 2, MG_DIST)
     state = acc.shape[1] > 0
     if g.size > 0:
-        _boundary(x, v, V, xi, w, n, g)
+        # one replica: the replicas' kernel on a (1, K) view (the same sums, the same order)
+        _boundary_groups(x, v, V, xi, w, n, g.reshape(1, g.size))
     if started:
         for k in range(g.size):
             bd[0, k] += g[k] - gprev[k]
