@@ -47,6 +47,10 @@ class Setup(NamedTuple):
         With ``coupled``, every two coarse steps are also done as one step ``cf_cc`` (2h) on
         their combined noise: the coarsest level, row 3 of ``sums`` (measured at its own steps
         in the measured window).
+    middle : bool
+        With ``third``: whether the coarse level itself is stepped and measured. False composes
+        only its noise, for the coarsest level: the levels are then the fine one and one four
+        times as coarse (row 1 of ``sums`` stays empty).
     twin : bool
         A harmonic ring (coefficients ``cf_t`` at the fine step, physical vector ``pp_t``) is
         advanced on the fine level's noise and measured with it.
@@ -101,6 +105,7 @@ class Setup(NamedTuple):
     gen_kink: bool = False
     gen_every: int = 1
     groups: int = 1
+    middle: bool = True
 
 
 class Sums(NamedTuple):
@@ -223,6 +228,8 @@ def _run(tag, gen, s, out) -> None:
     # in reference counting at the solver's small chunks
     N, P, G, coupled, twin, kind, stride, nburn = s.N, s.P, s.groups, s.coupled, s.twin, s.kind, s.stride, s.nburn
     third = s.third and coupled
+    # the coarse level stepped and measured (else only its noise composed, for the coarsest)
+    mid = coupled and (s.middle or not third)
     cf_f, cf_c, cf_cc, cf_t, pp, pp_t = s.cf_f, s.cf_c, s.cf_cc, s.cf_t, s.pp, s.pp_t
     sums, counts, counters, esc = out.sums, out.counts, out.counters, out.esc_time
     mg, bd = out.ctl[:, :, s.mg_at:s.mg_at + s.n_mg], out.ctl[:, :, s.bd_at:s.bd_at + s.n_bd]
@@ -274,7 +281,7 @@ def _run(tag, gen, s, out) -> None:
         meas = it >= nburn and (it - nburn) % stride == 0
         first = it < half
         t_end = (it + 1) * h
-        counters[C_RING_STEPS] += (3 if coupled else 1) * live
+        counters[C_RING_STEPS] += (3 if mid else 2 if coupled else 1) * live
         for j in range(N):
             for p in range(P):
                 for r in range(nz):
@@ -295,8 +302,10 @@ def _run(tag, gen, s, out) -> None:
                      cs, rbm, rbx, w, counters, gen)
             if coupled and sub == 1:
                 compose(tag, cf_f, cf_c, e1, e2, ec)
-                step(tag, xc, vc, Vc, xic, Fc, sc, pc, ec, cf_c, pp, kind, xm, fext, cs, rbm, rbx, w, counters, gen)
-                _check_escape(xc, vc, Vc, xic, Fc, sc, w, thr, t_end, esc)
+                if mid:
+                    step(tag, xc, vc, Vc, xic, Fc, sc, pc, ec, cf_c, pp, kind, xm, fext, cs, rbm, rbx, w, counters,
+                         gen)
+                    _check_escape(xc, vc, Vc, xic, Fc, sc, w, thr, t_end, esc)
             _check_escape(xf, vf, Vf, xif, Ff, sf, w, thr, t_end - (0.5 * h if coupled and sub == 0 else 0.0), esc)
             if use_gen and it >= nburn:
                 gen_points, g_upd = _gen_point(s, g_fine, g_upd, gen_points, xf, vf, Vf, xif, w, gst, gacc, first,
@@ -316,10 +325,10 @@ def _run(tag, gen, s, out) -> None:
                     _measure_replicas(G, xf, vf, Vf, xif, sf, Ff, w, cf_f, pp, kind, sums, 2, counts, pf)
                     if twin:
                         _twin_replicas(G, xt, vt, Vt, xit, w, cf_t, sums, 2, pp[P_N], pt)
-                if coupled and sub == 1:
+                if mid and sub == 1:
                     _measure_replicas(G, xc, vc, Vc, xic, sc, Fc, w, cf_c, pp, kind, sums, 1, counts, pc)
             advance(tag, xif, ee, cf_f)
-        if coupled:
+        if mid:
             advance(tag, xic, ec, cf_c)
         if third and it % 2 == 1:
             counters[C_RING_STEPS] += live

@@ -89,8 +89,9 @@ class Estimate:
         Per observable (``V2, Pin, eta, v2, vV, x2, stuck, d2``): estimate and standard error
         (level 0, the finest step).
     bias : dict of float
-        Richardson estimate of the time-step bias of level 0, value(dt/2) - value(0)
-        (0 without a coarse level).
+        Richardson estimate of the time-step bias of level 0, value(dt/2) - value(0), from the
+        coarse level's difference (coarse - fine) / (r^p - 1) at the step ratio r of the two
+        levels (0 without a coarse level).
     bias_se : dict of float
         Standard error of ``bias`` over replicas (the levels share their noise, so it is
         much smaller than ``se``).
@@ -256,7 +257,10 @@ def _estimate(e: Ensemble, h: Harvester, order: float | None, control: bool | No
     R = h.params.R
     reduction: dict[str, float] = {}
     Ff = fine[valid]
-    scale = 1.0 / (2.0**order - 1.0)
+    # e(h) = C h^p: coarse - fine = (r^p - 1) e(fine step) for a step ratio r (2, or 4 with
+    # simulate's coarse_ratio=4)
+    ratio = e.dts[1] / e.dts[0] if e.levels > 1 else 2.0
+    scale = 1.0 / (ratio**order - 1.0)
     # the extrapolation per replica: its mean is that of the reported number
     Y = Ff + scale * (Ff - coarse[valid]) if extrapolate else Ff
     chosen = "none"
@@ -277,8 +281,7 @@ def _estimate(e: Ensemble, h: Harvester, order: float | None, control: bool | No
     controls_used = (C, mu, crossfit) if use else None
     bias, bias_se = dict(zero), dict(zero)
     if coarse is not None:
-        # e(h) = C h^p gives fine - coarse = (1 - 2^p) e(h/2); the controls are the fine
-        # level's (the twin runs at the fine step only)
+        # the controls are the fine level's (the twin runs at the fine step only)
         bias, bias_se = _scaled_difference(coarse[valid] - Ff, controls_used, mean, R, scale)
     residual, residual_se = dict(zero), dict(zero)
     if coarsest is not None:

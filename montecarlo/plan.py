@@ -123,6 +123,9 @@ class RunPlan:
         (:mod:`montecarlo.controls.generator`).
     group : int
         Replicas per task of :func:`montecarlo.simulate` (1: a task per replica).
+    coarse_ratio : int
+        The Richardson coarse level's step over the fine one's (:func:`montecarlo.simulate`'s
+        ``coarse_ratio``: 2, or 4 for the level at ``2 dt``).
     """
 
     dt: float
@@ -135,3 +138,4 @@ class RunPlan:
     notes: dict[str, Any]
     generator: bool = False
     group: int = 1
+    coarse_ratio: int = 2

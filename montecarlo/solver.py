@@ -16,7 +16,7 @@ error adds the bound of :data:`montecarlo.estimate.RESIDUAL_RULE` on the remaini
 ``dt`` (automatic: twice the halving policy's start) is halved only when that bound, resolved,
 takes more than a third of ``tol``. With the halving policy the fine level is reported with its
 Richardson bias estimate in the error, and an automatic ``dt`` is halved whenever that bias takes
-more than a third of ``tol``. ``extrapolate=None`` (default) picks the extrapolation at tight
+more than a third of ``tol`` by one of its standard errors. ``extrapolate=None`` (default) picks the extrapolation at tight
 tolerances (``tol <= 1e-3``) where the stepper's bias is known to be asymptotic (the frozen step
 on a smooth force), the halving policy elsewhere: outside its asymptotic range the
 extrapolation's error bars do not hold (docs/methods.md, "Error estimate").
@@ -134,6 +134,12 @@ _GEN_EVERY = 0.02
 _STRONG_KINK_RELVAR, _STRONG_KINK_FINER_TOL = 20.0, 1.8e-3
 #: One-path replicas of the strong kink's first batch (:meth:`MonteCarlo._first_batch`).
 _PILOT_REPLICAS = 128
+#: The strong kink's generator runs estimate the fine level's bias from a coarse level at four
+#: times its step (:func:`montecarlo.simulate`'s ``coarse_ratio``), not two: at n = 1, a = 2 that
+#: estimate's standard error is a fifth (8.0e-5 against 4.0e-4 of eta on 4096 replicas; with two,
+#: its noise took about 15 % of the error budget), its value the same within errors, and the coarse
+#: level costs about half (docs/methods.md, "Generator controls").
+_STRONG_KINK_RATIO = 4
 
 #: A confined system's escape threshold is at least this many natural amplitudes
 #: (:func:`~montecarlo.harmonic.natural_amplitude`), and at least 100.
@@ -581,15 +587,20 @@ class MonteCarlo:
                         threshold=self.threshold(h), threads=self.threads, first_replica=first,
                         twin=plan.twin, start=plan.start, step=self.step,
                         controls=self._controls(plan),
-                        third_level=self.extrapolates(h), generator_every=_GEN_EVERY, group=group)
+                        third_level=self.extrapolates(h), generator_every=_GEN_EVERY, group=group,
+                        coarse_ratio=plan.coarse_ratio)
 
     def _restart_reason(self, h: Harvester, plan: RunPlan, est: Estimate) -> tuple[str, RunPlan] | None:
         """After a batch: a finer step or a longer burn-in, if the data ask for one.
 
         Both tests need three standard errors (they are repeated after every batch) and a
-        size that matters for ``tol``: the bias estimate above a third of it (only with an
-        automatic ``dt``), or the first half of the measured window off the whole by that much
-        (only with an automatic ``t_burn``, at most three doublings).
+        size that matters for ``tol``: the bias estimate above a third of it by one of its standard
+        errors (only with an automatic ``dt``), or the first half of the measured window off the
+        whole by a third of it (only with an automatic ``t_burn``, at most three doublings).
+        The bias's margin: a precise estimate of a bias just below a third of tol (the strong
+        kink's at its coarse level four steps apart, 0.15-0.2 of tol) otherwise crossed that third
+        by chance after some batch and halved the step, doubling the run for a bias that takes a
+        few per cent of the error budget (docs/methods.md, "Generator controls").
         """
         eta = abs(est.mean["eta"])
         if not (eta > 0 and math.isfinite(eta)):
@@ -598,7 +609,7 @@ class MonteCarlo:
             bias, bias_se = abs(est.residual["eta"]), est.residual_se["eta"]
         else:
             bias, bias_se = abs(est.bias["eta"]), est.bias_se["eta"]
-        if (self.dt is None and self.richardson and bias > _BIAS_SHARE * self.tol * eta
+        if (self.dt is None and self.richardson and bias - bias_se > _BIAS_SHARE * self.tol * eta
                 and bias > DRIFT_SIGMAS * bias_se and plan.dt / 2 >= _DT_MIN):
             return "dt", dataclasses.replace(plan, dt=plan.dt / 2)
         drift, drift_se = abs(est.drift["eta"]), est.drift_se["eta"]
@@ -657,12 +668,15 @@ class MonteCarlo:
         first = min(self.max_replicas, max(self.min_replicas, round(0.5 * need / paths)))
         why = f"used: plain relative variance of eta {relvar:.3g} per unit path time; about {need:.3g} paths, " \
               f"{paths} per replica, {group} replicas per task"
-        dt = plan.dt
+        dt, ratio = plan.dt, plan.coarse_ratio
         if (self.dt is None and self.richardson and onsite_kind(h) == KIND_KINK and relvar >= _STRONG_KINK_RELVAR
                 and self.tol < _STRONG_KINK_FINER_TOL and dt / 2 >= _DT_MIN):
             dt /= 2
             why += f"; dt halved to {dt:g} with them (the strong kink's bias at the starting step exceeds a third of tol)"
-        return note(why, first, generator=True, paths=paths, dt=dt, group=group)
+            if not self.extrapolates(h):
+                ratio = _STRONG_KINK_RATIO
+                why += f"; the bias estimated from a coarse level at {ratio // 2} dt"
+        return note(why, first, generator=True, paths=paths, dt=dt, group=group, coarse_ratio=ratio)
 
     def run(self, h: Harvester, plan: RunPlan | None = None) -> tuple[Ensemble, Estimate, bool, RunPlan]:
         """Adaptive replica loop; returns the ensemble, its estimate, whether tol was met, the plan."""

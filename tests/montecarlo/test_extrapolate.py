@@ -62,6 +62,28 @@ def test_coarsest_level_has_the_law_of_its_own_step(step: str) -> None:
                 assert abs(want) > 8 * se, (level, name)
 
 
+def test_a_coarse_level_at_four_times_the_fine_step_is_the_coarsest_level_alone() -> None:
+    # coarse_ratio=4: the fine level and the controls as with the coarse level at dt, the coarse
+    # level bit for bit the third level's at 2 dt, and the bias scaled by 1/(4^p - 1)
+    h = Harvester.build(a=2.0, n=1.0)
+    kw = dict(dt=0.02, paths=2, replicas=4, t_burn=2.0, t_run=10.0, seed=3, richardson=True, twin=4.0,
+              start="twin", controls=("martingale", "boundary"), group=2)
+    two, three, four = simulate(h, **kw), simulate(h, third_level=True, **kw), simulate(h, coarse_ratio=4, **kw)
+    assert four.dts == (0.01, 0.04) and three.dts == (0.01, 0.02, 0.04)
+    for name in ("sums", "counts", "ctl"):
+        assert np.array_equal(getattr(four, name)[:, 0], getattr(two, name)[:, 0]), name
+        assert np.array_equal(getattr(four, name)[:, -1], getattr(two, name)[:, -1]), name
+    assert np.array_equal(four.sums[:, 1], three.sums[:, 2]) and np.array_equal(four.counts[:, 1], three.counts[:, 2])
+    assert four.path_steps < two.path_steps < three.path_steps
+    m0, m1 = four.moments(0), four.moments(1)
+    p = estimate(four, h, control=False)
+    assert p.bias["V2"] == pytest.approx((m1["V2"].mean() - m0["V2"].mean()) / 15.0, rel=1e-9, abs=1e-15)
+    with pytest.raises(ParameterError, match="coarse_ratio must be 2 or 4, got 3"):
+        simulate(h, coarse_ratio=3, **kw)
+    with pytest.raises(ParameterError, match="not with third_level=True"):
+        simulate(h, coarse_ratio=4, third_level=True, **kw)
+
+
 def test_extrapolated_solve_is_unbiased_where_the_fine_level_is_not() -> None:
     # harmonic ring at a coarse explicit step: the fine level's bias is many of the extrapolated
     # value's error bars, the extrapolated value lies within its error bar of the exact solver
