@@ -51,6 +51,9 @@ class Setup(NamedTuple):
         With ``third``: whether the coarse level itself is stepped and measured. False composes
         only its noise, for the coarsest level: the levels are then the fine one and one four
         times as coarse (row 1 of ``sums`` stays empty).
+    coarse_half : bool
+        With ``coupled``: the coarse and coarsest levels stop after the first half of the measured
+        window (their rows then hold that half only, to be compared with row 2).
     twin : bool
         A harmonic ring (coefficients ``cf_t`` at the fine step, physical vector ``pp_t``) is
         advanced on the fine level's noise and measured with it.
@@ -106,6 +109,7 @@ class Setup(NamedTuple):
     gen_every: int = 1
     groups: int = 1
     middle: bool = True
+    coarse_half: bool = False
 
 
 class Sums(NamedTuple):
@@ -274,6 +278,8 @@ def _run(tag, gen, s, out) -> None:
                  (xt, vt, Vt, xit, Ft))
     cc_stride = max(1, stride // 2)
     half = nburn + s.nrun // 2
+    # the steps after which the coarser levels stop
+    c_end = half if s.coarse_half else nburn + s.nrun
     for it in range(nburn + s.nrun):
         live = _live(w)
         if live == 0:
@@ -281,7 +287,8 @@ def _run(tag, gen, s, out) -> None:
         meas = it >= nburn and (it - nburn) % stride == 0
         first = it < half
         t_end = (it + 1) * h
-        counters[C_RING_STEPS] += (3 if mid else 2 if coupled else 1) * live
+        mid_now, third_now = mid and it < c_end, third and it < c_end
+        counters[C_RING_STEPS] += (3 if mid_now else 2 if coupled else 1) * live
         for j in range(N):
             for p in range(P):
                 for r in range(nz):
@@ -300,9 +307,9 @@ def _run(tag, gen, s, out) -> None:
                 noise(tag, cf_t, zz, et)
                 step(tag, xt, vt, Vt, xit, Ft, st, pt, et, cf_t, pp_t, KIND_LINEAR, xm, fext,
                      cs, rbm, rbx, w, counters, gen)
-            if coupled and sub == 1:
+            if sub == 1 and (mid_now or third_now):
                 compose(tag, cf_f, cf_c, e1, e2, ec)
-                if mid:
+                if mid_now:
                     step(tag, xc, vc, Vc, xic, Fc, sc, pc, ec, cf_c, pp, kind, xm, fext, cs, rbm, rbx, w, counters,
                          gen)
                     _check_escape(xc, vc, Vc, xic, Fc, sc, w, thr, t_end, esc)
@@ -325,12 +332,12 @@ def _run(tag, gen, s, out) -> None:
                     _measure_replicas(G, xf, vf, Vf, xif, sf, Ff, w, cf_f, pp, kind, sums, 2, counts, pf)
                     if twin:
                         _twin_replicas(G, xt, vt, Vt, xit, w, cf_t, sums, 2, pp[P_N], pt)
-                if mid and sub == 1:
+                if mid_now and sub == 1:
                     _measure_replicas(G, xc, vc, Vc, xic, sc, Fc, w, cf_c, pp, kind, sums, 1, counts, pc)
             advance(tag, xif, ee, cf_f)
-        if mid:
+        if mid_now:
             advance(tag, xic, ec, cf_c)
-        if third and it % 2 == 1:
+        if third_now and it % 2 == 1:
             counters[C_RING_STEPS] += live
             compose(tag, cf_c, cf_cc, ec0, ec, ecc)
             step(tag, xcc, vcc, Vcc, xicc, Fcc, scc, pcc, ecc, cf_cc, pp, kind, xm, fext, cs, rbm, rbx, w, counters,
@@ -339,7 +346,7 @@ def _run(tag, gen, s, out) -> None:
             if it >= nburn and ((it - nburn) // 2) % cc_stride == 0:
                 _measure_replicas(G, xcc, vcc, Vcc, xicc, scc, Fcc, w, cf_cc, pp, kind, sums, 3, counts, pcc)
             advance(tag, xicc, ecc, cf_cc)
-        elif third:
+        elif third_now:
             _copy_noise(ec, ec0)
     if use_gen:
         gen_close(gacc)

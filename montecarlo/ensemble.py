@@ -48,6 +48,10 @@ class Ensemble:
         over its first half; None without such controls.
     ctl_names : dict of str to tuple of str
         Control name -> the names of its sums, which occupy the columns of ``ctl`` in this order.
+    coarse_half : bool
+        The coarse level ran through the burn-in and the first half of the measured window only
+        (``simulate(..., coarse_half=True)``): its row holds that half, to be compared with level 0
+        over the same half (the last row).
     """
 
     sums: np.ndarray
@@ -69,6 +73,7 @@ class Ensemble:
     start: str = "rest"
     ctl: np.ndarray | None = None
     ctl_names: dict[str, tuple[str, ...]] = field(default_factory=dict)
+    coarse_half: bool = False
 
     @property
     def replicas(self) -> int:
@@ -113,10 +118,11 @@ class Ensemble:
     def merge(self, other: Ensemble) -> Ensemble:
         """Concatenate the replicas of two runs with identical settings."""
         if (other.dts, other.paths, other.t_run, other.t_burn, other.twin_kappa, other.start,
-                other.ctl_names) != (self.dts, self.paths, self.t_run, self.t_burn, self.twin_kappa,
-                                     self.start, self.ctl_names):
+                other.ctl_names, other.coarse_half) != (self.dts, self.paths, self.t_run, self.t_burn,
+                                                        self.twin_kappa, self.start, self.ctl_names,
+                                                        self.coarse_half):
             raise ParameterError("can only merge ensembles with the same dt, paths, t_run, t_burn, "
-                                 "twin, start and accumulated controls")
+                                 "twin, start, accumulated controls and coarse window")
         return Ensemble(
             sums=np.concatenate([self.sums, other.sums]),
             counts=np.concatenate([self.counts, other.counts]),
@@ -134,4 +140,5 @@ class Ensemble:
             start=self.start,
             ctl=None if self.ctl is None else np.concatenate([self.ctl, other.ctl]),
             ctl_names=dict(self.ctl_names),
+            coarse_half=self.coarse_half,
         )

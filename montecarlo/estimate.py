@@ -279,10 +279,13 @@ def _estimate(e: Ensemble, h: Harvester, order: float | None, control: bool | No
         reduction["eta"] = (_ratio(mean, plain_cov, R)[1] / est_se["eta"]) ** 2
     zero = dict.fromkeys(_NAMES + ("eta",), 0.0)
     controls_used = (C, mu, crossfit) if use else None
+    # the coarse level ran the whole window, or its first half (coarse_half): the fine level and
+    # the controls over the same (the controls are the fine level's: the twin runs at its step)
+    half_controls = (C_first, mu, crossfit) if use else None
+    base, base_controls = (first[valid], half_controls) if e.coarse_half else (Ff, controls_used)
     bias, bias_se = dict(zero), dict(zero)
     if coarse is not None:
-        # the controls are the fine level's (the twin runs at the fine step only)
-        bias, bias_se = _scaled_difference(coarse[valid] - Ff, controls_used, mean, R, scale)
+        bias, bias_se = _scaled_difference(coarse[valid] - base, base_controls, mean, R, scale)
     residual, residual_se = dict(zero), dict(zero)
     if coarsest is not None:
         # R(2dt) - R(dt) with R(h) = F(h/2) + scale (F(h/2) - F(h)); the remaining error c dt^q of
@@ -294,7 +297,8 @@ def _estimate(e: Ensemble, h: Harvester, order: float | None, control: bool | No
     # control for the system's, which a transient would shift
     drift_controls = (C_first - C, np.zeros(C.shape[1]), crossfit) if use else None
     drift, drift_se = _scaled_difference(first[valid] - Ff, drift_controls, mean, R, 1.0)
-    second = _second_pass(e, h, valid, extrapolate, scale, controls_used, drift_controls)
+    second = _second_pass(e, h, valid, extrapolate, scale, controls_used, drift_controls,
+                          half_controls if e.coarse_half else controls_used)
     for out, part in zip((est_mean, est_se, bias, bias_se, residual, residual_se, drift, drift_se), second):
         out["d2"] = part
     p = h.params
@@ -349,24 +353,26 @@ def student_factor(dof: int) -> float:
 
 
 def _second_pass(e: Ensemble, h: Harvester, valid: np.ndarray, extrapolate: bool, scale: float,
-                 controls: Controls | None, drift_controls: Controls | None) -> tuple[float, ...]:
+                 controls: Controls | None, drift_controls: Controls | None,
+                 bias_controls: Controls | None) -> tuple[float, ...]:
     """The :data:`_SECOND` observables' last entry (``d2``) as :func:`estimate` treats the first
     pass's: mean, standard error, bias and its error, residual and its error, drift and its
-    error (0 where a level is missing)."""
+    error (0 where a level is missing; ``bias_controls`` those of the coarse level's window)."""
     levels = [_per_replica(e, h, i, _SECOND)[valid] if i < e.levels else None for i in range(3)]
     Ff, coarse, coarsest = levels
+    first = _per_replica(e, h, -1, _SECOND)[valid]
     Y = Ff + scale * (Ff - coarse) if extrapolate else Ff
     mean, cov = _plain(Y) if controls is None else _regression(Y, *controls)[:2]
     name, R = _SECOND[-1], h.params.R
     out = [float(mean[-1]), math.sqrt(max(float(cov[-1, -1]), 0.0)), 0.0, 0.0, 0.0, 0.0]
     if coarse is not None:
-        b, b_se = _scaled_difference(coarse - Ff, controls, mean, R, scale, _SECOND)
+        b, b_se = _scaled_difference(coarse - (first if e.coarse_half else Ff), bias_controls, mean, R, scale,
+                                     _SECOND)
         out[2:4] = b[name], b_se[name]
     if coarsest is not None:
         D = (1.0 + 2.0 * scale) * coarse - scale * coarsest - (1.0 + scale) * Ff
         r, r_se = _scaled_difference(D, controls, mean, R, 1.0 / (2.0 ** RESIDUAL_RULE[0] - 1.0), _SECOND)
         out[4:6] = r[name], r_se[name]
-    first = _per_replica(e, h, -1, _SECOND)[valid]
     d, d_se = _scaled_difference(first - Ff, drift_controls, mean, R, 1.0, _SECOND)
     return (*out, d[name], d_se[name])
 

@@ -126,6 +126,9 @@ class RunPlan:
     coarse_ratio : int
         The Richardson coarse level's step over the fine one's (:func:`montecarlo.simulate`'s
         ``coarse_ratio``: 2, or 4 for the level at ``2 dt``).
+    coarse_half : bool
+        The coarse level runs through the burn-in and the first half of the measured window only
+        (:func:`montecarlo.simulate`'s ``coarse_half``).
     """
 
     dt: float
@@ -139,3 +142,4 @@ class RunPlan:
     generator: bool = False
     group: int = 1
     coarse_ratio: int = 2
+    coarse_half: bool = False

@@ -60,6 +60,7 @@ def simulate(
     generator_every: float = 0.0,
     group: int = 1,
     coarse_ratio: int = 2,
+    coarse_half: bool = False,
 ) -> Ensemble:
     """Simulate independent replicas of ``h`` and return their raw moment sums.
 
@@ -142,6 +143,13 @@ def simulate(
         level's bias instead of ``2^p - 1`` times, while its noise grows less (at the strong kink,
         n = 1, a = 2, the bias estimate's standard error fell 5x: docs/methods.md, "Generator
         controls"). Not with ``third_level``.
+    coarse_half : bool
+        With ``richardson``: the coarse level runs through the burn-in and the first half of the
+        measured window only (:attr:`Ensemble.coarse_half`), at about half its cost; its
+        difference from the fine level over that half estimates the same bias, from half the
+        path time. Pays where that estimate's noise takes little of the error budget (the strong
+        kink with ``coarse_ratio=4``: docs/methods.md, "Generator controls"). Not with
+        ``third_level``.
     group : int
         Replicas per task, >= 1. With more than one, a task runs ``group`` whole replicas
         (``group * paths`` paths, ``paths <= chunk``) on one random stream, seeded by its first
@@ -164,7 +172,8 @@ def simulate(
                richardson=richardson, threshold=threshold, chunk=chunk, threads=threads,
                first_replica=first_replica, sample_every=sample_every, twin=twin, start=start,
                kink_rule=kink_rule, kind=kind, step=step, controls=controls, third_level=third_level,
-               generator_every=generator_every, group=group, coarse_ratio=coarse_ratio)
+               generator_every=generator_every, group=group, coarse_ratio=coarse_ratio,
+               coarse_half=coarse_half)
     stepper, setup, twin_mean = _coefficients(h, c)
     ss = np.random.SeedSequence(c.seed)
     tasks = _tasks(c)
@@ -196,6 +205,7 @@ def simulate(
         start=c.start,
         ctl=ctl if c.controls else None,
         ctl_names={name: CONTROLS[name].sums(h) for name in c.controls},
+        coarse_half=c.coarse_half,
     )
 
 
@@ -225,6 +235,7 @@ class _Checked(NamedTuple):
     generator_every: float
     group: int
     coarse_ratio: int
+    coarse_half: bool
 
 
 def _level_exponents(c: _Checked) -> tuple[int, ...]:
@@ -238,7 +249,7 @@ def _check(h: Harvester, *, dt: float, paths: int, replicas: int, t_burn: float,
            seed: int | None, richardson: bool, threshold: float, chunk: int, threads: int | None,
            first_replica: int, sample_every: float, twin: float | None, start: str, kink_rule: str,
            kind: int | None, step: str, controls: tuple[str, ...], third_level: bool,
-           generator_every: float, group: int, coarse_ratio: int) -> _Checked:
+           generator_every: float, group: int, coarse_ratio: int, coarse_half: bool) -> _Checked:
     """Validate :func:`simulate`'s arguments (raises :class:`ParameterError`)."""
     if not isinstance(h, Harvester):
         raise ParameterError(f"h must be a Harvester, got {h!r} (type {type(h).__name__})")
@@ -277,6 +288,11 @@ def _check(h: Harvester, *, dt: float, paths: int, replicas: int, t_burn: float,
         raise ParameterError(f"coarse_ratio must be 2 or 4, got {coarse_ratio!r} (type {type(coarse_ratio).__name__})")
     if coarse_ratio == 4 and third_level and richardson:
         raise ParameterError("coarse_ratio=4 runs the coarse level at 2 dt itself: not with third_level=True")
+    if not isinstance(coarse_half, bool):
+        raise ParameterError(f"coarse_half must be True or False, got {coarse_half!r} "
+                             f"(type {type(coarse_half).__name__})")
+    if coarse_half and third_level and richardson:
+        raise ParameterError("coarse_half=True leaves the coarser levels half the window: not with third_level=True")
     loop_controls = tuple(name for name, control in CONTROLS.items() if control.accumulated)
     if isinstance(controls, str) or not all(name in loop_controls for name in controls) \
             or len(set(controls)) != len(controls):
@@ -295,7 +311,8 @@ def _check(h: Harvester, *, dt: float, paths: int, replicas: int, t_burn: float,
         raise ParameterError(f"twin: the {stepper.name} step has no harmonic twin; use twin=None")
     return _Checked(dt, paths, replicas, t_burn, t_run, seed, bool(richardson), threshold, chunk, threads,
                     first_replica, sample_every, twin, start, kink_rule, kind, stepper.name, tuple(controls),
-                    third_level and bool(richardson), generator_every, group, int(coarse_ratio))
+                    third_level and bool(richardson), generator_every, group, int(coarse_ratio),
+                    coarse_half and bool(richardson))
 
 
 def _coefficients(h: Harvester, c: _Checked) -> tuple[Stepper, Setup, dict[str, float]]:
@@ -318,7 +335,8 @@ def _coefficients(h: Harvester, c: _Checked) -> tuple[Stepper, Setup, dict[str, 
     chol = initial_cholesky(lin, dt_f, c.step) if c.start == "twin" else np.zeros((0, 0))
     setup = Setup(P=0, N=h.N, nburn=int(round(c.t_burn / c.dt)), nrun=max(1, int(round(c.t_run / c.dt))),
                   stride=max(1, int(round(c.sample_every / c.dt))), coupled=c.richardson,
-                  third=c.third_level or ratio4, middle=not ratio4, twin=c.twin is not None, kind=c.kind, cf_f=cf_f, cf_c=cf_c, cf_cc=cf_cc,
+                  third=c.third_level or ratio4, middle=not ratio4, coarse_half=c.coarse_half,
+                  twin=c.twin is not None, kind=c.kind, cf_f=cf_f, cf_c=cf_c, cf_cc=cf_cc,
                   cf_t=cf_t, pp=pp, pp_t=pp_t, chol=chol)
     # each accumulated control's sums at its columns of the loop's control accumulator
     n_ctl = 0

@@ -137,8 +137,10 @@ _PILOT_REPLICAS = 128
 #: The strong kink's generator runs estimate the fine level's bias from a coarse level at four
 #: times its step (:func:`montecarlo.simulate`'s ``coarse_ratio``), not two: at n = 1, a = 2 that
 #: estimate's standard error is a fifth (8.0e-5 against 4.0e-4 of eta on 4096 replicas; with two,
-#: its noise took about 15 % of the error budget), its value the same within errors, and the coarse
-#: level costs about half (docs/methods.md, "Generator controls").
+#: its noise took about 15 % of the error budget), its value the same within errors, and the
+#: coarse level costs 5 % less. So little noise is left that the coarse level runs only through the
+#: first half of the window (``coarse_half``): the bias estimate's error grows by about sqrt(2), the
+#: loop's cost falls by about 14 % (docs/methods.md, "Generator controls").
 _STRONG_KINK_RATIO = 4
 
 #: A confined system's escape threshold is at least this many natural amplitudes
@@ -588,7 +590,7 @@ class MonteCarlo:
                         twin=plan.twin, start=plan.start, step=self.step,
                         controls=self._controls(plan),
                         third_level=self.extrapolates(h), generator_every=_GEN_EVERY, group=group,
-                        coarse_ratio=plan.coarse_ratio)
+                        coarse_ratio=plan.coarse_ratio, coarse_half=plan.coarse_half)
 
     def _restart_reason(self, h: Harvester, plan: RunPlan, est: Estimate) -> tuple[str, RunPlan] | None:
         """After a batch: a finer step or a longer burn-in, if the data ask for one.
@@ -668,15 +670,16 @@ class MonteCarlo:
         first = min(self.max_replicas, max(self.min_replicas, round(0.5 * need / paths)))
         why = f"used: plain relative variance of eta {relvar:.3g} per unit path time; about {need:.3g} paths, " \
               f"{paths} per replica, {group} replicas per task"
-        dt, ratio = plan.dt, plan.coarse_ratio
+        dt, ratio, half = plan.dt, plan.coarse_ratio, plan.coarse_half
         if (self.dt is None and self.richardson and onsite_kind(h) == KIND_KINK and relvar >= _STRONG_KINK_RELVAR
                 and self.tol < _STRONG_KINK_FINER_TOL and dt / 2 >= _DT_MIN):
             dt /= 2
             why += f"; dt halved to {dt:g} with them (the strong kink's bias at the starting step exceeds a third of tol)"
             if not self.extrapolates(h):
-                ratio = _STRONG_KINK_RATIO
-                why += f"; the bias estimated from a coarse level at {ratio // 2} dt"
-        return note(why, first, generator=True, paths=paths, dt=dt, group=group, coarse_ratio=ratio)
+                ratio, half = _STRONG_KINK_RATIO, True
+                why += f"; the bias estimated from a coarse level at {ratio // 2} dt over the window's first half"
+        return note(why, first, generator=True, paths=paths, dt=dt, group=group, coarse_ratio=ratio,
+                    coarse_half=half)
 
     def run(self, h: Harvester, plan: RunPlan | None = None) -> tuple[Ensemble, Estimate, bool, RunPlan]:
         """Adaptive replica loop; returns the ensemble, its estimate, whether tol was met, the plan."""

@@ -84,6 +84,31 @@ def test_a_coarse_level_at_four_times_the_fine_step_is_the_coarsest_level_alone(
         simulate(h, coarse_ratio=4, third_level=True, **kw)
 
 
+def test_a_coarse_level_over_the_first_half_is_the_coarse_level_of_a_run_half_as_long() -> None:
+    # coarse_half: the fine level and the controls as without it; the coarse level bit for bit that
+    # of a run whose measured window is the first half; the bias from the fine level's first half
+    h = Harvester.build(a=2.0, n=1.0)
+    kw = dict(dt=0.02, paths=2, replicas=4, t_burn=2.0, seed=3, richardson=True, twin=4.0, start="twin",
+              controls=("martingale", "boundary"), group=2, coarse_ratio=4)
+    whole, half = simulate(h, t_run=10.0, **kw), simulate(h, t_run=10.0, coarse_half=True, **kw)
+    short = simulate(h, t_run=5.0, **kw)
+    assert half.coarse_half and not whole.coarse_half
+    for name in ("sums", "counts", "ctl"):
+        assert np.array_equal(getattr(half, name)[:, 0], getattr(whole, name)[:, 0]), name
+        assert np.array_equal(getattr(half, name)[:, -1], getattr(whole, name)[:, -1]), name
+    assert np.array_equal(half.sums[:, 1], short.sums[:, 1]) and np.array_equal(half.counts[:, 1], short.counts[:, 1])
+    assert half.path_steps < whole.path_steps
+    m_first, m1 = half.moments(-1), half.moments(1)
+    p = estimate(half, h, control=False)
+    assert p.bias["V2"] == pytest.approx((m1["V2"].mean() - m_first["V2"].mean()) / 15.0, rel=1e-9, abs=1e-15)
+    with pytest.raises(ParameterError, match="can only merge"):
+        half.merge(whole)
+    with pytest.raises(ParameterError, match="coarse_half must be True or False, got 1"):
+        simulate(h, t_run=10.0, coarse_half=1, **kw)
+    with pytest.raises(ParameterError, match="not with third_level=True"):
+        simulate(h, t_run=10.0, coarse_half=True, third_level=True, **{**kw, "coarse_ratio": 2})
+
+
 def test_extrapolated_solve_is_unbiased_where_the_fine_level_is_not() -> None:
     # harmonic ring at a coarse explicit step: the fine level's bias is many of the extrapolated
     # value's error bars, the extrapolated value lies within its error bar of the exact solver

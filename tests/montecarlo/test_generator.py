@@ -153,11 +153,11 @@ def test_the_strong_kink_restarts_with_the_generator_at_half_the_step_only_at_ti
     assert first > 0 and new.generator and new.dt == dt / 2, new.notes["generator"]
     assert "dt halved" in new.notes["generator"]
     # with its bias estimated from a coarse level at four times the fine step
-    assert new.coarse_ratio == 4 and "coarse level at 2 dt" in new.notes["generator"]
+    assert new.coarse_ratio == 4 and new.coarse_half and "coarse level at 2 dt" in new.notes["generator"]
     dt, new, first = replanned(tol=2e-3)
-    assert first > 0 and new.generator and new.dt == dt and new.coarse_ratio == 2
+    assert first > 0 and new.generator and new.dt == dt and new.coarse_ratio == 2 and not new.coarse_half
     dt, new, first = replanned(tol=1e-3, dt=0.02)
-    assert new.generator and new.dt == 0.02 and new.coarse_ratio == 2
+    assert new.generator and new.dt == 0.02 and new.coarse_ratio == 2 and not new.coarse_half
 
 
 def test_generator_batches_run_in_whole_rounds_of_equal_tasks() -> None:
