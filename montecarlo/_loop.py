@@ -184,6 +184,20 @@ def _copy_noise(src, dst) -> None:
 
 
 @njit(cache=True, nogil=True, inline="always")
+def _draw(gen, z1, z2, coupled) -> None:
+    """The step's standard normals: per unit and path those of ``z1`` and, with ``coupled``, of
+    ``z2`` (the fine level's two half steps), in that order."""
+    nz, N, P = z1.shape
+    for j in range(N):
+        for p in range(P):
+            for r in range(nz):
+                z1[r, j, p] = gen.standard_normal()
+            if coupled:
+                for r in range(nz):
+                    z2[r, j, p] = gen.standard_normal()
+
+
+@njit(cache=True, nogil=True, inline="always")
 def _measure_replicas(G, x, v, V, xi, stuck, F, w, cf, pp, kind, sums, row, counts, pvx) -> None:
     """The system's moments into ``sums[g, row]`` and ``counts[g, row]`` for each of the chunk's G
     replicas: :func:`montecarlo._kernels._measure` for one, ``measure_groups`` for several (the
@@ -289,13 +303,7 @@ def _run(tag, gen, s, out) -> None:
         t_end = (it + 1) * h
         mid_now, third_now = mid and it < c_end, third and it < c_end
         counters[C_RING_STEPS] += (3 if mid_now else 2 if coupled else 1) * live
-        for j in range(N):
-            for p in range(P):
-                for r in range(nz):
-                    z1[r, j, p] = gen.standard_normal()
-                if coupled:
-                    for r in range(nz):
-                        z2[r, j, p] = gen.standard_normal()
+        _draw(gen, z1, z2, coupled)
         for sub in range(2 if coupled else 1):
             zz = z1 if sub == 0 else z2
             ee = e1 if sub == 0 else e2

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import dataclasses
 import math
 
 import numpy as np
@@ -280,6 +281,12 @@ def test_restart_rules() -> None:
     what, new = mc._restart_reason(h, plan, est(4e-4, 1e-5, 0.0, 1e-4))
     assert what == "dt" and new.dt == plan.dt / 2
     assert mc._restart_reason(h, plan, est(4e-4, 2e-4, 0.0, 1e-4)) is None  # bias not resolved
+    # a third of tol x eta is 1.67e-4; from a coarse level at four times the fine step the bias
+    # must pass it by one standard error
+    assert mc._restart_reason(h, plan, est(2.0e-4, 5e-5, 0.0, 1e-4))[0] == "dt"
+    four = dataclasses.replace(plan, coarse_ratio=4)
+    assert mc._restart_reason(h, four, est(2.0e-4, 5e-5, 0.0, 1e-4)) is None
+    assert mc._restart_reason(h, four, est(2.3e-4, 5e-5, 0.0, 1e-4))[0] == "dt"
     what, new = mc._restart_reason(h, plan, est(0.0, 1e-6, 1e-3, 1e-4))
     assert what == "t_burn" and new.t_burn == 2 * plan.t_burn
     assert MonteCarlo(seed=1, tol=1e-3, dt=0.02)._restart_reason(h, plan, est(4e-4, 1e-5, 0, 1)) is None

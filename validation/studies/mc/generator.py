@@ -147,9 +147,11 @@ COVERAGE: dict[str, tuple[Any, ...]] = {
     "n1_a2_solver_layout": ({"n": 1.0, "a": 2.0}, "mc n = 1, a = 2", 1536, 1, 400.0,
                             {"dt": 0.01, "group": 48, "generator_every": 0.02}),
     # the same with the solver's later layout: tasks of 192 and the bias from a coarse level at
-    # four times the fine step (simulate's coarse_ratio=4)
+    # four times the fine step over the window's first half (simulate's coarse_ratio=4,
+    # coarse_half=True)
     "n1_a2_coarse_ratio4": ({"n": 1.0, "a": 2.0}, "mc n = 1, a = 2", 1536, 1, 400.0,
-                            {"dt": 0.01, "group": 192, "generator_every": 0.02, "coarse_ratio": 4}),
+                            {"dt": 0.01, "group": 192, "generator_every": 0.02, "coarse_ratio": 4,
+                             "coarse_half": True}),
     "harmonic_unit_vs_exact": ({"a": 0.5}, "exact", 256, 2, 100.0),
     "harmonic_ring_vs_exact": ({"a": 0.5, "N": 3, "k": -0.2}, "exact", 256, 2, 100.0),
 }
