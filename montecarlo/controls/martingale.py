@@ -171,6 +171,38 @@ def mg_phi(x, v, V, xi, w, a, n, phi) -> None:
             phi[o + 9, j, p] = wp * vv * r2
 
 
+@njit(cache=True, nogil=True, inline="always")
+def _state_sums(phi, xi, xi0, w, decay: float, var: float, p0: int, p1: int, acc, first: bool) -> None:
+    """The martingale sums of one replica, paths ``p0 .. p1 - 1``, into its ``acc`` (2, K + D + 1)
+    (:func:`mg_measure`): acc[0, k] += sum of phi[k] eta, acc[0, K + d] += sum of
+    :math:`\\eta_j\\eta_{j+d}/var - \\delta_{d0}` over live paths, the same into acc[1] with
+    ``first``. Shared by :func:`mg_measure` (0, P) and :func:`mg_measure_groups` (each replica's
+    paths)."""
+    K, N, _ = phi.shape
+    D = min(N // 2, MG_DIST)
+    for k in range(K):
+        s = 0.0
+        for j in range(N):
+            for p in range(p0, p1):
+                s += phi[k, j, p] * (xi[j, p] - decay * xi0[j, p])
+        acc[0, k] += s
+        if first:
+            acc[1, k] += s
+    for d in range(D + 1):
+        s = 0.0
+        for p in range(p0, p1):
+            if w[p] == 0.0:
+                continue
+            for j in range(N):
+                l = (j + d) % N
+                s += (xi[j, p] - decay * xi0[j, p]) * (xi[l, p] - decay * xi0[l, p]) / var
+                if d == 0:
+                    s -= 1.0
+        acc[0, K + d] += s
+        if first:
+            acc[1, K + d] += s
+
+
 @njit(cache=True, nogil=True)
 def mg_measure(x, v, V, xi, w, a, n, phi, xi0, acc, bd, first: bool, started: bool, decay: float,
                var: float, g: np.ndarray, gprev: np.ndarray) -> None:
@@ -201,27 +233,7 @@ def mg_measure(x, v, V, xi, w, a, n, phi, xi0, acc, bd, first: bool, started: bo
             if first:
                 bd[1, k] += g[k] - gprev[k]
         if state:
-            for k in range(K):
-                s = 0.0
-                for j in range(N):
-                    for p in range(P):
-                        s += phi[k, j, p] * (xi[j, p] - decay * xi0[j, p])
-                acc[0, k] += s
-                if first:
-                    acc[1, k] += s
-            for d in range(D + 1):
-                s = 0.0
-                for p in range(P):
-                    if w[p] == 0.0:
-                        continue
-                    for j in range(N):
-                        l = (j + d) % N
-                        s += (xi[j, p] - decay * xi0[j, p]) * (xi[l, p] - decay * xi0[l, p]) / var
-                        if d == 0:
-                            s -= 1.0
-                acc[0, K + d] += s
-                if first:
-                    acc[1, K + d] += s
+            _state_sums(phi, xi, xi0, w, decay, var, 0, P, acc, first)
     # element loops, not slice copies: those compile numba's shape-checked copy per dimension
     for k in range(g.size):
         gprev[k] = g[k]
@@ -254,27 +266,7 @@ def mg_measure_groups(x, v, V, xi, w, a, n, phi, xi0, acc, bd, first: bool, star
                     bd[r, 1, k] += g[r, k] - gprev[r, k]
             if not state:
                 continue
-            for k in range(K):
-                s = 0.0
-                for j in range(N):
-                    for p in range(p0, p1):
-                        s += phi[k, j, p] * (xi[j, p] - decay * xi0[j, p])
-                acc[r, 0, k] += s
-                if first:
-                    acc[r, 1, k] += s
-            for d in range(D + 1):
-                s = 0.0
-                for p in range(p0, p1):
-                    if w[p] == 0.0:
-                        continue
-                    for j in range(N):
-                        l = (j + d) % N
-                        s += (xi[j, p] - decay * xi0[j, p]) * (xi[l, p] - decay * xi0[l, p]) / var
-                        if d == 0:
-                            s -= 1.0
-                acc[r, 0, K + d] += s
-                if first:
-                    acc[r, 1, K + d] += s
+            _state_sums(phi, xi, xi0, w, decay, var, p0, p1, acc[r], first)
     # element loops, not slice copies: those compile numba's shape-checked copy per dimension
     for r in range(G):
         for k in range(g.shape[1]):
